@@ -1,0 +1,294 @@
+"""A simplified bimanual ALOHA cube handoff: two planar arms with grippers, seen from above.
+
+The model lives in ``aloha.xml`` beside this file (MuJoCo MJCF). Everything is read and written
+through MuJoCo's named accessors (``data.joint("right_x")``, ``data.actuator("left_grip")``,
+``model.site("target")``), never through hard-coded array indices.
+
+Task: a cube spawns where only the right arm can reach it; the target lies where only the left
+arm can reach. The two reach ranges overlap only in the handoff zone |x| < 0.05 m, so the right
+arm must pick the cube, carry it to the middle, hand it to the left arm, and the left arm must
+carry it to the target.
+
+Observation, float32[10] (``STATE_NAMES``)
+
+    idx  name         unit  meaning
+    0    right_x      m     right end-effector x, in [-0.05, 0.35]
+    1    right_y      m     right end-effector y, in [-0.25, 0.25]
+    2    right_grip   -     right gripper closedness, 0 open .. 1 closed
+    3    left_x       m     left end-effector x, in [-0.35, 0.05]
+    4    left_y       m     left end-effector y, in [-0.25, 0.25]
+    5    left_grip    -     left gripper closedness, 0 open .. 1 closed
+    6    cube_x       m     cube centre x
+    7    cube_y       m     cube centre y
+    8    target_x     m     delivery target x (constant within an episode)
+    9    target_y     m     delivery target y (constant within an episode)
+
+Action, float32[6] (``ACTION_NAMES``), every entry clipped to [-1, 1]
+
+    idx  name             unit  meaning
+    0    right_vx         m/s   right end-effector velocity command, x
+    1    right_vy         m/s   right end-effector velocity command, y
+    2    right_grip_cmd   -     +1 close, -1 open (finger speed = cmd * GRIP_SPEED)
+    3    left_vx          m/s   left end-effector velocity command, x
+    4    left_vy          m/s   left end-effector velocity command, y
+    5    left_grip_cmd    -     +1 close, -1 open
+
+Constants: FPS = 10 control steps per second; PHYSICS_DT = 0.01 s (N_SUBSTEPS = 10 physics
+steps per control step); MAX_STEPS = 400 control steps; SUCCESS_TOL = 0.04 m;
+SUCCESS_HOLD = 5 control steps; GRIP_SPEED = 0.08 m/s of finger travel (FINGER_TRAVEL = 0.02 m,
+so a full close or open takes 0.25 s, i.e. 2.5 control steps).
+
+Physics: each end-effector is a body on slide joints (x, y) whose joint ranges are the reach
+limits, driven by velocity actuators (ctrl = commanded m/s, kv = 60). Each gripper is a finger
+slide joint (0 .. FINGER_TRAVEL m) driven by a velocity actuator; closedness = finger position /
+FINGER_TRAVEL, clipped to [0, 1]. Gravity is off and contacts are off (a planar, top-down
+abstraction): the arms pass over each other and over the cube.
+
+Grasp rule (deterministic, evaluated after every physics step, right arm first):
+* a gripper ENGAGES the cube when its closedness > GRASP_ENGAGE (0.8) and its end-effector is
+  within GRASP_RADIUS (0.03 m) of the cube centre (planar distance); the cube-minus-gripper
+  offset at that instant is remembered.
+* a gripper RELEASES the cube when its closedness drops below GRASP_RELEASE (0.5).
+* while held, the cube is a kinematic attachment: its joint positions are set to the holder's
+  end-effector position plus the remembered offset (the mean over both holders during a
+  handoff, when both grippers hold it), and its joint velocities to the holders' mean velocity.
+* when nobody holds it the cube rests on the table: at the moment of release its velocity is set
+  to zero, and nothing moves it afterwards.
+
+Reward and success: reward is 1.0 once the episode has succeeded, else 0.0. Success means the
+cube centre is within SUCCESS_TOL of the target for SUCCESS_HOLD consecutive control steps,
+whether or not a gripper still holds it. Success latches. ``done`` is True at success or after
+MAX_STEPS control steps.
+
+Spawn distribution (``reset(seed)``, all from ``np.random.default_rng(seed)`` built there):
+* cube uniform in CUBE_X_RANGE x CUBE_Y_RANGE = [0.15, 0.30] x [-0.15, 0.15] m (right-only);
+* target uniform in TARGET_X_RANGE x TARGET_Y_RANGE = [-0.30, -0.15] x [-0.15, 0.15] m
+  (left-only);
+* right end-effector uniform in [0.10, 0.30] x [-0.20, 0.20] m, left end-effector in
+  [-0.30, -0.10] x [-0.20, 0.20] m; both grippers open, everything at rest.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+XML_PATH = Path(__file__).with_name("aloha.xml")
+
+FPS = 10                      # control steps per second
+PHYSICS_DT = 0.01             # s, MuJoCo timestep
+N_SUBSTEPS = 10               # physics steps per control step (= 1 / (FPS * PHYSICS_DT))
+MAX_STEPS = 400               # control steps per episode
+SUCCESS_TOL = 0.04            # m, cube-to-target distance
+SUCCESS_HOLD = 5              # consecutive control steps within SUCCESS_TOL
+ACT_DIM = 6
+OBS_DIM = 10
+
+# Reach limits (m): these are the slide-joint ranges in aloha.xml (checked at load time).
+RIGHT_X_RANGE = (-0.05, 0.35)
+LEFT_X_RANGE = (-0.35, 0.05)
+Y_RANGE = (-0.25, 0.25)
+HANDOFF_HALF_WIDTH = 0.05     # m, the two reaches overlap for |x| < this
+
+# Spawn regions (m).
+CUBE_X_RANGE = (0.15, 0.30)
+CUBE_Y_RANGE = (-0.15, 0.15)
+TARGET_X_RANGE = (-0.30, -0.15)
+TARGET_Y_RANGE = (-0.15, 0.15)
+RIGHT_START_X_RANGE = (0.10, 0.30)
+LEFT_START_X_RANGE = (-0.30, -0.10)
+START_Y_RANGE = (-0.20, 0.20)
+
+# Gripper and grasp rule.
+FINGER_TRAVEL = 0.02          # m, finger slide range (closedness 1 = fully closed)
+GRIP_SPEED = 0.08             # m/s of finger travel at |grip command| = 1
+GRASP_ENGAGE = 0.8            # closedness above which a gripper near the cube grasps it
+GRASP_RELEASE = 0.5           # closedness below which a holding gripper lets go
+GRASP_RADIUS = 0.03           # m, end-effector-to-cube distance for a grasp to engage
+
+STATE_NAMES = ("right_x", "right_y", "right_grip", "left_x", "left_y", "left_grip",
+               "cube_x", "cube_y", "target_x", "target_y")
+ACTION_NAMES = ("right_vx", "right_vy", "right_grip_cmd", "left_vx", "left_vy", "left_grip_cmd")
+ROBOT_TYPE = "aloha_planar_bimanual"
+TASK = "Pick the cube with the right arm, hand it to the left arm, and place it on the target."
+
+_ARMS = ("right", "left")
+
+
+class AlohaCubeEnv:
+    """Bimanual planar cube handoff. See the module docstring for the full contract."""
+
+    def __init__(self) -> None:
+        self.model = mujoco.MjModel.from_xml_path(str(XML_PATH))
+        self.data = mujoco.MjData(self.model)
+        m, d = self.model, self.data
+        assert abs(m.opt.timestep - PHYSICS_DT) < 1e-12, "aloha.xml timestep must be PHYSICS_DT"
+        for arm, xr in (("right", RIGHT_X_RANGE), ("left", LEFT_X_RANGE)):
+            assert np.allclose(m.joint(f"{arm}_x").range, xr), f"{arm}_x range != reach limit"
+            assert np.allclose(m.joint(f"{arm}_y").range, Y_RANGE), f"{arm}_y range != reach limit"
+            assert np.allclose(m.joint(f"{arm}_finger").range, (0.0, FINGER_TRAVEL))
+        # Named views into data (numpy views that stay valid across mj_resetData).
+        self._jx = {a: d.joint(f"{a}_x") for a in _ARMS}
+        self._jy = {a: d.joint(f"{a}_y") for a in _ARMS}
+        self._jf = {a: d.joint(f"{a}_finger") for a in _ARMS}
+        self._cube_x = d.joint("cube_x")
+        self._cube_y = d.joint("cube_y")
+        self._act_vx = {a: d.actuator(f"{a}_vx") for a in _ARMS}
+        self._act_vy = {a: d.actuator(f"{a}_vy") for a in _ARMS}
+        self._act_grip = {a: d.actuator(f"{a}_grip") for a in _ARMS}
+        self._target_site = m.site("target")
+        self._target = np.zeros(2)
+        self._holding = {a: False for a in _ARMS}
+        self._offset = {a: np.zeros(2) for a in _ARMS}
+        self._steps = 0
+        self._in_tol = 0
+        self._success = False
+        self._renderer = None
+
+    # ------------------------------------------------------------------ episode API
+    def reset(self, seed: int) -> np.ndarray:
+        """Start a new episode; every random draw comes from ``np.random.default_rng(seed)``."""
+        rng = np.random.default_rng(seed)
+        cube = np.array([rng.uniform(*CUBE_X_RANGE), rng.uniform(*CUBE_Y_RANGE)])
+        target = np.array([rng.uniform(*TARGET_X_RANGE), rng.uniform(*TARGET_Y_RANGE)])
+        right = np.array([rng.uniform(*RIGHT_START_X_RANGE), rng.uniform(*START_Y_RANGE)])
+        left = np.array([rng.uniform(*LEFT_START_X_RANGE), rng.uniform(*START_Y_RANGE)])
+
+        mujoco.mj_resetData(self.model, self.data)
+        for a, p in (("right", right), ("left", left)):
+            self._jx[a].qpos[0] = p[0]
+            self._jy[a].qpos[0] = p[1]
+            self._jf[a].qpos[0] = 0.0
+            self._holding[a] = False
+            self._offset[a][:] = 0.0
+        self._cube_x.qpos[0] = cube[0]
+        self._cube_y.qpos[0] = cube[1]
+        self._target[:] = target
+        self._target_site.pos[:2] = target
+        mujoco.mj_forward(self.model, self.data)
+        self._steps = 0
+        self._in_tol = 0
+        self._success = False
+        return self._obs()
+
+    def step(self, action):
+        """Apply one control step (N_SUBSTEPS physics steps). Returns (obs, reward, done, info)."""
+        a = np.clip(np.asarray(action, dtype=np.float64).reshape(ACT_DIM), -1.0, 1.0)
+        for i, arm in enumerate(_ARMS):
+            self._act_vx[arm].ctrl[0] = a[3 * i]
+            self._act_vy[arm].ctrl[0] = a[3 * i + 1]
+            self._act_grip[arm].ctrl[0] = a[3 * i + 2] * GRIP_SPEED
+        m, d = self.model, self.data
+        for _ in range(N_SUBSTEPS):
+            mujoco.mj_step(m, d)
+            self._apply_grasp()
+        self._steps += 1
+        cube = np.array([self._cube_x.qpos[0], self._cube_y.qpos[0]])
+        if np.hypot(*(cube - self._target)) < SUCCESS_TOL:
+            self._in_tol += 1
+        else:
+            self._in_tol = 0
+        if self._in_tol >= SUCCESS_HOLD:
+            self._success = True
+        done = self._success or self._steps >= MAX_STEPS
+        info = {"success": self._success, "steps": self._steps}
+        return self._obs(), float(self._success), done, info
+
+    def _apply_grasp(self) -> None:
+        """Grasp rule of the module docstring, run after every physics step."""
+        cube = np.array([self._cube_x.qpos[0], self._cube_y.qpos[0]])
+        held_any_before = self._holding["right"] or self._holding["left"]
+        pos_sum = np.zeros(2)
+        vel_sum = np.zeros(2)
+        n = 0
+        for arm in _ARMS:
+            ee = np.array([self._jx[arm].qpos[0], self._jy[arm].qpos[0]])
+            closed = self._closedness(arm)
+            if self._holding[arm]:
+                if closed < GRASP_RELEASE:
+                    self._holding[arm] = False
+            elif closed > GRASP_ENGAGE and np.hypot(*(cube - ee)) < GRASP_RADIUS:
+                self._holding[arm] = True
+                self._offset[arm] = cube - ee
+            if self._holding[arm]:
+                pos_sum += ee + self._offset[arm]
+                vel_sum += (self._jx[arm].qvel[0], self._jy[arm].qvel[0])
+                n += 1
+        if n:
+            self._cube_x.qpos[0], self._cube_y.qpos[0] = pos_sum / n
+            self._cube_x.qvel[0], self._cube_y.qvel[0] = vel_sum / n
+        elif held_any_before:
+            self._cube_x.qvel[0] = 0.0
+            self._cube_y.qvel[0] = 0.0
+
+    def _closedness(self, arm: str) -> float:
+        return min(max(self._jf[arm].qpos[0] / FINGER_TRAVEL, 0.0), 1.0)
+
+    def _obs(self) -> np.ndarray:
+        return np.array([
+            self._jx["right"].qpos[0], self._jy["right"].qpos[0], self._closedness("right"),
+            self._jx["left"].qpos[0], self._jy["left"].qpos[0], self._closedness("left"),
+            self._cube_x.qpos[0], self._cube_y.qpos[0], self._target[0], self._target[1],
+        ], dtype=np.float32)
+
+    # ------------------------------------------------------------------ read-only accessors
+    @property
+    def right_ee(self) -> np.ndarray:
+        """Right end-effector (x, y) in m (a copy)."""
+        return np.array([self._jx["right"].qpos[0], self._jy["right"].qpos[0]])
+
+    @property
+    def left_ee(self) -> np.ndarray:
+        """Left end-effector (x, y) in m (a copy)."""
+        return np.array([self._jx["left"].qpos[0], self._jy["left"].qpos[0]])
+
+    @property
+    def grip(self) -> tuple[float, float]:
+        """(right, left) gripper closedness, 0 open .. 1 closed."""
+        return (self._closedness("right"), self._closedness("left"))
+
+    @property
+    def cube_pos(self) -> np.ndarray:
+        """Cube centre (x, y) in m (a copy)."""
+        return np.array([self._cube_x.qpos[0], self._cube_y.qpos[0]])
+
+    @property
+    def target_pos(self) -> np.ndarray:
+        """Delivery target (x, y) in m (a copy)."""
+        return self._target.copy()
+
+    @property
+    def holding(self) -> tuple[bool, bool]:
+        """(right holds the cube, left holds the cube)."""
+        return (self._holding["right"], self._holding["left"])
+
+    @property
+    def steps(self) -> int:
+        """Control steps taken in this episode."""
+        return self._steps
+
+    @property
+    def success(self) -> bool:
+        """True once the success rule has been met in this episode (latched)."""
+        return self._success
+
+    # ------------------------------------------------------------------ rendering
+    def render(self, size: int = 96) -> np.ndarray:
+        """Top-down uint8 image (size, size, 3) from the fixed "top" camera.
+
+        Needs an OpenGL backend (for headless machines set MUJOCO_GL=egl or osmesa before
+        importing mujoco); raises if none is available.
+        """
+        if self._renderer is None or self._renderer.height != size:
+            if self._renderer is not None:
+                self._renderer.close()
+            self._renderer = mujoco.Renderer(self.model, height=size, width=size)
+        mujoco.mj_forward(self.model, self.data)
+        self._renderer.update_scene(self.data, camera="top")
+        return self._renderer.render().copy()
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
