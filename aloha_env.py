@@ -39,7 +39,8 @@ SUCCESS_HOLD = 5 control steps; GRIP_SPEED = 0.08 m/s of finger travel (FINGER_T
 so a full close or open takes 0.25 s, i.e. 2.5 control steps).
 
 Physics: each end-effector is a body on slide joints (x, y) whose joint ranges are the reach
-limits, driven by velocity actuators (ctrl = commanded m/s, kv = 60). Each gripper is a finger
+limits, driven by velocity actuators (ctrl = commanded m/s, kv = 60). Joint limits are MuJoCo's
+soft constraints: pushing into a limit at full speed overshoots it by about 2 mm. Each gripper is a finger
 slide joint (0 .. FINGER_TRAVEL m) driven by a velocity actuator; closedness = finger position /
 FINGER_TRAVEL, clipped to [0, 1]. Gravity is off and contacts are off (a planar, top-down
 abstraction): the arms pass over each other and over the cube.
@@ -223,7 +224,7 @@ class AlohaCubeEnv:
             self._cube_y.qvel[0] = 0.0
 
     def _closedness(self, arm: str) -> float:
-        return min(max(self._jf[arm].qpos[0] / FINGER_TRAVEL, 0.0), 1.0)
+        return float(min(max(self._jf[arm].qpos[0] / FINGER_TRAVEL, 0.0), 1.0))
 
     def _obs(self) -> np.ndarray:
         return np.array([
@@ -246,7 +247,7 @@ class AlohaCubeEnv:
     @property
     def grip(self) -> tuple[float, float]:
         """(right, left) gripper closedness, 0 open .. 1 closed."""
-        return (self._closedness("right"), self._closedness("left"))
+        return (float(self._closedness("right")), float(self._closedness("left")))
 
     @property
     def cube_pos(self) -> np.ndarray:

@@ -1,0 +1,120 @@
+"""Plumbing for the chapter's demo sets: LeRobot v3 read/write, seeds, stamps.
+
+Kept out of scale_data.py so its regions read like the lesson. Everything here is a pure
+function of its arguments: no clock, no global RNG.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+# torchcodec needs system FFmpeg libraries and prints long tracebacks when they are missing;
+# pyav ships its own FFmpeg, so every dataset here is read and written through pyav.
+VIDEO_BACKEND = "pyav"
+STAMP_NAME = "scale_data_stamp.json"  # written by this project into every set it makes
+IMAGE_KEY = "observation.images.top"
+
+# Env seeds are carved into disjoint blocks so that demos, augmentation draws and evaluation
+# starts never share a seed, for any --seed >= 0: env_seed = (seed * 4 + purpose) * 1e6 + i.
+PURPOSES = {"demo": 0, "aug": 1, "eval": 2}
+SEED_BLOCK = 1_000_000
+
+
+def env_seed(seed: int, purpose: str, i: int) -> int:
+    if not (0 <= i < SEED_BLOCK) or seed < 0:
+        raise ValueError(f"seed must be >= 0 and index in [0, {SEED_BLOCK}); got seed={seed}, i={i}")
+    return (seed * len(PURPOSES) + PURPOSES[purpose]) * SEED_BLOCK + i
+
+
+class DataError(Exception):
+    """A problem with a demo directory that the user must fix (printed as one line)."""
+
+
+def holds_data(path: Path) -> bool:
+    return path.exists() and (not path.is_dir() or any(path.iterdir()))
+
+
+def features(state_names, action_names, extra: dict | None = None, video: bool = False) -> dict:
+    feats = {
+        "observation.state": {"dtype": "float32", "shape": (len(state_names),), "names": list(state_names)},
+        "action": {"dtype": "float32", "shape": (len(action_names),), "names": list(action_names)},
+        "next.success": {"dtype": "bool", "shape": (1,), "names": None},
+    }
+    if video:
+        feats[IMAGE_KEY] = {"dtype": "video", "shape": (96, 96, 3), "names": ["height", "width", "channels"]}
+    feats.update(extra or {})
+    return feats
+
+
+def write_dataset(out: Path, *, repo_id: str, fps: int, robot_type: str, task: str, feats: dict,
+                  episodes, stamp: dict) -> None:
+    """Write `episodes` (an iterable of dicts of per-frame arrays keyed like `feats`) to `out`.
+
+    The set is built in a sibling temp directory and renamed into place, so an interrupted run
+    never leaves a half-written set at `out`. `out` must not hold data.
+    """
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    out = Path(out)
+    if holds_data(out):
+        raise DataError(f"{out} already holds data; pick another --out or remove it yourself")
+    tmp = out.parent / f".{out.name}.partial-{os.getpid()}"
+    if tmp.exists():
+        shutil.rmtree(tmp)  # our own leftover from a crashed run with this pid
+    out.parent.mkdir(parents=True, exist_ok=True)
+    use_videos = any(f["dtype"] == "video" for f in feats.values())
+    try:
+        ds = LeRobotDataset.create(repo_id, fps=fps, features=feats, root=tmp, robot_type=robot_type,
+                                   use_videos=use_videos, video_backend=VIDEO_BACKEND)
+        for ep in episodes:
+            n = len(ep["action"])
+            for t in range(n):
+                ds.add_frame({k: ep[k][t] for k in feats} | {"task": task})
+            ds.save_episode()
+        ds.finalize()
+        (tmp / STAMP_NAME).write_text(json.dumps(stamp, sort_keys=True, indent=1) + "\n")
+        if out.exists():
+            out.rmdir()  # empty directory (holds_data checked above)
+        tmp.rename(out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+
+
+def read_stamp(root: Path) -> dict | None:
+    p = Path(root) / STAMP_NAME
+    try:
+        return json.loads(p.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+
+
+def open_dataset(root: Path, repo_id: str = "local/demos"):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    return LeRobotDataset(repo_id, root=Path(root), video_backend=VIDEO_BACKEND)
+
+
+def load_arrays(root: Path, keys=("observation.state", "action", "episode_index", "frame_index")) -> dict:
+    """Every frame of a local LeRobot dataset as numpy arrays, in dataset order."""
+    ds = open_dataset(root)
+    table = ds.hf_dataset.with_format("numpy")
+    return {k: np.asarray(table[k]) for k in keys}
+
+
+def schema_problem(root: Path, state_dim: int, action_dim: int) -> str | None:
+    """None if `root` is a LeRobot dataset with the expected state/action widths, else why not."""
+    info_path = Path(root) / "meta" / "info.json"
+    try:
+        feats = json.loads(info_path.read_text())["features"]
+    except (OSError, json.JSONDecodeError, KeyError):
+        return f"{root} is not a LeRobot v3 dataset (no readable meta/info.json)"
+    for key, want in (("observation.state", state_dim), ("action", action_dim)):
+        got = feats.get(key, {}).get("shape")
+        if got is None or list(got) != [want]:
+            return f"{root}: feature {key!r} has shape {got}, expected [{want}]"
+    return None

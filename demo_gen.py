@@ -1,0 +1,144 @@
+"""Shared machinery of gen_demos_pusht.py and gen_demos_aloha.py: roll out an expert, write LeRobot v3.
+
+A demo set is a pure function of (embodiment, episodes, seed, noise, video): episode i of seed s
+is rolled out from env seed demo_data.env_seed(s, "demo", i), and the expert's action noise is
+drawn from a generator seeded with that same number.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+import demo_data
+
+if sys.platform.startswith("linux"):  # headless rendering: EGL unless the user chose a GL backend
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
+GENERATOR_VERSION = 1  # bump when a change alters the frames a given set of flags produces
+
+
+@dataclass(frozen=True)
+class Embodiment:
+    name: str            # "pusht" | "aloha"
+    env_module: object   # module with the Env class and STATE_NAMES, ACTION_NAMES, FPS, ROBOT_TYPE, TASK
+    env_class: str
+    expert_class: type
+    default_noise: float  # action noise std (m/s) when --noise is not given
+
+    def make_env(self):
+        return getattr(self.env_module, self.env_class)()
+
+
+def rollout(env, policy, obs, *, render: bool = False) -> dict:
+    """Run `policy` from `obs` (what reset or set_start returned) to the end of the episode.
+
+    Frame t pairs the obs before action t with action t.
+    Returns arrays: observation.state (T, obs_dim) float32, action (T, act_dim) float32,
+    next.success (T, 1) bool, and IMAGE_KEY (T, 96, 96, 3) uint8 when render is set.
+    """
+    policy.reset()
+    states, actions, succ, frames = [], [], [], []
+    done = False
+    while not done:
+        if render:
+            frames.append(env.render(96))
+        act = policy.act(obs)
+        states.append(obs)
+        actions.append(act)
+        obs, _, done, info = env.step(act)
+        succ.append(bool(info["success"]))
+    ep = {
+        "observation.state": np.asarray(states, np.float32),
+        "action": np.asarray(actions, np.float32),
+        "next.success": np.asarray(succ, bool)[:, None],
+        "success": bool(succ[-1]),
+    }
+    if render:
+        ep[demo_data.IMAGE_KEY] = np.asarray(frames, np.uint8)
+    return ep
+
+
+def progress(iterable, *, total: int, desc: str, quiet: bool = False):
+    """A tqdm bar on a terminal; silent when quiet or when stderr is not a TTY."""
+    from tqdm import tqdm
+
+    return tqdm(iterable, total=total, desc=desc, unit="ep", leave=False,
+                disable=quiet or not sys.stderr.isatty())
+
+
+def generate(emb: Embodiment, out: Path, *, episodes: int, seed: int, noise: float, video: bool = False,
+             quiet: bool = False) -> dict:
+    """Write a demo set to `out` and return its summary (episodes, frames, successes)."""
+    env = emb.make_env()
+    m = emb.env_module
+    summary = {"episodes": 0, "frames": 0, "successes": 0}
+
+    def episodes_iter():
+        for i in progress(range(episodes), total=episodes, desc=f"{emb.name} demos", quiet=quiet):
+            s = demo_data.env_seed(seed, "demo", i)
+            ep = rollout(env, emb.expert_class(noise=noise, seed=s), env.reset(s), render=video)
+            summary["episodes"] += 1
+            summary["frames"] += len(ep["action"])
+            summary["successes"] += ep["success"]
+            yield ep
+
+    demo_data.write_dataset(
+        out, repo_id=f"local/{emb.name}_demos", fps=m.FPS, robot_type=m.ROBOT_TYPE, task=m.TASK,
+        feats=demo_data.features(m.STATE_NAMES, m.ACTION_NAMES, video=video), episodes=episodes_iter(),
+        stamp=stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=video))
+    return summary
+
+
+def stamp_for(emb: Embodiment, *, episodes: int, seed: int, noise: float, video: bool) -> dict:
+    """Everything the frames of a generated set depend on; a cached set is reused only on equality."""
+    return {"made_by": "ch3.7-scale-data", "embodiment": emb.name, "episodes": int(episodes),
+            "seed": int(seed), "noise": float(noise), "video": bool(video),
+            "generator_version": GENERATOR_VERSION}
+
+
+def check_gl() -> str | None:
+    """None if headless rendering works here, else a one-line reason."""
+    try:
+        import mujoco
+
+        mujoco.Renderer(mujoco.MjModel.from_xml_string("<mujoco/>"), 8, 8).close()
+        return None
+    except Exception as e:  # no EGL/OSMesa/GLFW context: anything MuJoCo raises here means "no GL"
+        return f"no OpenGL backend for headless rendering ({type(e).__name__}); set MUJOCO_GL=egl or osmesa with its library installed, or use --no-video"
+
+
+def main(emb: Embodiment, argv=None, default_out: str | None = None) -> int:
+    p = argparse.ArgumentParser(description=f"Generate {emb.name} expert demos as a local LeRobot v3 dataset.")
+    p.add_argument("--episodes", type=int, default=50, help="number of episodes to roll out (default 50)")
+    p.add_argument("--seed", type=int, default=0, help="dataset seed >= 0; seeds never share an episode")
+    p.add_argument("--out", type=Path, default=Path(default_out or f"outputs/demos/{emb.name}"),
+                   help="directory for the dataset; must not already hold data")
+    p.add_argument("--noise", type=float, default=emb.default_noise,
+                   help=f"std of Gaussian action noise, m/s (default {emb.default_noise})")
+    p.add_argument("--video", action=argparse.BooleanOptionalAction, default=False,
+                   help="also record a 96x96 top-down video (needs a headless GL backend)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    a = p.parse_args(argv)
+    problem = None
+    if a.episodes <= 0:
+        problem = f"--episodes must be positive, got {a.episodes}"
+    elif a.seed < 0:
+        problem = f"--seed must be >= 0, got {a.seed}"
+    elif not np.isfinite(a.noise) or a.noise < 0:
+        problem = f"--noise must be a finite number >= 0, got {a.noise}"
+    elif demo_data.holds_data(a.out):
+        problem = f"{a.out} already holds data; pick another --out (nothing was touched)"
+    elif a.video:
+        problem = check_gl()
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
+        return 2
+    s = generate(emb, a.out, episodes=a.episodes, seed=a.seed, noise=a.noise, video=a.video, quiet=a.quiet)
+    print(f"wrote {s['episodes']} {emb.name} episodes, {s['frames']} frames to {a.out} "
+          f"(expert successes {s['successes']}/{s['episodes']})")
+    return 0

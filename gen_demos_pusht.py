@@ -1,0 +1,22 @@
+"""Generate PushT expert demos as a local LeRobot v3 dataset.
+
+    python gen_demos_pusht.py --episodes 50 --seed 0 --out outputs/demos/pusht [--noise 0.0] [--video]
+
+observation.state float32[10] and action float32[2] (pusher velocity, m/s), fps 10; names and
+units in pusht_env.py. Callable from Python as main(argv).
+"""
+import sys
+
+import demo_gen
+import pusht_env
+from scripted_expert import PushTExpert
+
+PUSHT = demo_gen.Embodiment("pusht", pusht_env, "PushTEnv", PushTExpert, default_noise=0.0)
+
+
+def main(argv=None) -> int:
+    return demo_gen.main(PUSHT, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

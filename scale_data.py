@@ -1,0 +1,355 @@
+"""Chapter 3.7, Datasets at Scale: wrangle a cross-embodiment pile, grow it, measure what it buys.
+
+Open X-Embodiment and DROID are piles of demos from many robots. Two problems meet you the moment
+you pool data: robots disagree on action size and on what a state number means, and a dozen demos
+cover too little of the start space for a policy to generalise. This script meets both on two
+small MuJoCo robots of our own. It pools PushT (2-D actions) with a bimanual ALOHA cube handoff
+(6-D actions), then grows the PushT demos the way MimicGen does (perturb the start, re-solve with
+the expert, keep only successes) and trains the same behaviour-cloning MLP with and without the
+extra demos, so the data is the only difference.
+
+  1. setup    flags, seeds, device, a two-line banner with the expected wall-clock
+  2. wrangle  load both LeRobot sets, per-embodiment stats, normalize, zero-pad + action mask
+  3. augment  perturbed PushT starts re-solved by the expert, kept only on success
+  4. measure  source-only vs source+augmented vs a compute-matched control, same eval starts
+  5. emit     metrics.json, cross_embodiment.json, a PNG figure and a Rerun recording
+
+Run:    python scale_data.py --seed 0
+Smoke:  python scale_data.py --smoke --seed 0     (seconds; two runs give identical metrics.json)
+"""
+# --- region: setup ---
+# Every knob is a flag with its unit and why its default; --smoke pins a tiny CPU configuration.
+# Heavy imports (torch, lerobot) come after validation so --help and flag errors are instant.
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import chapter_io as io
+
+t_start = time.perf_counter()
+p = argparse.ArgumentParser(description="Chapter 3.7: Datasets at Scale (cross-embodiment wrangling, MimicGen-style augmentation, data-scale effect).")
+p.add_argument("--out", type=Path, default=None, help="output folder (default outputs/ch3.7-scale-data, or ...-smoke with --smoke)")
+p.add_argument("--pusht_data", type=Path, default=None, help="your own PushT LeRobot set (never modified; default: a private set under --out)")
+p.add_argument("--aloha_data", type=Path, default=None, help="your own ALOHA LeRobot set (never modified; default: a private set under --out)")
+p.add_argument("--source_episodes", type=int, default=12, help="expert demos per embodiment; 12 is coverage-starved on purpose")
+p.add_argument("--aug_per_demo", type=int, default=8, help="perturbed re-solves per PushT source demo (0 = no augmentation)")
+p.add_argument("--aug_pos_sigma", type=float, default=0.08, help="m; std of block and pusher xy perturbation, about a third of the spawn annulus")
+p.add_argument("--aug_yaw_sigma", type=float, default=0.5, help="rad; std of block yaw perturbation")
+p.add_argument("--epochs", type=int, default=500, help="passes over each arm's data; enough for the MLP to fit 12 demos")
+p.add_argument("--batch_size", type=int, default=128, help="frames per gradient step")
+p.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate, cosine-decayed to 0")
+p.add_argument("--hidden_dim", type=int, default=512, help="width of both hidden layers of the BC MLP")
+p.add_argument("--eval_episodes", type=int, default=50, help="held-out PushT starts per arm; 50 gives a +-0.14 interval at worst")
+p.add_argument("--seed", type=int, default=0, help="seed >= 0; seeds 0, 1, 2 draw disjoint demos and eval starts")
+p.add_argument("--device", default="auto", help="auto | cpu | cuda | mps (auto: cuda > mps > cpu)")
+p.add_argument("--smoke", action="store_true", help="tiny CPU configuration for tests and CI (seconds)")
+p.add_argument("--rerun", action=argparse.BooleanOptionalAction, default=True, help="write a Rerun .rrd recording")
+p.error = lambda msg: io.fail(f"{msg} (see --help)")
+args = p.parse_args()
+if args.smoke:  # pinned so two smoke runs are byte-identical on any machine
+    args.source_episodes, args.aug_per_demo, args.epochs, args.hidden_dim = 4, 2, 30, 64
+    args.eval_episodes, args.batch_size, args.device = 8, 64, "cpu"
+args.out = args.out or Path("outputs/ch3.7-scale-data" + ("-smoke" if args.smoke else ""))
+for name in ("source_episodes", "epochs", "batch_size", "hidden_dim", "eval_episodes"):
+    if getattr(args, name) <= 0:
+        io.fail(f"--{name} must be a positive integer, got {getattr(args, name)}")
+for name in ("aug_per_demo", "seed"):
+    if getattr(args, name) < 0:
+        io.fail(f"--{name} must be >= 0, got {getattr(args, name)}")
+for name in ("aug_pos_sigma", "aug_yaw_sigma", "lr"):
+    if not math.isfinite(getattr(args, name)) or getattr(args, name) < 0 or (name == "lr" and args.lr == 0):
+        io.fail(f"--{name} must be a finite {'positive' if name == 'lr' else 'non-negative'} number, got {getattr(args, name)}")
+if args.device not in ("auto", "cpu", "cuda", "mps"):
+    io.fail(f"--device must be auto, cpu, cuda or mps, got {args.device!r}")
+
+import torch  # noqa: E402  (after validation, see above)
+
+available = {"cpu": True, "cuda": torch.cuda.is_available(), "mps": torch.backends.mps.is_available()}
+if args.device == "auto":
+    args.device = next(d for d in ("cuda", "mps", "cpu") if available[d])
+elif not available[args.device]:
+    io.fail(f"--device {args.device} is not available on this machine; use --device cpu or auto")
+torch.manual_seed(args.seed)
+device = torch.device(args.device)
+tier = io.device_tier(args.device)
+print(f"ch3.7 Datasets at Scale | seed {args.seed} | device {args.device} ({tier}) | torch {torch.__version__}")
+print("smoke run: tiny configuration, seconds, numbers not meaningful" if args.smoke else io.expected_wallclock(tier))
+# --- endregion ---
+
+# --- region: wrangle ---
+# Pool two robots' demos. Each keeps its own statistics (a PushT velocity and an ALOHA grip
+# command share no scale), actions are zero-padded to the widest robot (6) with a mask so the
+# padding never teaches anything, and an embodiment id says which robot a row came from.
+import demo_data  # noqa: E402
+from gen_demos_aloha import ALOHA  # noqa: E402
+from gen_demos_pusht import PUSHT  # noqa: E402
+
+sets = {}
+for emb, given in ((PUSHT, args.pusht_data), (ALOHA, args.aloha_data)):
+    path = given or args.out / "demos" / f"{emb.name}_seed{args.seed}_ep{args.source_episodes}"
+    try:
+        how = io.ensure_demos(emb, path, user_given=given is not None, episodes=args.source_episodes,
+                              seed=args.seed, noise=emb.default_noise, quiet=args.smoke)
+    except demo_data.DataError as e:
+        io.fail(str(e))
+    d = demo_data.load_arrays(path)  # read back through LeRobotDataset, as any LeRobot user would
+    sets[emb.name] = dict(d, path=path, emb=emb)
+    lo, hi = d["action"].min(0), d["action"].max(0)
+    print(f"{emb.name:6s} {len(np.unique(d['episode_index'])):3d} episodes {len(d['action']):6d} frames "
+          f"act_dim {d['action'].shape[1]}  action range [{lo.min():+.2f}, {hi.max():+.2f}]  ({how})")
+
+
+def stats_of(x):  # (N, D) -> per-dimension statistics, the same keys LeRobot's meta/stats.json uses
+    return {"min": x.min(0), "max": x.max(0), "mean": x.mean(0), "std": x.std(0),
+            "q01": np.quantile(x, 0.01, axis=0), "q99": np.quantile(x, 0.99, axis=0)}
+
+
+PAD = max(s["action"].shape[1] for s in sets.values())  # 6: the widest action wins
+pile = {"state": [], "action": [], "mask": [], "emb_id": []}
+for emb_id, (name, s) in enumerate(sets.items()):
+    s["stats"] = {"state": stats_of(s["observation.state"]), "action": stats_of(s["action"])}
+    z = lambda x, st: (x - st["mean"]) / np.where(st["std"] > 1e-8, st["std"], 1.0)  # noqa: E731
+    state = z(s["observation.state"], s["stats"]["state"])  # (N, 10), own stats
+    act = z(s["action"], s["stats"]["action"])  # (N, act_dim), own stats
+    n, a = act.shape
+    pile["state"].append(state.astype(np.float32))
+    pile["action"].append(np.pad(act, ((0, 0), (0, PAD - a))).astype(np.float32))  # (N, 6) zero-padded
+    pile["mask"].append(np.repeat((np.arange(PAD) < a).astype(np.float32)[None], n, 0))  # (N, 6) 1 = real dim
+    pile["emb_id"].append(np.full(n, emb_id, np.int64))
+pile = {k: np.concatenate(v) for k, v in pile.items()}
+print(f"pile: {len(pile['state'])} rows, state (N, 10), actions padded to (N, {PAD}), "
+      f"mask density PushT {pile['mask'][pile['emb_id'] == 0].mean():.3f} ALOHA {pile['mask'][pile['emb_id'] == 1].mean():.3f}")
+
+
+def masked_mse(pred, target, mask):  # padded dims contribute nothing to the loss, hence no gradient
+    return ((pred - target) ** 2 * mask).sum() / mask.sum().clamp(min=1)
+
+
+# The mask must reach the gradient, not just the printout: one shared linear head on the pile.
+head = torch.nn.Linear(10, PAD)
+rows = torch.from_numpy(np.concatenate([np.flatnonzero(pile["emb_id"] == e)[:64] for e in (0, 1)]))
+pred = head(torch.from_numpy(pile["state"][rows]))
+pred.retain_grad()
+masked_mse(pred, torch.from_numpy(pile["action"][rows]), torch.from_numpy(pile["mask"][rows])).backward()
+pad_grad = pred.grad[:64, 2:].abs().max().item()  # PushT rows, padded dims 2..5
+print(f"masked loss: largest gradient on PushT's padded dims = {pad_grad:.1f} (real dims: {pred.grad[:64, :2].abs().max().item():.2e})")
+cross = {
+    "padded_action_dim": PAD,
+    "embodiments": [{
+        "name": name, "id": i, "act_dim": int(s["action"].shape[1]), "frames": int(len(s["action"])),
+        "state_names": list(s["emb"].env_module.STATE_NAMES), "action_names": list(s["emb"].env_module.ACTION_NAMES),
+        "mask_density": float(pile["mask"][pile["emb_id"] == i].mean()),
+        "stats": {part: {k: [float(x) for x in v] for k, v in st.items()} for part, st in s["stats"].items()},
+    } for i, (name, s) in enumerate(sets.items())],
+    "state_index_2_means": {name: s["emb"].env_module.STATE_NAMES[2] for name, s in sets.items()},
+    "padded_dim_max_grad": pad_grad,
+}
+io.write_atomic(args.out / "cross_embodiment.json", io.dump_json(io.round_floats(cross, 6)))
+# --- endregion ---
+
+# --- region: augment ---
+# MimicGen-style growth: take each source demo's first state, perturb the block pose and pusher,
+# put the simulator there and let the same expert solve it; keep the demo only if it succeeds.
+# No action is invented. Each (source demo, k) draws from its own seeded stream, so the set for
+# aug_per_demo=4 is a subset of the set for 8 and the scaling curve compares nested data.
+import pusht_env  # noqa: E402
+from demo_gen import progress, rollout  # noqa: E402
+from scripted_expert import PushTExpert  # noqa: E402
+
+R_LO, R_HI = 0.08, 0.26  # m; the block is kept on a band slightly wider than the spawn annulus
+
+
+def perturbed_start(first_state, rng, tries=100):
+    """(block x, y, yaw, pusher x, y) near a source start, or None if no valid draw was found."""
+    px, py, bx, by, s, c = (float(v) for v in first_state[:6])
+    for _ in range(tries):
+        nbx, nby = bx + rng.normal(0, args.aug_pos_sigma), by + rng.normal(0, args.aug_pos_sigma)
+        yaw = math.atan2(s, c) + rng.normal(0, args.aug_yaw_sigma)
+        npx, npy = np.clip([px + rng.normal(0, args.aug_pos_sigma), py + rng.normal(0, args.aug_pos_sigma)],
+                           -pusht_env.PUSHER_HALF, pusht_env.PUSHER_HALF)
+        if R_LO <= math.hypot(nbx, nby) <= R_HI and pusht_env.pusher_clear(nbx, nby, yaw, npx, npy):
+            return (nbx, nby, math.atan2(math.sin(yaw), math.cos(yaw)), float(npx), float(npy))
+    return None
+
+
+pusht = sets["pusht"]
+ep_ids = np.unique(pusht["episode_index"])
+first = {int(e): pusht["observation.state"][np.flatnonzero(pusht["episode_index"] == e)[0]] for e in ep_ids}
+env = pusht_env.PushTEnv()
+kept, failures = [], {"expert_failed": 0, "no_valid_start": 0}
+jobs = [(e, k) for e in first for k in range(args.aug_per_demo)]
+for e, k in progress(jobs, total=len(jobs), desc="augment", quiet=args.smoke):
+    rng = np.random.default_rng([demo_data.env_seed(args.seed, "aug", e), k])  # own stream per (demo, k)
+    start = perturbed_start(first[e], rng)
+    if start is None:
+        failures["no_valid_start"] += 1
+        continue
+    ep = rollout(env, PushTExpert(noise=0.0), env.set_start(*start))
+    if not ep["success"]:
+        failures["expert_failed"] += 1
+        continue
+    n = len(ep["action"])
+    ep["aug.source_episode"] = np.full((n, 1), e, np.int64)  # provenance, stored on every frame
+    ep["aug.start"] = np.tile(np.float32(start), (n, 1))
+    kept.append(ep)
+attempts = len(jobs)
+yield_ = len(kept) / attempts if attempts else 0.0
+print(f"augment: {attempts} attempts, {len(kept)} kept, yield {yield_:.2f}, failures {failures}")
+aug_path = args.out / "demos" / f"pusht_aug_seed{args.seed}_src{len(first)}_k{args.aug_per_demo}"
+try:
+    io.replace_own_dir(aug_path)
+except demo_data.DataError as e:
+    io.fail(str(e))
+extra = {"aug.source_episode": {"dtype": "int64", "shape": (1,), "names": None},
+         "aug.start": {"dtype": "float32", "shape": (5,), "names": ["block_x", "block_y", "block_yaw", "pusher_x", "pusher_y"]}}
+aug = {"observation.state": np.zeros((0, 10), np.float32), "action": np.zeros((0, 2), np.float32),
+       "episode_index": np.zeros(0, np.int64), "aug.start": np.zeros((0, 5), np.float32)}
+if kept:
+    demo_data.write_dataset(aug_path, repo_id="local/pusht_aug", fps=pusht_env.FPS, robot_type=pusht_env.ROBOT_TYPE,
+                            task=pusht_env.TASK, feats=demo_data.features(pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, extra),
+                            episodes=kept, stamp={"made_by": "ch3.7-scale-data", "kind": "augmented", "seed": args.seed})
+    aug = demo_data.load_arrays(aug_path, keys=tuple(aug))  # train on what is on disk
+# --- endregion ---
+
+# --- region: measure ---
+# One MLP recipe, three arms. Same initial weights and same batch-order generator in every arm,
+# so the data is the only difference; the compute-matched arm trains on source+augmented for
+# exactly the source arm's number of steps, so "more data" is not confused with "more steps".
+# All arms roll out on the same held-out starts, in lockstep: one policy call per control step.
+class BCPolicy(torch.nn.Module):
+    def __init__(self, states, actions, hidden):
+        super().__init__()
+        self.net = torch.nn.Sequential(torch.nn.Linear(10, hidden), torch.nn.ReLU(), torch.nn.Linear(hidden, hidden),
+                                       torch.nn.ReLU(), torch.nn.Linear(hidden, 2))
+        for name, x in (("s", states), ("a", actions)):  # min-max ranges of the arm's own data
+            lo, hi = torch.as_tensor(x.min(0)), torch.as_tensor(x.max(0))
+            self.register_buffer(f"{name}_lo", lo)
+            self.register_buffer(f"{name}_span", torch.where(hi - lo > 1e-6, hi - lo, torch.ones_like(lo)))
+
+    def norm_s(self, s):  # -> [-1, 1]
+        return 2 * (s - self.s_lo) / self.s_span - 1
+
+    def norm_a(self, a):
+        return 2 * (a - self.a_lo) / self.a_span - 1
+
+    def forward(self, s):  # raw state (B, 10) -> raw action (B, 2), m/s
+        return (self.net(self.norm_s(s)) + 1) / 2 * self.a_span + self.a_lo
+
+
+torch.manual_seed(args.seed)
+init_weights = BCPolicy(np.zeros((1, 10), np.float32), np.zeros((1, 2), np.float32), args.hidden_dim).net.state_dict()
+
+
+def train(states, actions, *, steps=None):
+    """Fit a fresh BCPolicy for args.epochs epochs (or exactly `steps` steps); returns (policy, steps)."""
+    pol = BCPolicy(states, actions, args.hidden_dim)
+    pol.net.load_state_dict(init_weights)
+    pol.to(device)
+    s, a = torch.as_tensor(states, device=device), torch.as_tensor(actions, device=device)
+    x, y = pol.norm_s(s), pol.norm_a(a)  # normalize once, not per batch
+    per_epoch = math.ceil(len(x) / args.batch_size)
+    total = steps if steps is not None else args.epochs * per_epoch
+    opt = torch.optim.Adam(pol.net.parameters(), lr=args.lr)
+    gen = torch.Generator().manual_seed(args.seed)  # the same batch order stream in every arm
+    step = 0
+    bar = progress(range(total), total=total, desc="train", quiet=args.smoke)
+    while step < total:
+        order = torch.randperm(len(x), generator=gen).to(device)
+        for b in range(per_epoch):
+            if step == total:
+                break
+            idx = order[b * args.batch_size:(b + 1) * args.batch_size]
+            loss = torch.nn.functional.mse_loss(pol.net(x[idx]), y[idx])
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            for g in opt.param_groups:  # cosine from lr to 0 over the arm's steps
+                g["lr"] = args.lr * 0.5 * (1 + math.cos(math.pi * step / total))
+            opt.step()
+            step += 1
+            bar.update()
+    bar.close()
+    return pol.eval(), total
+
+
+@torch.no_grad()
+def evaluate(pol, seeds):
+    """Success rate of `pol` on PushT starts env.reset(seed), all episodes stepped in lockstep."""
+    envs = [pusht_env.PushTEnv() for _ in seeds]
+    obs = np.stack([e.reset(sd) for e, sd in zip(envs, seeds)])
+    live, success = np.ones(len(envs), bool), np.zeros(len(envs), bool)
+    while live.any():
+        idx = np.flatnonzero(live)
+        act = pol(torch.as_tensor(obs[idx], device=device)).cpu().numpy()  # one call for every live env
+        for j, a in zip(idx, act):
+            obs[j], _, done, info = envs[j].step(a)
+            success[j], live[j] = info["success"], not done
+    return float(success.mean())
+
+
+def wilson(p_hat, n, z=1.96):  # 95% interval for a success rate from n episodes
+    centre, half = (p_hat + z * z / (2 * n)) / (1 + z * z / n), z * math.sqrt(p_hat * (1 - p_hat) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return [max(0.0, centre - half), min(1.0, centre + half)]
+
+
+src_x, src_y = pusht["observation.state"], pusht["action"]
+all_x, all_y = np.concatenate([src_x, aug["observation.state"]]), np.concatenate([src_y, aug["action"]])
+eval_seeds = [demo_data.env_seed(args.seed, "eval", j) for j in range(args.eval_episodes)]  # disjoint from demos
+arms = {}
+for arm, (x, y, steps) in {"source": (src_x, src_y, None), "augmented": (all_x, all_y, None),
+                           "compute_matched": (all_x, all_y, "source")}.items():
+    t0 = time.perf_counter()
+    pol, n_steps = train(x, y, steps=arms[steps]["steps"] if steps else None)
+    rate = evaluate(pol, eval_seeds)
+    arms[arm] = {"frames": int(len(x)), "steps": n_steps, "success": rate, "ci95": wilson(rate, len(eval_seeds))}
+    print(f"{arm:16s} {len(x):6d} frames {n_steps:6d} steps  success {rate:.2f}  "
+          f"95% CI [{arms[arm]['ci95'][0]:.2f}, {arms[arm]['ci95'][1]:.2f}]  ({time.perf_counter() - t0:.1f} s)")
+# --- endregion ---
+
+# --- region: emit ---
+# Coverage says why the extra demos help: count which cells of the spawn annulus (3 rings x 12
+# sectors) hold a block start. Then metrics.json (sorted, rounded, atomic), a PNG figure and a
+# Rerun recording, and the headline last.
+RINGS, SECTORS = 3, 12
+
+
+def cells(starts):  # (N, 2) block xy -> set of (ring, sector) inside the annulus, and the count outside
+    r, th = np.hypot(starts[:, 0], starts[:, 1]), np.arctan2(starts[:, 1], starts[:, 0]) % (2 * np.pi)
+    inside = (r >= pusht_env.SPAWN_R_MIN) & (r <= pusht_env.SPAWN_R_MAX)
+    ring = np.minimum(((r - pusht_env.SPAWN_R_MIN) / (pusht_env.SPAWN_R_MAX - pusht_env.SPAWN_R_MIN) * RINGS).astype(int), RINGS - 1)
+    sector = np.minimum((th / (2 * np.pi) * SECTORS).astype(int), SECTORS - 1)
+    return {(int(a), int(b)) for a, b, ok in zip(ring, sector, inside) if ok}, int((~inside).sum())
+
+
+src_starts = np.array([first[e][2:4] for e in first])
+aug_starts = np.array([k["aug.start"][0, :2] for k in kept]).reshape(-1, 2)
+c_src, out_src = cells(src_starts)
+c_aug, out_aug = cells(aug_starts)
+metrics = {
+    "seed": args.seed, "smoke": args.smoke, "config": {k: (str(v) if isinstance(v, Path) else v) for k, v in sorted(vars(args).items())},
+    "action_dims": {name: int(s["action"].shape[1]) for name, s in sets.items()}, "padded_action_dim": PAD,
+    "source_demos": len(first), "source_frames": int(len(src_x)), "attempts": attempts, "kept": len(kept),
+    "yield": yield_, "augment_failures": failures, "augmented_frames": int(len(aug["action"])),
+    "arms": arms, "scale_effect": arms["augmented"]["success"] - arms["source"]["success"],
+    "compute_matched_effect": arms["compute_matched"]["success"] - arms["source"]["success"],
+    "coverage": {"cells": RINGS * SECTORS, "source": len(c_src), "augmented": len(c_aug), "union": len(c_src | c_aug),
+                 "outside_annulus": {"source": out_src, "augmented": out_aug}},
+}
+io.write_atomic(args.out / "metrics.json", io.dump_json(io.round_floats(metrics)))
+import chapter_viz  # noqa: E402  (matplotlib and rerun drawing code, kept out of the lesson)
+
+fig_path = chapter_viz.figure(args.out / "scale_data.png", src_starts, aug_starts, arms, metrics["coverage"],
+                              (pusht_env.SPAWN_R_MIN, pusht_env.SPAWN_R_MAX, RINGS, SECTORS))
+if args.rerun:
+    rrd_path = chapter_viz.recording(args.out / "scale_data.rrd", arms, metrics, src_starts, aug_starts, kept[:8])
+s, a_ = arms["source"]["success"], arms["augmented"]["success"]
+print(f"headline: source-only {s:.2f} -> source+augmented {a_:.2f} ({(a_ - s) * 100:+.0f} points; "
+      f"compute-matched {arms['compute_matched']['success']:.2f}); coverage {len(c_src)} -> {len(c_src | c_aug)} of {RINGS * SECTORS} cells")
+print(f"wrote {args.out / 'metrics.json'} and {args.out / 'cross_embodiment.json'} (JSON), {fig_path} (open as an image)"
+      + (f", {rrd_path} (open with: rerun {rrd_path})" if args.rerun else "")
+      + f"  [{time.perf_counter() - t_start:.0f} s]")
+# --- endregion ---
