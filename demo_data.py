@@ -34,6 +34,15 @@ class DataError(Exception):
     """A problem with a demo directory that the user must fix (printed as one line)."""
 
 
+def _lerobot_dataset_class():
+    """LeRobotDataset, with Hugging Face datasets' per-episode "Map" bars silenced (our own bar is enough)."""
+    import datasets
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    datasets.disable_progress_bars()
+    return LeRobotDataset
+
+
 def holds_data(path: Path) -> bool:
     return path.exists() and (not path.is_dir() or any(path.iterdir()))
 
@@ -57,8 +66,7 @@ def write_dataset(out: Path, *, repo_id: str, fps: int, robot_type: str, task: s
     The set is built in a sibling temp directory and renamed into place, so an interrupted run
     never leaves a half-written set at `out`. `out` must not hold data.
     """
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
-
+    LeRobotDataset = _lerobot_dataset_class()
     out = Path(out)
     if holds_data(out):
         raise DataError(f"{out} already holds data; pick another --out or remove it yourself")
@@ -94,9 +102,7 @@ def read_stamp(root: Path) -> dict | None:
 
 
 def open_dataset(root: Path, repo_id: str = "local/demos"):
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
-
-    return LeRobotDataset(repo_id, root=Path(root), video_backend=VIDEO_BACKEND)
+    return _lerobot_dataset_class()(repo_id, root=Path(root), video_backend=VIDEO_BACKEND)
 
 
 def load_arrays(root: Path, keys=("observation.state", "action", "episode_index", "frame_index")) -> dict:

@@ -18,6 +18,7 @@ import demo_data
 
 if sys.platform.startswith("linux"):  # headless rendering: EGL unless the user chose a GL backend
     os.environ.setdefault("MUJOCO_GL", "egl")
+os.environ.setdefault("SVT_LOG", "1")  # the AV1 encoder's banner: errors only
 
 GENERATOR_VERSION = 1  # bump when a change alters the frames a given set of flags produces
 
@@ -103,6 +104,9 @@ def stamp_for(emb: Embodiment, *, episodes: int, seed: int, noise: float, video:
 
 def check_gl() -> str | None:
     """None if headless rendering works here, else a one-line reason."""
+    import av
+
+    av.logging.set_level(av.logging.ERROR)  # FFmpeg's muxer chatter
     try:
         import mujoco
 

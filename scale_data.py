@@ -246,7 +246,7 @@ init_weights = BCPolicy(np.zeros((1, 10), np.float32), np.zeros((1, 2), np.float
 
 
 def train(states, actions, *, steps=None):
-    """Fit a fresh BCPolicy for args.epochs epochs (or exactly `steps` steps); returns (policy, steps)."""
+    """Fit a fresh BCPolicy for args.epochs epochs (or exactly `steps` steps); returns (policy, steps, loss)."""
     pol = BCPolicy(states, actions, args.hidden_dim)
     pol.net.load_state_dict(init_weights)
     pol.to(device)
@@ -273,7 +273,9 @@ def train(states, actions, *, steps=None):
             step += 1
             bar.update()
     bar.close()
-    return pol.eval(), total
+    with torch.no_grad():  # fit on the arm's whole training set, a digit-level fingerprint of the run
+        final_loss = torch.nn.functional.mse_loss(pol.net(x), y).item()
+    return pol.eval(), total, final_loss
 
 
 @torch.no_grad()
@@ -303,9 +305,10 @@ arms = {}
 for arm, (x, y, steps) in {"source": (src_x, src_y, None), "augmented": (all_x, all_y, None),
                            "compute_matched": (all_x, all_y, "source")}.items():
     t0 = time.perf_counter()
-    pol, n_steps = train(x, y, steps=arms[steps]["steps"] if steps else None)
+    pol, n_steps, loss = train(x, y, steps=arms[steps]["steps"] if steps else None)
     rate = evaluate(pol, eval_seeds)
-    arms[arm] = {"frames": int(len(x)), "steps": n_steps, "success": rate, "ci95": wilson(rate, len(eval_seeds))}
+    arms[arm] = {"frames": int(len(x)), "steps": n_steps, "final_loss": round(loss, 6), "success": rate,
+                 "ci95": wilson(rate, len(eval_seeds))}
     print(f"{arm:16s} {len(x):6d} frames {n_steps:6d} steps  success {rate:.2f}  "
           f"95% CI [{arms[arm]['ci95'][0]:.2f}, {arms[arm]['ci95'][1]:.2f}]  ({time.perf_counter() - t0:.1f} s)")
 # --- endregion ---
@@ -330,7 +333,7 @@ aug_starts = np.array([k["aug.start"][0, :2] for k in kept]).reshape(-1, 2)
 c_src, out_src = cells(src_starts)
 c_aug, out_aug = cells(aug_starts)
 metrics = {
-    "seed": args.seed, "smoke": args.smoke, "config": {k: (str(v) if isinstance(v, Path) else v) for k, v in sorted(vars(args).items())},
+    "seed": args.seed, "smoke": args.smoke, "config": {k: (str(v) if isinstance(v, Path) else v) for k, v in sorted(vars(args).items()) if k != "out"},
     "action_dims": {name: int(s["action"].shape[1]) for name, s in sets.items()}, "padded_action_dim": PAD,
     "source_demos": len(first), "source_frames": int(len(src_x)), "attempts": attempts, "kept": len(kept),
     "yield": yield_, "augment_failures": failures, "augmented_frames": int(len(aug["action"])),
@@ -339,7 +342,7 @@ metrics = {
     "coverage": {"cells": RINGS * SECTORS, "source": len(c_src), "augmented": len(c_aug), "union": len(c_src | c_aug),
                  "outside_annulus": {"source": out_src, "augmented": out_aug}},
 }
-io.write_atomic(args.out / "metrics.json", io.dump_json(io.round_floats(metrics)))
+io.write_atomic(args.out / "metrics.json", io.dump_json(io.round_floats(metrics, 6)))
 import chapter_viz  # noqa: E402  (matplotlib and rerun drawing code, kept out of the lesson)
 
 fig_path = chapter_viz.figure(args.out / "scale_data.png", src_starts, aug_starts, arms, metrics["coverage"],

@@ -1,0 +1,179 @@
+"""scale_data.py end to end at --smoke size: determinism, no data loss, bad flags, the lesson's invariants."""
+import hashlib
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+import demo_data
+from conftest import run_script
+
+
+def smoke(out, *extra, check=True):
+    return run_script("scale_data.py", "--smoke", "--seed", "0", "--no-rerun", "--out", out, *extra, check=check)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """Smoke runs shared by the tests below: A and B identical flags in separate folders."""
+    a, b = tmp_path_factory.mktemp("a"), tmp_path_factory.mktemp("b")
+    out = {"a": (a, smoke(a)), "b": (b, smoke(b))}
+    return out
+
+
+def tree_digest(path):
+    h = hashlib.sha256()
+    for p in sorted(path.rglob("*")):
+        h.update(str(p.relative_to(path)).encode())
+        if p.is_file():
+            h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def test_smoke_twice_is_byte_identical(runs):
+    (a, pa), (b, pb) = runs["a"], runs["b"]
+    for name in ("metrics.json", "cross_embodiment.json"):
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+    assert "headline:" in pa.stdout and "metrics.json" in pa.stdout.strip().splitlines()[-1]
+    m = json.loads((a / "metrics.json").read_text())
+    assert m["smoke"] is True and m["seed"] == 0 and m["action_dims"] == {"aloha": 6, "pusht": 2}
+    assert m["attempts"] == m["source_demos"] * m["config"]["aug_per_demo"]
+    assert (a / "scale_data.png").stat().st_size > 1000
+    assert pa.stderr.count("Traceback") == 0
+
+
+def test_seeds_draw_different_data(runs, tmp_path):
+    smoke(tmp_path, "--seed", "1")  # --seed given twice: argparse keeps the last
+    a = json.loads((runs["a"][0] / "cross_embodiment.json").read_text())
+    b = json.loads((tmp_path / "cross_embodiment.json").read_text())
+    assert a["embodiments"][0]["stats"] != b["embodiments"][0]["stats"]
+
+
+def test_stats_match_lerobot_meta_stats(runs):
+    a = runs["a"][0]
+    cross = json.loads((a / "cross_embodiment.json").read_text())
+    for e in cross["embodiments"]:
+        (root,) = (a / "demos").glob(f"{e['name']}_seed0_*")
+        meta = json.loads((root / "meta" / "stats.json").read_text())
+        for part, key in (("state", "observation.state"), ("action", "action")):
+            ours, theirs = e["stats"][part], meta[key]
+            span = np.maximum(np.array(theirs["max"]) - np.array(theirs["min"]), 1e-6)
+            for stat in ("min", "max", "mean"):
+                np.testing.assert_allclose(ours[stat], theirs[stat], atol=1e-5, err_msg=f"{e['name']} {key} {stat}")
+            np.testing.assert_allclose(ours["std"], theirs["std"], atol=1e-4, rtol=1e-3)
+            for q in ("q01", "q99"):  # LeRobot's quantiles are histogram estimates merged over episodes
+                assert np.all(np.abs(np.array(ours[q]) - np.array(theirs[q])) <= 0.05 * span + 1e-6), (e["name"], key, q)
+
+
+def test_masked_loss_gives_padded_dims_exactly_zero_gradient(runs):
+    cross = json.loads((runs["a"][0] / "cross_embodiment.json").read_text())
+    assert cross["padded_dim_max_grad"] == 0.0
+    assert cross["padded_action_dim"] == 6
+    dens = {e["name"]: e["mask_density"] for e in cross["embodiments"]}
+    assert dens == {"pusht": pytest.approx(1 / 3, abs=1e-6), "aloha": 1.0}
+    assert cross["state_index_2_means"] == {"pusht": "block_x", "aloha": "right_grip"}
+
+
+def test_aug_zero_reproduces_source_arm_to_the_digit(runs, tmp_path):
+    a = runs["a"][0]
+    shutil.copytree(a / "demos", tmp_path / "demos")  # reuse the cached demo sets
+    smoke(tmp_path, "--aug_per_demo", "0")
+    m0 = json.loads((tmp_path / "metrics.json").read_text())
+    m2 = json.loads((a / "metrics.json").read_text())
+    assert m0["kept"] == 0 and m0["augmented_frames"] == 0
+    assert m0["arms"]["source"] == m2["arms"]["source"]
+    assert m0["arms"]["augmented"] == m0["arms"]["source"] == m0["arms"]["compute_matched"]
+
+
+def test_augmentation_is_nested(runs, tmp_path):
+    a = runs["a"][0]
+    shutil.copytree(a / "demos", tmp_path / "demos", ignore=shutil.ignore_patterns("pusht_aug*"))
+    smoke(tmp_path, "--aug_per_demo", "1")
+    starts = {}
+    for out, k in ((tmp_path, 1), (a, 2)):
+        (root,) = (out / "demos").glob(f"pusht_aug_seed0_*_k{k}")
+        d = demo_data.load_arrays(root, keys=("aug.start", "aug.source_episode", "episode_index"))
+        first = np.unique(d["episode_index"], return_index=True)[1]
+        starts[k] = {tuple(np.round(d["aug.start"][i], 6)) + (int(d["aug.source_episode"][i][0]),) for i in first}
+    assert starts[1] and starts[1] < starts[2]
+
+
+def test_aug_set_loads_with_provenance(runs):
+    (root,) = (runs["a"][0] / "demos").glob("pusht_aug_seed0_*")
+    ds = demo_data.open_dataset(root)
+    m = json.loads((runs["a"][0] / "metrics.json").read_text())
+    assert ds.num_episodes == m["kept"] and ds.num_frames == m["augmented_frames"]
+    item = ds[0]
+    assert item["aug.start"].shape == (5,) and "aug.source_episode" in item
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["--epochs", "0"], "--epochs"), (["--aug_pos_sigma", "-0.1"], "--aug_pos_sigma"),
+    (["--device", "tpu"], "--device"), (["--batch_size", "abc"], "batch_size"), (["--seed", "-2"], "--seed"),
+    (["--source_episodes", "-3"], "--source_episodes"), (["--lr", "nan"], "--lr")])
+def test_bad_flags_one_clear_line(tmp_path, argv, needle):
+    p = run_script("scale_data.py", *argv, "--out", tmp_path / "o", check=False)
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(err) == 1 and needle in err[0] and "Traceback" not in p.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_unavailable_device_is_refused(tmp_path):
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("this machine has CUDA")
+    p = run_script("scale_data.py", "--device", "cuda", "--out", tmp_path / "o", check=False)
+    assert p.returncode == 2 and "not available" in p.stderr and len(p.stderr.strip().splitlines()) == 1
+
+
+def test_user_dataset_is_used_as_given_and_never_touched(runs, tmp_path):
+    (src,) = (runs["a"][0] / "demos").glob("pusht_seed0_*")
+    mine = tmp_path / "my_pusht"
+    shutil.copytree(src, mine)
+    (mine / demo_data.STAMP_NAME).unlink()  # the user's own set: no stamp of ours
+    before = tree_digest(mine)
+    p = smoke(tmp_path / "o", "--pusht_data", mine)
+    assert "used as given" in p.stdout
+    assert tree_digest(mine) == before
+
+
+def test_mismatching_user_dataset_is_refused_untouched(runs, tmp_path):
+    (aloha,) = (runs["a"][0] / "demos").glob("aloha_seed0_*")
+    mine = tmp_path / "wrong"
+    shutil.copytree(aloha, mine)
+    (mine / demo_data.STAMP_NAME).unlink()
+    before = tree_digest(mine)
+    p = smoke(tmp_path / "o", "--pusht_data", mine, check=False)
+    assert p.returncode == 2 and "action" in p.stderr and len(p.stderr.strip().splitlines()) == 1
+    assert tree_digest(mine) == before
+    # a set we stamped for another request is refused too, not rebuilt
+    (pusht,) = (runs["a"][0] / "demos").glob("pusht_seed0_*")
+    ours = tmp_path / "ours"
+    shutil.copytree(pusht, ours)
+    before = tree_digest(ours)
+    p = smoke(tmp_path / "o2", "--pusht_data", ours, "--seed", "1", check=False)
+    assert p.returncode == 2 and "does not match" in p.stderr
+    assert tree_digest(ours) == before
+
+
+def test_foreign_directory_at_cache_path_is_refused_untouched(tmp_path):
+    cache = tmp_path / "demos" / "pusht_seed0_ep4"
+    cache.mkdir(parents=True)
+    (cache / "thesis.tex").write_text("do not lose me")
+    p = smoke(tmp_path, check=False)
+    assert p.returncode == 2 and "did not make" in p.stderr
+    assert [x.name for x in cache.iterdir()] == ["thesis.tex"] and (cache / "thesis.tex").read_text() == "do not lose me"
+
+
+def test_stale_set_we_made_is_rebuilt(runs, tmp_path):
+    shutil.copytree(runs["a"][0] / "demos", tmp_path / "demos")
+    (root,) = (tmp_path / "demos").glob("pusht_seed0_*")
+    stamp = json.loads((root / demo_data.STAMP_NAME).read_text())
+    stamp["generator_version"] = -1
+    (root / demo_data.STAMP_NAME).write_text(json.dumps(stamp))
+    p = smoke(tmp_path)
+    assert "generated" in p.stdout
+    assert json.loads((root / demo_data.STAMP_NAME).read_text())["generator_version"] != -1
+    assert (tmp_path / "metrics.json").read_bytes() == (runs["a"][0] / "metrics.json").read_bytes()
