@@ -70,9 +70,7 @@ def replace_own_dir(path: Path) -> None:
 def write_atomic(path: Path, text: str) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    write_bytes_atomic(path, text.encode())
 
 
 def dump_json(obj) -> str:
@@ -112,3 +110,91 @@ def expected_wallclock(tier: str, csv_path: Path = ROOT / "wallclock.csv") -> st
         if r.get("tier") == tier and r.get("status") == "measured":
             return f"about {float(r['minutes']):.1f} min for the default run (wallclock.csv, measured {r['date']})"
     return "default-run wall-clock not yet measured for this tier"
+
+
+# --- result cache: a finished run is reused when its flags and every file that shapes it match ---
+CODE_FILES = ("scale_data.py", "pusht_env.py", "pusht.xml", "aloha_env.py", "aloha.xml", "scripted_expert.py",
+              "demo_gen.py", "demo_data.py", "gen_demos_pusht.py", "gen_demos_aloha.py")
+RESULT_FILES = ("metrics.json", "cross_embodiment.json", "scale_data.png", "scale_data.rrd")
+NOT_IN_KEY = ("out", "cache", "workers")  # where results go and how fast they come do not change them
+
+
+def cache_root() -> Path:
+    return Path(os.environ.get("CH37_CACHE_DIR", ROOT / "outputs" / ".result_cache"))
+
+
+def _tree_digest(h, path: Path) -> None:
+    for p in sorted(Path(path).rglob("*")):
+        if p.is_file():
+            h.update(str(p.relative_to(path)).encode())
+            h.update(p.read_bytes())
+
+
+def result_key(config: dict) -> str:
+    """sha256 of the configuration, the code that shapes the result, package versions and user data."""
+    import hashlib
+    from importlib.metadata import version
+
+    h = hashlib.sha256(json.dumps({k: str(v) for k, v in config.items() if k not in NOT_IN_KEY},
+                                  sort_keys=True).encode())
+    for name in CODE_FILES:
+        h.update(name.encode())
+        h.update((ROOT / name).read_bytes())
+    for pkg in ("torch", "lerobot", "mujoco", "numpy"):
+        h.update(f"{pkg}=={version(pkg)}".encode())
+    for key in ("pusht_data", "aloha_data"):  # a user's own set: its bytes are part of the input
+        if config.get(key):
+            _tree_digest(h, Path(config[key]))
+    return h.hexdigest()[:24]
+
+
+def replay_cached(key: str, out: Path) -> bool:
+    """Copy a cached run's outputs into `out` and print its summary; False if there is none."""
+    src = cache_root() / key
+    if not (src / "metrics.json").exists():
+        return False
+    out.mkdir(parents=True, exist_ok=True)
+    for name in RESULT_FILES:
+        if (src / name).exists():
+            write_bytes_atomic(out / name, (src / name).read_bytes())
+    print(f"reusing the result of an identical earlier run (same flags and code, cache key {key}; --no-cache runs it again)")
+    print((src / "summary.txt").read_text().replace("{out}", str(out)), end="")
+    return True
+
+
+def store_result(key: str, out: Path, summary: str) -> None:
+    dst = cache_root() / key
+    tmp = dst.with_name(f".{key}.tmp-{os.getpid()}")
+    tmp.mkdir(parents=True, exist_ok=True)
+    for name in RESULT_FILES:
+        if (out / name).exists():
+            shutil.copyfile(out / name, tmp / name)
+    (tmp / "summary.txt").write_text(summary.replace(str(out), "{out}"))
+    if dst.exists():
+        shutil.rmtree(dst)  # our own cache entry for the same key
+    tmp.rename(dst)
+
+
+def write_bytes_atomic(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
+def parallel_map(fn, jobs: list, *, workers: int, bar) -> list:
+    """[fn(j) for j in jobs], in order, on `workers` forked processes; the result never depends on
+    `workers`, because every job carries its own seed. Falls back to one process without fork."""
+    import multiprocessing as mp
+
+    out = []
+    if workers > 1 and len(jobs) > 1 and "fork" in mp.get_all_start_methods():
+        with mp.get_context("fork").Pool(min(workers, len(jobs))) as pool:
+            for r in pool.imap(fn, jobs, chunksize=max(1, len(jobs) // (4 * workers))):
+                out.append(r)
+                bar.update()
+    else:
+        for j in jobs:
+            out.append(fn(j))
+            bar.update()
+    bar.close()
+    return out

@@ -23,6 +23,7 @@ Smoke:  python scale_data.py --smoke --seed 0     (seconds; two runs give identi
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -49,13 +50,16 @@ p.add_argument("--seed", type=int, default=0, help="seed >= 0; seeds 0, 1, 2 dra
 p.add_argument("--device", default="auto", help="auto | cpu | cuda | mps (auto: cuda > mps > cpu)")
 p.add_argument("--smoke", action="store_true", help="tiny CPU configuration for tests and CI (seconds)")
 p.add_argument("--rerun", action=argparse.BooleanOptionalAction, default=True, help="write a Rerun .rrd recording")
+p.add_argument("--cache", action=argparse.BooleanOptionalAction, default=True, help="reuse an identical earlier run (same flags and code)")
+p.add_argument("--workers", type=int, default=None, help="processes for the augmentation re-solves (default: CPU cores); never changes results")
 p.error = lambda msg: io.fail(f"{msg} (see --help)")
 args = p.parse_args()
 if args.smoke:  # pinned so two smoke runs are byte-identical on any machine
     args.source_episodes, args.aug_per_demo, args.epochs, args.hidden_dim = 4, 2, 30, 64
     args.eval_episodes, args.batch_size, args.device = 8, 64, "cpu"
 args.out = args.out or Path("outputs/ch3.7-scale-data" + ("-smoke" if args.smoke else ""))
-for name in ("source_episodes", "epochs", "batch_size", "hidden_dim", "eval_episodes"):
+args.workers = args.workers or min(8, os.cpu_count() or 1)
+for name in ("source_episodes", "epochs", "batch_size", "hidden_dim", "eval_episodes", "workers"):
     if getattr(args, name) <= 0:
         io.fail(f"--{name} must be a positive integer, got {getattr(args, name)}")
 for name in ("aug_per_demo", "seed"):
@@ -75,10 +79,15 @@ if args.device == "auto":
 elif not available[args.device]:
     io.fail(f"--device {args.device} is not available on this machine; use --device cpu or auto")
 torch.manual_seed(args.seed)
+if args.smoke:
+    torch.set_num_threads(1)  # tiny matrices: threads only add overhead, and one thread is the same everywhere
 device = torch.device(args.device)
 tier = io.device_tier(args.device)
 print(f"ch3.7 Datasets at Scale | seed {args.seed} | device {args.device} ({tier}) | torch {torch.__version__}")
 print("smoke run: tiny configuration, seconds, numbers not meaningful" if args.smoke else io.expected_wallclock(tier))
+cache_key = io.result_key(vars(args))
+if args.cache and io.replay_cached(cache_key, args.out):
+    sys.exit(0)
 # --- endregion ---
 
 # --- region: wrangle ---
@@ -181,22 +190,27 @@ pusht = sets["pusht"]
 ep_ids = np.unique(pusht["episode_index"])
 first = {int(e): pusht["observation.state"][np.flatnonzero(pusht["episode_index"] == e)[0]] for e in ep_ids}
 env = pusht_env.PushTEnv()
-kept, failures = [], {"expert_failed": 0, "no_valid_start": 0}
-jobs = [(e, k) for e in first for k in range(args.aug_per_demo)]
-for e, k in progress(jobs, total=len(jobs), desc="augment", quiet=args.smoke):
+
+
+def resolve(job):  # (source episode, k) -> the expert's demo from a perturbed start, or why there is none
+    e, k = job
     rng = np.random.default_rng([demo_data.env_seed(args.seed, "aug", e), k])  # own stream per (demo, k)
     start = perturbed_start(first[e], rng)
     if start is None:
-        failures["no_valid_start"] += 1
-        continue
+        return "no_valid_start"
     ep = rollout(env, PushTExpert(noise=0.0), env.set_start(*start))
     if not ep["success"]:
-        failures["expert_failed"] += 1
-        continue
+        return "expert_failed"
     n = len(ep["action"])
     ep["aug.source_episode"] = np.full((n, 1), e, np.int64)  # provenance, stored on every frame
     ep["aug.start"] = np.tile(np.float32(start), (n, 1))
-    kept.append(ep)
+    return ep
+
+
+jobs = [(e, k) for e in first for k in range(args.aug_per_demo)]
+results = io.parallel_map(resolve, jobs, workers=args.workers, bar=progress(None, total=len(jobs), desc="augment", quiet=args.smoke))
+kept = [r for r in results if not isinstance(r, str)]
+failures = {why: sum(r == why for r in results if isinstance(r, str)) for why in ("expert_failed", "no_valid_start")}
 attempts = len(jobs)
 yield_ = len(kept) / attempts if attempts else 0.0
 print(f"augment: {attempts} attempts, {len(kept)} kept, yield {yield_:.2f}, failures {failures}")
@@ -350,9 +364,11 @@ fig_path = chapter_viz.figure(args.out / "scale_data.png", src_starts, aug_start
 if args.rerun:
     rrd_path = chapter_viz.recording(args.out / "scale_data.rrd", arms, metrics, src_starts, aug_starts, kept[:8])
 s, a_ = arms["source"]["success"], arms["augmented"]["success"]
-print(f"headline: source-only {s:.2f} -> source+augmented {a_:.2f} ({(a_ - s) * 100:+.0f} points; "
-      f"compute-matched {arms['compute_matched']['success']:.2f}); coverage {len(c_src)} -> {len(c_src | c_aug)} of {RINGS * SECTORS} cells")
-print(f"wrote {args.out / 'metrics.json'} and {args.out / 'cross_embodiment.json'} (JSON), {fig_path} (open as an image)"
-      + (f", {rrd_path} (open with: rerun {rrd_path})" if args.rerun else "")
-      + f"  [{time.perf_counter() - t_start:.0f} s]")
+summary = (f"headline: source-only {s:.2f} -> source+augmented {a_:.2f} ({(a_ - s) * 100:+.0f} points; "
+           f"compute-matched {arms['compute_matched']['success']:.2f}); coverage {len(c_src)} -> {len(c_src | c_aug)} of {RINGS * SECTORS} cells\n"
+           f"wrote {args.out / 'metrics.json'} and {args.out / 'cross_embodiment.json'} (JSON), {fig_path} (open as an image)"
+           + (f", {rrd_path} (open with: rerun {rrd_path})" if args.rerun else "") + "\n")
+io.store_result(cache_key, args.out, summary)
+print(f"finished in {time.perf_counter() - t_start:.0f} s")
+print(summary, end="", flush=True)
 # --- endregion ---

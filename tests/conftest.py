@@ -1,12 +1,15 @@
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+# scale_data.py's result cache: one private folder per test session, never the user's outputs/
+os.environ.setdefault("CH37_CACHE_DIR", tempfile.mkdtemp(prefix="ch37-cache-"))
 
 
 def run_script(*args, cwd=ROOT, check=True, timeout=600):

@@ -10,8 +10,9 @@ import demo_data
 from conftest import run_script
 
 
-def smoke(out, *extra, check=True):
-    return run_script("scale_data.py", "--smoke", "--seed", "0", "--no-rerun", "--out", out, *extra, check=check)
+def smoke(out, *extra, check=True, cache=False):
+    flags = () if cache else ("--no-cache",)
+    return run_script("scale_data.py", "--smoke", "--seed", "0", "--no-rerun", "--out", out, *flags, *extra, check=check)
 
 
 @pytest.fixture(scope="module")
@@ -177,3 +178,37 @@ def test_stale_set_we_made_is_rebuilt(runs, tmp_path):
     assert "generated" in p.stdout
     assert json.loads((root / demo_data.STAMP_NAME).read_text())["generator_version"] != -1
     assert (tmp_path / "metrics.json").read_bytes() == (runs["a"][0] / "metrics.json").read_bytes()
+
+
+def test_worker_count_never_changes_the_result(runs, tmp_path):
+    a = runs["a"][0]  # default workers (the CPU count)
+    shutil.copytree(a / "demos", tmp_path / "demos", ignore=shutil.ignore_patterns("pusht_aug*"))
+    smoke(tmp_path, "--workers", "1")
+    assert (tmp_path / "metrics.json").read_bytes() == (a / "metrics.json").read_bytes()
+    (r1,) = (tmp_path / "demos").glob("pusht_aug*")
+    (r2,) = (a / "demos").glob("pusht_aug*")
+    d1, d2 = (demo_data.load_arrays(r, keys=("observation.state", "action", "aug.start")) for r in (r1, r2))
+    assert all(d1[k].tobytes() == d2[k].tobytes() for k in d1)
+
+
+def test_result_cache_reuses_only_the_same_configuration(tmp_path, monkeypatch):
+    monkeypatch.setenv("CH37_CACHE_DIR", str(tmp_path / "cache"))
+    first = smoke(tmp_path / "one", cache=True)
+    assert "reusing" not in first.stdout
+    again = smoke(tmp_path / "two", cache=True)  # same flags, another --out: served from the cache
+    assert "reusing the result" in again.stdout and "augment:" not in again.stdout  # nothing recomputed
+    assert (tmp_path / "two" / "metrics.json").read_bytes() == (tmp_path / "one" / "metrics.json").read_bytes()
+    assert str(tmp_path / "two") in again.stdout.strip().splitlines()[-1]
+    other = smoke(tmp_path / "three", "--aug_yaw_sigma", "0.4", cache=True)  # a flag --smoke does not pin
+    assert "reusing" not in other.stdout and "augment:" in other.stdout
+    assert (tmp_path / "three" / "metrics.json").read_bytes() != (tmp_path / "one" / "metrics.json").read_bytes()
+
+
+def test_result_key_changes_with_every_input():
+    import chapter_io
+
+    base = {"seed": 0, "epochs": 500, "smoke": False, "device": "cpu", "out": "a", "workers": 2, "cache": True}
+    k = chapter_io.result_key(base)
+    assert chapter_io.result_key(dict(base, out="b", workers=1, cache=False)) == k  # where and how fast: same result
+    for field, value in (("seed", 1), ("epochs", 499), ("smoke", True), ("device", "cuda"), ("lr", 0.01)):
+        assert chapter_io.result_key(dict(base, **{field: value})) != k, field

@@ -1,0 +1,334 @@
+"""The exercise checks can pass and can fail: reference answers pass, wrong answers fail with a clear message.
+
+The check logic (exercises/checks.py) is called directly with modules, functions and metrics
+dicts; a few tests run `pytest exercises/checks.py -k ...` in a subprocess, as a learner would.
+"""
+import os
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import yaml
+
+from exercises import checks
+from exercises.checks import ExerciseError
+
+ROOT = Path(__file__).resolve().parent.parent
+SOLUTIONS = ROOT / "exercises" / "solutions"
+# meta.yaml once chapter_tools.py has written it; until then a stand-in for these tests only
+META = ROOT / "meta.yaml" if (ROOT / "meta.yaml").is_file() else ROOT / "tests" / "fixtures_meta.yaml"
+EX1 = tuple(checks.EX1_CHOICES)
+EX3 = checks.EX3_CHOICES
+WHY = "twelve demos cover little of the start space"
+
+
+@pytest.fixture(scope="module")
+def meta():
+    return checks.load_meta(META)
+
+
+def run_checks(*args, env_extra=None, unset=(), timeout=600):
+    """`python -m pytest exercises/checks.py ARGS` from the repo root, as a learner runs it."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("CH37_") and k not in unset}
+    env.update({"CH37_META": str(META), "PYTHONHASHSEED": "0", **(env_extra or {})})
+    return subprocess.run([sys.executable, "-m", "pytest", "exercises/checks.py", "-p", "no:cacheprovider", *args],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout)
+
+
+# ---------------------------------------------------------------- meta.yaml: the schema checks.py reads
+def test_meta_has_the_exercise_checks_schema(meta):
+    assert meta["ex1"]["seed"] == 0 and meta["ex1"]["answer"] in EX1
+    assert {"scale_effect_min", "scale_effect_max"} & set(meta["ex1"]["band"])
+    assert meta["ex2"]["pusht_mask_density"] == pytest.approx(1 / 3, abs=1e-6)
+    ex3 = meta["ex3"]
+    assert ex3["seed"] == 0 and ex3["aug_per_demo"] == [0, 4, 8] and ex3["answer"] in EX3 and ex3["plateau_tol"] > 0
+    for k in ("0", "4", "8"):
+        lo, hi = ex3["band"][k]
+        assert 0.0 <= lo <= hi <= 1.0
+
+
+def test_missing_meta_is_a_clear_failure(tmp_path):
+    with pytest.raises(ExerciseError, match="not found"):
+        checks.load_meta(tmp_path / "meta.yaml")
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump({"id": "x"}))
+    with pytest.raises(ExerciseError, match="no exercise_checks"):
+        checks.load_meta(tmp_path / "m.yaml")
+
+
+# ---------------------------------------------------------------- predictions: ex1 and ex3
+def test_reference_predictions_pass_and_match_meta(meta):
+    assert checks.check_prediction(checks.load_exercise("ex1", SOLUTIONS), EX1, "ex1") == meta["ex1"]["answer"]
+    assert checks.check_prediction(checks.load_exercise("ex3", SOLUTIONS), EX3, "ex3") == meta["ex3"]["answer"]
+
+
+@pytest.mark.parametrize("ex,allowed", [("ex1", EX1), ("ex3", EX3)])
+def test_unfilled_exercise_files_fail(ex, allowed):
+    with pytest.raises(ExerciseError, match=rf"{ex}: PREDICTION is empty.*exercises/{checks.FILES[ex]}"):
+        checks.check_prediction(checks.load_exercise(ex, ROOT / "exercises"), allowed, ex)
+
+
+WRONG_PREDICTIONS = [
+    ("ex1", {"WHY": WHY}, "PREDICTION is missing"),
+    ("ex1", {"PREDICTION": "D", "WHY": WHY}, "must be one of"),
+    ("ex1", {"PREDICTION": "AB", "WHY": WHY}, "must be one of"),
+    ("ex1", {"PREDICTION": "helps", "WHY": WHY}, "must be one of"),
+    ("ex1", {"PREDICTION": 1, "WHY": WHY}, "must be a string"),
+    ("ex1", {"PREDICTION": "  ", "WHY": WHY}, "PREDICTION is empty"),
+    ("ex1", {"PREDICTION": "A", "WHY": ""}, "WHY needs one sentence"),
+    ("ex1", {"PREDICTION": "A"}, "WHY needs one sentence"),
+    ("ex1", {"PREDICTION": "A", "WHY": "more data"}, "at least three words"),
+    ("ex3", {"WHY": WHY}, "PREDICTION is missing"),
+    ("ex3", {"PREDICTION": "rise", "WHY": WHY}, "must be one of"),
+    ("ex3", {"PREDICTION": "A", "WHY": WHY}, "must be one of"),
+    ("ex3", {"PREDICTION": "", "WHY": WHY}, "PREDICTION is empty"),
+    ("ex3", {"PREDICTION": "plateau", "WHY": "   "}, "WHY needs one sentence"),
+    ("ex3", {"PREDICTION": "climb", "WHY": None}, "WHY needs one sentence"),
+]
+
+
+@pytest.mark.parametrize("ex,fields,needle", WRONG_PREDICTIONS)
+def test_wrong_predictions_fail(ex, fields, needle):
+    mod = SimpleNamespace(__file__=str(ROOT / "exercises" / checks.FILES[ex]), **fields)
+    with pytest.raises(ExerciseError, match=needle):
+        checks.check_prediction(mod, EX1 if ex == "ex1" else EX3, ex)
+
+
+def test_predictions_ignore_case_and_spaces():
+    assert checks.check_prediction(SimpleNamespace(PREDICTION=" a ", WHY=WHY), EX1, "ex1") == "A"
+    assert checks.check_prediction(SimpleNamespace(PREDICTION="Plateau", WHY=WHY), EX3, "ex3") == "plateau"
+
+
+def test_answer_file_that_does_not_import_fails_clearly(tmp_path):
+    (tmp_path / checks.FILES["ex1"]).write_text('PREDICTION = "A\n')
+    with pytest.raises(ExerciseError, match="does not import: SyntaxError"):
+        checks.load_exercise("ex1", tmp_path)
+    with pytest.raises(ExerciseError, match="not found"):
+        checks.load_exercise("ex3", tmp_path)
+
+
+# ---------------------------------------------------------------- ex2: zero-pad + action mask
+def _ids(n, m):
+    return np.concatenate([np.zeros(n, np.int64), np.ones(m, np.int64)])
+
+
+def pad_left(p, a):
+    _, mask, ids = checks.expected_mix(p, a)
+    act = np.concatenate([np.pad(np.asarray(p, np.float32), ((0, 0), (4, 0))), np.asarray(a, np.float32)])
+    return act, mask, ids
+
+
+def mask_all_ones(p, a):
+    act, mask, ids = checks.expected_mix(p, a)
+    return act, np.ones_like(mask), ids
+
+
+def aloha_first(p, a):
+    act = np.concatenate([np.asarray(a, np.float32), np.pad(np.asarray(p, np.float32), ((0, 0), (0, 4)))])
+    mask = np.concatenate([np.ones((len(a), 6), np.float32), np.repeat(np.float32([[1, 1, 0, 0, 0, 0]]), len(p), 0)])
+    return act, mask, np.concatenate([np.ones(len(a), np.int64), np.zeros(len(p), np.int64)])
+
+
+def float64_out(p, a):
+    act, mask, ids = checks.expected_mix(p, a)
+    return act.astype(np.float64), mask, ids
+
+
+def mutates_inputs(p, a):
+    out = checks.expected_mix(p.copy(), a.copy())
+    np.clip(a, -0.5, 0.5, out=a)  # "normalizes" the caller's array in place
+    return out
+
+
+def swapped_ids(p, a):
+    act, mask, _ = checks.expected_mix(p, a)
+    return act, mask, 1 - _ids(len(p), len(a))
+
+
+def int32_ids(p, a):
+    act, mask, ids = checks.expected_mix(p, a)
+    return act, mask, ids.astype(np.int32)
+
+
+def not_implemented(p, a):
+    raise NotImplementedError
+
+
+def two_outputs(p, a):
+    return checks.expected_mix(p, a)[:2]
+
+
+def garbage_in_padding(p, a):
+    act, mask, ids = checks.expected_mix(p, a)
+    act[: len(p), 2:] = 1.0
+    return act, mask, ids
+
+
+WRONG_MIXES = [
+    (pad_left, "pad on the right"),
+    (mask_all_ones, "mask is all ones"),
+    (aloha_first, "ALOHA rows come first"),
+    (float64_out, "actions has dtype float64, expected float32"),
+    (mutates_inputs, "modified its input arrays"),
+    (swapped_ids, "embodiment_id is wrong"),
+    (int32_ids, "embodiment_id has dtype int32"),
+    (not_implemented, r"not implemented yet \(NotImplementedError\)"),
+    (two_outputs, "return a tuple"),
+    (garbage_in_padding, "must be exactly zero"),
+]
+
+
+def test_reference_mix_passes(meta):
+    fn = checks.load_exercise("ex2", SOLUTIONS).mix_embodiments
+    assert checks.check_mix(fn, meta["ex2"]["pusht_mask_density"]) == len(checks.ex2_cases())
+    shapes = {(len(p), len(a)) for p, a in checks.ex2_cases()}
+    dtypes = {(p.dtype.name, a.dtype.name) for p, a in checks.ex2_cases()}
+    assert {(0, 4), (3, 0), (1, 1)} <= shapes and {("float32", "float32"), ("float64", "float64")} <= dtypes
+
+
+@pytest.mark.parametrize("fn,needle", WRONG_MIXES, ids=[f.__name__ for f, _ in WRONG_MIXES])
+def test_wrong_mixes_fail(fn, needle):
+    with pytest.raises(ExerciseError, match=needle):
+        checks.check_mix(fn)
+
+
+def test_ex2_unfilled_fails_clearly_and_solutions_pass_under_pytest():
+    p = run_checks("-k", "ex2", unset=("CH37_EXERCISE_DIR",))
+    assert p.returncode == 1, p.stdout + p.stderr
+    assert ("ex2: mix_embodiments is not implemented yet (NotImplementedError); "
+            "fill in exercises/ex2_completion_wrangle.py") in p.stdout
+    assert "Traceback" not in p.stdout and "1 failed, 2 deselected" in p.stdout
+    p = run_checks("-k", "ex2", env_extra={"CH37_EXERCISE_DIR": "exercises/solutions"})
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert "matches the specification" in p.stdout and "1 passed, 2 deselected" in p.stdout
+
+
+# ---------------------------------------------------------------- measured claims: ex1 and ex3
+def make_metrics(source=0.1, augmented=0.3, compute_matched=0.2, aug_frames=6000, kept=96, attempts=96, src_frames=838):
+    def arm(s, frames, steps):
+        return {"success": s, "ci95": [max(0.0, s - 0.1), min(1.0, s + 0.1)], "frames": frames, "steps": steps,
+                "final_loss": 0.01}
+    return {"arms": {"source": arm(source, src_frames, 3500), "augmented": arm(augmented, src_frames + aug_frames, 9000),
+                     "compute_matched": arm(compute_matched, src_frames + aug_frames, 3500)},
+            "scale_effect": round(augmented - source, 6), "compute_matched_effect": round(compute_matched - source, 6),
+            "kept": kept, "attempts": attempts, "yield": kept / attempts if attempts else 0.0,
+            "augmented_frames": aug_frames, "source_frames": src_frames}
+
+
+def test_ex1_band_passes_inside_and_fails_outside():
+    band = {"scale_effect_min": 0.1}
+    assert "holds" in checks.check_ex1_measured(make_metrics(0.02, 0.30), band)[0]
+    checks.check_ex1_measured(make_metrics(0.0, 0.1), band)  # on the edge: holds
+    for src, aug in ((0.1, 0.14), (0.2, 0.2), (0.3, 0.1)):
+        with pytest.raises(ExerciseError, match="outside the band"):
+            checks.check_ex1_measured(make_metrics(src, aug), band)
+    b = {"scale_effect_max": -0.05}  # answer B
+    checks.check_ex1_measured(make_metrics(0.3, 0.1), b)
+    with pytest.raises(ExerciseError, match="outside the band"):
+        checks.check_ex1_measured(make_metrics(0.1, 0.3), b)
+    c = {"scale_effect_min": -0.06, "scale_effect_max": 0.06}  # answer C
+    checks.check_ex1_measured(make_metrics(0.2, 0.22), c)
+    for src, aug in ((0.1, 0.3), (0.3, 0.1)):
+        with pytest.raises(ExerciseError, match="outside the band"):
+            checks.check_ex1_measured(make_metrics(src, aug), c)
+    with pytest.raises(ExerciseError, match="neither"):
+        checks.check_ex1_measured(make_metrics(), {})
+
+
+def test_ex1_band_from_meta(meta):
+    band = meta["ex1"]["band"]
+    lo, hi = band.get("scale_effect_min"), band.get("scale_effect_max")
+    inside = lo if lo is not None else hi
+    checks.check_ex1_measured(make_metrics(0.5 - inside / 2, 0.5 + inside / 2), band)
+    outside = lo - 0.05 if lo is not None else hi + 0.05
+    with pytest.raises(ExerciseError, match="outside the band"):
+        checks.check_ex1_measured(make_metrics(0.5 - outside / 2, 0.5 + outside / 2), band)
+
+
+@pytest.mark.parametrize("broken,needle", [
+    (lambda m: m.pop("scale_effect"), "lacks scale_effect"),
+    (lambda m: m["arms"].pop("compute_matched"), "lacks arms.compute_matched"),
+    (lambda m: m["arms"]["source"].pop("ci95"), "lacks arms.source.ci95"),
+    (lambda m: m["arms"]["augmented"].update(success=1.2, ci95=[0.9, 1.3]), "not a valid rate"),
+    (lambda m: m["arms"]["augmented"].update(success=0.9), "not a valid rate"),
+    (lambda m: m.update(scale_effect=0.5), "is not augmented minus source"),
+    (lambda m: m.update(kept=100), "kept 100 of 96"),
+    (lambda m: m["arms"]["augmented"].update(frames=838), "source \\+ augmented frames"),
+])
+def test_broken_metrics_fail(broken, needle):
+    m = make_metrics()
+    broken(m)
+    with pytest.raises(ExerciseError, match=needle):
+        checks.check_run_sane(m)
+
+
+@pytest.mark.parametrize("rates,shape", [
+    ({0: 0.0, 4: 0.1, 8: 0.2}, "climb"),
+    ({0: 0.0, 4: 0.2, 8: 0.22}, "plateau"),
+    ({0: 0.22, 4: 0.26, 8: 0.30}, "plateau"),  # steps of exactly tol are flat
+    ({0: 0.3, 4: 0.2, 8: 0.2}, "plateau"),  # only the last step decides "fall"
+    ({0: 0.0, 4: 0.3, 8: 0.2}, "fall"),
+    ({0: 0.1, 4: 0.1, 8: 0.1}, "plateau"),
+])
+def test_curve_shape_rule(rates, shape):
+    assert checks.curve_shape(rates, 0.04) == shape
+    assert checks.curve_shape({str(k): v for k, v in rates.items()}, 0.04) == shape
+
+
+def test_step_lines_have_signs():
+    assert checks.step_lines({0: 0.2, 4: 0.26, 8: 0.24}) == ["0 -> 4: +0.06", "4 -> 8: -0.02"]
+
+
+def test_ex3_bands_pass_inside_and_fail_outside(meta):
+    band, tol = meta["ex3"]["band"], meta["ex3"]["plateau_tol"]
+    mid = {int(k): (lo + hi) / 2 for k, (lo, hi) in band.items()}
+    lines = checks.check_ex3_measured(mid, band, tol)
+    assert len(lines) == 4 and all("holds" in x for x in lines[:3]) and lines[3].startswith("steps: 0 -> 4: ")
+    for k in (0, 4, 8):
+        lo, hi = band[str(k)]
+        for bad in (lo - 0.02, hi + 0.02):
+            if 0.0 <= bad <= 1.0:
+                with pytest.raises(ExerciseError, match=f"at aug_per_demo {k} is outside the band"):
+                    checks.check_ex3_measured({**mid, k: bad}, band, tol)
+    with pytest.raises(ExerciseError, match="no band for aug_per_demo 2"):
+        checks.check_ex3_measured({0: 0.0, 2: 0.1, 8: 0.2}, band, tol)
+
+
+def test_ex3_nested_sizes():
+    runs = {0: make_metrics(0.1, 0.1, 0.1, aug_frames=0, kept=0, attempts=0), 4: make_metrics(aug_frames=3000, attempts=48, kept=48),
+            8: make_metrics(aug_frames=6000)}
+    runs[0]["arms"]["augmented"]["frames"] = runs[0]["arms"]["source"]["frames"]
+    checks.check_ex3_nested(runs)
+    bad = {**runs, 8: make_metrics(aug_frames=3000)}
+    with pytest.raises(ExerciseError, match="should grow"):
+        checks.check_ex3_nested(bad)
+    bad = {**runs, 0: make_metrics(aug_frames=10)}
+    with pytest.raises(ExerciseError, match="should add no frames"):
+        checks.check_ex3_nested(bad)
+    bad = {**runs, 4: make_metrics(aug_frames=3000, src_frames=500)}
+    with pytest.raises(ExerciseError, match="source-only arm differs"):
+        checks.check_ex3_nested(bad)
+
+
+# ---------------------------------------------------------------- end to end: the runs themselves
+def test_ex1_ex3_end_to_end_smoke(tmp_path):
+    """Smoke-size runs (seconds each): the pipeline, keys, ranges and nested sizes; bands skipped, and said so."""
+    p = run_checks("-k", "ex1 or ex3", env_extra={"CH37_EXERCISE_DIR": str(SOLUTIONS), "CH37_EXERCISE_SMOKE": "1",
+                                                  "CH37_EXERCISE_OUT": str(tmp_path)})
+    assert p.returncode == 0, p.stdout[-4000:] + p.stderr[-2000:]
+    assert "2 passed, 1 deselected" in p.stdout
+    assert "ex1: smoke run" in p.stdout and "ex3: smoke run" in p.stdout and "bands are skipped" in p.stdout
+    assert "ex3: steps 0 -> 4: " in p.stdout
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["smoke_seed0_aug0", "smoke_seed0_aug4", "smoke_seed0_aug8"]
+
+
+@pytest.mark.slow
+def test_ex1_ex3_end_to_end_full():
+    """Full size at seed 0 (minutes; reuses outputs/exercises/ runs via scale_data.py's cache): bands asserted."""
+    p = run_checks("-k", "ex1 or ex3", env_extra={"CH37_EXERCISE_DIR": str(SOLUTIONS)}, timeout=7200)
+    assert p.returncode == 0, p.stdout[-4000:] + p.stderr[-2000:]
+    assert "2 passed, 1 deselected" in p.stdout and "smoke" not in p.stdout
+    assert "ex1: your prediction " in p.stdout and "matched the measurement" in p.stdout
+    assert "ex3: the data shows a " in p.stdout and "4 -> 8: " in p.stdout
