@@ -181,17 +181,31 @@ def write_bytes_atomic(path: Path, data: bytes) -> None:
     os.replace(tmp, path)
 
 
+_FORKED_WORK: tuple = ()  # (fn, jobs), set just before forking so workers inherit it unpickled
+
+
+def _run_job(i: int):
+    fn, jobs = _FORKED_WORK
+    return fn(jobs[i])
+
+
 def parallel_map(fn, jobs: list, *, workers: int, bar) -> list:
     """[fn(j) for j in jobs], in order, on `workers` forked processes; the result never depends on
-    `workers`, because every job carries its own seed. Falls back to one process without fork."""
+    `workers`, because every job carries its own seed. Falls back to one process without fork.
+    `fn` is inherited through fork, not pickled, so a function defined in a script or notebook works."""
     import multiprocessing as mp
 
+    global _FORKED_WORK
     out = []
     if workers > 1 and len(jobs) > 1 and "fork" in mp.get_all_start_methods():
-        with mp.get_context("fork").Pool(min(workers, len(jobs))) as pool:
-            for r in pool.imap(fn, jobs, chunksize=max(1, len(jobs) // (4 * workers))):
-                out.append(r)
-                bar.update()
+        _FORKED_WORK = (fn, jobs)
+        try:
+            with mp.get_context("fork").Pool(min(workers, len(jobs))) as pool:
+                for r in pool.imap(_run_job, range(len(jobs)), chunksize=max(1, len(jobs) // (4 * workers))):
+                    out.append(r)
+                    bar.update()
+        finally:
+            _FORKED_WORK = ()
     else:
         for j in jobs:
             out.append(fn(j))

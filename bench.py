@@ -1,0 +1,172 @@
+"""Where the time of one scale_data.py run goes. Prints figures; asserts nothing.
+
+    python bench.py                 # the default run (seed 0), --no-rerun --no-cache
+    python bench.py --smoke         # the smoke run
+    python bench.py --repeat 3      # median of 3 runs per phase
+
+It executes scale_data.py statement by statement in one process (the same code, not a copy),
+times each phase, and wraps the chapter's own functions (demo generation, dataset loading,
+training, rollouts) to attribute their time. For training it reports achieved GFLOP/s next to a
+dense fp32 matmul measured in the same process, i.e. how close training runs to the machine's limit.
+"""
+from __future__ import annotations
+
+import argparse
+import ast
+import resource
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent
+t_process = time.perf_counter()
+
+
+def matmul_gflops(batch: int, hidden: int, seconds: float = 1.5) -> float:
+    """fp32 (batch x hidden) @ (hidden x hidden) rate, the shape that dominates training."""
+    import torch
+
+    a, w = torch.randn(batch, hidden), torch.randn(hidden, hidden)
+    for _ in range(20):
+        a @ w
+    n, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        for _ in range(50):
+            a @ w
+        n += 50
+    return 2 * batch * hidden * hidden * n / (time.perf_counter() - t0) / 1e9
+
+
+def step_flops(batch: int, hidden: int, obs: int = 10, act: int = 2) -> int:
+    """Multiply-adds x2 of one training step: forward, plus backward for all weights and the
+    hidden activations (the input needs no gradient)."""
+    fwd = 2 * batch * (obs * hidden + hidden * hidden + hidden * act)
+    bwd = 2 * batch * obs * hidden + 4 * batch * hidden * hidden + 4 * batch * hidden * act
+    return fwd + bwd
+
+
+def run_once(argv: list[str]) -> dict:
+    """Execute scale_data.py with `argv` in this process; return {phase: seconds} and facts."""
+    import chapter_io
+    import demo_data
+
+    src = (ROOT / "scale_data.py").read_text()
+    tree = ast.parse(src)
+    times: dict[str, float] = {}  # regions (and imports)
+    inner: dict[str, float] = {}  # calls inside them: "of which" lines
+    facts: dict = {"train_steps": {}}
+
+    def add(phase, dt, into=None):
+        into = inner if into is None else into
+        into[phase] = into.get(phase, 0.0) + dt
+
+    def timed(phase, fn):
+        def wrapper(*a, **k):
+            if facts.get("generating") and phase.startswith("write"):
+                return fn(*a, **k)  # already inside "demo generation"
+            facts["generating"] = phase.startswith("demo generation")
+            t0 = time.perf_counter()
+            try:
+                return fn(*a, **k)
+            finally:
+                facts["generating"] = False
+                add(phase, time.perf_counter() - t0)
+        return wrapper
+
+    orig = {"ensure": chapter_io.ensure_demos, "load": demo_data.load_arrays, "write": demo_data.write_dataset,
+            "pmap": chapter_io.parallel_map}
+    chapter_io.ensure_demos = timed("demo generation (or cache check)", orig["ensure"])
+    demo_data.load_arrays = timed("load LeRobot sets (all three)", orig["load"])
+    demo_data.write_dataset = timed("write augmented LeRobot set", orig["write"])
+    chapter_io.parallel_map = timed("augmentation re-solves", orig["pmap"])
+    sys.argv = ["scale_data.py", *argv]
+    ns = {"__name__": "__main__", "__file__": str(ROOT / "scale_data.py")}
+    region = "docstring"
+    lines = src.splitlines()
+    try:
+        for node in tree.body:
+            for ln in range(node.lineno - 1, 0, -1):  # the region marker above this statement
+                if lines[ln - 1].startswith("# --- region:"):
+                    region = lines[ln - 1].split(":", 1)[1].strip(" -")
+                    break
+            code = compile(ast.Module([node], []), "scale_data.py", "exec")
+            phase = "import" if isinstance(node, (ast.Import, ast.ImportFrom)) else region
+            t0 = time.perf_counter()
+            exec(code, ns)
+            add(phase, time.perf_counter() - t0, times)
+            if isinstance(node, ast.FunctionDef) and node.name == "train":
+                def train(*a, _f=ns["train"], **k):
+                    t0 = time.perf_counter()
+                    out = _f(*a, **k)
+                    arm = f"train arm {len(facts['train_steps']) + 1}"
+                    facts["train_steps"][arm] = out[1]
+                    add(arm, time.perf_counter() - t0)
+                    return out
+                ns["train"] = train
+            if isinstance(node, ast.FunctionDef) and node.name == "evaluate":
+                ns["evaluate"] = timed("rollouts (all arms)", ns["evaluate"])
+    finally:
+        chapter_io.ensure_demos, demo_data.load_arrays = orig["ensure"], orig["load"]
+        demo_data.write_dataset, chapter_io.parallel_map = orig["write"], orig["pmap"]
+    args = ns["args"]
+    facts.update(batch=args.batch_size, hidden=args.hidden_dim, device=args.device)
+    return {"times": times, "inner": inner, "facts": facts}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--smoke", action="store_true", help="benchmark the smoke run")
+    ap.add_argument("--repeat", type=int, default=1, help="runs per phase; the median is printed")
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args()
+    sys.path.insert(0, str(ROOT))
+    t_imp = time.perf_counter()
+    import torch  # noqa: F401  (counted as the import phase of the first run below)
+
+    import_s = time.perf_counter() - t_imp
+    runs, walls = [], []
+    with tempfile.TemporaryDirectory(prefix="ch37-bench-") as tmp:
+        for i in range(a.repeat):
+            argv = ["--seed", str(a.seed), "--no-rerun", "--no-cache", "--out", f"{tmp}/run{i}"]
+            argv += ["--smoke"] if a.smoke else []
+            t0 = time.perf_counter()
+            runs.append(run_once(argv))
+            walls.append(time.perf_counter() - t0)
+    f = runs[0]["facts"]
+    gflops = matmul_gflops(f["batch"], f["hidden"]) if f["device"] == "cpu" else float("nan")
+    per_step = step_flops(f["batch"], f["hidden"])
+    print(f"\nscale_data.py {'--smoke' if a.smoke else '(default)'} seed {a.seed}, median of {a.repeat} run(s), device {f['device']}, "
+          f"torch threads {torch.get_num_threads()}")
+    print(f"{'phase':44s} {'seconds':>8s}")
+    print(f"{'import torch (before the first run)':44s} {import_s:8.2f}")
+
+    def med(part, key):
+        return statistics.median(r[part].get(key, 0.0) for r in runs)
+
+    for ph in dict.fromkeys(k for r in runs for k in r["times"]):
+        print(f"{ph:44s} {med('times', ph):8.2f}")
+        for sub in dict.fromkeys(k for r in runs for k in r["inner"]):
+            owner = {"wrangle": ("demo generation", "load"), "augment": ("augmentation", "write"),
+                     "measure": ("train", "rollouts")}.get(ph, ())
+            if not sub.startswith(owner):
+                continue
+            extra = ""
+            if sub in f["train_steps"]:
+                steps, sec = f["train_steps"][sub], med("inner", sub)
+                rate = steps * per_step / sec / 1e9
+                extra = f"  {steps} steps, {sec / steps * 1e3:.2f} ms/step, {rate:.0f} GFLOP/s = {rate / gflops:.0%} of matmul"
+            print(f"  of which {sub:34s} {med('inner', sub):8.2f}{extra}")
+    total_steps = sum(f["train_steps"].values())
+    train_s = statistics.median(sum(v for k, v in r["inner"].items() if k.startswith("train arm")) for r in runs)
+    rate = total_steps * per_step / train_s / 1e9
+    print(f"{'wall (one run, in process)':40s} {statistics.median(walls):8.2f}")
+    print(f"training: {total_steps} steps x {per_step / 1e9:.3f} GFLOP = {total_steps * per_step / 1e12:.2f} TFLOP in {train_s:.1f} s "
+          f"-> {rate:.0f} GFLOP/s; dense matmul ({f['batch']}x{f['hidden']} @ {f['hidden']}x{f['hidden']}) in this process: "
+          f"{gflops:.0f} GFLOP/s; training at {rate / gflops:.0%} of it; floor at matmul rate {total_steps * per_step / gflops / 1e9:.1f} s")
+    print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
+
+
+if __name__ == "__main__":
+    main()
