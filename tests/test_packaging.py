@@ -1,4 +1,5 @@
 """Course packaging: region markers, the meta.yaml drift check, the notebook, sweeps, meta derivation, wall-clock."""
+import contextlib
 import csv
 import json
 import os
@@ -66,7 +67,7 @@ def test_parser_rejects_malformed_markers(tmp_path, text, message):
     assert str(e.value).startswith("scale_data.py")  # names the file (and the line where there is one)
 
 
-def test_regions_cli_prints_every_region(root):
+def test_regions_cli_prints_every_region():
     p = run_script("chapter_tools.py", "regions")
     lines = [ln.split() for ln in p.stdout.splitlines() if ln.split() and ln.split()[0] in ct.REGION_ORDER]
     assert [ln[0] for ln in lines] == list(ct.REGION_ORDER)
@@ -290,11 +291,26 @@ def test_paired_stats():
     assert one["std_delta"] is None and one["sem_delta"] is None
 
 
+@contextlib.contextmanager
+def fresh_result_cache(path):
+    """Point scale_data.py's result cache (chapter_io.cache_root) at an empty folder for the duration."""
+    old = os.environ.get("CH37_CACHE_DIR")
+    os.environ["CH37_CACHE_DIR"] = str(path)
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop("CH37_CACHE_DIR")
+        else:
+            os.environ["CH37_CACHE_DIR"] = old
+
+
 @pytest.fixture(scope="module")
 def smoke_sweep(tmp_path_factory):
     """The real scale_data.py at --smoke size, seeds 0 and 1."""
     out = tmp_path_factory.mktemp("sweep")
-    p = run_script("chapter_tools.py", "sweep", "--seeds", "2", "--smoke", "--out-root", out)
+    with fresh_result_cache(tmp_path_factory.mktemp("cache")):  # really run, never replay a cached result
+        p = run_script("chapter_tools.py", "sweep", "--seeds", "2", "--smoke", "--out-root", out)
     return out, p
 
 
@@ -362,12 +378,14 @@ def test_notebook_runs_end_to_end_in_smoke_mode(tmp_path, smoke_sweep):
     nb = nbformat.read(ct.NOTEBOOK, as_version=4)
     out = tmp_path / "out"
     (argv_cell,) = [c for c in nb.cells if "argv" in c.metadata.get("tags", [])]
-    argv_cell.source = f"import sys\nsys.argv = {['scale_data.py', '--smoke', '--seed', '0', '--no-rerun', '--out', str(out)]!r}"
-    env = dict(os.environ, HF_HUB_OFFLINE="1", HF_DATASETS_OFFLINE="1", MPLBACKEND="Agg")
+    argv = ["scale_data.py", "--smoke", "--seed", "0", "--no-rerun", "--out", str(out)]
+    argv_cell.source = f"import sys\nsys.argv = {argv!r}"
+    env = dict(os.environ, HF_HUB_OFFLINE="1", HF_DATASETS_OFFLINE="1", MPLBACKEND="Agg",
+               CH37_CACHE_DIR=str(tmp_path / "cache"))  # an empty result cache: the notebook really runs
     client = nbclient.NotebookClient(nb, km=km, timeout=600, resources={"metadata": {"path": str(ROOT)}})
     client.execute(env=env)
     text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs)
-    assert "lerobot ready" in text and "headline:" in text and "wrote" in text
+    assert "lerobot ready" in text and "headline:" in text and "wrote" in text and "reusing" not in text
     sweep_out, _ = smoke_sweep
     same_run = sweep_out / "seeds" / "seed0" / "metrics.json"  # the script itself, same flags
     assert (out / "metrics.json").read_bytes() == same_run.read_bytes()
@@ -406,9 +424,9 @@ def test_wallclock_cli_smoke_never_writes(tmp_path, stub):
     assert row["status"] == "measured" and float(row["minutes"]) >= 0 and len(row["config_hash"]) == 12
 
 
-def test_config_hash_ignores_device_only():
-    c = {"seed": 0, "epochs": 500, "device": "cpu"}
-    assert ct.config_hash(c) == ct.config_hash(dict(c, device="cuda")) != ct.config_hash(dict(c, epochs=499))
+def test_config_hash_ignores_only_device_workers_cache():
+    c = {"seed": 0, "epochs": 500, "device": "cpu", "workers": 2, "cache": False}
+    assert ct.config_hash(c) == ct.config_hash(dict(c, device="cuda", workers=8, cache=True)) != ct.config_hash(dict(c, epochs=499))
     assert ct.config_hash(c) == ct.config_hash(dict(reversed(list(c.items()))))
 
 
