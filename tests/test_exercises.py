@@ -3,6 +3,7 @@
 The check logic (exercises/checks.py) is called directly with modules, functions and metrics
 dicts; a few tests run `pytest exercises/checks.py -k ...` in a subprocess, as a learner would.
 """
+import json
 import os
 import subprocess
 import sys
@@ -20,6 +21,9 @@ ROOT = Path(__file__).resolve().parent.parent
 SOLUTIONS = ROOT / "exercises" / "solutions"
 # meta.yaml once chapter_tools.py has written it; until then a stand-in for these tests only
 META = ROOT / "meta.yaml" if (ROOT / "meta.yaml").is_file() else ROOT / "tests" / "fixtures_meta.yaml"
+# a meta.yaml derived from smoke-sized sweeps says so; its answers and bands are not the chapter's
+PROVISIONAL = bool((yaml.safe_load(META.read_text()).get("reference_run") or {}).get("provisional"))
+EXERCISE_VARS = ("CH37_EXERCISE_DIR", "CH37_EXERCISE_SMOKE", "CH37_EXERCISE_OUT", "CH37_META")
 EX1 = tuple(checks.EX1_CHOICES)
 EX3 = checks.EX3_CHOICES
 WHY = "twelve demos cover little of the start space"
@@ -32,7 +36,7 @@ def meta():
 
 def run_checks(*args, env_extra=None, unset=(), timeout=600):
     """`python -m pytest exercises/checks.py ARGS` from the repo root, as a learner runs it."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith("CH37_") and k not in unset}
+    env = {k: v for k, v in os.environ.items() if k not in EXERCISE_VARS and k not in unset}  # keeps CH37_CACHE_DIR
     env.update({"CH37_META": str(META), "PYTHONHASHSEED": "0", **(env_extra or {})})
     return subprocess.run([sys.executable, "-m", "pytest", "exercises/checks.py", "-p", "no:cacheprovider", *args],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout)
@@ -60,8 +64,12 @@ def test_missing_meta_is_a_clear_failure(tmp_path):
 
 # ---------------------------------------------------------------- predictions: ex1 and ex3
 def test_reference_predictions_pass_and_match_meta(meta):
-    assert checks.check_prediction(checks.load_exercise("ex1", SOLUTIONS), EX1, "ex1") == meta["ex1"]["answer"]
-    assert checks.check_prediction(checks.load_exercise("ex3", SOLUTIONS), EX3, "ex3") == meta["ex3"]["answer"]
+    got = {"ex1": checks.check_prediction(checks.load_exercise("ex1", SOLUTIONS), EX1, "ex1"),
+           "ex3": checks.check_prediction(checks.load_exercise("ex3", SOLUTIONS), EX3, "ex3")}
+    if PROVISIONAL:
+        pytest.skip("meta.yaml is provisional (smoke-sized sweep): its answers are not the chapter's yet")
+    assert got == {"ex1": meta["ex1"]["answer"], "ex3": meta["ex3"]["answer"]}, \
+        "exercises/solutions/ disagree with meta.yaml's answers: update the reference answers (and their WHY)"
 
 
 @pytest.mark.parametrize("ex,allowed", [("ex1", EX1), ("ex3", EX3)])
@@ -324,10 +332,43 @@ def test_ex1_ex3_end_to_end_smoke(tmp_path):
     assert sorted(x.name for x in tmp_path.iterdir()) == ["smoke_seed0_aug0", "smoke_seed0_aug4", "smoke_seed0_aug8"]
 
 
+def test_full_mode_asserts_bands_and_scores_predictions(tmp_path, monkeypatch):
+    """The non-smoke path (bands asserted, prediction scored) on tiny runs, with bands written for them.
+
+    Same configurations as the smoke test above, so scale_data.py's result cache (one per test
+    session) replays them when that test ran first.
+    """
+    monkeypatch.setattr(checks, "FULL_FLAGS", checks.SMOKE_FLAGS)
+    meta = {"exercise_checks": {
+        "ex1": {"seed": 0, "answer": "C", "band": {"scale_effect_min": -0.5, "scale_effect_max": 0.5}},
+        "ex2": {"pusht_mask_density": 0.333333},
+        "ex3": {"seed": 0, "aug_per_demo": [0, 4, 8], "answer": "plateau", "plateau_tol": 0.04,
+                "band": {"0": [0.0, 1.0], "4": [0.0, 1.0], "8": [0.0, 1.0]}}}}
+    (tmp_path / "meta.yaml").write_text(yaml.safe_dump(meta))
+    for k in EXERCISE_VARS:
+        monkeypatch.delenv(k, raising=False)
+    monkeypatch.setenv("CH37_META", str(tmp_path / "meta.yaml"))
+    monkeypatch.setenv("CH37_EXERCISE_DIR", str(SOLUTIONS))
+    monkeypatch.setenv("CH37_EXERCISE_OUT", str(tmp_path / "runs"))
+    out = []
+    checks.run_ex1(out.append)
+    checks.run_ex3(out.append)
+    text = "\n".join(out)
+    assert "smoke" not in text and "band scale_effect >= -0.500 and scale_effect <= +0.500: holds" in text
+    assert "ex1: your prediction was A (augmentation helps); the measurement says C" in text  # scored, not failed
+    assert "aug_per_demo 8: success" in text and "ex3: steps: 0 -> 4: " in text
+    shape = checks.curve_shape({k: json.loads((tmp_path / "runs" / f"seed0_aug{k}" / "metrics.json").read_text())
+                                ["arms"]["augmented"]["success"] for k in (0, 4, 8)}, 0.04)
+    assert f"ex3: the data shows a {shape}; " in text
+
+
 @pytest.mark.slow
-def test_ex1_ex3_end_to_end_full():
-    """Full size at seed 0 (minutes; reuses outputs/exercises/ runs via scale_data.py's cache): bands asserted."""
-    p = run_checks("-k", "ex1 or ex3", env_extra={"CH37_EXERCISE_DIR": str(SOLUTIONS)}, timeout=7200)
+def test_ex1_ex3_end_to_end_full(tmp_path):
+    """Full size at seed 0 (three default-size runs; the aug-8 run is shared through the result cache): bands asserted."""
+    if PROVISIONAL:
+        pytest.skip("meta.yaml is provisional (smoke-sized sweep): its bands do not describe full-size runs")
+    p = run_checks("-k", "ex1 or ex3", env_extra={"CH37_EXERCISE_DIR": str(SOLUTIONS), "CH37_EXERCISE_OUT": str(tmp_path)},
+                   timeout=7200)
     assert p.returncode == 0, p.stdout[-4000:] + p.stderr[-2000:]
     assert "2 passed, 1 deselected" in p.stdout and "smoke" not in p.stdout
     assert "ex1: your prediction " in p.stdout and "matched the measurement" in p.stdout
