@@ -623,10 +623,10 @@ ARGV_CELL = """\
 # Smoke run, seconds, numbers not meaningful:  sys.argv = ["scale_data.py", "--smoke", "--seed", "0"]
 {cache_note}import sys
 
-sys.argv = ["scale_data.py", "--seed", "0"]"""
+sys.argv = ["scale_data.py", "--seed", "0", "--no-cache"]"""
 CACHE_NOTE = """\
-# An identical earlier run (same flags, same code) is replayed and the script stops early with
-# "SystemExit: 0" after printing its results; add "--no-cache" to run everything again.
+# --no-cache: every cell really runs. Without it an identical earlier run (same flags, same code)
+# is replayed from the result cache and the setup cell stops the notebook early ("SystemExit: 0").
 """
 
 
