@@ -3,6 +3,7 @@
     python bench.py                 # the default run (seed 0), --no-rerun --no-cache
     python bench.py --smoke         # the smoke run
     python bench.py --repeat 3      # median of 3 runs per phase
+    python bench.py --epochs 100    # other flags go to scale_data.py
 
 It executes scale_data.py statement by statement in one process (the same code, not a copy),
 times each phase, and wraps the chapter's own functions (demo generation, dataset loading,
@@ -120,7 +121,7 @@ def main() -> None:
     ap.add_argument("--smoke", action="store_true", help="benchmark the smoke run")
     ap.add_argument("--repeat", type=int, default=1, help="runs per phase; the median is printed")
     ap.add_argument("--seed", type=int, default=0)
-    a = ap.parse_args()
+    a, extra = ap.parse_known_args()  # anything else goes to scale_data.py, e.g. --epochs 100
     sys.path.insert(0, str(ROOT))
     t_imp = time.perf_counter()
     import torch  # noqa: F401  (counted as the import phase of the first run below)
@@ -130,7 +131,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="ch37-bench-") as tmp:
         for i in range(a.repeat):
             argv = ["--seed", str(a.seed), "--no-rerun", "--no-cache", "--out", f"{tmp}/run{i}"]
-            argv += ["--smoke"] if a.smoke else []
+            argv += (["--smoke"] if a.smoke else []) + extra
             t0 = time.perf_counter()
             runs.append(run_once(argv))
             walls.append(time.perf_counter() - t0)

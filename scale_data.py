@@ -118,13 +118,16 @@ def stats_of(x):  # (N, D) -> per-dimension statistics, the same keys LeRobot's 
             "q01": np.quantile(x, 0.01, axis=0), "q99": np.quantile(x, 0.99, axis=0)}
 
 
+def standardize(x, st):  # a constant dimension (PushT's target pose) is left centred, not divided by 0
+    return (x - st["mean"]) / np.where(st["std"] > 1e-8, st["std"], 1.0)
+
+
 PAD = max(s["action"].shape[1] for s in sets.values())  # 6: the widest action wins
 pile = {"state": [], "action": [], "mask": [], "emb_id": []}
 for emb_id, (name, s) in enumerate(sets.items()):
     s["stats"] = {"state": stats_of(s["observation.state"]), "action": stats_of(s["action"])}
-    z = lambda x, st: (x - st["mean"]) / np.where(st["std"] > 1e-8, st["std"], 1.0)  # noqa: E731
-    state = z(s["observation.state"], s["stats"]["state"])  # (N, 10), own stats
-    act = z(s["action"], s["stats"]["action"])  # (N, act_dim), own stats
+    state = standardize(s["observation.state"], s["stats"]["state"])  # (N, 10), own stats
+    act = standardize(s["action"], s["stats"]["action"])  # (N, act_dim), own stats
     n, a = act.shape
     pile["state"].append(state.astype(np.float32))
     pile["action"].append(np.pad(act, ((0, 0), (0, PAD - a))).astype(np.float32))  # (N, 6) zero-padded
@@ -133,6 +136,8 @@ for emb_id, (name, s) in enumerate(sets.items()):
 pile = {k: np.concatenate(v) for k, v in pile.items()}
 print(f"pile: {len(pile['state'])} rows, state (N, 10), actions padded to (N, {PAD}), "
       f"mask density PushT {pile['mask'][pile['emb_id'] == 0].mean():.3f} ALOHA {pile['mask'][pile['emb_id'] == 1].mean():.3f}")
+print("state index 2 is " + " and ".join(f"{s['emb'].env_module.STATE_NAMES[2]} in {n}" for n, s in sets.items())
+      + ": a shared network carries structure across robots, not the meaning of a raw state number")
 
 
 def masked_mse(pred, target, mask):  # padded dims contribute nothing to the loss, hence no gradient
@@ -157,6 +162,7 @@ cross = {
     } for i, (name, s) in enumerate(sets.items())],
     "state_index_2_means": {name: s["emb"].env_module.STATE_NAMES[2] for name, s in sets.items()},
     "padded_dim_max_grad": pad_grad,
+    "quantiles": "q01/q99 over all frames; LeRobot's meta/stats.json averages per-episode quantiles instead",
 }
 io.write_atomic(args.out / "cross_embodiment.json", io.dump_json(io.round_floats(cross, 6)))
 # --- endregion ---
