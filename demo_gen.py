@@ -20,7 +20,19 @@ if sys.platform.startswith("linux"):  # headless rendering: EGL unless the user 
     os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("SVT_LOG", "1")  # the AV1 encoder's banner: errors only
 
-GENERATOR_VERSION = 1  # bump when a change alters the frames a given set of flags produces
+def _code_digest(names=("pusht_env.py", "pusht.xml", "aloha_env.py", "aloha.xml", "scripted_expert.py",
+                        "demo_gen.py", "demo_data.py")) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    for name in names:
+        h.update((Path(__file__).with_name(name)).read_bytes())
+    return h.hexdigest()[:12]
+
+
+# Everything that shapes the frames of a set besides its flags: the envs, the experts and this writer.
+# Any edit to them changes the version, so a cached set can never outlive the code that made it.
+GENERATOR_VERSION = f"2+{_code_digest()}"
 
 
 @dataclass(frozen=True)

@@ -348,7 +348,7 @@ def test_notebook_is_fresh_and_deterministic():
     regions = ct.parse_regions()
     assert [c.source for c in code[2:]] == [r.code for r in regions]
     assert nb.cells[0].source.startswith("# Chapter 3.7")
-    assert 'sys.argv = ["scale_data.py", "--seed", "0"]' in code[1].source and "--smoke" in code[1].source
+    assert 'sys.argv = ["scale_data.py", "--seed", "0", "--no-cache"]' in code[1].source and "--smoke" in code[1].source
     assert "%pip install -q -e ." in code[0].source and 'find_spec("lerobot") is None' in code[0].source
 
 
