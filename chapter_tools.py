@@ -284,10 +284,11 @@ def ex1_band(answer: str, effect0: float, ci95_aug0) -> dict:
 
 
 def ex3_answer(s0: float, s4: float, s8: float, tol: float = PLATEAU_TOL) -> str:
-    """climb: both steps above +tol; fall: the last step below -tol; anything else: plateau.
+    """The question is what the curve does at the end (4 -> 8): climb if the last step is above
+    +tol, fall if it is below -tol, plateau otherwise; the first step (0 -> 4) is printed, not judged.
     Steps are rounded to 6 decimals first, so a step of exactly tol (0.26 - 0.22) reads as flat."""
-    step1, step2 = round(s4 - s0, 6), round(s8 - s4, 6)
-    if step1 > tol and step2 > tol:
+    step2 = round(s8 - s4, 6)
+    if step2 > tol:
         return "climb"
     if step2 < -tol:
         return "fall"

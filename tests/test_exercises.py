@@ -279,6 +279,7 @@ def test_broken_metrics_fail(broken, needle):
     ({0: 0.3, 4: 0.2, 8: 0.2}, "plateau"),  # only the last step decides "fall"
     ({0: 0.0, 4: 0.3, 8: 0.2}, "fall"),
     ({0: 0.1, 4: 0.1, 8: 0.1}, "plateau"),
+    ({0: 0.0, 4: 0.02, 8: 0.2}, "climb"),  # a flat first step does not matter: the last one decides
 ])
 def test_curve_shape_rule(rates, shape):
     assert checks.curve_shape(rates, 0.04) == shape

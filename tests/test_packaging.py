@@ -173,7 +173,7 @@ def test_ex3_answer_rule_both_ways():
     assert ct.ex3_answer(0.1, 0.2, 0.2 + tol) == "plateau"  # a step of exactly tol is flat
     assert ct.ex3_answer(0.1, 0.22, 0.26) == "plateau" and ct.ex3_answer(0.26, 0.22, 0.18) == "plateau"  # float noise
     assert ct.ex3_answer(0.1, 0.3, 0.2) == "fall"
-    assert ct.ex3_answer(0.1, 0.1, 0.3) == "plateau"  # first step flat: not "keeps climbing"
+    assert ct.ex3_answer(0.1, 0.1, 0.3) == "climb"  # the last step decides: still climbing at the end
     assert ct.ex3_answer(0.3, 0.1, 0.12) == "plateau"
 
 
