@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-ARM_LABELS = {"source": "source only", "augmented": "source + augmented", "compute_matched": "compute-matched"}
+ARM_LABELS = {"source": "source\nonly", "augmented": "source +\naugmented", "compute_matched": "compute-\nmatched"}
 RERUN_APP_ID = "ch3_7_scale_data"  # letters, digits and underscores: accepted by Rerun as is
 
 
@@ -34,12 +34,13 @@ def figure(path: Path, src_starts, aug_starts, arms: dict, coverage: dict, annul
     ax0.set(aspect="equal", xlim=(-0.3, 0.3), ylim=(-0.3, 0.3), xlabel="block x (m)", ylabel="block y (m)",
             title=f"block starts: cells {coverage['source']} -> {coverage['union']} of {coverage['cells']}")
     ax0.legend(loc="lower left", fontsize=8)
-    names = list(arms)
+    names = [n for n in ARM_LABELS if n in arms]  # fixed order and colour per arm
     rates = [arms[n]["success"] for n in names]
     err = np.array([[r - arms[n]["ci95"][0], arms[n]["ci95"][1] - r] for n, r in zip(names, rates)]).T
-    ax1.bar([ARM_LABELS.get(n, n) for n in names], rates, yerr=err, capsize=6, color=["tab:blue", "tab:orange", "tab:gray"])
+    ax1.bar([ARM_LABELS.get(n, n) for n in names], rates, yerr=err, capsize=6,
+            color=[{"source": "tab:blue", "augmented": "tab:orange"}.get(n, "tab:gray") for n in names])
     for i, n in enumerate(names):
-        ax1.text(i, rates[i] + 0.01, f"{rates[i]:.2f}\n{arms[n]['frames']} frames", ha="center", va="bottom", fontsize=8)
+        ax1.text(i, arms[n]["ci95"][1] + 0.02, f"{rates[i]:.2f}\n{arms[n]['frames']} frames", ha="center", va="bottom", fontsize=8)
     ax1.set(ylim=(0, 1), ylabel="success rate (95% Wilson interval)", title="BC policy on held-out PushT starts")
     fig.tight_layout()
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}.png")
