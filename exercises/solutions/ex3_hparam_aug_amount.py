@@ -8,12 +8,12 @@ Objective
 What to do
     1. Predict the shape of the policy's success rate as aug_per_demo goes 0 -> 4 -> 8
        (0 means source demos only). Set PREDICTION to one word:
-         "climb"    success keeps rising: both steps go up
-         "plateau"  it rises and then levels off, or barely moves at all
+         "climb"    success is still rising at the end: 4 -> 8 goes up
+         "plateau"  it levels off: 4 -> 8 barely moves
          "fall"     the last step goes down: too much augmentation hurts
-       The check reads a step smaller than meta.yaml's plateau_tol (a few points of
-       success) as flat: climb = both steps above +tol, fall = the last step below -tol,
-       anything else is a plateau.
+       The check judges the last step (4 -> 8) and reads a step smaller than meta.yaml's
+       plateau_tol (a few points of success) as flat: climb = above +tol, fall = below -tol,
+       anything else is a plateau. The first step (0 -> 4) is printed for you to think about.
     2. Set WHY to one sentence (at least three words) saying why.
     3. Run the check. It validates your answer, then runs scale_data.py at seed 0 with
        --aug_per_demo 0, 4 and 8 (folders outputs/exercises/seed0_aug{0,4,8}; the k = 8 run is
