@@ -18,10 +18,9 @@ Run:    python scale_data.py --seed 0
 Smoke:  python scale_data.py --smoke --seed 0     (seconds; two runs give identical metrics.json)
 """
 # --- region: setup ---
-# Every knob is a flag with its unit and why its default; --smoke pins a tiny CPU configuration.
+# Every knob is a flag with its unit and why its default; --smoke sets tiny CPU defaults.
 # Heavy imports (torch, lerobot) come after validation so --help and flag errors are instant.
 import argparse
-import json
 import math
 import os
 import sys
