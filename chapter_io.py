@@ -49,10 +49,7 @@ def ensure_demos(emb, path: Path, *, user_given: bool, episodes: int, seed: int,
         return "matches its stamp" if ours else "your own set, used as given"
     if ours and stamp == want:
         return "cached"
-    if demo_data.holds_data(path) and not ours:
-        raise demo_data.DataError(f"{path} holds data this program did not make; move it or pass another --out")
-    if ours:
-        shutil.rmtree(path)  # stale set that this project made itself: rebuild it
+    replace_own_dir(path)  # a stale set we made is rebuilt; anything else is refused
     s = demo_gen.generate(emb, path, episodes=episodes, seed=seed, noise=noise, quiet=quiet)
     return f"generated ({s['successes']}/{s['episodes']} expert successes)"
 
@@ -62,7 +59,7 @@ def replace_own_dir(path: Path) -> None:
     if not demo_data.holds_data(path):
         return
     stamp = demo_data.read_stamp(path)
-    if stamp is None or stamp.get("made_by") != "ch3.7-scale-data":
+    if stamp is None or stamp.get("made_by") != demo_data.MADE_BY:
         raise demo_data.DataError(f"{path} holds data this program did not make; move it or pass another --out")
     shutil.rmtree(path)
 

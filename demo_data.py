@@ -16,6 +16,7 @@ import numpy as np
 # pyav ships its own FFmpeg, so every dataset here is read and written through pyav.
 VIDEO_BACKEND = "pyav"
 STAMP_NAME = "scale_data_stamp.json"  # written by this project into every set it makes
+MADE_BY = "ch3.7-scale-data"  # the stamp's "made_by": only a set carrying it may ever be deleted
 IMAGE_KEY = "observation.images.top"
 
 # Env seeds are carved into disjoint blocks so that demos, augmentation draws and evaluation

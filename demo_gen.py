@@ -109,7 +109,7 @@ def generate(emb: Embodiment, out: Path, *, episodes: int, seed: int, noise: flo
 
 def stamp_for(emb: Embodiment, *, episodes: int, seed: int, noise: float, video: bool) -> dict:
     """Everything the frames of a generated set depend on; a cached set is reused only on equality."""
-    return {"made_by": "ch3.7-scale-data", "embodiment": emb.name, "episodes": int(episodes),
+    return {"made_by": demo_data.MADE_BY, "embodiment": emb.name, "episodes": int(episodes),
             "seed": int(seed), "noise": float(noise), "video": bool(video),
             "generator_version": GENERATOR_VERSION}
 
