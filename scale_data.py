@@ -50,7 +50,7 @@ p.add_argument("--device", default="auto", help="auto | cpu | cuda | mps (auto: 
 p.add_argument("--smoke", action="store_true", help="tiny CPU defaults for tests and CI (seconds); explicit flags still win")
 p.add_argument("--rerun", action=argparse.BooleanOptionalAction, default=True, help="write a Rerun .rrd recording")
 p.add_argument("--cache", action=argparse.BooleanOptionalAction, default=True, help="reuse an identical earlier run (same flags and code)")
-p.add_argument("--workers", type=int, default=None, help="processes for the augmentation re-solves (default: CPU cores); never changes results")
+p.add_argument("--workers", type=int, default=None, help="processes for the augmentation re-solves and the evaluation physics (default: CPU cores); never changes results")
 p.error = lambda msg: io.fail(f"{msg} (see --help)")
 args = p.parse_args()
 if args.smoke:  # tiny CPU defaults, the same on every machine; flags given explicitly still win
@@ -298,15 +298,17 @@ def train(states, actions, *, steps=None):
 @torch.no_grad()
 def evaluate(pol, seeds):
     """Success rate of `pol` on PushT starts env.reset(seed), all episodes stepped in lockstep."""
-    envs = [pusht_env.PushTEnv() for _ in seeds]
-    obs = np.stack([e.reset(sd) for e, sd in zip(envs, seeds)])
-    live, success = np.ones(len(envs), bool), np.zeros(len(envs), bool)
-    while live.any():
-        idx = np.flatnonzero(live)
-        act = pol(torch.as_tensor(obs[idx], device=device)).cpu().numpy()  # one call for every live env
-        for j, a in zip(idx, act):
-            obs[j], _, done, info = envs[j].step(a)
-            success[j], live[j] = info["success"], not done
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # a (N, 10) batch needs no second thread; leave the cores to the physics workers
+    with io.LockstepEnvs(pusht_env.PushTEnv, seeds, workers=args.workers) as envs:
+        obs = envs.reset()  # (N, 10)
+        live, success = np.ones(len(seeds), bool), np.zeros(len(seeds), bool)
+        while live.any():
+            idx = np.flatnonzero(live)
+            act = pol(torch.as_tensor(obs[idx], device=device)).cpu().numpy()  # one call for every live env
+            obs[idx], done, success[idx] = envs.step(idx, act)
+            live[idx] = ~done
+    torch.set_num_threads(threads)
     return float(success.mean())
 
 

@@ -1,5 +1,9 @@
 """Demo generators write real LeRobot v3 sets that round-trip bit for bit."""
 import json
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -8,6 +12,8 @@ import demo_data
 import gen_demos_aloha
 import gen_demos_pusht
 from demo_gen import rollout
+
+ROOT = Path(__file__).resolve().parents[1]
 
 GENS = [pytest.param(gen_demos_pusht, gen_demos_pusht.PUSHT, 0.08, id="pusht"),
         pytest.param(gen_demos_aloha, gen_demos_aloha.ALOHA, 0.05, id="aloha")]
@@ -45,6 +51,19 @@ def test_same_flags_same_data_different_seed_different_data(tmp_path, gen, emb, 
 
     a, b, c = make("a", 0), make("b", 0), make("c", 1)
     assert a == b and a != c
+
+
+def test_same_flags_same_bytes_whatever_the_hash_seed(tmp_path):
+    """A set is a pure function of its flags down to the bytes of every file, even across
+    processes whose string hashes differ (lerobot orders stats.json's keys by hash)."""
+    trees = []
+    for hash_seed in ("1", "2"):
+        out = tmp_path / f"set{hash_seed}"
+        subprocess.run([sys.executable, str(ROOT / "gen_demos_pusht.py"), "--episodes", "2", "--seed", "0",
+                        "--out", str(out), "--quiet"], check=True, env=dict(os.environ, PYTHONHASHSEED=hash_seed))
+        trees.append({p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()})
+    assert trees[0].keys() == trees[1].keys() and len(trees[0]) >= 5
+    assert [k for k in trees[0] if trees[0][k] != trees[1][k]] == []
 
 
 def test_episode_seeds_never_overlap_across_seeds_or_purposes():

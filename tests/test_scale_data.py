@@ -219,3 +219,41 @@ def test_result_key_changes_with_every_input():
     assert chapter_io.result_key(dict(base, out="b", workers=1, cache=False)) == k  # where and how fast: same result
     for field, value in (("seed", 1), ("epochs", 499), ("smoke", True), ("device", "cuda"), ("lr", 0.01)):
         assert chapter_io.result_key(dict(base, **{field: value})) != k, field
+
+
+@pytest.mark.parametrize("workers", [1, 3])
+def test_lockstep_envs_step_each_env_as_if_alone(workers):
+    """The evaluation's env pool: any worker count, any subset of envs per step, the same
+    trajectories as stepping each env by itself."""
+    import chapter_io
+    from pusht_env import PushTEnv
+
+    seeds = [demo_data.env_seed(0, "eval", j) for j in range(5)]
+    acts = np.random.default_rng(0).uniform(-1, 1, (30, len(seeds), 2))
+    plan = [[j for j in range(len(seeds)) if (t + j) % 3] for t in range(len(acts))]  # envs stepped at t
+    ref = []
+    for j, s in enumerate(seeds):
+        env = PushTEnv()
+        traj = [env.reset(s)]
+        traj += [env.step(acts[t, j])[0] for t in range(len(acts)) if j in plan[t]]
+        ref.append(np.stack(traj))
+    with chapter_io.LockstepEnvs(PushTEnv, seeds, workers=workers) as envs:
+        obs = envs.reset()
+        got = [[o] for o in obs]
+        for t, idx in enumerate(plan):
+            o, done, success = envs.step(idx, acts[t, idx])
+            assert o.shape == (len(idx), 10) and done.dtype == bool and not done.any() and not success.any()
+            for j, row in zip(idx, o):
+                got[j].append(row)
+    for j in range(len(seeds)):
+        assert np.stack(got[j]).tobytes() == ref[j].tobytes()
+
+
+def test_lockstep_envs_raise_a_worker_error():
+    import chapter_io
+    from pusht_env import PushTEnv
+
+    with chapter_io.LockstepEnvs(PushTEnv, [1, 2], workers=2) as envs:
+        envs.reset()
+        with pytest.raises(ValueError, match="non-finite action"):
+            envs.step([0, 1], np.array([[0.0, 0.0], [np.nan, 0.0]]))
