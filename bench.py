@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import math
 import resource
 import statistics
 import sys
@@ -41,8 +42,8 @@ def matmul_gflops(batch: int, hidden: int, seconds: float = 1.5) -> float:
 
 
 def step_flops(batch: int, hidden: int, obs: int = 10, act: int = 2) -> int:
-    """Multiply-adds x2 of one training step: forward, plus backward for all weights and the
-    hidden activations (the input needs no gradient)."""
+    """Multiply-adds x2 of one training step on `batch` rows: forward, plus backward for all
+    weights and the hidden activations (the input needs no gradient). Linear in `batch`."""
     fwd = 2 * batch * (obs * hidden + hidden * hidden + hidden * act)
     bwd = 2 * batch * obs * hidden + 4 * batch * hidden * hidden + 4 * batch * hidden * act
     return fwd + bwd
@@ -57,7 +58,7 @@ def run_once(argv: list[str]) -> dict:
     tree = ast.parse(src)
     times: dict[str, float] = {}  # regions (and imports)
     inner: dict[str, float] = {}  # calls inside them: "of which" lines
-    facts: dict = {"train_steps": {}}
+    facts: dict = {"train_steps": {}, "train_rows": {}}
 
     def add(phase, dt, into=None):
         into = inner if into is None else into
@@ -102,8 +103,11 @@ def run_once(argv: list[str]) -> dict:
                     t0 = time.perf_counter()
                     out = _f(*a, **k)
                     arm = f"train arm {len(facts['train_steps']) + 1}"
-                    facts["train_steps"][arm] = out[1]
                     add(arm, time.perf_counter() - t0)
+                    facts["train_steps"][arm] = out[1]
+                    n, b = len(a[0]), ns["args"].batch_size
+                    epoch = math.ceil(n / b)  # steps per epoch; the last batch of each epoch is short
+                    facts["train_rows"][arm] = sum(min(b, n - (t % epoch) * b) for t in range(out[1]))
                     return out
                 ns["train"] = train
             if isinstance(node, ast.FunctionDef) and node.name == "evaluate":
@@ -137,7 +141,7 @@ def main() -> None:
             walls.append(time.perf_counter() - t0)
     f = runs[0]["facts"]
     gflops = matmul_gflops(f["batch"], f["hidden"]) if f["device"] == "cpu" else float("nan")
-    per_step = step_flops(f["batch"], f["hidden"])
+    per_row = step_flops(1, f["hidden"])  # FLOPs per training row; steps see batch or fewer rows
     print(f"\nscale_data.py {'--smoke' if a.smoke else '(default)'} seed {a.seed}, median of {a.repeat} run(s), device {f['device']}, "
           f"torch threads {torch.get_num_threads()}")
     print(f"{'phase':44s} {'seconds':>8s}")
@@ -156,16 +160,16 @@ def main() -> None:
             extra = ""
             if sub in f["train_steps"]:
                 steps, sec = f["train_steps"][sub], med("inner", sub)
-                rate = steps * per_step / sec / 1e9
+                rate = f["train_rows"][sub] * per_row / sec / 1e9
                 extra = f"  {steps} steps, {sec / steps * 1e3:.2f} ms/step, {rate:.0f} GFLOP/s = {rate / gflops:.0%} of matmul"
             print(f"  of which {sub:34s} {med('inner', sub):8.2f}{extra}")
-    total_steps = sum(f["train_steps"].values())
+    total_steps, flops = sum(f["train_steps"].values()), sum(f["train_rows"].values()) * per_row
     train_s = statistics.median(sum(v for k, v in r["inner"].items() if k.startswith("train arm")) for r in runs)
-    rate = total_steps * per_step / train_s / 1e9
+    rate = flops / train_s / 1e9
     print(f"{'wall (one run, in process)':40s} {statistics.median(walls):8.2f}")
-    print(f"training: {total_steps} steps x {per_step / 1e9:.3f} GFLOP = {total_steps * per_step / 1e12:.2f} TFLOP in {train_s:.1f} s "
+    print(f"training: {total_steps} steps, {sum(f['train_rows'].values())} rows x {per_row / 1e6:.2f} MFLOP = {flops / 1e12:.2f} TFLOP in {train_s:.1f} s "
           f"-> {rate:.0f} GFLOP/s; dense matmul ({f['batch']}x{f['hidden']} @ {f['hidden']}x{f['hidden']}) in this process: "
-          f"{gflops:.0f} GFLOP/s; training at {rate / gflops:.0%} of it; floor at matmul rate {total_steps * per_step / gflops / 1e9:.1f} s")
+          f"{gflops:.0f} GFLOP/s; training at {rate / gflops:.0%} of it; floor at matmul rate {flops / gflops / 1e9:.1f} s")
     print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
 
 

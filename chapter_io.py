@@ -235,7 +235,7 @@ class LockstepEnvs:
         ctx = mp.get_context("fork")
         for part in self.parts:
             parent, child = ctx.Pipe()
-            proc = ctx.Process(target=_env_worker, args=(child, make_env, [self.seeds[i] for i in part]), daemon=True)
+            proc = ctx.Process(target=_env_worker, args=(child, make_env, [self.seeds[i] for i in part], len(self.procs)), daemon=True)
             proc.start()
             child.close()
             self.conns.append(parent)
@@ -313,7 +313,10 @@ def _env_serve(envs, seeds, cmd, arg):
     return np.stack(obs), done, success
 
 
-def _env_worker(conn, make_env, seeds) -> None:
+def _env_worker(conn, make_env, seeds, rank: int) -> None:
+    if hasattr(os, "sched_setaffinity"):  # one core each: woken together, they would otherwise
+        cpus = sorted(os.sched_getaffinity(0))  # often queue on the core of the process that woke them
+        os.sched_setaffinity(0, {cpus[rank % len(cpus)]})
     envs = [make_env() for _ in seeds]
     while (msg := conn.recv()) is not None:
         try:
