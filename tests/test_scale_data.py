@@ -221,6 +221,22 @@ def test_result_key_changes_with_every_input():
         assert chapter_io.result_key(dict(base, **{field: value})) != k, field
 
 
+def test_result_key_changes_with_every_code_file(tmp_path, monkeypatch):
+    import chapter_io
+
+    for name in chapter_io.CODE_FILES:
+        shutil.copyfile(chapter_io.ROOT / name, tmp_path / name)
+    monkeypatch.setattr(chapter_io, "ROOT", tmp_path)
+    config = {"seed": 0, "epochs": 500}
+    keys = {chapter_io.result_key(config)}
+    assert {"scale_data.py", "pusht_env.py", "scripted_expert.py", "chapter_io.py"} <= set(chapter_io.CODE_FILES)
+    for name in chapter_io.CODE_FILES:
+        with open(tmp_path / name, "a") as f:
+            f.write("\n")
+        keys.add(chapter_io.result_key(config))
+    assert len(keys) == len(chapter_io.CODE_FILES) + 1
+
+
 @pytest.mark.parametrize("workers", [1, 3])
 def test_lockstep_envs_step_each_env_as_if_alone(workers):
     """The evaluation's env pool: any worker count, any subset of envs per step, the same
