@@ -112,7 +112,7 @@ def expected_wallclock(tier: str, csv_path: Path = ROOT / "wallclock.csv") -> st
 # --- result cache: a finished run is reused when its flags and every file that shapes it match ---
 CODE_FILES = ("scale_data.py", "pusht_env.py", "pusht.xml", "aloha_env.py", "aloha.xml", "scripted_expert.py",
               "demo_gen.py", "demo_data.py", "gen_demos_pusht.py", "gen_demos_aloha.py", "chapter_viz.py",
-              "chapter_io.py")  # chapter_io steps the evaluation envs
+              "chapter_io.py", "mlp_grads.py")  # chapter_io steps the evaluation envs; mlp_grads trains
 RESULT_FILES = ("metrics.json", "cross_embodiment.json", "scale_data.png", "scale_data.rrd")
 NOT_IN_KEY = ("out", "cache", "workers")  # where results go and how fast they come do not change them
 

@@ -240,6 +240,9 @@ if kept:
 # so the data is the only difference; the compute-matched arm trains on source+augmented for
 # exactly the source arm's number of steps, so "more data" is not confused with "more steps".
 # All arms roll out on the same held-out starts, in lockstep: one policy call per control step.
+from mlp_grads import mse_grads  # noqa: E402  (exact MLP gradients without autograd's overhead)
+
+
 class BCPolicy(torch.nn.Module):
     def __init__(self, states, actions, hidden):
         super().__init__()
@@ -277,15 +280,17 @@ def train(states, actions, *, steps=None):
     opt = torch.optim.Adam(pol.net.parameters(), lr=args.lr, fused=device.type in ("cpu", "cuda"))
     lrs = [args.lr * 0.5 * (1 + math.cos(math.pi * t / total)) for t in range(total)]  # cosine from lr to 0
     gen = torch.Generator().manual_seed(args.seed)  # the same batch order stream in every arm
+    params = list(pol.net.parameters())
     bar = progress(None, total=total, desc="train", quiet=args.smoke)
     for first_step in range(0, total, per_epoch):
         order = torch.randperm(len(x), generator=gen).to(device)
         xs, ys = x[order], y[order]  # shuffle once per epoch; each batch is then a contiguous slice
         for step in range(first_step, min(first_step + per_epoch, total)):
             b = (step - first_step) * args.batch_size
-            loss = torch.nn.functional.mse_loss(pol.net(xs[b:b + args.batch_size]), ys[b:b + args.batch_size])
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
+            # the gradients of mse_loss(pol.net(batch), target): bit for bit what loss.backward()
+            # leaves in p.grad, without autograd's per-op bookkeeping (a fifth of a step here)
+            for param, grad in zip(params, mse_grads(pol.net, xs[b:b + args.batch_size], ys[b:b + args.batch_size])):
+                param.grad = grad
             opt.param_groups[0]["lr"] = lrs[step]
             opt.step()
         bar.update(step + 1 - first_step)
