@@ -288,7 +288,7 @@ def train(states, actions, *, steps=None):
         for step in range(first_step, min(first_step + per_epoch, total)):
             b = (step - first_step) * args.batch_size
             # the gradients of mse_loss(pol.net(batch), target): bit for bit what loss.backward()
-            # leaves in p.grad, without autograd's per-op bookkeeping (a fifth of a step here)
+            # leaves in param.grad, without autograd's per-op bookkeeping (a tenth of a step here)
             for param, grad in zip(params, mse_grads(pol.net, xs[b:b + args.batch_size], ys[b:b + args.batch_size])):
                 param.grad = grad
             opt.param_groups[0]["lr"] = lrs[step]
