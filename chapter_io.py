@@ -258,8 +258,8 @@ class LockstepEnvs:
         import numpy as np
 
         replies = self._ask({w: ("reset", None) for w in range(len(self.parts))})
-        self.obs_shape = (replies[0].shape[1], replies[0].dtype)
-        obs = np.zeros((len(self.seeds), *self.obs_shape[:1]), self.obs_shape[1])
+        self.obs_dim, self.obs_dtype = replies[0].shape[1], replies[0].dtype
+        obs = np.zeros((len(self.seeds), self.obs_dim), self.obs_dtype)
         for w, part in enumerate(self.parts):
             obs[part] = replies[w]
         return obs
@@ -276,7 +276,7 @@ class LockstepEnvs:
             if mine:
                 asks[w] = mine
         replies = self._ask({w: ("step", ([j for j, _ in m], actions[[k for _, k in m]])) for w, m in asks.items()})
-        obs = np.zeros((len(row), *self.obs_shape[:1]), self.obs_shape[1])
+        obs = np.zeros((len(row), self.obs_dim), self.obs_dtype)
         done, success = np.zeros(len(row), bool), np.zeros(len(row), bool)
         for w, m in asks.items():
             rows = [k for _, k in m]

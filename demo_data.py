@@ -79,13 +79,6 @@ def features(state_names, action_names, extra: dict | None = None, video: bool =
     return feats
 
 
-def _write_episodes(ds, episodes, feats: dict, task: str) -> None:
-    for ep in episodes:
-        for t in range(len(ep["action"])):
-            ds.add_frame({k: ep[k][t] for k in feats} | {"task": task})
-        ds.save_episode()
-
-
 @contextlib.contextmanager
 def _fast_fingerprints():
     """lerobot 0.6 builds a datasets.Dataset per saved episode only to get its Arrow table, and
@@ -122,7 +115,10 @@ def write_dataset(out: Path, *, repo_id: str, fps: int, robot_type: str, task: s
         ds = LeRobotDataset.create(repo_id, fps=fps, features=feats, root=tmp, robot_type=robot_type,
                                    use_videos=use_videos, video_backend=VIDEO_BACKEND)
         with _fast_fingerprints():
-            _write_episodes(ds, episodes, feats, task)
+            for ep in episodes:
+                for t in range(len(ep["action"])):
+                    ds.add_frame({k: ep[k][t] for k in feats} | {"task": task})
+                ds.save_episode()
         ds.finalize()
         stats = tmp / "meta" / "stats.json"  # lerobot orders its keys by string hash; sorted, equal sets are equal bytes
         if stats.exists():
