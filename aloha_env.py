@@ -33,7 +33,7 @@ Action, float32[6] (``ACTION_NAMES``), every entry clipped to [-1, 1]
     4    left_vy          m/s   left end-effector velocity command, y
     5    left_grip_cmd    -     +1 close, -1 open
 
-Constants: FPS = 10 control steps per second; PHYSICS_DT = 0.01 s (N_SUBSTEPS = 10 physics
+Constants: FPS = 10 control steps per second; PHYSICS_DT = 0.01 s (SUBSTEPS = 10 physics
 steps per control step); MAX_STEPS = 400 control steps; SUCCESS_TOL = 0.04 m;
 SUCCESS_HOLD = 5 control steps; GRIP_SPEED = 0.08 m/s of finger travel (FINGER_TRAVEL = 0.02 m,
 so a full close or open takes 0.25 s, i.e. 2.5 control steps).
@@ -68,6 +68,7 @@ Spawn distribution (``reset(seed)``, all from ``np.random.default_rng(seed)`` bu
 * right end-effector uniform in [0.10, 0.30] x [-0.20, 0.20] m, left end-effector in
   [-0.30, -0.10] x [-0.20, 0.20] m; both grippers open, everything at rest.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -77,12 +78,12 @@ import numpy as np
 
 XML_PATH = Path(__file__).with_name("aloha.xml")
 
-FPS = 10                      # control steps per second
-PHYSICS_DT = 0.01             # s, MuJoCo timestep
-N_SUBSTEPS = 10               # physics steps per control step (= 1 / (FPS * PHYSICS_DT))
-MAX_STEPS = 400               # control steps per episode
-SUCCESS_TOL = 0.04            # m, cube-to-target distance
-SUCCESS_HOLD = 5              # consecutive control steps within SUCCESS_TOL
+FPS = 10  # control steps per second
+PHYSICS_DT = 0.01  # s, MuJoCo timestep
+SUBSTEPS = round(1.0 / (FPS * PHYSICS_DT))  # physics steps per control step (10)
+MAX_STEPS = 400  # control steps per episode
+SUCCESS_TOL = 0.04  # m, cube-to-target distance
+SUCCESS_HOLD = 5  # consecutive control steps within SUCCESS_TOL
 ACT_DIM = 6
 OBS_DIM = 10
 
@@ -90,7 +91,7 @@ OBS_DIM = 10
 RIGHT_X_RANGE = (-0.05, 0.35)
 LEFT_X_RANGE = (-0.35, 0.05)
 Y_RANGE = (-0.25, 0.25)
-HANDOFF_HALF_WIDTH = 0.05     # m, the two reaches overlap for |x| < this
+HANDOFF_HALF_WIDTH = 0.05  # m, the two reaches overlap for |x| < this
 
 # Spawn regions (m).
 CUBE_X_RANGE = (0.15, 0.30)
@@ -102,14 +103,24 @@ LEFT_START_X_RANGE = (-0.30, -0.10)
 START_Y_RANGE = (-0.20, 0.20)
 
 # Gripper and grasp rule.
-FINGER_TRAVEL = 0.02          # m, finger slide range (closedness 1 = fully closed)
-GRIP_SPEED = 0.08             # m/s of finger travel at |grip command| = 1
-GRASP_ENGAGE = 0.8            # closedness above which a gripper near the cube grasps it
-GRASP_RELEASE = 0.5           # closedness below which a holding gripper lets go
-GRASP_RADIUS = 0.03           # m, end-effector-to-cube distance for a grasp to engage
+FINGER_TRAVEL = 0.02  # m, finger slide range (closedness 1 = fully closed)
+GRIP_SPEED = 0.08  # m/s of finger travel at |grip command| = 1
+GRASP_ENGAGE = 0.8  # closedness above which a gripper near the cube grasps it
+GRASP_RELEASE = 0.5  # closedness below which a holding gripper lets go
+GRASP_RADIUS = 0.03  # m, end-effector-to-cube distance for a grasp to engage
 
-STATE_NAMES = ("right_x", "right_y", "right_grip", "left_x", "left_y", "left_grip",
-               "cube_x", "cube_y", "target_x", "target_y")
+STATE_NAMES = (
+    "right_x",
+    "right_y",
+    "right_grip",
+    "left_x",
+    "left_y",
+    "left_grip",
+    "cube_x",
+    "cube_y",
+    "target_x",
+    "target_y",
+)
 ACTION_NAMES = ("right_vx", "right_vy", "right_grip_cmd", "left_vx", "left_vy", "left_grip_cmd")
 ROBOT_TYPE = "aloha_planar_bimanual"
 TASK = "Pick the cube with the right arm, hand it to the left arm, and place it on the target."
@@ -124,11 +135,16 @@ class AlohaCubeEnv:
         self.model = mujoco.MjModel.from_xml_path(str(XML_PATH))
         self.data = mujoco.MjData(self.model)
         m, d = self.model, self.data
-        assert abs(m.opt.timestep - PHYSICS_DT) < 1e-12, "aloha.xml timestep must be PHYSICS_DT"
+        if abs(m.opt.timestep - PHYSICS_DT) > 1e-12:
+            raise ValueError(f"aloha.xml timestep {m.opt.timestep} != PHYSICS_DT {PHYSICS_DT}")
         for arm, xr in (("right", RIGHT_X_RANGE), ("left", LEFT_X_RANGE)):
-            assert np.allclose(m.joint(f"{arm}_x").range, xr), f"{arm}_x range != reach limit"
-            assert np.allclose(m.joint(f"{arm}_y").range, Y_RANGE), f"{arm}_y range != reach limit"
-            assert np.allclose(m.joint(f"{arm}_finger").range, (0.0, FINGER_TRAVEL))
+            for joint, want in (
+                (f"{arm}_x", xr),
+                (f"{arm}_y", Y_RANGE),
+                (f"{arm}_finger", (0.0, FINGER_TRAVEL)),
+            ):
+                if not np.allclose(m.joint(joint).range, want):
+                    raise ValueError(f"aloha.xml range of {joint} differs from aloha_env's {want}")
         # Named views into data (numpy views that stay valid across mj_resetData).
         self._jx = {a: d.joint(f"{a}_x") for a in _ARMS}
         self._jy = {a: d.joint(f"{a}_y") for a in _ARMS}
@@ -174,14 +190,14 @@ class AlohaCubeEnv:
         return self._obs()
 
     def step(self, action):
-        """Apply one control step (N_SUBSTEPS physics steps). Returns (obs, reward, done, info)."""
+        """Apply one control step (SUBSTEPS physics steps). Returns (obs, reward, done, info)."""
         a = np.clip(np.asarray(action, dtype=np.float64).reshape(ACT_DIM), -1.0, 1.0)
         for i, arm in enumerate(_ARMS):
             self._act_vx[arm].ctrl[0] = a[3 * i]
             self._act_vy[arm].ctrl[0] = a[3 * i + 1]
             self._act_grip[arm].ctrl[0] = a[3 * i + 2] * GRIP_SPEED
         m, d = self.model, self.data
-        for _ in range(N_SUBSTEPS):
+        for _ in range(SUBSTEPS):
             mujoco.mj_step(m, d)
             self._apply_grasp()
         self._steps += 1
@@ -227,11 +243,21 @@ class AlohaCubeEnv:
         return float(min(max(self._jf[arm].qpos[0] / FINGER_TRAVEL, 0.0), 1.0))
 
     def _obs(self) -> np.ndarray:
-        return np.array([
-            self._jx["right"].qpos[0], self._jy["right"].qpos[0], self._closedness("right"),
-            self._jx["left"].qpos[0], self._jy["left"].qpos[0], self._closedness("left"),
-            self._cube_x.qpos[0], self._cube_y.qpos[0], self._target[0], self._target[1],
-        ], dtype=np.float32)
+        return np.array(
+            [
+                self._jx["right"].qpos[0],
+                self._jy["right"].qpos[0],
+                self._closedness("right"),
+                self._jx["left"].qpos[0],
+                self._jy["left"].qpos[0],
+                self._closedness("left"),
+                self._cube_x.qpos[0],
+                self._cube_y.qpos[0],
+                self._target[0],
+                self._target[1],
+            ],
+            dtype=np.float32,
+        )
 
     # ------------------------------------------------------------------ read-only accessors
     @property

@@ -5,17 +5,18 @@
 observation.state float32[10] and action float32[6] (two planar velocities in m/s and two grip
 commands), fps 10; names and units in aloha_env.py. Callable from Python as main(argv).
 """
+
 import sys
 
 import aloha_env
-import demo_gen
+from ch37 import demos
 from scripted_expert import AlohaExpert
 
-ALOHA = demo_gen.Embodiment("aloha", aloha_env, "AlohaCubeEnv", AlohaExpert, default_noise=0.0)
+ALOHA = demos.Embodiment("aloha", aloha_env, "AlohaCubeEnv", AlohaExpert, default_noise=0.0)
 
 
 def main(argv=None) -> int:
-    return demo_gen.main(ALOHA, argv)
+    return demos.main(ALOHA, argv)
 
 
 if __name__ == "__main__":

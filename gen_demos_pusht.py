@@ -5,17 +5,18 @@
 observation.state float32[10] and action float32[2] (pusher velocity, m/s), fps 10; names and
 units in pusht_env.py. Callable from Python as main(argv).
 """
+
 import sys
 
-import demo_gen
 import pusht_env
+from ch37 import demos
 from scripted_expert import PushTExpert
 
-PUSHT = demo_gen.Embodiment("pusht", pusht_env, "PushTEnv", PushTExpert, default_noise=0.0)
+PUSHT = demos.Embodiment("pusht", pusht_env, "PushTEnv", PushTExpert, default_noise=0.0)
 
 
 def main(argv=None) -> int:
-    return demo_gen.main(PUSHT, argv)
+    return demos.main(PUSHT, argv)
 
 
 if __name__ == "__main__":

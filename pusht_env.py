@@ -48,6 +48,7 @@ Start distribution of ``reset(seed)`` (every draw from ``np.random.default_rng(s
                                     from every part of the T
 ``set_start(...)`` places any other start with zero velocities and fresh counters.
 """
+
 from __future__ import annotations
 
 import math
@@ -73,11 +74,19 @@ YAW_REWARD_SCALE = 0.05  # m per rad, weighs yaw error against position error in
 ACT_DIM = 2
 OBS_DIM = 10
 ACTION_LIMIT = 1.0  # m/s, actions are clipped to [-1, 1]
-STATE_NAMES = [
-    "pusher_x", "pusher_y", "block_x", "block_y", "block_sin_yaw", "block_cos_yaw",
-    "target_x", "target_y", "target_sin_yaw", "target_cos_yaw",
-]
-ACTION_NAMES = ["pusher_vx", "pusher_vy"]
+STATE_NAMES = (
+    "pusher_x",
+    "pusher_y",
+    "block_x",
+    "block_y",
+    "block_sin_yaw",
+    "block_cos_yaw",
+    "target_x",
+    "target_y",
+    "target_sin_yaw",
+    "target_cos_yaw",
+)
+ACTION_NAMES = ("pusher_vx", "pusher_vy")
 ROBOT_TYPE = "pusht_pusher"
 TASK = "Push the T-shaped block onto the target pose."
 
@@ -99,22 +108,32 @@ def wrap_angle(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def t_sdf(q: np.ndarray) -> np.ndarray:
+    """Signed distance (m) from block-frame points q (..., 2) to the T; negative inside."""
+    out = None
+    for cy, (hx, hy) in ((0.0, BAR_HALF), (STEM_CENTER_Y, STEM_HALF)):
+        ex = np.abs(q[..., 0]) - hx
+        ey = np.abs(q[..., 1] - cy) - hy
+        d = np.hypot(np.maximum(ex, 0.0), np.maximum(ey, 0.0)) + np.minimum(np.maximum(ex, ey), 0.0)
+        out = d if out is None else np.minimum(out, d)
+    return out
+
+
 def t_signed_distance(px: float, py: float, block_x: float, block_y: float, block_yaw: float) -> float:
-    """Signed distance (m) from the point (px, py) to the T at the given pose; negative inside."""
+    """Signed distance (m) from the world point (px, py) to the T at the given pose; negative inside."""
     c, s = math.cos(block_yaw), math.sin(block_yaw)
     dx, dy = px - block_x, py - block_y
-    lx, ly = c * dx + s * dy, -s * dx + c * dy  # point in the block frame
-
-    def box(qx: float, qy: float, hx: float, hy: float) -> float:
-        ex, ey = abs(qx) - hx, abs(qy) - hy
-        outside = math.hypot(max(ex, 0.0), max(ey, 0.0))
-        return outside + min(max(ex, ey), 0.0)
-
-    return min(box(lx, ly, *BAR_HALF), box(lx, ly - STEM_CENTER_Y, *STEM_HALF))
+    return float(t_sdf(np.array([c * dx + s * dy, -s * dx + c * dy])))  # the point in the block frame
 
 
-def pusher_clear(block_x: float, block_y: float, block_yaw: float, pusher_x: float, pusher_y: float,
-                 clearance: float = SPAWN_CLEARANCE) -> bool:
+def pusher_clear(
+    block_x: float,
+    block_y: float,
+    block_yaw: float,
+    pusher_x: float,
+    pusher_y: float,
+    clearance: float = SPAWN_CLEARANCE,
+) -> bool:
     """True when the pusher's edge is at least ``clearance`` m from every part of the T."""
     return t_signed_distance(pusher_x, pusher_y, block_x, block_y, block_yaw) >= PUSHER_RADIUS + clearance
 
@@ -127,15 +146,20 @@ class PushTEnv:
         self.data = mujoco.MjData(self.model)
         if abs(self.model.opt.timestep - PHYSICS_DT) > 1e-12:
             raise ValueError(f"pusht.xml timestep {self.model.opt.timestep} != PHYSICS_DT {PHYSICS_DT}")
-        for name, value in (("block_x", BLOCK_SLIDE_DAMPING), ("block_y", BLOCK_SLIDE_DAMPING),
-                            ("block_yaw", BLOCK_YAW_DAMPING)):
+        for name, value in (
+            ("block_x", BLOCK_SLIDE_DAMPING),
+            ("block_y", BLOCK_SLIDE_DAMPING),
+            ("block_yaw", BLOCK_YAW_DAMPING),
+        ):
             if abs(float(self.model.joint(name).damping[0]) - value) > 1e-12:
                 raise ValueError(f"pusht.xml damping of {name} differs from pusht_env's {value}")
         geo = self.model.geom
-        if (abs(float(geo("pusher").size[0]) - PUSHER_RADIUS) > 1e-12
-                or not np.allclose(geo("block_bar").size[:2], BAR_HALF)
-                or not np.allclose(geo("block_stem").size[:2], STEM_HALF)
-                or not np.isclose(geo("block_stem").pos[1], STEM_CENTER_Y)):
+        if (
+            abs(float(geo("pusher").size[0]) - PUSHER_RADIUS) > 1e-12
+            or not np.allclose(geo("block_bar").size[:2], BAR_HALF)
+            or not np.allclose(geo("block_stem").size[:2], STEM_HALF)
+            or not np.isclose(geo("block_stem").pos[1], STEM_CENTER_Y)
+        ):
             raise ValueError("pusht.xml geometry differs from pusht_env's constants")
         d = self.data
         # Named views into MjData (numpy views of length 1): reading/writing them touches the
@@ -191,8 +215,9 @@ class PushTEnv:
                 break
         return self.set_start(bx, by, yaw, float(px), float(py))
 
-    def set_start(self, block_x: float, block_y: float, block_yaw: float,
-                  pusher_x: float, pusher_y: float) -> np.ndarray:
+    def set_start(
+        self, block_x: float, block_y: float, block_yaw: float, pusher_x: float, pusher_y: float
+    ) -> np.ndarray:
         """Place block (m, m, rad) and pusher (m, m) at rest, zero the counters, return the obs.
 
         The caller keeps the pusher clear of the block (see ``pusher_clear``); an overlapping
@@ -227,8 +252,7 @@ class PushTEnv:
             self._success = True
         reward = 1.0 if self._success else -(pos_err + YAW_REWARD_SCALE * abs(yaw_err))
         done = self._success or self._steps >= MAX_STEPS
-        info = {"success": self._success, "steps": self._steps,
-                "pos_error": pos_err, "yaw_error": yaw_err}
+        info = {"success": self._success, "steps": self._steps, "pos_error": pos_err, "yaw_error": yaw_err}
         return self._observe(), reward, done, info
 
     def _observe(self) -> np.ndarray:
@@ -243,7 +267,7 @@ class PushTEnv:
 
     # ----- rendering (optional; needs an OpenGL backend such as EGL or OSMesa) -----
     def render(self, size: int = 96) -> np.ndarray:
-        """Top-down RGB image, uint8 (size, size, 3), from the fixed camera "top" (headless: MUJOCO_GL=egl)."""
+        """Top-down RGB image, uint8 (size, size, 3), from the fixed camera "top" (MUJOCO_GL=egl)."""
         renderer = self._renderers.get(size)
         if renderer is None:
             renderer = mujoco.Renderer(self.model, height=size, width=size)

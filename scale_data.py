@@ -17,75 +17,65 @@ extra demos, so the data is the only difference.
 Run:    python scale_data.py --seed 0
 Smoke:  python scale_data.py --smoke --seed 0     (seconds; two runs give identical metrics.json)
 """
+
 # --- region: setup ---
 # Every knob is a flag with its unit and why its default; --smoke sets tiny CPU defaults.
-# Heavy imports (torch, lerobot) come after validation so --help and flag errors are instant.
 import argparse
 import math
-import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-import chapter_io as io
+from ch37 import cli, result_cache
 
 t_start = time.perf_counter()
-p = argparse.ArgumentParser(description="Chapter 3.7: Datasets at Scale (cross-embodiment wrangling, MimicGen-style augmentation, data-scale effect).")
-p.add_argument("--out", type=Path, default=None, help="output folder (default outputs/ch3.7-scale-data, or ...-smoke with --smoke)")
-p.add_argument("--pusht_data", type=Path, default=None, help="your own PushT LeRobot set (never modified; default: a private set under --out)")
-p.add_argument("--aloha_data", type=Path, default=None, help="your own ALOHA LeRobot set (never modified; default: a private set under --out)")
-p.add_argument("--source_episodes", type=int, default=12, help="expert demos per embodiment; 12 is coverage-starved on purpose")
-p.add_argument("--aug_per_demo", type=int, default=8, help="perturbed re-solves per PushT source demo (0 = no augmentation)")
-p.add_argument("--aug_pos_sigma", type=float, default=0.08, help="m; std of block and pusher xy perturbation, about a third of the spawn annulus")
-p.add_argument("--aug_yaw_sigma", type=float, default=0.5, help="rad; std of block yaw perturbation")
-p.add_argument("--epochs", type=int, default=500, help="passes over each arm's data; enough for the MLP to fit 12 demos")
-p.add_argument("--batch_size", type=int, default=128, help="frames per gradient step")
-p.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate, cosine-decayed to 0")
-p.add_argument("--hidden_dim", type=int, default=512, help="width of both hidden layers of the BC MLP")
-p.add_argument("--eval_episodes", type=int, default=50, help="held-out PushT starts per arm; 50 gives a +-0.14 interval at worst")
-p.add_argument("--seed", type=int, default=0, help="seed >= 0; seeds 0, 1, 2 draw disjoint demos and eval starts")
-p.add_argument("--device", default="auto", help="auto | cpu | cuda | mps (auto: cuda > mps > cpu)")
-p.add_argument("--smoke", action="store_true", help="tiny CPU defaults for tests and CI (seconds); explicit flags still win")
-p.add_argument("--rerun", action=argparse.BooleanOptionalAction, default=True, help="write a Rerun .rrd recording")
-p.add_argument("--cache", action=argparse.BooleanOptionalAction, default=True, help="reuse an identical earlier run (same flags and code)")
-p.add_argument("--workers", type=int, default=None, help="processes for the augmentation re-solves and the evaluation physics (default: CPU cores); never changes results")
-p.error = lambda msg: io.fail(f"{msg} (see --help)")
-args = p.parse_args()
-if args.smoke:  # tiny CPU defaults, the same on every machine; flags given explicitly still win
-    p.set_defaults(source_episodes=4, aug_per_demo=2, epochs=30, hidden_dim=64, eval_episodes=8, batch_size=64, device="cpu")
-    args = p.parse_args()
-args.out = args.out or Path("outputs/ch3.7-scale-data" + ("-smoke" if args.smoke else ""))
-args.workers = args.workers or min(8, os.cpu_count() or 1)
-for name in ("source_episodes", "epochs", "batch_size", "hidden_dim", "eval_episodes", "workers"):
-    if getattr(args, name) <= 0:
-        io.fail(f"--{name} must be a positive integer, got {getattr(args, name)}")
-for name in ("aug_per_demo", "seed"):
-    if getattr(args, name) < 0:
-        io.fail(f"--{name} must be >= 0, got {getattr(args, name)}")
-for name in ("aug_pos_sigma", "aug_yaw_sigma", "lr"):
-    if not math.isfinite(getattr(args, name)) or getattr(args, name) < 0 or (name == "lr" and args.lr == 0):
-        io.fail(f"--{name} must be a finite {'positive' if name == 'lr' else 'non-negative'} number, got {getattr(args, name)}")
-if args.device not in ("auto", "cpu", "cuda", "mps"):
-    io.fail(f"--device must be auto, cpu, cuda or mps, got {args.device!r}")
+p = argparse.ArgumentParser(description="Chapter 3.7: Datasets at Scale (see the module docstring).")
+flag, on_off = p.add_argument, argparse.BooleanOptionalAction
+flag(
+    "--out", type=Path, help="output folder (default outputs/ch3.7-scale-data, -smoke appended with --smoke)"
+)
+flag("--pusht_data", type=Path, help="your own PushT LeRobot set, never modified (default: made under --out)")
+flag("--aloha_data", type=Path, help="your own ALOHA LeRobot set, never modified (default: made under --out)")
+flag(
+    "--source_episodes",
+    type=int,
+    default=12,
+    help="expert demos per robot; 12 is coverage-starved on purpose",
+)
+flag("--aug_per_demo", type=int, default=8, help="perturbed re-solves per PushT source demo (0 = none)")
+flag("--aug_pos_sigma", type=float, default=0.08, help="m; std of block and pusher xy perturbation")
+flag("--aug_yaw_sigma", type=float, default=0.5, help="rad; std of block yaw perturbation")
+flag("--epochs", type=int, default=500, help="passes over the data that sets a budget (see measure)")
+flag("--batch_size", type=int, default=128, help="frames per gradient step")
+flag("--lr", type=float, default=1e-3, help="Adam learning rate, cosine-decayed to 0")
+flag("--hidden_dim", type=int, default=512, help="width of both hidden layers of the BC MLP")
+flag("--eval_episodes", type=int, default=50, help="held-out PushT starts per arm; 50: +-0.14 at worst")
+flag("--seed", type=int, default=0, help=">= 0; seeds 0, 1, 2 draw disjoint demos and eval starts")
+flag("--device", default="auto", help="auto | cpu | cuda | mps (auto: cuda > mps > cpu)")
+flag("--smoke", action="store_true", help="tiny CPU defaults for tests and CI (seconds); explicit flags win")
+flag("--rerun", action=on_off, default=True, help="write a Rerun .rrd recording")
+flag("--cache", action=on_off, default=True, help="reuse an identical earlier run (same flags and code)")
+flag(
+    "--workers",
+    type=int,
+    help="processes for re-solves and evaluation physics (default: cores); same results",
+)
+args = cli.parse(p)  # every flag checked here: a bad one is one line and exit 2, before any heavy import
 
-import torch  # noqa: E402  (after validation, see above)
+import torch  # noqa: E402  (after the checks, so --help and flag errors are instant)
 
-available = {"cpu": True, "cuda": torch.cuda.is_available(), "mps": torch.backends.mps.is_available()}
-if args.device == "auto":
-    args.device = next(d for d in ("cuda", "mps", "cpu") if available[d])
-elif not available[args.device]:
-    io.fail(f"--device {args.device} is not available on this machine; use --device cpu or auto")
+args.device = cli.pick_device(args.device)
 torch.manual_seed(args.seed)
 if args.smoke:
-    torch.set_num_threads(1)  # tiny matrices: threads only add overhead, and one thread is the same everywhere
+    torch.set_num_threads(
+        1
+    )  # tiny matrices: a second thread only adds overhead, and 1 is the same everywhere
 device = torch.device(args.device)
-tier = io.device_tier(args.device)
-print(f"ch3.7 Datasets at Scale | seed {args.seed} | device {args.device} ({tier}) | torch {torch.__version__}")
-print("smoke run: tiny configuration, seconds, numbers not meaningful" if args.smoke else io.expected_wallclock(tier))
-cache_key = io.result_key(vars(args))
-if args.cache and io.replay_cached(cache_key, args.out):
+cli.banner(args)
+cache = result_cache.ResultCache(args)
+if cache.replay():  # an identical earlier run (same flags, code and data): its outputs are now in --out
     sys.exit(0)
 # --- endregion ---
 
@@ -93,7 +83,10 @@ if args.cache and io.replay_cached(cache_key, args.out):
 # Pool two robots' demos. Each keeps its own statistics (a PushT velocity and an ALOHA grip
 # command share no scale), actions are zero-padded to the widest robot (6) with a mask so the
 # padding never teaches anything, and an embodiment id says which robot a row came from.
-import demo_data  # noqa: E402
+from ch37.demos import ensure_demos  # noqa: E402
+from ch37.errors import DataError, fail  # noqa: E402
+from ch37.files import dump_json, round_floats, write_atomic  # noqa: E402
+from ch37.lerobot_io import load_arrays  # noqa: E402
 from gen_demos_aloha import ALOHA  # noqa: E402
 from gen_demos_pusht import PUSHT  # noqa: E402
 
@@ -101,42 +94,66 @@ sets = {}
 for emb, given in ((PUSHT, args.pusht_data), (ALOHA, args.aloha_data)):
     path = given or args.out / "demos" / f"{emb.name}_seed{args.seed}_ep{args.source_episodes}"
     try:
-        how = io.ensure_demos(emb, path, user_given=given is not None, episodes=args.source_episodes,
-                              seed=args.seed, noise=emb.default_noise, quiet=args.smoke)
-    except demo_data.DataError as e:
-        io.fail(str(e))
-    d = demo_data.load_arrays(path)  # read back through LeRobotDataset, as any LeRobot user would
+        how = ensure_demos(
+            emb,
+            path,
+            user_given=given is not None,
+            episodes=args.source_episodes,
+            seed=args.seed,
+            noise=emb.default_noise,
+            quiet=args.smoke,
+        )
+    except DataError as e:
+        fail(str(e))
+    d = load_arrays(path)  # read back through LeRobotDataset, as any LeRobot user would
     sets[emb.name] = dict(d, path=path, emb=emb)
     lo, hi = d["action"].min(0), d["action"].max(0)
-    print(f"{emb.name:6s} {len(np.unique(d['episode_index'])):3d} episodes {len(d['action']):6d} frames "
-          f"act_dim {d['action'].shape[1]}  action range [{lo.min():+.2f}, {hi.max():+.2f}]  ({how})")
+    print(
+        f"{emb.name:6s} {len(np.unique(d['episode_index'])):3d} episodes {len(d['action']):6d} frames "
+        f"act_dim {d['action'].shape[1]}  action range [{lo.min():+.2f}, {hi.max():+.2f}]  ({how})"
+    )
 
 
 def stats_of(x):  # (N, D) -> per-dimension statistics, the same keys LeRobot's meta/stats.json uses
-    return {"min": x.min(0), "max": x.max(0), "mean": x.mean(0), "std": x.std(0),
-            "q01": np.quantile(x, 0.01, axis=0), "q99": np.quantile(x, 0.99, axis=0)}
+    return {
+        "min": x.min(0),
+        "max": x.max(0),
+        "mean": x.mean(0),
+        "std": x.std(0),
+        "q01": np.quantile(x, 0.01, axis=0),
+        "q99": np.quantile(x, 0.99, axis=0),
+    }
 
 
 def standardize(x, st):  # a constant dimension (PushT's target pose) is left centred, not divided by 0
     return (x - st["mean"]) / np.where(st["std"] > 1e-8, st["std"], 1.0)
 
 
-PAD = max(s["action"].shape[1] for s in sets.values())  # 6: the widest action wins
+PAD = max(demo["action"].shape[1] for demo in sets.values())  # 6: the widest action wins
 pile = {"state": [], "action": [], "mask": [], "emb_id": []}
-for emb_id, (name, s) in enumerate(sets.items()):
-    s["stats"] = {"state": stats_of(s["observation.state"]), "action": stats_of(s["action"])}
-    state = standardize(s["observation.state"], s["stats"]["state"])  # (N, 10), own stats
-    act = standardize(s["action"], s["stats"]["action"])  # (N, act_dim), own stats
-    n, a = act.shape
+for emb_id, demo in enumerate(sets.values()):
+    demo["stats"] = {"state": stats_of(demo["observation.state"]), "action": stats_of(demo["action"])}
+    state = standardize(demo["observation.state"], demo["stats"]["state"])  # (N, 10), own stats
+    act = standardize(demo["action"], demo["stats"]["action"])  # (N, act_dim), own stats
+    n_rows, act_dim = act.shape
     pile["state"].append(state.astype(np.float32))
-    pile["action"].append(np.pad(act, ((0, 0), (0, PAD - a))).astype(np.float32))  # (N, 6) zero-padded
-    pile["mask"].append(np.repeat((np.arange(PAD) < a).astype(np.float32)[None], n, 0))  # (N, 6) 1 = real dim
-    pile["emb_id"].append(np.full(n, emb_id, np.int64))
+    pile["action"].append(np.pad(act, ((0, 0), (0, PAD - act_dim))).astype(np.float32))  # (N, 6) zero-padded
+    pile["mask"].append(
+        np.repeat((np.arange(PAD) < act_dim).astype(np.float32)[None], n_rows, 0)
+    )  # (N, 6) 1 = real
+    pile["emb_id"].append(np.full(n_rows, emb_id, np.int64))
 pile = {k: np.concatenate(v) for k, v in pile.items()}
-print(f"pile: {len(pile['state'])} rows, state (N, 10), actions padded to (N, {PAD}), "
-      f"mask density PushT {pile['mask'][pile['emb_id'] == 0].mean():.3f} ALOHA {pile['mask'][pile['emb_id'] == 1].mean():.3f}")
-print("state index 2 is " + " and ".join(f"{s['emb'].env_module.STATE_NAMES[2]} in {n}" for n, s in sets.items())
-      + ": a shared network carries structure across robots, not the meaning of a raw state number")
+STATE_DIM = pile["state"].shape[1]  # 10 for both robots: the same width, different meanings
+density = {name: pile["mask"][pile["emb_id"] == i].mean() for i, name in enumerate(sets)}
+print(
+    f"pile: {len(pile['state'])} rows, state (N, {STATE_DIM}), actions padded to (N, {PAD}), "
+    f"mask density PushT {density['pusht']:.3f} ALOHA {density['aloha']:.3f}"
+)
+print(
+    "state index 2 is "
+    + " and ".join(f"{demo['emb'].env_module.STATE_NAMES[2]} in {name}" for name, demo in sets.items())
+    + ": a shared network carries structure across robots, not the meaning of a raw state number"
+)
 
 
 def masked_mse(pred, target, mask):  # padded dims contribute nothing to the loss, hence no gradient
@@ -144,26 +161,41 @@ def masked_mse(pred, target, mask):  # padded dims contribute nothing to the los
 
 
 # The mask must reach the gradient, not just the printout: one shared linear head on the pile.
-head = torch.nn.Linear(10, PAD)
-rows = torch.from_numpy(np.concatenate([np.flatnonzero(pile["emb_id"] == e)[:64] for e in (0, 1)]))
+PROBE_ROWS = 64  # rows per robot in the check
+head = torch.nn.Linear(STATE_DIM, PAD)
+rows = torch.from_numpy(np.concatenate([np.flatnonzero(pile["emb_id"] == e)[:PROBE_ROWS] for e in (0, 1)]))
 pred = head(torch.from_numpy(pile["state"][rows]))
 pred.retain_grad()
 masked_mse(pred, torch.from_numpy(pile["action"][rows]), torch.from_numpy(pile["mask"][rows])).backward()
-pad_grad = pred.grad[:64, 2:].abs().max().item()  # PushT rows, padded dims 2..5
-print(f"masked loss: largest gradient on PushT's padded dims = {pad_grad:.1f} (real dims: {pred.grad[:64, :2].abs().max().item():.2e})")
+pusht_grad = pred.grad[:PROBE_ROWS]  # (64, 6): PushT rows; dims 0..1 are real, 2..5 padding
+pusht_act = sets["pusht"]["action"].shape[1]
+pad_grad = pusht_grad[:, pusht_act:].abs().max().item()
+print(
+    f"masked loss: largest gradient on PushT's padded dims = {pad_grad:.1f} "
+    f"(real dims: {pusht_grad[:, :pusht_act].abs().max().item():.2e})"
+)
 cross = {
     "padded_action_dim": PAD,
-    "embodiments": [{
-        "name": name, "id": i, "act_dim": int(s["action"].shape[1]), "frames": int(len(s["action"])),
-        "state_names": list(s["emb"].env_module.STATE_NAMES), "action_names": list(s["emb"].env_module.ACTION_NAMES),
-        "mask_density": float(pile["mask"][pile["emb_id"] == i].mean()),
-        "stats": {part: {k: [float(x) for x in v] for k, v in st.items()} for part, st in s["stats"].items()},
-    } for i, (name, s) in enumerate(sets.items())],
-    "state_index_2_means": {name: s["emb"].env_module.STATE_NAMES[2] for name, s in sets.items()},
+    "embodiments": [
+        {
+            "name": name,
+            "id": i,
+            "act_dim": int(demo["action"].shape[1]),
+            "frames": int(len(demo["action"])),
+            "state_names": list(demo["emb"].env_module.STATE_NAMES),
+            "action_names": list(demo["emb"].env_module.ACTION_NAMES),
+            "mask_density": float(density[name]),
+            "stats": {
+                part: {k: [float(x) for x in v] for k, v in st.items()} for part, st in demo["stats"].items()
+            },
+        }
+        for i, (name, demo) in enumerate(sets.items())
+    ],
+    "state_index_2_means": {name: demo["emb"].env_module.STATE_NAMES[2] for name, demo in sets.items()},
     "padded_dim_max_grad": pad_grad,
     "quantiles": "q01/q99 over all frames; LeRobot's meta/stats.json averages per-episode quantiles instead",
 }
-io.write_atomic(args.out / "cross_embodiment.json", io.dump_json(io.round_floats(cross, 6)))
+write_atomic(args.out / "cross_embodiment.json", dump_json(round_floats(cross, 6)))
 # --- endregion ---
 
 # --- region: augment ---
@@ -172,7 +204,11 @@ io.write_atomic(args.out / "cross_embodiment.json", io.dump_json(io.round_floats
 # No action is invented. Each (source demo, k) draws from its own seeded stream, so the set for
 # aug_per_demo=4 is a subset of the set for 8 and the scaling curve compares nested data.
 import pusht_env  # noqa: E402
-from demo_gen import progress, rollout  # noqa: E402
+from ch37.demos import progress, rollout  # noqa: E402
+from ch37.lerobot_io import features, write_dataset  # noqa: E402
+from ch37.parallel import parallel_map  # noqa: E402
+from ch37.seeds import env_seed  # noqa: E402
+from ch37.stamps import MADE_BY, replace_own_dir  # noqa: E402
 from scripted_expert import PushTExpert  # noqa: E402
 
 R_LO, R_HI = 0.08, 0.26  # m; the block is kept on a band slightly wider than the spawn annulus
@@ -184,8 +220,11 @@ def perturbed_start(first_state, rng, tries=100):
     for _ in range(tries):
         nbx, nby = bx + rng.normal(0, args.aug_pos_sigma), by + rng.normal(0, args.aug_pos_sigma)
         yaw = math.atan2(s, c) + rng.normal(0, args.aug_yaw_sigma)
-        npx, npy = np.clip([px + rng.normal(0, args.aug_pos_sigma), py + rng.normal(0, args.aug_pos_sigma)],
-                           -pusht_env.PUSHER_HALF, pusht_env.PUSHER_HALF)
+        npx, npy = np.clip(
+            [px + rng.normal(0, args.aug_pos_sigma), py + rng.normal(0, args.aug_pos_sigma)],
+            -pusht_env.PUSHER_HALF,
+            pusht_env.PUSHER_HALF,
+        )
         if R_LO <= math.hypot(nbx, nby) <= R_HI and pusht_env.pusher_clear(nbx, nby, yaw, npx, npy):
             return (nbx, nby, math.atan2(math.sin(yaw), math.cos(yaw)), float(npx), float(npy))
     return None
@@ -199,7 +238,7 @@ env = pusht_env.PushTEnv()
 
 def resolve(job):  # (source episode, k) -> the expert's demo from a perturbed start, or why there is none
     e, k = job
-    rng = np.random.default_rng([demo_data.env_seed(args.seed, "aug", e), k])  # own stream per (demo, k)
+    rng = np.random.default_rng([env_seed(args.seed, "aug", e), k])  # own stream per (demo, k)
     start = perturbed_start(first[e], rng)
     if start is None:
         return "no_valid_start"
@@ -213,26 +252,43 @@ def resolve(job):  # (source episode, k) -> the expert's demo from a perturbed s
 
 
 jobs = [(e, k) for e in first for k in range(args.aug_per_demo)]
-results = io.parallel_map(resolve, jobs, workers=args.workers, bar=progress(None, total=len(jobs), desc="augment", quiet=args.smoke))
+bar = progress(None, total=len(jobs), desc="augment", quiet=args.smoke)
+results = parallel_map(resolve, jobs, workers=args.workers, bar=bar)
 kept = [r for r in results if not isinstance(r, str)]
-failures = {why: sum(r == why for r in results if isinstance(r, str)) for why in ("expert_failed", "no_valid_start")}
+failures = {
+    why: sum(r == why for r in results if isinstance(r, str)) for why in ("expert_failed", "no_valid_start")
+}
 attempts = len(jobs)
 yield_ = len(kept) / attempts if attempts else 0.0
 print(f"augment: {attempts} attempts, {len(kept)} kept, yield {yield_:.2f}, failures {failures}")
 aug_path = args.out / "demos" / f"pusht_aug_seed{args.seed}_src{len(first)}_k{args.aug_per_demo}"
 try:
-    io.replace_own_dir(aug_path)
-except demo_data.DataError as e:
-    io.fail(str(e))
-extra = {"aug.source_episode": {"dtype": "int64", "shape": (1,), "names": None},
-         "aug.start": {"dtype": "float32", "shape": (5,), "names": ["block_x", "block_y", "block_yaw", "pusher_x", "pusher_y"]}}
-aug = {"observation.state": np.zeros((0, 10), np.float32), "action": np.zeros((0, 2), np.float32),
-       "episode_index": np.zeros(0, np.int64), "aug.start": np.zeros((0, 5), np.float32)}
+    replace_own_dir(aug_path)
+except DataError as e:
+    fail(str(e))
+START_NAMES = ["block_x", "block_y", "block_yaw", "pusher_x", "pusher_y"]  # what set_start takes
+extra = {
+    "aug.source_episode": {"dtype": "int64", "shape": (1,), "names": None},
+    "aug.start": {"dtype": "float32", "shape": (len(START_NAMES),), "names": START_NAMES},
+}
+aug = {
+    "observation.state": np.zeros((0, pusht_env.OBS_DIM), np.float32),
+    "action": np.zeros((0, pusht_env.ACT_DIM), np.float32),
+    "episode_index": np.zeros(0, np.int64),
+    "aug.start": np.zeros((0, len(START_NAMES)), np.float32),
+}
 if kept:
-    demo_data.write_dataset(aug_path, repo_id="local/pusht_aug", fps=pusht_env.FPS, robot_type=pusht_env.ROBOT_TYPE,
-                            task=pusht_env.TASK, feats=demo_data.features(pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, extra),
-                            episodes=kept, stamp={"made_by": "ch3.7-scale-data", "kind": "augmented", "seed": args.seed})
-    aug = demo_data.load_arrays(aug_path, keys=tuple(aug))  # train on what is on disk
+    write_dataset(
+        aug_path,
+        repo_id="local/pusht_aug",
+        fps=pusht_env.FPS,
+        robot_type=pusht_env.ROBOT_TYPE,
+        task=pusht_env.TASK,
+        feats=features(pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, extra),
+        episodes=kept,
+        stamp={"made_by": MADE_BY, "kind": "augmented", "seed": args.seed},
+    )
+    aug = load_arrays(aug_path, keys=tuple(aug))  # train on what is on disk
 # --- endregion ---
 
 # --- region: measure ---
@@ -240,14 +296,20 @@ if kept:
 # so the data is the only difference; the compute-matched arm trains on source+augmented for
 # exactly the source arm's number of steps, so "more data" is not confused with "more steps".
 # All arms roll out on the same held-out starts, in lockstep: one policy call per control step.
-from mlp_grads import mse_grads  # noqa: E402  (exact MLP gradients without autograd's overhead)
+from ch37.mlp_grads import mse_grads  # noqa: E402  (exact MLP gradients without autograd overhead)
+from ch37.parallel import LockstepEnvs  # noqa: E402
 
 
 class BCPolicy(torch.nn.Module):
     def __init__(self, states, actions, hidden):
         super().__init__()
-        self.net = torch.nn.Sequential(torch.nn.Linear(10, hidden), torch.nn.ReLU(), torch.nn.Linear(hidden, hidden),
-                                       torch.nn.ReLU(), torch.nn.Linear(hidden, 2))
+        self.net = torch.nn.Sequential(
+            torch.nn.Linear(pusht_env.OBS_DIM, hidden),
+            torch.nn.ReLU(),
+            torch.nn.Linear(hidden, hidden),
+            torch.nn.ReLU(),
+            torch.nn.Linear(hidden, pusht_env.ACT_DIM),
+        )
         for name, x in (("s", states), ("a", actions)):  # min-max ranges of the arm's own data
             lo, hi = torch.as_tensor(x.min(0)), torch.as_tensor(x.max(0))
             self.register_buffer(f"{name}_lo", lo)
@@ -264,11 +326,12 @@ class BCPolicy(torch.nn.Module):
 
 
 torch.manual_seed(args.seed)
-init_weights = BCPolicy(np.zeros((1, 10), np.float32), np.zeros((1, 2), np.float32), args.hidden_dim).net.state_dict()
+no_data = np.zeros((1, pusht_env.OBS_DIM), np.float32), np.zeros((1, pusht_env.ACT_DIM), np.float32)
+init_weights = BCPolicy(*no_data, args.hidden_dim).net.state_dict()  # every arm starts from these
 
 
 def train(states, actions, *, steps=None):
-    """Fit a fresh BCPolicy for args.epochs epochs (or exactly `steps` steps); returns (policy, steps, loss)."""
+    """A fresh BCPolicy fit for args.epochs epochs (or exactly `steps` steps) -> (policy, steps, loss)."""
     pol = BCPolicy(states, actions, args.hidden_dim)
     pol.net.load_state_dict(init_weights)
     pol.to(device)
@@ -289,7 +352,9 @@ def train(states, actions, *, steps=None):
             b = (step - first_step) * args.batch_size
             # the gradients of mse_loss(pol.net(batch), target): bit for bit what loss.backward()
             # leaves in param.grad, without autograd's per-op bookkeeping (a tenth of a step here)
-            for param, grad in zip(params, mse_grads(pol.net, xs[b:b + args.batch_size], ys[b:b + args.batch_size])):
+            for param, grad in zip(
+                params, mse_grads(pol.net, xs[b : b + args.batch_size], ys[b : b + args.batch_size])
+            ):
                 param.grad = grad
             opt.param_groups[0]["lr"] = lrs[step]
             opt.step()
@@ -305,7 +370,7 @@ def evaluate(pol, seeds):
     """Success rate of `pol` on PushT starts env.reset(seed), all episodes stepped in lockstep."""
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # a (N, 10) batch needs no second thread; leave the cores to the physics workers
-    with io.LockstepEnvs(pusht_env.PushTEnv, seeds, workers=args.workers) as envs:
+    with LockstepEnvs(pusht_env.PushTEnv, seeds, workers=args.workers) as envs:
         obs = envs.reset()  # (N, 10)
         live, success = np.ones(len(seeds), bool), np.zeros(len(seeds), bool)
         while live.any():
@@ -318,23 +383,36 @@ def evaluate(pol, seeds):
 
 
 def wilson(p_hat, n, z=1.96):  # 95% interval for a success rate from n episodes
-    centre, half = (p_hat + z * z / (2 * n)) / (1 + z * z / n), z * math.sqrt(p_hat * (1 - p_hat) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    centre, half = (
+        (p_hat + z * z / (2 * n)) / (1 + z * z / n),
+        z * math.sqrt(p_hat * (1 - p_hat) / n + z * z / (4 * n * n)) / (1 + z * z / n),
+    )
     return [max(0.0, centre - half), min(1.0, centre + half)]
 
 
 src_x, src_y = pusht["observation.state"], pusht["action"]
 all_x, all_y = np.concatenate([src_x, aug["observation.state"]]), np.concatenate([src_y, aug["action"]])
-eval_seeds = [demo_data.env_seed(args.seed, "eval", j) for j in range(args.eval_episodes)]  # disjoint from demos
+eval_seeds = [env_seed(args.seed, "eval", j) for j in range(args.eval_episodes)]  # disjoint from demos
 arms = {}
-for arm, (x, y, steps) in {"source": (src_x, src_y, None), "augmented": (all_x, all_y, None),
-                           "compute_matched": (all_x, all_y, "source")}.items():
+for arm, (x, y, steps) in {
+    "source": (src_x, src_y, None),
+    "augmented": (all_x, all_y, None),
+    "compute_matched": (all_x, all_y, "source"),
+}.items():
     t0 = time.perf_counter()
     pol, n_steps, loss = train(x, y, steps=arms[steps]["steps"] if steps else None)
     rate = evaluate(pol, eval_seeds)
-    arms[arm] = {"frames": int(len(x)), "steps": n_steps, "final_loss": round(loss, 6), "success": rate,
-                 "ci95": wilson(rate, len(eval_seeds))}
-    print(f"{arm:16s} {len(x):6d} frames {n_steps:6d} steps  success {rate:.2f}  "
-          f"95% CI [{arms[arm]['ci95'][0]:.2f}, {arms[arm]['ci95'][1]:.2f}]  ({time.perf_counter() - t0:.1f} s)")
+    arms[arm] = {
+        "frames": int(len(x)),
+        "steps": n_steps,
+        "final_loss": round(loss, 6),
+        "success": rate,
+        "ci95": wilson(rate, len(eval_seeds)),
+    }
+    print(
+        f"{arm:16s} {len(x):6d} frames {n_steps:6d} steps  success {rate:.2f}  "
+        f"95% CI [{arms[arm]['ci95'][0]:.2f}, {arms[arm]['ci95'][1]:.2f}]  ({time.perf_counter() - t0:.1f} s)"
+    )
 # --- endregion ---
 
 # --- region: emit ---
@@ -342,43 +420,70 @@ for arm, (x, y, steps) in {"source": (src_x, src_y, None), "augmented": (all_x, 
 # sectors) hold a block start. Then metrics.json (sorted, rounded, atomic), a PNG figure and a
 # Rerun recording, and the headline last.
 RINGS, SECTORS = 3, 12
+R_MIN, R_MAX = pusht_env.SPAWN_R_MIN, pusht_env.SPAWN_R_MAX  # m, the spawn annulus
 
 
 def cells(starts):  # (N, 2) block xy -> set of (ring, sector) inside the annulus, and the count outside
     r, th = np.hypot(starts[:, 0], starts[:, 1]), np.arctan2(starts[:, 1], starts[:, 0]) % (2 * np.pi)
-    inside = (r >= pusht_env.SPAWN_R_MIN) & (r <= pusht_env.SPAWN_R_MAX)
-    ring = np.minimum(((r - pusht_env.SPAWN_R_MIN) / (pusht_env.SPAWN_R_MAX - pusht_env.SPAWN_R_MIN) * RINGS).astype(int), RINGS - 1)
+    inside = (r >= R_MIN) & (r <= R_MAX)
+    ring = np.minimum(((r - R_MIN) / (R_MAX - R_MIN) * RINGS).astype(int), RINGS - 1)
     sector = np.minimum((th / (2 * np.pi) * SECTORS).astype(int), SECTORS - 1)
-    return {(int(a), int(b)) for a, b, ok in zip(ring, sector, inside) if ok}, int((~inside).sum())
+    return {(int(i), int(j)) for i, j, ok in zip(ring, sector, inside) if ok}, int((~inside).sum())
 
 
-src_starts = np.array([first[e][2:4] for e in first])
-aug_starts = np.array([k["aug.start"][0, :2] for k in kept]).reshape(-1, 2)
+src_starts = np.array([first[e][2:4] for e in first])  # (12, 2) block xy
+aug_starts = np.array([k["aug.start"][0, :2] for k in kept]).reshape(-1, 2)  # (kept, 2)
 c_src, out_src = cells(src_starts)
 c_aug, out_aug = cells(aug_starts)
 metrics = {
-    "seed": args.seed, "smoke": args.smoke, "config": {k: (str(v) if isinstance(v, Path) else v) for k, v in sorted(vars(args).items()) if k not in io.NOT_IN_KEY},
-    "action_dims": {name: int(s["action"].shape[1]) for name, s in sets.items()}, "padded_action_dim": PAD,
-    "source_demos": len(first), "source_frames": int(len(src_x)), "attempts": attempts, "kept": len(kept),
-    "yield": yield_, "augment_failures": failures, "augmented_frames": int(len(aug["action"])),
-    "arms": arms, "scale_effect": arms["augmented"]["success"] - arms["source"]["success"],
+    "seed": args.seed,
+    "smoke": args.smoke,
+    "config": cli.result_config(args),
+    "action_dims": {name: int(demo["action"].shape[1]) for name, demo in sets.items()},
+    "padded_action_dim": PAD,
+    "source_demos": len(first),
+    "source_frames": int(len(src_x)),
+    "attempts": attempts,
+    "kept": len(kept),
+    "yield": yield_,
+    "augment_failures": failures,
+    "augmented_frames": int(len(aug["action"])),
+    "arms": arms,
+    "scale_effect": arms["augmented"]["success"] - arms["source"]["success"],
     "compute_matched_effect": arms["compute_matched"]["success"] - arms["source"]["success"],
-    "coverage": {"cells": RINGS * SECTORS, "source": len(c_src), "augmented": len(c_aug), "union": len(c_src | c_aug),
-                 "outside_annulus": {"source": out_src, "augmented": out_aug}},
+    "coverage": {
+        "cells": RINGS * SECTORS,
+        "source": len(c_src),
+        "augmented": len(c_aug),
+        "union": len(c_src | c_aug),
+        "outside_annulus": {"source": out_src, "augmented": out_aug},
+    },
 }
-io.write_atomic(args.out / "metrics.json", io.dump_json(io.round_floats(metrics, 6)))
-import chapter_viz  # noqa: E402  (matplotlib and rerun drawing code, kept out of the lesson)
+written = [
+    args.out / "cross_embodiment.json",
+    write_atomic(args.out / "metrics.json", dump_json(round_floats(metrics, 6))),
+]
+from ch37 import viz  # noqa: E402  (matplotlib and rerun drawing code, kept out of the lesson)
 
-fig_path = chapter_viz.figure(args.out / "scale_data.png", src_starts, aug_starts, arms, metrics["coverage"],
-                              (pusht_env.SPAWN_R_MIN, pusht_env.SPAWN_R_MAX, RINGS, SECTORS))
+annulus = (R_MIN, R_MAX, RINGS, SECTORS)
+written.append(
+    viz.figure(args.out / "scale_data.png", src_starts, aug_starts, arms, metrics["coverage"], annulus)
+)
 if args.rerun:
-    rrd_path = chapter_viz.recording(args.out / "scale_data.rrd", arms, metrics, src_starts, aug_starts, kept[:8])
-s, a_ = arms["source"]["success"], arms["augmented"]["success"]
-summary = (f"headline: source-only {s:.2f} -> source+augmented {a_:.2f} ({(a_ - s) * 100:+.0f} points; "
-           f"compute-matched {arms['compute_matched']['success']:.2f}); coverage {len(c_src)} -> {len(c_src | c_aug)} of {RINGS * SECTORS} cells\n"
-           f"wrote {args.out / 'metrics.json'} and {args.out / 'cross_embodiment.json'} (JSON), {fig_path} (open as an image)"
-           + (f", {rrd_path} (open with: rerun {rrd_path})" if args.rerun else "") + "\n")
-io.store_result(cache_key, args.out, summary)
+    written.append(
+        viz.recording(args.out / "scale_data.rrd", arms, metrics, src_starts, aug_starts, kept[:8], annulus)
+    )
+src_rate, aug_rate = arms["source"]["success"], arms["augmented"]["success"]
+opens = {".json": "JSON", ".png": "open as an image", ".rrd": "open with: rerun {}"}
+summary = (
+    f"headline: source-only {src_rate:.2f} -> source+augmented {aug_rate:.2f} "
+    f"({(aug_rate - src_rate) * 100:+.0f} points; compute-matched {arms['compute_matched']['success']:.2f}); "
+    f"coverage {len(c_src)} -> {len(c_src | c_aug)} of {RINGS * SECTORS} cells\n"
+    + "wrote "
+    + ", ".join(f"{f} ({opens[f.suffix].format(f)})" for f in written)
+    + "\n"
+)
+cache.store(written, summary)
 print(f"finished in {time.perf_counter() - t_start:.0f} s")
 print(summary, end="", flush=True)
 # --- endregion ---

@@ -4,13 +4,14 @@ Each expert is a policy object with ``reset()`` and ``act(obs) -> float32 action
 Gaussian action noise is drawn from a generator seeded by the caller, so a noisy demo is
 bit-for-bit reproducible for a given seed.
 """
+
 from __future__ import annotations
 
 import math
 
 import numpy as np
 
-# --- PushT expert (section owned by the PushT work) ---
+# --- PushT expert ---
 # A Markov pushing policy: the action is a function of the current 10-D observation alone (no
 # phase, no memory beyond the noise generator), so a behaviour-cloning MLP on the state can
 # imitate it. Every step it re-plans from scratch:
@@ -45,17 +46,6 @@ _PT_GOAL_YAW = 0.06  # rad
 _PT_ORBIT_CENTER = np.array([0.0, -0.03])  # m, block frame: a point near the T's middle
 
 
-def _pt_sdf(q: np.ndarray) -> np.ndarray:
-    """Signed distance (m) from block-frame points q (..., 2) to the T; negative inside."""
-    out = None
-    for cy, (hx, hy) in ((0.0, _pt.BAR_HALF), (_pt.STEM_CENTER_Y, _pt.STEM_HALF)):
-        ex = np.abs(q[..., 0]) - hx
-        ey = np.abs(q[..., 1] - cy) - hy
-        d = np.hypot(np.maximum(ex, 0.0), np.maximum(ey, 0.0)) + np.minimum(np.maximum(ex, ey), 0.0)
-        out = d if out is None else np.minimum(out, d)
-    return out
-
-
 def _pt_candidates() -> tuple[np.ndarray, np.ndarray]:
     """Contact points p (K, 2) and inward unit push directions n (K, 2), block frame (m)."""
     bx, by = _pt.BAR_HALF
@@ -72,7 +62,9 @@ def _pt_candidates() -> tuple[np.ndarray, np.ndarray]:
     face([(x, by) for x in np.linspace(-bx + 0.01, bx - 0.01, 11)], (0.0, -1.0))  # bar top
     for sgn in (-1.0, 1.0):
         face([(sgn * bx, y) for y in (-0.008, 0.0, 0.008)], (-sgn, 0.0))  # bar ends
-        face([(sgn * x, -by) for x in np.linspace(sx + r + 0.004, bx - 0.006, 3)], (0.0, 1.0))  # bar underside
+        face(
+            [(sgn * x, -by) for x in np.linspace(sx + r + 0.004, bx - 0.006, 3)], (0.0, 1.0)
+        )  # bar underside
         face([(sgn * sx, y) for y in np.linspace(-by - r - 0.004, sy0 + 0.006, 5)], (-sgn, 0.0))  # stem sides
     face([(x, sy0) for x in (-0.01, 0.0, 0.01)], (0.0, 1.0))  # stem bottom
     # Convex corners: a round pusher on a corner can push along any direction in the corner's cone.
@@ -93,8 +85,6 @@ class PushTExpert:
 
     ``noise`` is the std (m/s) of Gaussian noise added to every action, drawn from
     ``np.random.default_rng(seed)`` created once here; the sum is clipped to [-1, 1].
-    ``last_mode`` is (mode, candidate index) of the last clean action, for inspection only:
-    mode is "push", "move", "orbit" or "rest"; it never feeds back into ``act``.
     """
 
     def __init__(self, noise: float = 0.0, seed: int = 0) -> None:
@@ -110,7 +100,6 @@ class PushTExpert:
         u = np.concatenate([n, (_PT_YAW_LEN * _PT_K * tau)[:, None]], axis=1)
         self._u = u / np.linalg.norm(u, axis=1, keepdims=True)  # predicted twist directions
         self._seg = np.linspace(0.0, 1.0, 9)[1:-1]  # interior sample fractions of a path segment
-        self.last_mode: tuple[str, int] = ("rest", -1)
 
     def reset(self) -> None:
         """Nothing to clear: the policy is memoryless (the noise generator keeps running)."""
@@ -135,8 +124,7 @@ class PushTExpert:
         if err < _PT_GOAL_POS and abs(eyaw) < _PT_GOAL_YAW:
             # At the goal: back away from the block at 0.1 m/s until the pusher's edge is 3 cm
             # clear, then stand still, so the block rests untouched through the success hold.
-            self.last_mode = ("rest", -1)
-            if float(_pt_sdf(p)) > _PT_R + 0.03:
+            if float(_pt.t_sdf(p)) > _PT_R + 0.03:
                 return np.zeros(2)
             return rot @ (0.1 * self._grad(p))
 
@@ -161,7 +149,6 @@ class PushTExpert:
         rel = p - c0
         along, lat = float(rel @ n), float(rel @ t)
         if abs(lat) < 0.006 and -(_PT_STANDOFF + 0.008) < along < 0.01:
-            self.last_mode = ("push", k)
             twist_err = math.hypot(err, _PT_YAW_LEN * eyaw)  # m
             speed = min(max(_PT_PUSH_GAIN * twist_err, _PT_V_PUSH[0]), _PT_V_PUSH[1])
             v = speed * n - 5.0 * lat * t
@@ -172,19 +159,17 @@ class PushTExpert:
         speed = min(max(_PT_MOVE_GAIN * dist, _PT_V_MOVE[0]), _PT_V_MOVE[1])
         path = p + self._seg[:, None] * dg
         # Clear = the path never comes closer to the T than the pusher is now (or than R + 2 mm).
-        floor = min(_PT_R + 0.002, float(_pt_sdf(p)) - 0.001)
-        if np.all(_pt_sdf(path) > floor):
-            self.last_mode = ("move", k)
+        floor = min(_PT_R + 0.002, float(_pt.t_sdf(p)) - 0.001)
+        if np.all(_pt.t_sdf(path) > floor):
             return rot @ (speed * dg / max(dist, 1e-9))
         # 3c. Otherwise orbit the T at a safe clearance, the shorter way round.
-        self.last_mode = ("orbit", k)
         grad = self._grad(p)
         tang = np.array([-grad[1], grad[0]])  # counter-clockwise around the T
         a_p = math.atan2(*(p - _PT_ORBIT_CENTER)[::-1])
         a_g = math.atan2(*(g - _PT_ORBIT_CENTER)[::-1])
         if _pt.wrap_angle(a_g - a_p) < 0.0:
             tang = -tang
-        gap = float(_pt_sdf(p)) - _PT_R  # m between pusher edge and block
+        gap = float(_pt.t_sdf(p)) - _PT_R  # m between pusher edge and block
         radial = min(max(20.0 * (_PT_CLEAR - gap), -1.0), 1.0)  # saturates at 5 cm off the orbit
         v = tang + radial * grad
         return rot @ (_PT_V_MOVE[1] * v / max(np.linalg.norm(v), 1e-9))
@@ -194,13 +179,13 @@ class PushTExpert:
         """Unit outward gradient of the T's distance field at block-frame point p."""
         h = 1e-5
         q = np.array([p + (h, 0.0), p - (h, 0.0), p + (0.0, h), p - (0.0, h)])
-        d = _pt_sdf(q)
+        d = _pt.t_sdf(q)
         g = np.array([d[0] - d[1], d[2] - d[3]])
         nrm = np.linalg.norm(g)
         return g / nrm if nrm > 1e-12 else np.array([0.0, 1.0])
 
 
-# --- ALOHA expert (section owned by the ALOHA work) ---
+# --- ALOHA expert ---
 from aloha_env import ACT_DIM, GRASP_RADIUS, HANDOFF_HALF_WIDTH  # noqa: E402
 
 
@@ -228,14 +213,14 @@ class AlohaExpert:
     the generator is not re-seeded by ``reset()``, so successive episodes get fresh noise.
     """
 
-    GAIN = 6.0            # 1/s, proportional gain of the velocity law
-    MAX_SPEED = 0.12      # m/s, cap on each end-effector's commanded speed
-    HANDOFF_X = 0.0       # m, x of the handoff point (middle of the overlap |x| < 0.05)
-    HOLD_DIST = 0.035     # m, gripper-to-cube distance read as "holding" (grasp offsets <= 0.03)
-    CLOSE_DIST = 0.015    # m, start closing when this close to the cube
-    KEEP_DIST = 0.028     # m, keep closing (once closedness > 0.3) while within this distance
+    GAIN = 6.0  # 1/s, proportional gain of the velocity law
+    MAX_SPEED = 0.12  # m/s, cap on each end-effector's commanded speed
+    HANDOFF_X = 0.0  # m, x of the handoff point (middle of the overlap |x| < 0.05)
+    HOLD_DIST = 0.035  # m, gripper-to-cube distance read as "holding" (grasp offsets <= 0.03)
+    CLOSE_DIST = 0.015  # m, start closing when this close to the cube
+    KEEP_DIST = 0.028  # m, keep closing (once closedness > 0.3) while within this distance
     RIGHT_BACKOFF_X = 0.15  # m, where the right arm retreats after the handoff
-    READY_DIST = 0.02     # m, cube-to-handoff-point distance at which the left gripper closes in
+    READY_DIST = 0.02  # m, cube-to-handoff-point distance at which the left gripper closes in
 
     def __init__(self, noise: float = 0.0, seed: int = 0) -> None:
         assert self.HOLD_DIST > GRASP_RADIUS and abs(self.HANDOFF_X) < HANDOFF_HALF_WIDTH
@@ -260,29 +245,29 @@ class AlohaExpert:
 
     def act(self, obs) -> np.ndarray:
         o = np.asarray(obs, dtype=np.float64)
-        r, rg, l, lg, c, t = o[0:2], o[2], o[3:5], o[5], o[6:8], o[8:10]
+        r, rg, lft, lg, c, t = o[0:2], o[2], o[3:5], o[5], o[6:8], o[8:10]
         dr = float(np.hypot(*(r - c)))
-        dl = float(np.hypot(*(l - c)))
+        dl = float(np.hypot(*(lft - c)))
         right_has = rg > 0.9 and dr < self.HOLD_DIST
         left_has = lg > 0.9 and dl < self.HOLD_DIST
         handoff = np.array([self.HANDOFF_X, t[1]])
 
         if left_has:
-            if rg > 0.05:                      # release after the handoff: keep still, open right
+            if rg > 0.05:  # release after the handoff: keep still, open right
                 rv, rcmd = np.zeros(2), -1.0
                 lv, lcmd = np.zeros(2), 1.0
-            else:                              # deliver: left carries the cube to the target
+            else:  # deliver: left carries the cube to the target
                 rv, rcmd = self._vel(r, np.array([self.RIGHT_BACKOFF_X, r[1]])), -1.0
                 lv, lcmd = self._vel(c, t), 1.0
-        elif right_has:                        # carry to the handoff point, left meets it there
+        elif right_has:  # carry to the handoff point, left meets it there
             rv, rcmd = self._vel(c, handoff), 1.0
             if float(np.hypot(*(c - handoff))) < self.READY_DIST:
-                lv, lcmd = self._vel(l, c), self._grip_cmd(dl, lg)
+                lv, lcmd = self._vel(lft, c), self._grip_cmd(dl, lg)
             else:
-                lv, lcmd = self._vel(l, handoff), -1.0
-        else:                                  # pick: right goes to the cube and closes on it
+                lv, lcmd = self._vel(lft, handoff), -1.0
+        else:  # pick: right goes to the cube and closes on it
             rv, rcmd = self._vel(r, c), self._grip_cmd(dr, rg)
-            lv, lcmd = self._vel(l, handoff), -1.0
+            lv, lcmd = self._vel(lft, handoff), -1.0
 
         action = np.array([rv[0], rv[1], rcmd, lv[0], lv[1], lcmd], dtype=np.float64)
         if self.noise > 0.0:

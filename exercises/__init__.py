@@ -1,1 +1,2 @@
-"""Chapter 3.7 exercises: ex1..ex3 answer files, their checks (checks.py) and reference answers (solutions/)."""
+"""Chapter 3.7 exercises: the answer files ex1..ex3, their checks (checks.py), the rules that derive
+their answers and bands (rules.py) and reference answers (solutions/)."""

@@ -19,6 +19,7 @@ The logic lives in plain functions (check_prediction, check_mix, check_ex1_measu
 check_ex3_measured, curve_shape, ...) that raise ExerciseError; the three test_* functions at the
 bottom only wire them to pytest.
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -32,17 +33,29 @@ from pathlib import Path
 
 import numpy as np
 
+from .rules import ex3_answer
+
 ROOT = Path(__file__).resolve().parent.parent
-if str(ROOT) not in sys.path:  # chapter_tools (the ex3 shape rule) lives at the repository root
-    sys.path.insert(0, str(ROOT))
 HERE = Path(__file__).resolve().parent
 FILES = {"ex1": "ex1_predict_scale.py", "ex2": "ex2_completion_wrangle.py", "ex3": "ex3_hparam_aug_amount.py"}
 EX1_CHOICES = {"A": "augmentation helps", "B": "augmentation hurts", "C": "augmentation does not matter"}
 EX3_CHOICES = ("climb", "plateau", "fall")
 # Smoke size for CI: scale_data.py's own --smoke pins aug_per_demo, so the tiny configuration is
 # spelled out here and aug_per_demo stays free (ex3 needs 0, 4 and 8). About 15 s a run on 2 cores.
-SMOKE_FLAGS = ("--source_episodes", "1", "--epochs", "2", "--hidden_dim", "16", "--batch_size", "64",
-               "--eval_episodes", "1", "--device", "cpu")
+SMOKE_FLAGS = (
+    "--source_episodes",
+    "1",
+    "--epochs",
+    "2",
+    "--hidden_dim",
+    "16",
+    "--batch_size",
+    "64",
+    "--eval_episodes",
+    "1",
+    "--device",
+    "cpu",
+)
 FULL_FLAGS = ()  # the chapter's defaults: what meta.yaml's bands describe
 
 
@@ -75,8 +88,10 @@ def load_meta(path: Path | None = None) -> dict:
 
     path = Path(path or os.environ.get("CH37_META") or ROOT / "meta.yaml")
     if not path.is_file():
-        raise ExerciseError(f"{path} not found: the bands for the measured checks live there "
-                            "(exercise_checks); restore it from the repository")
+        raise ExerciseError(
+            f"{path} not found: the bands for the measured checks live there "
+            "(exercise_checks); restore it from the repository"
+        )
     meta = yaml.safe_load(path.read_text()) or {}
     if "exercise_checks" not in meta:
         raise ExerciseError(f"{path} has no exercise_checks section")
@@ -87,7 +102,9 @@ def load_exercise(ex: str, directory: Path | None = None):
     """Import the answer file for ex1/ex2/ex3 from `directory` (default: exercise_dir())."""
     path = Path(directory or exercise_dir()) / FILES[ex]
     if not path.is_file():
-        raise ExerciseError(f"{ex}: {path} not found (CH37_EXERCISE_DIR={os.environ.get('CH37_EXERCISE_DIR', '')!r})")
+        raise ExerciseError(
+            f"{ex}: {path} not found (CH37_EXERCISE_DIR={os.environ.get('CH37_EXERCISE_DIR', '')!r})"
+        )
     spec = importlib.util.spec_from_file_location(f"ch37_answer_{ex}_{abs(hash(str(path)))}", path)
     mod = importlib.util.module_from_spec(spec)
     try:
@@ -118,14 +135,18 @@ def check_prediction(mod, allowed, ex: str = "ex1") -> str:
     if not isinstance(pred, str):
         raise ExerciseError(f"{ex}: PREDICTION must be a string, one of {choices}; got {pred!r} in {where}")
     if not pred.strip():
-        raise ExerciseError(f"{ex}: PREDICTION is empty; write one of {choices} in {where} before running the experiment")
+        raise ExerciseError(
+            f"{ex}: PREDICTION is empty; write one of {choices} in {where} before running the experiment"
+        )
     norm = {a.lower(): a for a in allowed}.get(pred.strip().lower())
     if norm is None:
         raise ExerciseError(f"{ex}: PREDICTION must be one of {choices}; got {pred!r} in {where}")
     why = getattr(mod, "WHY", None)
     if not isinstance(why, str) or len(why.split()) < 3:
-        raise ExerciseError(f"{ex}: WHY needs one sentence of at least three words saying why you predict "
-                            f"{norm!r}; got {why!r} in {where}")
+        raise ExerciseError(
+            f"{ex}: WHY needs one sentence of at least three words saying why you predict "
+            f"{norm!r}; got {why!r} in {where}"
+        )
     return norm
 
 
@@ -147,8 +168,16 @@ def ex2_cases():
     """(pusht, aloha) input pairs: several shapes incl. N = 0, M = 0, N = 1, float32 and float64."""
     rng = np.random.default_rng(37)
     out = []
-    for (n, m), dt in [((5, 3), np.float32), ((5, 3), np.float64), ((1, 1), np.float32), ((1, 4), np.float64),
-                       ((0, 4), np.float32), ((3, 0), np.float64), ((0, 0), np.float32), ((64, 17), np.float64)]:
+    for (n, m), dt in [
+        ((5, 3), np.float32),
+        ((5, 3), np.float64),
+        ((1, 1), np.float32),
+        ((1, 4), np.float64),
+        ((0, 4), np.float32),
+        ((3, 0), np.float64),
+        ((0, 0), np.float32),
+        ((64, 17), np.float64),
+    ]:
         # values bounded away from 0, so a zero in the wrong place is always visible
         p = (rng.uniform(0.1, 1.0, (n, 2)) * rng.choice([-1, 1], (n, 2))).astype(dt)
         a = (rng.uniform(0.1, 1.0, (m, 6)) * rng.choice([-1, 1], (m, 6))).astype(dt)
@@ -160,15 +189,20 @@ def ex2_cases():
 def _diagnose_actions(got, p, a):
     n = len(p)
     if n and np.array_equal(got[:n, 4:], p) and not np.array_equal(got[:n, :2], p):
-        return "PushT actions sit in the last two columns: pad on the right (PushT in columns 0..1, zeros in 2..5)"
-    if n and len(a) and np.array_equal(got[:len(a)], a):
+        return (
+            "PushT actions sit in the last two columns: pad on the right "
+            "(PushT in columns 0..1, zeros in 2..5)"
+        )
+    if n and len(a) and np.array_equal(got[: len(a)], a):
         return "ALOHA rows come first: put the PushT rows first, then the ALOHA rows"
     if n and np.array_equal(got[:n, :2], p) and np.any(got[:n, 2:] != 0):
         return "the padded columns 2..5 of PushT rows must be exactly zero"
     return "values differ from the specification"
 
 
-def check_mix(fn, pusht_mask_density: float = 1 / 3, where: str = "exercises/ex2_completion_wrangle.py") -> int:
+def check_mix(
+    fn, pusht_mask_density: float = 1 / 3, where: str = "exercises/ex2_completion_wrangle.py"
+) -> int:
     """Compare a learner's mix_embodiments with the specification; returns the number of cases passed."""
     for i, (p, a) in enumerate(ex2_cases()):
         case = f"case {i + 1}: pusht {p.shape} {p.dtype}, aloha {a.shape} {a.dtype}"
@@ -176,14 +210,24 @@ def check_mix(fn, pusht_mask_density: float = 1 / 3, where: str = "exercises/ex2
         try:
             res = fn(p_in, a_in)
         except NotImplementedError as e:
-            raise ExerciseError("ex2: mix_embodiments is not implemented yet (NotImplementedError); fill in "
-                                f"{where}") from e
+            raise ExerciseError(
+                f"ex2: mix_embodiments is not implemented yet (NotImplementedError); fill in {where}"
+            ) from e
         except Exception as e:
             raise ExerciseError(f"ex2: mix_embodiments raised {type(e).__name__}: {e} ({case})") from e
-        if not np.array_equal(p_in, p) or not np.array_equal(a_in, a) or p_in.dtype != p.dtype or a_in.dtype != a.dtype:
-            raise ExerciseError(f"ex2: mix_embodiments modified its input arrays ({case}); build new arrays instead")
+        if (
+            not np.array_equal(p_in, p)
+            or not np.array_equal(a_in, a)
+            or p_in.dtype != p.dtype
+            or a_in.dtype != a.dtype
+        ):
+            raise ExerciseError(
+                f"ex2: mix_embodiments modified its input arrays ({case}); build new arrays instead"
+            )
         if not isinstance(res, (tuple, list)) or len(res) != 3:
-            raise ExerciseError(f"ex2: return a tuple (actions, mask, embodiment_id); got {type(res).__name__} ({case})")
+            raise ExerciseError(
+                f"ex2: return a tuple (actions, mask, embodiment_id); got {type(res).__name__} ({case})"
+            )
         want = expected_mix(p, a)
         for name, got, exp in zip(("actions", "mask", "embodiment_id"), res, want):
             if not isinstance(got, np.ndarray):
@@ -198,13 +242,17 @@ def check_mix(fn, pusht_mask_density: float = 1 / 3, where: str = "exercises/ex2
                 elif name == "mask" and len(p) and np.all(got == 1):
                     why = "the mask is all ones: padded dimensions (columns 2..5 of PushT rows) must be 0"
                 elif name == "mask":
-                    why = "1.0 for real dimensions, 0.0 for padding: [1, 1, 0, 0, 0, 0] for PushT, all ones for ALOHA"
+                    why = (
+                        "1.0 for real dimensions, 0.0 for padding: [1, 1, 0, 0, 0, 0] for PushT, "
+                        "all ones for ALOHA"
+                    )
                 else:
                     why = "0 for every PushT row, 1 for every ALOHA row, PushT rows first"
                 raise ExerciseError(f"ex2: {name} is wrong: {why} ({case})")
         mask, ids = res[1], res[2]
         if len(p) and not math.isclose(float(mask[ids == 0].mean()), pusht_mask_density, abs_tol=1e-6):
-            raise ExerciseError(f"ex2: PushT mask density {float(mask[ids == 0].mean()):.4f}, expected {pusht_mask_density:.4f}")
+            density = float(mask[ids == 0].mean())
+            raise ExerciseError(f"ex2: PushT mask density {density:.4f}, expected {pusht_mask_density:.4f}")
     return len(ex2_cases())
 
 
@@ -214,14 +262,32 @@ def run_dir(seed: int, aug_per_demo: int, smoke: bool) -> Path:
 
 
 def run_chapter(seed: int, aug_per_demo: int, smoke: bool, say=print) -> dict:
-    """Run scale_data.py for one configuration (an identical earlier run is reused by its cache); return metrics."""
+    """Run scale_data.py for one configuration and return its metrics (an identical earlier run is
+    reused by its cache)."""
     out = run_dir(seed, aug_per_demo, smoke)
-    argv = [sys.executable, str(ROOT / "scale_data.py"), "--seed", str(seed), "--aug_per_demo", str(aug_per_demo),
-            "--no-rerun", "--out", str(out), *(SMOKE_FLAGS if smoke else FULL_FLAGS)]
+    argv = [
+        sys.executable,
+        str(ROOT / "scale_data.py"),
+        "--seed",
+        str(seed),
+        "--aug_per_demo",
+        str(aug_per_demo),
+        "--no-rerun",
+        "--out",
+        str(out),
+        *(SMOKE_FLAGS if smoke else FULL_FLAGS),
+    ]
     say(f"running: python scale_data.py {' '.join(argv[2:])}")
     with tempfile.TemporaryFile("w+") as err:  # progress bars go to stderr; kept for the error message only
-        p = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, stderr=err, text=True, bufsize=1,
-                             env=dict(os.environ, PYTHONHASHSEED="0"))
+        p = subprocess.Popen(
+            argv,
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            stderr=err,
+            text=True,
+            bufsize=1,
+            env=dict(os.environ, PYTHONHASHSEED="0"),
+        )
         lines = []
         for line in p.stdout:  # streamed, so a run of several minutes shows where it is
             lines.append(line.rstrip())
@@ -230,7 +296,9 @@ def run_chapter(seed: int, aug_per_demo: int, smoke: bool, say=print) -> dict:
         err.seek(0)
         tail = "\n".join(lines[-10:] + err.read().strip().splitlines()[-5:])
     if rc != 0:
-        raise ExerciseError(f"scale_data.py exited {rc} for seed {seed}, aug_per_demo {aug_per_demo}:\n{tail}")
+        raise ExerciseError(
+            f"scale_data.py exited {rc} for seed {seed}, aug_per_demo {aug_per_demo}:\n{tail}"
+        )
     path = out / "metrics.json"
     if not path.is_file():
         raise ExerciseError(f"scale_data.py finished but wrote no {path}")
@@ -239,24 +307,45 @@ def run_chapter(seed: int, aug_per_demo: int, smoke: bool, say=print) -> dict:
 
 def check_run_sane(metrics: dict, ex: str = "ex1") -> None:
     """What any run, even a smoke run, must satisfy: the keys exist and the numbers are in range."""
-    top = ("arms", "scale_effect", "compute_matched_effect", "kept", "attempts", "yield", "augmented_frames",
-           "source_frames")
+    top = (
+        "arms",
+        "scale_effect",
+        "compute_matched_effect",
+        "kept",
+        "attempts",
+        "yield",
+        "augmented_frames",
+        "source_frames",
+    )
     missing = [k for k in top if k not in metrics]
     arms = metrics.get("arms") if isinstance(metrics.get("arms"), dict) else {}
     for name in ("source", "augmented", "compute_matched"):
         arm = arms.get(name)
-        missing += [f"arms.{name}"] if not isinstance(arm, dict) else [
-            f"arms.{name}.{k}" for k in ("success", "ci95", "frames", "steps", "final_loss") if k not in arm]
+        missing += (
+            [f"arms.{name}"]
+            if not isinstance(arm, dict)
+            else [
+                f"arms.{name}.{k}"
+                for k in ("success", "ci95", "frames", "steps", "final_loss")
+                if k not in arm
+            ]
+        )
     if missing:
         raise ExerciseError(f"{ex}: metrics.json lacks {', '.join(missing)}; is scale_data.py up to date?")
     for name, arm in arms.items():
         s, (lo, hi) = arm["success"], arm["ci95"]
         if not (0.0 <= lo <= s <= hi <= 1.0):
-            raise ExerciseError(f"{ex}: arm {name}: success {s} with interval [{lo}, {hi}] is not a valid rate")
+            raise ExerciseError(
+                f"{ex}: arm {name}: success {s} with interval [{lo}, {hi}] is not a valid rate"
+            )
         if arm["frames"] <= 0 or arm["steps"] <= 0 or not math.isfinite(arm["final_loss"]):
-            raise ExerciseError(f"{ex}: arm {name} has frames {arm['frames']}, steps {arm['steps']}, loss {arm['final_loss']}")
+            raise ExerciseError(
+                f"{ex}: arm {name} has frames {arm['frames']}, steps {arm['steps']}, loss {arm['final_loss']}"
+            )
     if not (0 <= metrics["kept"] <= metrics["attempts"] and 0.0 <= metrics["yield"] <= 1.0):
-        raise ExerciseError(f"{ex}: kept {metrics['kept']} of {metrics['attempts']} attempts, yield {metrics['yield']}")
+        raise ExerciseError(
+            f"{ex}: kept {metrics['kept']} of {metrics['attempts']} attempts, yield {metrics['yield']}"
+        )
     if arms["augmented"]["frames"] != metrics["source_frames"] + metrics["augmented_frames"]:
         raise ExerciseError(f"{ex}: the augmented arm should train on source + augmented frames")
     for key, arm in (("scale_effect", "augmented"), ("compute_matched_effect", "compute_matched")):
@@ -265,26 +354,37 @@ def check_run_sane(metrics: dict, ex: str = "ex1") -> None:
 
 
 def check_ex1_measured(metrics: dict, band: dict) -> list[str]:
-    """Assert the measured scale effect against meta.yaml's band (scale_effect_min and/or _max); returns lines to print."""
+    """Assert the measured scale effect against meta.yaml's band (scale_effect_min and/or _max);
+    returns lines to print."""
     check_run_sane(metrics, "ex1")
     s, a = metrics["arms"]["source"]["success"], metrics["arms"]["augmented"]["success"]
     eff, lo, hi = metrics["scale_effect"], band.get("scale_effect_min"), band.get("scale_effect_max")
     if lo is None and hi is None:
-        raise ExerciseError("ex1: meta.yaml's exercise_checks.ex1.band has neither scale_effect_min nor scale_effect_max")
-    want = " and ".join(x for x in (lo is not None and f"scale_effect >= {lo:+.3f}",
-                                    hi is not None and f"scale_effect <= {hi:+.3f}") if x)
+        raise ExerciseError(
+            "ex1: meta.yaml's exercise_checks.ex1.band has neither scale_effect_min nor scale_effect_max"
+        )
+    want = " and ".join(
+        x
+        for x in (
+            lo is not None and f"scale_effect >= {lo:+.3f}",
+            hi is not None and f"scale_effect <= {hi:+.3f}",
+        )
+        if x
+    )
     measured = f"source-only {s:.2f} -> source+augmented {a:.2f} ({eff * 100:+.0f} points)"
     if (lo is not None and eff < lo - 1e-9) or (hi is not None and eff > hi + 1e-9):
-        raise ExerciseError(f"ex1: measured scale effect {eff:+.3f} ({measured}) is outside the band in meta.yaml "
-                            f"({want}); the chapter's claim does not hold on this run: report it, with your metrics.json")
-    return [f"measured: {measured}, compute-matched {metrics['arms']['compute_matched']['success']:.2f}; "
-            f"meta.yaml band {want}: holds"]
+        raise ExerciseError(
+            f"ex1: measured scale effect {eff:+.3f} ({measured}) is outside the band in meta.yaml "
+            f"({want}); the chapter's claim does not hold on this run: report it, with your metrics.json"
+        )
+    return [
+        f"measured: {measured}, compute-matched {metrics['arms']['compute_matched']['success']:.2f}; "
+        f"meta.yaml band {want}: holds"
+    ]
 
 
 def curve_shape(rates: dict, tol: float) -> str:
     """climb, plateau or fall by the last step (4 -> 8), the rule meta.yaml's answer was derived with."""
-    from chapter_tools import ex3_answer
-
     (_, r0), (_, r1), (_, r2) = sorted((int(k), float(v)) for k, v in rates.items())
     return ex3_answer(r0, r1, r2, tol)
 
@@ -305,7 +405,9 @@ def check_ex3_nested(runs: dict) -> None:
     if len({(runs[k]["arms"]["source"]["frames"], runs[k]["arms"]["source"]["steps"]) for k in ks}) != 1:
         raise ExerciseError("ex3: the source-only arm differs between runs; the runs are not comparable")
     if runs[ks[0]]["arms"]["augmented"]["frames"] != runs[ks[0]]["arms"]["source"]["frames"]:
-        raise ExerciseError(f"ex3: at aug_per_demo {ks[0]} the augmented arm should train on the source frames only")
+        raise ExerciseError(
+            f"ex3: at aug_per_demo {ks[0]} the augmented arm should train on the source frames only"
+        )
 
 
 def check_ex3_measured(rates: dict, band: dict, tol: float) -> list[str]:
@@ -317,9 +419,11 @@ def check_ex3_measured(rates: dict, band: dict, tol: float) -> list[str]:
             raise ExerciseError(f"ex3: meta.yaml has no band for aug_per_demo {k}")
         lo, hi = band[str(k)]
         if not (lo - 1e-9 <= r <= hi + 1e-9):
-            raise ExerciseError(f"ex3: measured success {r:.3f} at aug_per_demo {k} is outside the band "
-                                f"[{lo:.3f}, {hi:.3f}] in meta.yaml; the chapter's claim does not hold on this run: "
-                                "report it, with your metrics.json files")
+            raise ExerciseError(
+                f"ex3: measured success {r:.3f} at aug_per_demo {k} is outside the band "
+                f"[{lo:.3f}, {hi:.3f}] in meta.yaml; the chapter's claim does not hold on this run: "
+                "report it, with your metrics.json files"
+            )
         lines.append(f"aug_per_demo {k}: success {r:.2f} (band [{lo:.2f}, {hi:.2f}]): holds")
     return lines + ["steps: " + ", ".join(step_lines(rates)) + f"  (flat means within +-{tol:.2f})"]
 
@@ -340,8 +444,10 @@ def run_ex1(say=print) -> None:
     m = run_chapter(int(meta.get("seed", 0)), 8, smoke, say)
     if smoke:
         check_run_sane(m, "ex1")
-        say("ex1: smoke run (CH37_EXERCISE_SMOKE=1): keys and ranges checked; numbers are not meaningful, "
-            "so the meta.yaml band is skipped and the prediction is not scored")
+        say(
+            "ex1: smoke run (CH37_EXERCISE_SMOKE=1): keys and ranges checked; numbers are not meaningful, "
+            "so the meta.yaml band is skipped and the prediction is not scored"
+        )
         return
     for line in check_ex1_measured(m, meta["band"]):
         say("ex1: " + line)
@@ -359,7 +465,10 @@ def run_ex2(say=print) -> None:
     if not callable(fn):
         raise ExerciseError(f"ex2: {_where(mod)} defines no function mix_embodiments")
     n = check_mix(fn, density, _where(mod))
-    say(f"ex2: mix_embodiments matches the specification on {n} cases (shapes incl. N=0, M=0, N=1; float32 and float64)")
+    say(
+        f"ex2: mix_embodiments matches the specification on {n} cases "
+        "(shapes incl. N=0, M=0, N=1; float32 and float64)"
+    )
 
 
 def run_ex3(say=print) -> None:
@@ -375,15 +484,24 @@ def run_ex3(say=print) -> None:
     tol = float(meta["plateau_tol"])
     if smoke:
         say("ex3: steps " + ", ".join(step_lines(rates)))
-        say("ex3: smoke run (CH37_EXERCISE_SMOKE=1): keys, ranges and nested sizes checked "
-            f"(augmented frames {[runs[k]['augmented_frames'] for k in sorted(runs)]}); numbers are not meaningful, "
-            "so the meta.yaml bands are skipped and the prediction is not scored")
+        say(
+            "ex3: smoke run (CH37_EXERCISE_SMOKE=1): keys, ranges and nested sizes checked "
+            f"(augmented frames {[runs[k]['augmented_frames'] for k in sorted(runs)]}); "
+            "numbers are not meaningful, so the meta.yaml bands are skipped and the prediction is not scored"
+        )
         return
     for line in check_ex3_measured(rates, meta["band"], tol):
         say("ex3: " + line)
     shape = curve_shape(rates, tol)
-    say(f"ex3: the data shows a {shape}; " + verdict(pred, shape)
-        + ("" if shape == meta.get("answer", shape) else f" (the reference run in meta.yaml reads {meta['answer']!r})"))
+    say(
+        f"ex3: the data shows a {shape}; "
+        + verdict(pred, shape)
+        + (
+            ""
+            if shape == meta.get("answer", shape)
+            else f" (the reference run in meta.yaml reads {meta['answer']!r})"
+        )
+    )
 
 
 def _wired(run, capsys):

@@ -32,6 +32,7 @@ How to check
 
 Estimated time: 15 minutes.
 """
+
 import numpy as np  # noqa: F401  (you will need it)
 
 

@@ -15,8 +15,9 @@ os.environ.setdefault("CH37_CACHE_DIR", tempfile.mkdtemp(prefix="ch37-cache-"))
 def run_script(*args, cwd=ROOT, check=True, timeout=600):
     """Run a project script with this interpreter; returns the CompletedProcess (text)."""
     env = dict(os.environ, PYTHONHASHSEED="0")
-    p = subprocess.run([sys.executable, *map(str, args)], cwd=cwd, capture_output=True, text=True,
-                       timeout=timeout, env=env)
+    p = subprocess.run(
+        [sys.executable, *map(str, args)], cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env
+    )
     if check and p.returncode != 0:
         raise AssertionError(f"{args} exited {p.returncode}\nstdout:\n{p.stdout}\nstderr:\n{p.stderr}")
     return p

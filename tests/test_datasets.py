@@ -1,40 +1,44 @@
 """Demo generators write real LeRobot v3 sets that round-trip bit for bit."""
+
 import json
 import os
 import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-import demo_data
 import gen_demos_aloha
 import gen_demos_pusht
-from demo_gen import rollout
+from ch37 import lerobot_io, seeds
+from ch37.demos import rollout
 
 ROOT = Path(__file__).resolve().parents[1]
 
-GENS = [pytest.param(gen_demos_pusht, gen_demos_pusht.PUSHT, 0.08, id="pusht"),
-        pytest.param(gen_demos_aloha, gen_demos_aloha.ALOHA, 0.05, id="aloha")]
+GENS = [
+    pytest.param(gen_demos_pusht, gen_demos_pusht.PUSHT, 0.08, id="pusht"),
+    pytest.param(gen_demos_aloha, gen_demos_aloha.ALOHA, 0.05, id="aloha"),
+]
 
 
 @pytest.mark.parametrize("gen,emb,noise", GENS)
 def test_round_trip_matches_direct_rollout(tmp_path, gen, emb, noise, capsys):
     out = tmp_path / "set"
-    assert gen.main(["--episodes", "3", "--seed", "1", "--noise", str(noise), "--out", str(out), "--quiet"]) == 0
+    assert (
+        gen.main(["--episodes", "3", "--seed", "1", "--noise", str(noise), "--out", str(out), "--quiet"]) == 0
+    )
     assert "3 " in capsys.readouterr().out  # summary line
-    ds = demo_data.open_dataset(out)
+    ds = lerobot_io.open_dataset(out)
     assert ds.num_episodes == 3 and ds.fps == 10
     info = json.loads((out / "meta" / "info.json").read_text())
     assert info["robot_type"] == emb.env_module.ROBOT_TYPE
     assert info["features"]["observation.state"]["names"] == list(emb.env_module.STATE_NAMES)
     assert info["features"]["action"]["names"] == list(emb.env_module.ACTION_NAMES)
     assert (out / "meta" / "stats.json").exists()
-    d = demo_data.load_arrays(out)
+    d = lerobot_io.load_arrays(out)
     env = emb.make_env()
     for i in range(3):
-        s = demo_data.env_seed(1, "demo", i)
+        s = seeds.env_seed(1, "demo", i)
         ep = rollout(env, emb.expert_class(noise=noise, seed=s), env.reset(s))
         rows = d["episode_index"] == i
         assert d["observation.state"][rows].tobytes() == ep["observation.state"].tobytes()
@@ -46,7 +50,7 @@ def test_round_trip_matches_direct_rollout(tmp_path, gen, emb, noise, capsys):
 def test_same_flags_same_data_different_seed_different_data(tmp_path, gen, emb, noise):
     def make(name, seed):
         gen.main(["--episodes", "2", "--seed", str(seed), "--out", str(tmp_path / name), "--quiet"])
-        d = demo_data.load_arrays(tmp_path / name)
+        d = lerobot_io.load_arrays(tmp_path / name)
         return d["observation.state"].tobytes() + d["action"].tobytes()
 
     a, b, c = make("a", 0), make("b", 0), make("c", 1)
@@ -59,8 +63,21 @@ def test_same_flags_same_bytes_whatever_the_hash_seed(tmp_path):
     trees = []
     for hash_seed in ("1", "2"):
         out = tmp_path / f"set{hash_seed}"
-        subprocess.run([sys.executable, str(ROOT / "gen_demos_pusht.py"), "--episodes", "2", "--seed", "0",
-                        "--out", str(out), "--quiet"], check=True, env=dict(os.environ, PYTHONHASHSEED=hash_seed))
+        subprocess.run(
+            [
+                sys.executable,
+                str(ROOT / "gen_demos_pusht.py"),
+                "--episodes",
+                "2",
+                "--seed",
+                "0",
+                "--out",
+                str(out),
+                "--quiet",
+            ],
+            check=True,
+            env=dict(os.environ, PYTHONHASHSEED=hash_seed),
+        )
         trees.append({p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()})
     assert trees[0].keys() == trees[1].keys() and len(trees[0]) >= 5
     assert [k for k in trees[0] if trees[0][k] != trees[1][k]] == []
@@ -69,9 +86,9 @@ def test_same_flags_same_bytes_whatever_the_hash_seed(tmp_path):
 def test_episode_seeds_never_overlap_across_seeds_or_purposes():
     seen = {}
     for seed in range(3):
-        for purpose in demo_data.PURPOSES:
+        for purpose in seeds.PURPOSES:
             for i in range(200):
-                s = demo_data.env_seed(seed, purpose, i)
+                s = seeds.env_seed(seed, purpose, i)
                 assert s not in seen, (seed, purpose, i, seen.get(s))
                 seen[s] = (seed, purpose, i)
 
@@ -86,8 +103,15 @@ def test_refuses_out_that_holds_data(tmp_path, capsys):
     assert [p.name for p in out.iterdir()] == ["notes.txt"] and (out / "notes.txt").read_text() == "precious"
 
 
-@pytest.mark.parametrize("argv,needle", [(["--episodes", "0"], "--episodes"), (["--seed", "-1"], "--seed"),
-                                         (["--noise", "-0.1"], "--noise"), (["--noise", "nan"], "--noise")])
+@pytest.mark.parametrize(
+    "argv,needle",
+    [
+        (["--episodes", "0"], "--episodes"),
+        (["--seed", "-1"], "--seed"),
+        (["--noise", "-0.1"], "--noise"),
+        (["--noise", "nan"], "--noise"),
+    ],
+)
 def test_bad_flags_one_line(tmp_path, capsys, argv, needle):
     assert gen_demos_aloha.main(argv + ["--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -1,4 +1,5 @@
 """One contract for both embodiments: determinism, shapes, dtypes, clipping, success and episode end."""
+
 import numpy as np
 import pytest
 
@@ -29,7 +30,11 @@ def test_contract(mod, Env, Expert, act_dim):
         for t in range(15):
             act = np.full(act_dim, scale * (1 if t % 2 else -1), np.float32)
             obs, r, done, info = env.step(act)
-            assert obs.dtype == np.float32 and obs.shape == (10,) and isinstance(info["success"], (bool, np.bool_))
+            assert (
+                obs.dtype == np.float32
+                and obs.shape == (10,)
+                and isinstance(info["success"], (bool, np.bool_))
+            )
             traj.append(obs.copy())
         return np.stack(traj)
 
@@ -73,7 +78,10 @@ def test_pusht_set_start_places_state_with_fresh_counters():
     # a start placed this way is deterministic and independent of what ran before
     other = pusht_env.PushTEnv()
     assert other.set_start(0.15, -0.05, 0.7, -0.25, 0.2).tobytes() == obs.tobytes()
-    assert other.step(np.array([0.2, 0.1], np.float32))[0].tobytes() == env.step(np.array([0.2, 0.1], np.float32))[0].tobytes()
+    assert (
+        other.step(np.array([0.2, 0.1], np.float32))[0].tobytes()
+        == env.step(np.array([0.2, 0.1], np.float32))[0].tobytes()
+    )
 
 
 def test_pusht_accessors_match_obs():

@@ -3,6 +3,7 @@
 The check logic (exercises/checks.py) is called directly with modules, functions and metrics
 dicts; a few tests run `pytest exercises/checks.py -k ...` in a subprocess, as a learner would.
 """
+
 import json
 import os
 import subprocess
@@ -14,13 +15,12 @@ import numpy as np
 import pytest
 import yaml
 
-from exercises import checks
+from exercises import checks, rules
 from exercises.checks import ExerciseError
 
 ROOT = Path(__file__).resolve().parent.parent
 SOLUTIONS = ROOT / "exercises" / "solutions"
-# meta.yaml once chapter_tools.py has written it; until then a stand-in for these tests only
-META = ROOT / "meta.yaml" if (ROOT / "meta.yaml").is_file() else ROOT / "tests" / "fixtures_meta.yaml"
+META = ROOT / "meta.yaml"  # written by python -m tools.meta from the sweeps
 # a meta.yaml derived from smoke-sized sweeps says so; its answers and bands are not the chapter's
 PROVISIONAL = bool((yaml.safe_load(META.read_text()).get("reference_run") or {}).get("provisional"))
 EXERCISE_VARS = ("CH37_EXERCISE_DIR", "CH37_EXERCISE_SMOKE", "CH37_EXERCISE_OUT", "CH37_META")
@@ -36,10 +36,18 @@ def meta():
 
 def run_checks(*args, env_extra=None, unset=(), timeout=600):
     """`python -m pytest exercises/checks.py ARGS` from the repo root, as a learner runs it."""
-    env = {k: v for k, v in os.environ.items() if k not in EXERCISE_VARS and k not in unset}  # keeps CH37_CACHE_DIR
+    env = {
+        k: v for k, v in os.environ.items() if k not in EXERCISE_VARS and k not in unset
+    }  # keeps CH37_CACHE_DIR
     env.update({"CH37_META": str(META), "PYTHONHASHSEED": "0", **(env_extra or {})})
-    return subprocess.run([sys.executable, "-m", "pytest", "exercises/checks.py", "-p", "no:cacheprovider", *args],
-                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout)
+    return subprocess.run(
+        [sys.executable, "-m", "pytest", "exercises/checks.py", "-p", "no:cacheprovider", *args],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
 
 
 # ---------------------------------------------------------------- meta.yaml: the schema checks.py reads
@@ -48,7 +56,12 @@ def test_meta_has_the_exercise_checks_schema(meta):
     assert {"scale_effect_min", "scale_effect_max"} & set(meta["ex1"]["band"])
     assert meta["ex2"]["pusht_mask_density"] == pytest.approx(1 / 3, abs=1e-6)
     ex3 = meta["ex3"]
-    assert ex3["seed"] == 0 and ex3["aug_per_demo"] == [0, 4, 8] and ex3["answer"] in EX3 and ex3["plateau_tol"] > 0
+    assert (
+        ex3["seed"] == 0
+        and ex3["aug_per_demo"] == [0, 4, 8]
+        and ex3["answer"] in EX3
+        and ex3["plateau_tol"] > 0
+    )
     for k in ("0", "4", "8"):
         lo, hi = ex3["band"][k]
         assert 0.0 <= lo <= hi <= 1.0
@@ -62,14 +75,94 @@ def test_missing_meta_is_a_clear_failure(tmp_path):
         checks.load_meta(tmp_path / "m.yaml")
 
 
+# ---------------------------------------------------------------- rules: meta.yaml's answers and bands
+def test_ex1_answer_rule_both_ways():
+    assert rules.ex1_answer([0.28, 0.12, 0.12]) == "A"
+    assert rules.ex1_answer([-0.1, -0.02]) == "B"
+    assert rules.ex1_answer([0.2, 0.0, 0.1]) == "C"  # a tie on one seed is not "helps on every seed"
+    assert rules.ex1_answer([0.2, -0.1]) == "C"
+    with pytest.raises(ValueError):
+        rules.ex1_answer([])
+
+
+def test_ex1_band_rule():
+    assert rules.ex1_band("A", 0.28, [0.2, 0.4]) == {"scale_effect_min": 0.14}
+    assert rules.ex1_band("B", -0.1, [0.0, 0.1]) == {"scale_effect_max": -0.05}
+    c = rules.ex1_band("C", 0.02, [0.1, 0.5])  # Wilson half-width 0.2 -> margin 0.1 > 0.06
+    assert c == {"scale_effect_min": -0.08, "scale_effect_max": 0.12}
+    assert rules.ex1_band("C", 0.0, [0.0, 0.1]) == {"scale_effect_min": -0.06, "scale_effect_max": 0.06}
+
+
+def test_ex3_answer_rule_both_ways():
+    tol = rules.PLATEAU_TOL
+    assert rules.ex3_answer(0.1, 0.2, 0.3) == "climb"
+    assert rules.ex3_answer(0.1, 0.2, 0.2 + tol) == "plateau"  # a step of exactly tol is flat
+    assert rules.ex3_answer(0.1, 0.22, 0.26) == "plateau" and rules.ex3_answer(0.26, 0.22, 0.18) == "plateau"
+    assert rules.ex3_answer(0.1, 0.3, 0.2) == "fall"
+    assert rules.ex3_answer(0.1, 0.1, 0.3) == "climb"  # the last step decides: still climbing at the end
+    assert rules.ex3_answer(0.3, 0.1, 0.12) == "plateau"
+
+
+def test_published_ex3_rule_says_what_the_code_does():
+    text = rules.RULES["ex3_answer"]
+    assert "s8-s4" in text and f"> +{rules.PLATEAU_TOL}" in text and f"< -{rules.PLATEAU_TOL}" in text
+    assert "both" not in text and "not judged" in text  # only the last step is judged
+    # the first step never changes the answer: a big fall then a climb is a climb
+    assert rules.ex3_answer(0.9, 0.1, 0.1 + 2 * rules.PLATEAU_TOL) == "climb"
+
+
+def test_success_band_rule_margin_and_clipping():
+    assert rules.band_margin([0.19, 0.44]) == pytest.approx(0.0625)  # Wilson half-width 0.125, halved
+    assert rules.success_band(0.3, [0.19, 0.44]) == [0.2375, 0.3625]
+    assert rules.success_band(0.3, [0.25, 0.35]) == [0.24, 0.36]  # narrow interval: the 0.06 floor
+    assert rules.success_band(0.02, [0.0, 0.1]) == [0.0, 0.08]  # clipped at 0, margin 0.06
+    assert rules.success_band(0.98, [0.9, 1.0]) == [0.92, 1.0]  # clipped at 1
+
+
+def test_derive_checks_refuses_bad_sweeps():
+    row = {"seed": 0, "delta": 0.1, "ci95": {"augmented": [0.2, 0.4]}}
+    seeds = {"rows": [row], "action_dims": {"pusht": 2}, "padded_action_dim": 6}
+    aug = {
+        "seed": 0,
+        "rows": [{"aug_per_demo": k, "augmented": 0.3, "ci95": {"augmented": [0.2, 0.4]}} for k in (0, 4, 8)],
+    }
+    ex = rules.derive_checks(seeds, aug)
+    assert ex["ex1"]["answer"] == "A" and ex["ex2"] == {"pusht_mask_density": 0.333333}
+    assert ex["ex3"]["answer"] == "plateau" and ex["ex3"]["plateau_tol"] == rules.PLATEAU_TOL
+    with pytest.raises(ValueError, match="must include seed 0"):
+        rules.derive_checks(dict(seeds, rows=[dict(row, seed=1)]), aug)
+    with pytest.raises(ValueError, match="must be at seed 0"):
+        rules.derive_checks(seeds, dict(aug, seed=1))
+    with pytest.raises(ValueError, match="must cover aug_per_demo 0, 4, 8"):
+        rules.derive_checks(seeds, dict(aug, rows=aug["rows"][:2]))
+
+
+def test_checks_judges_with_the_published_rule():
+    assert checks.ex3_answer is rules.ex3_answer
+    src = (ROOT / "exercises" / "checks.py").read_text()
+    assert "sys.path" not in src  # the rule is a package import, not a path hack
+
+
+def test_solutions_point_to_their_exercise_instead_of_copying_it():
+    for ex, name in checks.FILES.items():
+        task = (ROOT / "exercises" / name).read_text()
+        solution = (SOLUTIONS / name).read_text()
+        doc = solution.split('"""')[1]
+        assert "\n" not in doc and f"exercises/{name}" in doc, ex
+        assert "What to do" in task and "What to do" not in solution, ex
+
+
 # ---------------------------------------------------------------- predictions: ex1 and ex3
 def test_reference_predictions_pass_and_match_meta(meta):
-    got = {"ex1": checks.check_prediction(checks.load_exercise("ex1", SOLUTIONS), EX1, "ex1"),
-           "ex3": checks.check_prediction(checks.load_exercise("ex3", SOLUTIONS), EX3, "ex3")}
+    got = {
+        "ex1": checks.check_prediction(checks.load_exercise("ex1", SOLUTIONS), EX1, "ex1"),
+        "ex3": checks.check_prediction(checks.load_exercise("ex3", SOLUTIONS), EX3, "ex3"),
+    }
     if PROVISIONAL:
         pytest.skip("meta.yaml is provisional (smoke-sized sweep): its answers are not the chapter's yet")
-    assert got == {"ex1": meta["ex1"]["answer"], "ex3": meta["ex3"]["answer"]}, \
+    assert got == {"ex1": meta["ex1"]["answer"], "ex3": meta["ex3"]["answer"]}, (
         "exercises/solutions/ disagree with meta.yaml's answers: update the reference answers (and their WHY)"
+    )
 
 
 @pytest.mark.parametrize("ex,allowed", [("ex1", EX1), ("ex3", EX3)])
@@ -135,7 +228,9 @@ def mask_all_ones(p, a):
 
 def aloha_first(p, a):
     act = np.concatenate([np.asarray(a, np.float32), np.pad(np.asarray(p, np.float32), ((0, 0), (0, 4)))])
-    mask = np.concatenate([np.ones((len(a), 6), np.float32), np.repeat(np.float32([[1, 1, 0, 0, 0, 0]]), len(p), 0)])
+    mask = np.concatenate(
+        [np.ones((len(a), 6), np.float32), np.repeat(np.float32([[1, 1, 0, 0, 0, 0]]), len(p), 0)]
+    )
     return act, mask, np.concatenate([np.ones(len(a), np.int64), np.zeros(len(p), np.int64)])
 
 
@@ -205,8 +300,10 @@ def test_wrong_mixes_fail(fn, needle):
 def test_ex2_unfilled_fails_clearly_and_solutions_pass_under_pytest():
     p = run_checks("-k", "ex2", unset=("CH37_EXERCISE_DIR",))
     assert p.returncode == 1, p.stdout + p.stderr
-    assert ("ex2: mix_embodiments is not implemented yet (NotImplementedError); "
-            "fill in exercises/ex2_completion_wrangle.py") in p.stdout
+    assert (
+        "ex2: mix_embodiments is not implemented yet (NotImplementedError); "
+        "fill in exercises/ex2_completion_wrangle.py"
+    ) in p.stdout
     assert "Traceback" not in p.stdout and "1 failed, 2 deselected" in p.stdout
     p = run_checks("-k", "ex2", env_extra={"CH37_EXERCISE_DIR": "exercises/solutions"})
     assert p.returncode == 0, p.stdout + p.stderr
@@ -214,15 +311,32 @@ def test_ex2_unfilled_fails_clearly_and_solutions_pass_under_pytest():
 
 
 # ---------------------------------------------------------------- measured claims: ex1 and ex3
-def make_metrics(source=0.1, augmented=0.3, compute_matched=0.2, aug_frames=6000, kept=96, attempts=96, src_frames=838):
+def make_metrics(
+    source=0.1, augmented=0.3, compute_matched=0.2, aug_frames=6000, kept=96, attempts=96, src_frames=838
+):
     def arm(s, frames, steps):
-        return {"success": s, "ci95": [max(0.0, s - 0.1), min(1.0, s + 0.1)], "frames": frames, "steps": steps,
-                "final_loss": 0.01}
-    return {"arms": {"source": arm(source, src_frames, 3500), "augmented": arm(augmented, src_frames + aug_frames, 9000),
-                     "compute_matched": arm(compute_matched, src_frames + aug_frames, 3500)},
-            "scale_effect": round(augmented - source, 6), "compute_matched_effect": round(compute_matched - source, 6),
-            "kept": kept, "attempts": attempts, "yield": kept / attempts if attempts else 0.0,
-            "augmented_frames": aug_frames, "source_frames": src_frames}
+        return {
+            "success": s,
+            "ci95": [max(0.0, s - 0.1), min(1.0, s + 0.1)],
+            "frames": frames,
+            "steps": steps,
+            "final_loss": 0.01,
+        }
+
+    return {
+        "arms": {
+            "source": arm(source, src_frames, 3500),
+            "augmented": arm(augmented, src_frames + aug_frames, 9000),
+            "compute_matched": arm(compute_matched, src_frames + aug_frames, 3500),
+        },
+        "scale_effect": round(augmented - source, 6),
+        "compute_matched_effect": round(compute_matched - source, 6),
+        "kept": kept,
+        "attempts": attempts,
+        "yield": kept / attempts if attempts else 0.0,
+        "augmented_frames": aug_frames,
+        "source_frames": src_frames,
+    }
 
 
 def test_ex1_band_passes_inside_and_fails_outside():
@@ -255,16 +369,19 @@ def test_ex1_band_from_meta(meta):
         checks.check_ex1_measured(make_metrics(0.5 - outside / 2, 0.5 + outside / 2), band)
 
 
-@pytest.mark.parametrize("broken,needle", [
-    (lambda m: m.pop("scale_effect"), "lacks scale_effect"),
-    (lambda m: m["arms"].pop("compute_matched"), "lacks arms.compute_matched"),
-    (lambda m: m["arms"]["source"].pop("ci95"), "lacks arms.source.ci95"),
-    (lambda m: m["arms"]["augmented"].update(success=1.2, ci95=[0.9, 1.3]), "not a valid rate"),
-    (lambda m: m["arms"]["augmented"].update(success=0.9), "not a valid rate"),
-    (lambda m: m.update(scale_effect=0.5), "is not augmented minus source"),
-    (lambda m: m.update(kept=100), "kept 100 of 96"),
-    (lambda m: m["arms"]["augmented"].update(frames=838), "source \\+ augmented frames"),
-])
+@pytest.mark.parametrize(
+    "broken,needle",
+    [
+        (lambda m: m.pop("scale_effect"), "lacks scale_effect"),
+        (lambda m: m["arms"].pop("compute_matched"), "lacks arms.compute_matched"),
+        (lambda m: m["arms"]["source"].pop("ci95"), "lacks arms.source.ci95"),
+        (lambda m: m["arms"]["augmented"].update(success=1.2, ci95=[0.9, 1.3]), "not a valid rate"),
+        (lambda m: m["arms"]["augmented"].update(success=0.9), "not a valid rate"),
+        (lambda m: m.update(scale_effect=0.5), "is not augmented minus source"),
+        (lambda m: m.update(kept=100), "kept 100 of 96"),
+        (lambda m: m["arms"]["augmented"].update(frames=838), "source \\+ augmented frames"),
+    ],
+)
 def test_broken_metrics_fail(broken, needle):
     m = make_metrics()
     broken(m)
@@ -272,15 +389,18 @@ def test_broken_metrics_fail(broken, needle):
         checks.check_run_sane(m)
 
 
-@pytest.mark.parametrize("rates,shape", [
-    ({0: 0.0, 4: 0.1, 8: 0.2}, "climb"),
-    ({0: 0.0, 4: 0.2, 8: 0.22}, "plateau"),
-    ({0: 0.22, 4: 0.26, 8: 0.30}, "plateau"),  # steps of exactly tol are flat
-    ({0: 0.3, 4: 0.2, 8: 0.2}, "plateau"),  # only the last step decides "fall"
-    ({0: 0.0, 4: 0.3, 8: 0.2}, "fall"),
-    ({0: 0.1, 4: 0.1, 8: 0.1}, "plateau"),
-    ({0: 0.0, 4: 0.02, 8: 0.2}, "climb"),  # a flat first step does not matter: the last one decides
-])
+@pytest.mark.parametrize(
+    "rates,shape",
+    [
+        ({0: 0.0, 4: 0.1, 8: 0.2}, "climb"),
+        ({0: 0.0, 4: 0.2, 8: 0.22}, "plateau"),
+        ({0: 0.22, 4: 0.26, 8: 0.30}, "plateau"),  # steps of exactly tol are flat
+        ({0: 0.3, 4: 0.2, 8: 0.2}, "plateau"),  # only the last step decides "fall"
+        ({0: 0.0, 4: 0.3, 8: 0.2}, "fall"),
+        ({0: 0.1, 4: 0.1, 8: 0.1}, "plateau"),
+        ({0: 0.0, 4: 0.02, 8: 0.2}, "climb"),  # a flat first step does not matter: the last one decides
+    ],
+)
 def test_curve_shape_rule(rates, shape):
     assert checks.curve_shape(rates, 0.04) == shape
     assert checks.curve_shape({str(k): v for k, v in rates.items()}, 0.04) == shape
@@ -306,8 +426,11 @@ def test_ex3_bands_pass_inside_and_fail_outside(meta):
 
 
 def test_ex3_nested_sizes():
-    runs = {0: make_metrics(0.1, 0.1, 0.1, aug_frames=0, kept=0, attempts=0), 4: make_metrics(aug_frames=3000, attempts=48, kept=48),
-            8: make_metrics(aug_frames=6000)}
+    runs = {
+        0: make_metrics(0.1, 0.1, 0.1, aug_frames=0, kept=0, attempts=0),
+        4: make_metrics(aug_frames=3000, attempts=48, kept=48),
+        8: make_metrics(aug_frames=6000),
+    }
     runs[0]["arms"]["augmented"]["frames"] = runs[0]["arms"]["source"]["frames"]
     checks.check_ex3_nested(runs)
     bad = {**runs, 8: make_metrics(aug_frames=3000)}
@@ -323,14 +446,25 @@ def test_ex3_nested_sizes():
 
 # ---------------------------------------------------------------- end to end: the runs themselves
 def test_ex1_ex3_end_to_end_smoke(tmp_path):
-    """Smoke-size runs (seconds each): the pipeline, keys, ranges and nested sizes; bands skipped, and said so."""
-    p = run_checks("-k", "ex1 or ex3", env_extra={"CH37_EXERCISE_DIR": str(SOLUTIONS), "CH37_EXERCISE_SMOKE": "1",
-                                                  "CH37_EXERCISE_OUT": str(tmp_path)})
+    """Smoke-size runs (seconds each): the pipeline, keys, ranges and nested sizes; bands skipped, said so."""
+    p = run_checks(
+        "-k",
+        "ex1 or ex3",
+        env_extra={
+            "CH37_EXERCISE_DIR": str(SOLUTIONS),
+            "CH37_EXERCISE_SMOKE": "1",
+            "CH37_EXERCISE_OUT": str(tmp_path),
+        },
+    )
     assert p.returncode == 0, p.stdout[-4000:] + p.stderr[-2000:]
     assert "2 passed, 1 deselected" in p.stdout
     assert "ex1: smoke run" in p.stdout and "ex3: smoke run" in p.stdout and "bands are skipped" in p.stdout
     assert "ex3: steps 0 -> 4: " in p.stdout
-    assert sorted(x.name for x in tmp_path.iterdir()) == ["smoke_seed0_aug0", "smoke_seed0_aug4", "smoke_seed0_aug8"]
+    assert sorted(x.name for x in tmp_path.iterdir()) == [
+        "smoke_seed0_aug0",
+        "smoke_seed0_aug4",
+        "smoke_seed0_aug8",
+    ]
 
 
 def test_full_mode_asserts_bands_and_scores_predictions(tmp_path, monkeypatch):
@@ -340,11 +474,19 @@ def test_full_mode_asserts_bands_and_scores_predictions(tmp_path, monkeypatch):
     session) replays them when that test ran first.
     """
     monkeypatch.setattr(checks, "FULL_FLAGS", checks.SMOKE_FLAGS)
-    meta = {"exercise_checks": {
-        "ex1": {"seed": 0, "answer": "C", "band": {"scale_effect_min": -0.5, "scale_effect_max": 0.5}},
-        "ex2": {"pusht_mask_density": 0.333333},
-        "ex3": {"seed": 0, "aug_per_demo": [0, 4, 8], "answer": "plateau", "plateau_tol": 0.04,
-                "band": {"0": [0.0, 1.0], "4": [0.0, 1.0], "8": [0.0, 1.0]}}}}
+    meta = {
+        "exercise_checks": {
+            "ex1": {"seed": 0, "answer": "C", "band": {"scale_effect_min": -0.5, "scale_effect_max": 0.5}},
+            "ex2": {"pusht_mask_density": 0.333333},
+            "ex3": {
+                "seed": 0,
+                "aug_per_demo": [0, 4, 8],
+                "answer": "plateau",
+                "plateau_tol": 0.04,
+                "band": {"0": [0.0, 1.0], "4": [0.0, 1.0], "8": [0.0, 1.0]},
+            },
+        }
+    }
     (tmp_path / "meta.yaml").write_text(yaml.safe_dump(meta))
     for k in EXERCISE_VARS:
         monkeypatch.delenv(k, raising=False)
@@ -356,20 +498,34 @@ def test_full_mode_asserts_bands_and_scores_predictions(tmp_path, monkeypatch):
     checks.run_ex3(out.append)
     text = "\n".join(out)
     assert "smoke" not in text and "band scale_effect >= -0.500 and scale_effect <= +0.500: holds" in text
-    assert "ex1: your prediction was A (augmentation helps); the measurement says C" in text  # scored, not failed
+    assert (
+        "ex1: your prediction was A (augmentation helps); the measurement says C" in text
+    )  # scored, not failed
     assert "aug_per_demo 8: success" in text and "ex3: steps: 0 -> 4: " in text
-    shape = checks.curve_shape({k: json.loads((tmp_path / "runs" / f"seed0_aug{k}" / "metrics.json").read_text())
-                                ["arms"]["augmented"]["success"] for k in (0, 4, 8)}, 0.04)
+    shape = checks.curve_shape(
+        {
+            k: json.loads((tmp_path / "runs" / f"seed0_aug{k}" / "metrics.json").read_text())["arms"][
+                "augmented"
+            ]["success"]
+            for k in (0, 4, 8)
+        },
+        0.04,
+    )
     assert f"ex3: the data shows a {shape}; " in text
 
 
 @pytest.mark.slow
 def test_ex1_ex3_end_to_end_full(tmp_path):
-    """Full size at seed 0 (three default-size runs; the aug-8 run is shared through the result cache): bands asserted."""
+    """Full size at seed 0, bands asserted (three default-size runs; the aug-8 run is shared through the
+    result cache)."""
     if PROVISIONAL:
         pytest.skip("meta.yaml is provisional (smoke-sized sweep): its bands do not describe full-size runs")
-    p = run_checks("-k", "ex1 or ex3", env_extra={"CH37_EXERCISE_DIR": str(SOLUTIONS), "CH37_EXERCISE_OUT": str(tmp_path)},
-                   timeout=7200)
+    p = run_checks(
+        "-k",
+        "ex1 or ex3",
+        env_extra={"CH37_EXERCISE_DIR": str(SOLUTIONS), "CH37_EXERCISE_OUT": str(tmp_path)},
+        timeout=7200,
+    )
     assert p.returncode == 0, p.stdout[-4000:] + p.stderr[-2000:]
     assert "2 passed, 1 deselected" in p.stdout and "smoke" not in p.stdout
     assert "ex1: your prediction " in p.stdout and "matched the measurement" in p.stdout

@@ -1,4 +1,5 @@
 """Expert success counts: a fast subset by default, the full 50-start counts with -m slow."""
+
 import numpy as np
 import pytest
 
@@ -36,7 +37,9 @@ def test_expert_50_starts(Env, Expert, noise):
     assert solved(Env, Expert, range(50), noise) >= 45
 
 
-@pytest.mark.parametrize("Env,Expert,act_dim", [(pusht_env.PushTEnv, PushTExpert, 2), (aloha_env.AlohaCubeEnv, AlohaExpert, 6)])
+@pytest.mark.parametrize(
+    "Env,Expert,act_dim", [(pusht_env.PushTEnv, PushTExpert, 2), (aloha_env.AlohaCubeEnv, AlohaExpert, 6)]
+)
 def test_noisy_expert_is_reproducible_per_seed(Env, Expert, act_dim):
     def actions(seed):
         env, ex = Env(), Expert(noise=0.1, seed=seed)

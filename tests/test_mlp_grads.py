@@ -1,8 +1,9 @@
 """mse_grads gives exactly the gradients autograd gives, and refuses what it cannot differentiate."""
+
 import pytest
 import torch
 
-from mlp_grads import mse_grads
+from ch37.mlp_grads import mse_grads
 
 
 def mlp(widths, seed=0):
@@ -19,12 +20,23 @@ def autograd_grads(net, x, y):
     return [p.grad.clone() for p in net.parameters()]
 
 
-@pytest.mark.parametrize("widths,batch", [((10, 512, 512, 2), 128), ((10, 512, 512, 2), 34), ((10, 64, 64, 2), 64),
-                                          ((10, 32, 6), 16), ((3, 8, 8, 8, 4), 5)])
+@pytest.mark.parametrize(
+    "widths,batch",
+    [
+        ((10, 512, 512, 2), 128),
+        ((10, 512, 512, 2), 34),
+        ((10, 64, 64, 2), 64),
+        ((10, 32, 6), 16),
+        ((3, 8, 8, 8, 4), 5),
+    ],
+)
 def test_same_bits_as_autograd(widths, batch):
     net = mlp(widths)
     g = torch.Generator().manual_seed(1)
-    x, y = torch.rand(batch, widths[0], generator=g) * 2 - 1, torch.rand(batch, widths[-1], generator=g) * 2 - 1
+    x, y = (
+        torch.rand(batch, widths[0], generator=g) * 2 - 1,
+        torch.rand(batch, widths[-1], generator=g) * 2 - 1,
+    )
     ref = autograd_grads(net, x, y)
     got = mse_grads(net, x, y)
     assert [t.shape for t in got] == [t.shape for t in ref]

@@ -1,4 +1,6 @@
-"""Course packaging: region markers, the meta.yaml drift check, the notebook, sweeps, meta derivation, wall-clock."""
+"""Course tooling (tools/): region markers, the meta.yaml drift check, notebook, sweeps, meta, wall-clock."""
+
+import ast
 import contextlib
 import csv
 import json
@@ -9,10 +11,14 @@ import textwrap
 
 import pytest
 import yaml
-
-import chapter_io
-import chapter_tools as ct
 from conftest import ROOT, run_script
+
+import ch37.cli
+from ch37 import CHAPTER_ID
+from exercises import rules
+from tools import common, notebook, regions, wallclock
+from tools import meta as meta_tool
+from tools import sweep as sweep_tool
 
 # ----------------------------------------------------------------------------------------------
 # Region parser
@@ -26,59 +32,116 @@ def script(*regions, head=DOC, between="\n"):
     return head + between.join(parts)
 
 
-GOOD = [(n, f"# intent of {n}\nx_{n} = 1\n") for n in ct.REGION_ORDER]
+GOOD = [(n, f"# intent of {n}\nx_{n} = 1\n") for n in regions.REGION_ORDER]
 
 
 def parse(tmp_path, text):
     p = tmp_path / "scale_data.py"
     p.write_text(text)
-    return ct.parse_regions(p)
+    return regions.parse_regions(p)
 
 
 def test_parser_accepts_a_well_formed_script(tmp_path):
-    regions = parse(tmp_path, script(*GOOD))
-    assert [r.name for r in regions] == list(ct.REGION_ORDER)
-    r = regions[0]
+    found = parse(tmp_path, script(*GOOD))
+    assert [r.name for r in found] == list(regions.REGION_ORDER)
+    r = found[0]
     assert (r.start, r.end) == (5, 8)
-    assert r.body == "# intent of setup\nx_setup = 1\n" and r.intent == ["intent of setup"] and r.code == "x_setup = 1"
+    assert (
+        r.body == "# intent of setup\nx_setup = 1\n"
+        and r.intent == ["intent of setup"]
+        and r.code == "x_setup = 1"
+    )
 
 
-@pytest.mark.parametrize("text, message", [
-    (script(*GOOD[:2], ("mystery", "y = 1\n"), *GOOD[2:]), "unknown region name 'mystery'"),
-    (script(*GOOD[:2], GOOD[1], *GOOD[2:]), "duplicate region 'wrangle'"),
-    (script(GOOD[1], GOOD[0], *GOOD[2:]), "out of order: expected 'setup'"),
-    (script(*GOOD[:4]), "missing region(s) emit"),
-    (script(*GOOD).replace("x_measure = 1\n# --- endregion ---", "x_measure = 1"), "opens inside region 'measure'"),
-    (script(*GOOD).rsplit("# --- endregion ---", 1)[0], "region 'emit' has no '# --- endregion ---'"),
-    (script(*GOOD) + "# --- endregion ---\n", "without an open region"),
-    (script(*GOOD).replace("x_augment = 1\n# --- endregion ---\n", "x_augment = 1\n# --- endregion ---\nstray = 2\n"),
-     "code outside any region: 'stray = 2'"),
-    (script(*GOOD, head=DOC + "import os\n"), "code outside any region: 'import os'"),
-    (script(*GOOD, head=DOC + "# a comment\n"), "code outside any region"),
-    (script(*GOOD).replace("# --- region: augment ---", "# --- region augment ---"), "malformed region marker"),
-    (script(*GOOD).replace("# --- region: augment ---", "    # --- region: augment ---"), "malformed region marker"),
-    (script(*GOOD).replace("# --- region: augment ---", "# --- region: augment"), "malformed region marker"),
-    (script(*GOOD) + "def broken(:\n", "not valid Python"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        (script(*GOOD[:2], ("mystery", "y = 1\n"), *GOOD[2:]), "unknown region name 'mystery'"),
+        (script(*GOOD[:2], GOOD[1], *GOOD[2:]), "duplicate region 'wrangle'"),
+        (script(GOOD[1], GOOD[0], *GOOD[2:]), "out of order: expected 'setup'"),
+        (script(*GOOD[:4]), "missing region(s) emit"),
+        (
+            script(*GOOD).replace("x_measure = 1\n# --- endregion ---", "x_measure = 1"),
+            "opens inside region 'measure'",
+        ),
+        (script(*GOOD).rsplit("# --- endregion ---", 1)[0], "region 'emit' has no '# --- endregion ---'"),
+        (script(*GOOD) + "# --- endregion ---\n", "without an open region"),
+        (
+            script(*GOOD).replace(
+                "x_augment = 1\n# --- endregion ---\n", "x_augment = 1\n# --- endregion ---\nstray = 2\n"
+            ),
+            "code outside any region: 'stray = 2'",
+        ),
+        (script(*GOOD, head=DOC + "import os\n"), "code outside any region: 'import os'"),
+        (script(*GOOD, head=DOC + "# a comment\n"), "code outside any region"),
+        (
+            script(*GOOD).replace("# --- region: augment ---", "# --- region augment ---"),
+            "malformed region marker",
+        ),
+        (
+            script(*GOOD).replace("# --- region: augment ---", "    # --- region: augment ---"),
+            "malformed region marker",
+        ),
+        (
+            script(*GOOD).replace("# --- region: augment ---", "# --- region: augment"),
+            "malformed region marker",
+        ),
+        (script(*GOOD) + "def broken(:\n", "not valid Python"),
+    ],
+)
 def test_parser_rejects_malformed_markers(tmp_path, text, message):
-    with pytest.raises(ct.RegionError) as e:
+    with pytest.raises(regions.RegionError) as e:
         parse(tmp_path, text)
     assert message in str(e.value)
     assert str(e.value).startswith("scale_data.py")  # names the file (and the line where there is one)
 
 
 def test_regions_cli_prints_every_region():
-    p = run_script("chapter_tools.py", "regions")
-    lines = [ln.split() for ln in p.stdout.splitlines() if ln.split() and ln.split()[0] in ct.REGION_ORDER]
-    assert [ln[0] for ln in lines] == list(ct.REGION_ORDER)
+    p = run_script("-m", "tools.regions")
+    lines = [
+        ln.split() for ln in p.stdout.splitlines() if ln.split() and ln.split()[0] in regions.REGION_ORDER
+    ]
+    assert [ln[0] for ln in lines] == list(regions.REGION_ORDER)
     assert all(len(ln[-1]) == 64 for ln in lines)
 
 
 def test_regions_cli_reports_a_malformed_script_in_one_line(tmp_path):
     bad = tmp_path / "bad.py"
     bad.write_text(script(*GOOD[:4]))
-    p = run_script("chapter_tools.py", "regions", "--script", bad, check=False)
-    assert p.returncode == 2 and p.stderr.startswith("error: bad.py: missing region(s) emit") and "Traceback" not in p.stderr
+    p = run_script("-m", "tools.regions", "--script", bad, check=False)
+    assert (
+        p.returncode == 2
+        and p.stderr.startswith("error: bad.py: missing region(s) emit")
+        and "Traceback" not in p.stderr
+    )
+
+
+@pytest.mark.parametrize("mode", [[], ["--check"], ["--write"]])
+def test_regions_cli_reports_a_missing_script_in_one_line(tmp_path, mode):
+    meta = tmp_path / "meta.yaml"
+    p = run_script(
+        "-m", "tools.regions", *mode, "--script", tmp_path / "missing.py", "--meta", meta, check=False
+    )
+    assert p.returncode == 2 and p.stdout == "" and not meta.exists()
+    assert p.stderr.startswith("error: ") and "missing.py: no such file" in p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ("tools.regions", "--no-such-flag"),
+        ("tools.regions", "--check", "--write"),
+        ("tools.meta", "--no-such-flag"),
+        ("tools.sweep", "--seeds", "x"),
+        ("tools.wallclock", "--no-such-flag"),
+        ("tools.notebook", "--no-such-flag"),
+    ],
+)
+def test_bad_flags_are_one_error_line(argv):
+    p = run_script("-m", *argv, check=False)
+    assert p.returncode == 2 and p.stdout == "" and p.stderr.startswith("error: "), p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr
 
 
 # ----------------------------------------------------------------------------------------------
@@ -86,136 +149,154 @@ def test_regions_cli_reports_a_malformed_script_in_one_line(tmp_path):
 # ----------------------------------------------------------------------------------------------
 def test_meta_region_hashes_match_scale_data():
     """THE drift test: every region of scale_data.py must match meta.yaml (refresh on purpose with
-    `python chapter_tools.py hashes --write`, and re-run the sweep + meta if numbers may move)."""
-    recorded = ct.load_yaml(ct.META).get("region_hashes")
-    bad = ct.drifted(ct.region_hashes(ct.SCRIPT), recorded)
-    assert not bad, (f"scale_data.py region(s) {', '.join(bad)} changed but meta.yaml was not refreshed: "
-                     "run python chapter_tools.py hashes --write")
+    `python -m tools.regions --write`, and re-run the sweeps + meta if numbers may move)."""
+    recorded = meta_tool.load_yaml(common.META).get("region_hashes")
+    bad = regions.drifted(regions.region_hashes(common.SCRIPT), recorded)
+    assert not bad, (
+        f"scale_data.py region(s) {', '.join(bad)} changed but meta.yaml was not refreshed: "
+        "run python -m tools.regions --write"
+    )
 
 
 def test_drift_check_catches_a_one_character_change(tmp_path):
     copy, meta = tmp_path / "scale_data.py", tmp_path / "meta.yaml"
-    shutil.copy(ct.SCRIPT, copy)
-    shutil.copy(ct.META, meta)
-    ok = run_script("chapter_tools.py", "hashes", "--write", "--script", copy, "--meta", meta)
+    shutil.copy(common.SCRIPT, copy)
+    shutil.copy(common.META, meta)
+    ok = run_script("-m", "tools.regions", "--write", "--script", copy, "--meta", meta)
     assert ok.returncode == 0
-    assert run_script("chapter_tools.py", "hashes", "--check", "--script", copy, "--meta", meta).returncode == 0
+    assert run_script("-m", "tools.regions", "--check", "--script", copy, "--meta", meta).returncode == 0
     text = copy.read_text()
-    r = ct.parse_regions(copy)[2]  # augment
+    r = regions.parse_regions(copy)[2]  # augment
     lines = text.splitlines(keepends=True)
     i = r.start  # 0-based index of the region's first body line: its intent comment
     assert lines[i].startswith("#")
     lines[i] = lines[i].rstrip("\n") + "x\n"
     copy.write_text("".join(lines))  # one character added to a comment; still valid Python
-    p = run_script("chapter_tools.py", "hashes", "--check", "--script", copy, "--meta", meta, check=False)
+    p = run_script("-m", "tools.regions", "--check", "--script", copy, "--meta", meta, check=False)
     assert p.returncode == 1
-    assert "augment" in p.stdout and "setup" not in p.stdout and "hashes --write" in p.stdout
+    assert "augment" in p.stdout and "setup" not in p.stdout and "python -m tools.regions --write" in p.stdout
 
 
 def test_hashes_write_keeps_the_rest_of_meta(tmp_path):
     meta = tmp_path / "meta.yaml"
-    shutil.copy(ct.META, meta)
+    shutil.copy(common.META, meta)
     before = yaml.safe_load(meta.read_text())
     before_hashes = dict(before["region_hashes"])
     changed = dict(before, region_hashes={k: "0" * 64 for k in before_hashes})
     meta.write_text(yaml.safe_dump(changed, sort_keys=False))
-    run_script("chapter_tools.py", "hashes", "--write", "--meta", meta)
+    run_script("-m", "tools.regions", "--write", "--meta", meta)
     after = yaml.safe_load(meta.read_text())
-    assert after["region_hashes"] == ct.region_hashes(ct.SCRIPT)
-    assert {k: v for k, v in after.items() if k != "region_hashes"} == {k: v for k, v in before.items() if k != "region_hashes"}
+    assert after["region_hashes"] == regions.region_hashes(common.SCRIPT)
+    assert {k: v for k, v in after.items() if k != "region_hashes"} == {
+        k: v for k, v in before.items() if k != "region_hashes"
+    }
     assert list(after)[:3] == ["id", "title", "track"]
 
 
 def test_meta_yaml_schema():
-    m = ct.load_yaml(ct.META)
+    m = meta_tool.load_yaml(common.META)
     assert m["id"] == "ch3.7-scale-data" and m["title"] == "Datasets at Scale" and len(m["objectives"]) == 4
-    assert m["mimicgen"]["commit"] == "ea0988523f468ccf7570475f1906023f854962e9" and m["mimicgen"]["tag"] == "v1.0.0"
-    assert [f["path"] for f in m["mimicgen"]["files"]] == ["mimicgen/utils/pose_utils.py", "mimicgen/scripts/generate_dataset.py"]
+    assert (
+        m["mimicgen"]["commit"] == "ea0988523f468ccf7570475f1906023f854962e9"
+        and m["mimicgen"]["tag"] == "v1.0.0"
+    )
+    assert [f["path"] for f in m["mimicgen"]["files"]] == [
+        "mimicgen/utils/pose_utils.py",
+        "mimicgen/scripts/generate_dataset.py",
+    ]
     ex = m["exercise_checks"]
     assert ex["ex1"]["seed"] == 0 and ex["ex1"]["answer"] in ("A", "B", "C") and ex["ex1"]["band"]
     assert ex["ex2"] == {"pusht_mask_density": 0.333333}
     assert ex["ex3"]["aug_per_demo"] == [0, 4, 8] and ex["ex3"]["answer"] in ("climb", "plateau", "fall")
-    assert ex["ex3"]["plateau_tol"] == ct.PLATEAU_TOL
+    assert ex["ex3"]["plateau_tol"] == rules.PLATEAU_TOL
     for k in ("0", "4", "8"):
         lo, hi = ex["ex3"]["band"][k]
         assert 0.0 <= lo <= hi <= 1.0
     ref = m["reference_run"]
     assert isinstance(ref["provisional"], bool)
     prov = ref["seeds"]["provenance"]
-    assert prov["command"].startswith("python chapter_tools.py sweep") and prov["date_utc"].endswith("Z")
+    assert prov["command"].startswith("python -m tools.sweep --seeds") and prov["date_utc"].endswith("Z")
+    assert ref["aug_curve"]["provenance"]["command"].startswith("python -m tools.sweep --aug")
     assert set(prov["packages"]) == {"torch", "lerobot", "mujoco", "numpy"} and prov["platform"]["cpu_count"]
     assert ref["provisional"] == ("--smoke" in prov["command"])
+    assert ref["rules"] == rules.RULES  # the published rules are the code's (exercises/rules.py)
 
 
 # ----------------------------------------------------------------------------------------------
-# Meta derivation rules
+# meta.yaml from sweep files (the rules themselves: tests/test_exercises.py)
 # ----------------------------------------------------------------------------------------------
-def test_ex1_answer_rule_both_ways():
-    assert ct.ex1_answer([0.28, 0.12, 0.12]) == "A"
-    assert ct.ex1_answer([-0.1, -0.02]) == "B"
-    assert ct.ex1_answer([0.2, 0.0, 0.1]) == "C"  # a tie on one seed is not "helps on every seed"
-    assert ct.ex1_answer([0.2, -0.1]) == "C"
-    with pytest.raises(ct.ToolError):
-        ct.ex1_answer([])
-
-
-def test_ex1_band_rule():
-    assert ct.ex1_band("A", 0.28, [0.2, 0.4]) == {"scale_effect_min": 0.14}
-    assert ct.ex1_band("B", -0.1, [0.0, 0.1]) == {"scale_effect_max": -0.05}
-    c = ct.ex1_band("C", 0.02, [0.1, 0.5])  # Wilson half-width 0.2 -> margin 0.1 > 0.06
-    assert c == {"scale_effect_min": -0.08, "scale_effect_max": 0.12}
-    assert ct.ex1_band("C", 0.0, [0.0, 0.1]) == {"scale_effect_min": -0.06, "scale_effect_max": 0.06}
-
-
-def test_ex3_answer_rule_both_ways():
-    tol = ct.PLATEAU_TOL
-    assert ct.ex3_answer(0.1, 0.2, 0.3) == "climb"
-    assert ct.ex3_answer(0.1, 0.2, 0.2 + tol) == "plateau"  # a step of exactly tol is flat
-    assert ct.ex3_answer(0.1, 0.22, 0.26) == "plateau" and ct.ex3_answer(0.26, 0.22, 0.18) == "plateau"  # float noise
-    assert ct.ex3_answer(0.1, 0.3, 0.2) == "fall"
-    assert ct.ex3_answer(0.1, 0.1, 0.3) == "climb"  # the last step decides: still climbing at the end
-    assert ct.ex3_answer(0.3, 0.1, 0.12) == "plateau"
-
-
-def test_success_band_rule_margin_and_clipping():
-    assert ct.band_margin([0.19, 0.44]) == pytest.approx(0.0625)  # Wilson half-width 0.125, halved
-    assert ct.success_band(0.3, [0.19, 0.44]) == [0.2375, 0.3625]
-    assert ct.success_band(0.3, [0.25, 0.35]) == [0.24, 0.36]  # narrow interval: the 0.06 floor
-    assert ct.success_band(0.02, [0.0, 0.1]) == [0.0, 0.08]  # clipped at 0, margin 0.06
-    assert ct.success_band(0.98, [0.9, 1.0]) == [0.92, 1.0]  # clipped at 1
-
-
 def sweep_files(tmp_path, deltas, aug_success, smoke=False):
     def row(extra, src, aug):
-        ci = {k: [max(0, v - 0.1), min(1, v + 0.1)] for k, v in (("source", src), ("augmented", aug), ("compute_matched", src))}
-        return {**extra, "source": src, "augmented": aug, "compute_matched": src, "delta": round(aug - src, 6),
-                "yield": 1.0, "kept": 96, "attempts": 96, "coverage_source": 12, "coverage_union": 32, "ci95": ci, "wall_s": 1}
+        ci = {
+            k: [max(0, v - 0.1), min(1, v + 0.1)]
+            for k, v in (("source", src), ("augmented", aug), ("compute_matched", src))
+        }
+        return {
+            **extra,
+            "source": src,
+            "augmented": aug,
+            "compute_matched": src,
+            "delta": round(aug - src, 6),
+            "yield": 1.0,
+            "kept": 96,
+            "attempts": 96,
+            "coverage_source": 12,
+            "coverage_union": 32,
+            "ci95": ci,
+            "wall_s": 1,
+        }
+
     rows = [row({"seed": s}, 0.1, 0.1 + d) for s, d in enumerate(deltas)]
-    seeds = {"kind": "seeds", "smoke": smoke, "command": "python chapter_tools.py sweep --seeds 3", "date_utc": "2025-01-01T00:00:00Z",
-             "platform": {"cpu_count": 2}, "packages": {}, "config": {}, "action_dims": {"pusht": 2, "aloha": 6},
-             "padded_action_dim": 6, "rows": rows, "mean": ct.mean_row(rows), "paired": ct.paired(rows),
-             "script_region_hashes": ct.region_hashes()}
-    aug = {"kind": "aug", "smoke": smoke, "seed": 0, "command": "python chapter_tools.py sweep --aug 0 4 8",
-           "rows": [row({"aug_per_demo": k}, aug_success[0], s) for k, s in zip((0, 4, 8), aug_success)],
-           "script_region_hashes": ct.region_hashes()}
+    seeds = {
+        "kind": "seeds",
+        "smoke": smoke,
+        "command": "python -m tools.sweep --seeds 3",
+        "date_utc": "2025-01-01T00:00:00Z",
+        "platform": {"cpu_count": 2},
+        "packages": {},
+        "config": {},
+        "action_dims": {"pusht": 2, "aloha": 6},
+        "padded_action_dim": 6,
+        "rows": rows,
+        "mean": sweep_tool.mean_row(rows),
+        "paired": sweep_tool.paired(rows),
+        "script_region_hashes": regions.region_hashes(),
+    }
+    aug = {
+        "kind": "aug",
+        "smoke": smoke,
+        "seed": 0,
+        "command": "python -m tools.sweep --aug 0 4 8",
+        "rows": [row({"aug_per_demo": k}, aug_success[0], s) for k, s in zip((0, 4, 8), aug_success)],
+        "script_region_hashes": regions.region_hashes(),
+    }
     a, b = tmp_path / "sweep_seeds.json", tmp_path / "sweep_aug.json"
     a.write_text(json.dumps(seeds))
     b.write_text(json.dumps(aug))
     return a, b
 
 
-@pytest.mark.parametrize("deltas, aug, ex1, ex3, smoke", [
-    ([0.28, 0.12, 0.12], [0.02, 0.2, 0.3], "A", "climb", False),
-    ([-0.1, -0.2], [0.3, 0.2, 0.1], "B", "fall", True),
-    ([0.1, -0.1], [0.1, 0.2, 0.21], "C", "plateau", False),
-])
+@pytest.mark.parametrize(
+    "deltas, aug, ex1, ex3, smoke",
+    [
+        ([0.28, 0.12, 0.12], [0.02, 0.2, 0.3], "A", "climb", False),
+        ([-0.1, -0.2], [0.3, 0.2, 0.1], "B", "fall", True),
+        ([0.1, -0.1], [0.1, 0.2, 0.21], "C", "plateau", False),
+    ],
+)
 def test_meta_command_derives_checks_from_sweep_files(tmp_path, deltas, aug, ex1, ex3, smoke):
     a, b = sweep_files(tmp_path, deltas, aug, smoke)
     meta = tmp_path / "meta.yaml"
-    meta.write_text(yaml.safe_dump({"id": "ch3.7-scale-data", "title": "Custom title kept", "extra": {"kept": True}}))
-    run_script("chapter_tools.py", "meta", "--sweep", a, "--aug-sweep", b, "--meta", meta)
+    meta.write_text(
+        yaml.safe_dump({"id": "ch3.7-scale-data", "title": "Custom title kept", "extra": {"kept": True}})
+    )
+    run_script("-m", "tools.meta", "--sweep", a, "--aug-sweep", b, "--meta", meta)
     m = yaml.safe_load(meta.read_text())
-    assert m["title"] == "Custom title kept" and m["extra"] == {"kept": True} and m["mimicgen"]["tag"] == "v1.0.0"
+    assert (
+        m["title"] == "Custom title kept"
+        and m["extra"] == {"kept": True}
+        and m["mimicgen"]["tag"] == "v1.0.0"
+    )
     ex = m["exercise_checks"]
     assert ex["ex1"]["answer"] == ex1 and ex["ex3"]["answer"] == ex3
     assert ex["ex2"]["pusht_mask_density"] == 0.333333
@@ -224,7 +305,47 @@ def test_meta_command_derives_checks_from_sweep_files(tmp_path, deltas, aug, ex1
         assert ex["ex1"]["band"] == {"scale_effect_min": 0.14}
     assert m["reference_run"]["provisional"] is smoke
     assert m["reference_run"]["seeds"]["paired"]["wins"] == sum(d > 0 for d in deltas)
-    assert m["region_hashes"] == ct.region_hashes()
+    assert m["region_hashes"] == regions.region_hashes()
+    assert m["reference_run"]["rules"] == rules.RULES
+
+
+def _drop(d: dict, key: str) -> dict:
+    return {k: v for k, v in d.items() if k != key}
+
+
+CORRUPT_SWEEPS = [  # (which file, how it is broken, what the one error line says)
+    ("seeds", None, "not found; run the sweeps first: python -m tools.sweep --seeds 3"),
+    ("seeds", lambda s: "{not json", "is not a readable JSON sweep file"),
+    ("aug", lambda s: json.dumps(s)[:-30], "is not a readable JSON sweep file"),  # cut short
+    ("seeds", lambda s: "[]", "--sweep"),
+    ("aug", lambda s: json.dumps(dict(s, kind="seeds")), "--aug-sweep"),
+    ("seeds", lambda s: json.dumps(_drop(s, "paired")), "lacks paired"),
+    ("seeds", lambda s: json.dumps(dict(s, rows=[])), "rows (a non-empty list)"),
+    ("seeds", lambda s: json.dumps(dict(s, rows=[_drop(r, "delta") for r in s["rows"]])), "rows[0].delta"),
+    (
+        "aug",
+        lambda s: json.dumps(dict(s, rows=[dict(r, ci95={}) for r in s["rows"]])),
+        "rows[0].ci95.augmented",
+    ),
+    ("aug", lambda s: json.dumps(dict(s, rows=s["rows"][:2])), "must cover aug_per_demo 0, 4, 8"),
+    ("seeds", lambda s: json.dumps(dict(s, action_dims={})), "malformed"),
+    ("seeds", lambda s: json.dumps(dict(s, rows=[dict(r, delta="x") for r in s["rows"]])), "malformed"),
+]
+
+
+@pytest.mark.parametrize("which, corrupt, needle", CORRUPT_SWEEPS)
+def test_meta_command_refuses_a_corrupt_sweep_file_in_one_line(tmp_path, which, corrupt, needle):
+    a, b = sweep_files(tmp_path, [0.1, 0.2], [0.1, 0.2, 0.3])
+    path = a if which == "seeds" else b
+    if corrupt is None:
+        path.unlink()
+    else:
+        path.write_text(corrupt(json.loads(path.read_text())))
+    meta = tmp_path / "meta.yaml"
+    p = run_script("-m", "tools.meta", "--sweep", a, "--aug-sweep", b, "--meta", meta, check=False)
+    assert p.returncode == 2 and p.stderr.startswith("error: ") and needle in p.stderr, p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr
+    assert not meta.exists()  # nothing written
 
 
 # ----------------------------------------------------------------------------------------------
@@ -244,7 +365,8 @@ STUB = textwrap.dedent('''
     arm = lambda s: {"success": s, "ci95": [max(0.0, s - 0.1), min(1.0, s + 0.1)]}
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "metrics.json").write_text(json.dumps({
-        "config": {"seed": a.seed, "aug_per_demo": a.aug_per_demo, "device": "cpu", "smoke": a.smoke, "rerun": a.rerun},
+        "config": {"seed": a.seed, "aug_per_demo": a.aug_per_demo, "device": "cpu", "smoke": a.smoke,
+                   "rerun": a.rerun},
         "arms": {"source": arm(src), "augmented": arm(aug), "compute_matched": arm((src + aug) / 2)},
         "scale_effect": aug - src, "yield": 1.0, "kept": 12 * a.aug_per_demo, "attempts": 12 * a.aug_per_demo,
         "coverage": {"source": 12, "union": 12 + a.aug_per_demo}, "action_dims": {"pusht": 2, "aloha": 6},
@@ -261,7 +383,9 @@ def stub(tmp_path):
 
 def test_sweep_aug_mode_and_flag_passthrough(tmp_path, stub):
     out = tmp_path / "sw"
-    p = run_script("chapter_tools.py", "sweep", "--aug", "0", "4", "8", "--script", stub, "--out-root", out, "--smoke")
+    p = run_script(
+        "-m", "tools.sweep", "--aug", "0", "4", "8", "--script", stub, "--out-root", out, "--smoke"
+    )
     s = json.loads((out / "sweep_aug.json").read_text())
     assert s["kind"] == "aug" and s["smoke"] is True and s["seed"] == 0
     assert [r["aug_per_demo"] for r in s["rows"]] == [0, 4, 8]
@@ -273,27 +397,42 @@ def test_sweep_aug_mode_and_flag_passthrough(tmp_path, stub):
 
 def test_sweep_refuses_flags_it_owns(tmp_path, stub):
     for flag in ("--seed", "--out", "--no-rerun"):
-        p = run_script("chapter_tools.py", "sweep", "--seeds", "2", "--script", stub, "--out-root", tmp_path, flag, "1",
-                       check=False)
+        p = run_script(
+            "-m",
+            "tools.sweep",
+            "--seeds",
+            "2",
+            "--script",
+            stub,
+            "--out-root",
+            tmp_path,
+            flag,
+            "1",
+            check=False,
+        )
         assert p.returncode == 2 and flag in p.stderr
-    p = run_script("chapter_tools.py", "sweep", "--script", stub, check=False)
+    p = run_script("-m", "tools.sweep", "--script", stub, check=False)
     assert p.returncode == 2 and "--seeds" in p.stderr
 
 
 def test_paired_stats():
-    rows = [{"source": 0.02, "augmented": 0.30}, {"source": 0.08, "augmented": 0.20}, {"source": 0.14, "augmented": 0.26}]
-    pr = ct.paired(rows)
+    rows = [
+        {"source": 0.02, "augmented": 0.30},
+        {"source": 0.08, "augmented": 0.20},
+        {"source": 0.14, "augmented": 0.26},
+    ]
+    pr = sweep_tool.paired(rows)
     assert (pr["n"], pr["wins"], pr["ties"], pr["losses"]) == (3, 3, 0, 0)
     assert pr["mean_delta"] == pytest.approx(0.173333, abs=1e-6)
     assert pr["std_delta"] == pytest.approx(0.092376, abs=1e-6)
-    assert pr["sem_delta"] == pytest.approx(0.092376 / 3 ** 0.5, abs=1e-6)
-    one = ct.paired(rows[:1])
+    assert pr["sem_delta"] == pytest.approx(0.092376 / 3**0.5, abs=1e-6)
+    one = sweep_tool.paired(rows[:1])
     assert one["std_delta"] is None and one["sem_delta"] is None
 
 
 @contextlib.contextmanager
 def fresh_result_cache(path):
-    """Point scale_data.py's result cache (chapter_io.cache_root) at an empty folder for the duration."""
+    """Point scale_data.py's result cache (ch37.result_cache.cache_root) at an empty folder for a while."""
     old = os.environ.get("CH37_CACHE_DIR")
     os.environ["CH37_CACHE_DIR"] = str(path)
     try:
@@ -310,7 +449,7 @@ def smoke_sweep(tmp_path_factory):
     """The real scale_data.py at --smoke size, seeds 0 and 1."""
     out = tmp_path_factory.mktemp("sweep")
     with fresh_result_cache(tmp_path_factory.mktemp("cache")):  # really run, never replay a cached result
-        p = run_script("chapter_tools.py", "sweep", "--seeds", "2", "--smoke", "--out-root", out)
+        p = run_script("-m", "tools.sweep", "--seeds", "2", "--smoke", "--out-root", out)
     return out, p
 
 
@@ -322,43 +461,67 @@ def test_sweep_seeds_on_smoke_writes_the_table_and_paired_stats(smoke_sweep):
         m = json.loads((out / "seeds" / f"seed{r['seed']}" / "metrics.json").read_text())
         assert m["seed"] == r["seed"] and m["config"]["rerun"] is False
         assert r["source"] == m["arms"]["source"]["success"] and r["kept"] == m["kept"]
-        assert r["coverage_union"] == m["coverage"]["union"] and r["delta"] == pytest.approx(m["scale_effect"])
-    assert set(s["mean"]) >= {"source", "augmented", "compute_matched", "delta", "yield", "kept", "coverage_union"}
+        assert r["coverage_union"] == m["coverage"]["union"] and r["delta"] == pytest.approx(
+            m["scale_effect"]
+        )
+    assert set(s["mean"]) >= {
+        "source",
+        "augmented",
+        "compute_matched",
+        "delta",
+        "yield",
+        "kept",
+        "coverage_union",
+    }
     assert s["paired"]["n"] == 2 and s["paired"]["wins"] + s["paired"]["ties"] + s["paired"]["losses"] == 2
     assert s["paired"]["std_delta"] is not None and s["paired"]["sem_delta"] is not None
-    assert s["command"] == "python chapter_tools.py sweep --seeds 2 --smoke --out-root " + str(out)
+    assert s["command"] == "python -m tools.sweep --seeds 2 --smoke --out-root " + str(out)
     assert s["date_utc"].endswith("Z") and s["platform"]["python"] == ".".join(map(str, sys.version_info[:3]))
-    assert s["packages"]["torch"] and s["packages"]["lerobot"] and s["packages"]["mujoco"] and s["packages"]["numpy"]
+    assert (
+        s["packages"]["torch"]
+        and s["packages"]["lerobot"]
+        and s["packages"]["mujoco"]
+        and s["packages"]["numpy"]
+    )
     assert s["config"]["smoke"] is True and "seed" not in s["config"]
-    assert s["script_region_hashes"] == ct.region_hashes()
-    assert "paired: augmented beat source on" in p.stdout and "mean" in p.stdout and "sweep_seeds.json" in p.stdout
+    assert s["script_region_hashes"] == regions.region_hashes()
+    assert (
+        "paired: augmented beat source on" in p.stdout
+        and "mean" in p.stdout
+        and "sweep_seeds.json" in p.stdout
+    )
 
 
 # ----------------------------------------------------------------------------------------------
 # Notebook
 # ----------------------------------------------------------------------------------------------
 def test_notebook_is_fresh_and_deterministic():
-    text = ct.build_notebook()
-    assert text == ct.build_notebook()
-    assert ct.NOTEBOOK.read_text() == text, "scale_data.ipynb is stale: run python chapter_tools.py notebook"
+    text = notebook.build_notebook()
+    assert text == notebook.build_notebook()
+    assert common.NOTEBOOK.read_text() == text, "scale_data.ipynb is stale: run python -m tools.notebook"
     nbformat = pytest.importorskip("nbformat")
     nb = nbformat.reads(text, as_version=4)
     nbformat.validate(nb)
     code = [c for c in nb.cells if c.cell_type == "code"]
-    regions = ct.parse_regions()
-    assert [c.source for c in code[2:]] == [r.code for r in regions]
-    assert nb.cells[0].source.startswith("# Chapter 3.7")
-    assert 'sys.argv = ["scale_data.py", "--seed", "0", "--no-cache"]' in code[1].source and "--smoke" in code[1].source
+    assert [c.source for c in code[2:]] == [r.code for r in regions.parse_regions()]
+    assert (
+        nb.cells[0].source.startswith("# Chapter 3.7")
+        and "by `python -m tools.notebook`" in nb.cells[0].source
+    )
+    assert (
+        'sys.argv = ["scale_data.py", "--seed", "0", "--no-cache"]' in code[1].source
+        and "--smoke" in code[1].source
+    )
     assert "%pip install -q -e ." in code[0].source and 'find_spec("lerobot") is None' in code[0].source
 
 
 def test_notebook_check_flags_a_stale_notebook(tmp_path):
     copy, nb = tmp_path / "scale_data.py", tmp_path / "scale_data.ipynb"
-    shutil.copy(ct.SCRIPT, copy)
-    run_script("chapter_tools.py", "notebook", "--script", copy, "--out", nb)
-    assert run_script("chapter_tools.py", "notebook", "--check", "--script", copy, "--out", nb).returncode == 0
+    shutil.copy(common.SCRIPT, copy)
+    run_script("-m", "tools.notebook", "--script", copy, "--out", nb)
+    assert run_script("-m", "tools.notebook", "--check", "--script", copy, "--out", nb).returncode == 0
     copy.write_text(copy.read_text().replace("# --- endregion ---", "x = 1\n# --- endregion ---", 1))
-    p = run_script("chapter_tools.py", "notebook", "--check", "--script", copy, "--out", nb, check=False)
+    p = run_script("-m", "tools.notebook", "--check", "--script", copy, "--out", nb, check=False)
     assert p.returncode == 1 and "stale" in p.stdout
 
 
@@ -372,16 +535,30 @@ def test_notebook_runs_end_to_end_in_smoke_mode(tmp_path, smoke_sweep):
     # A kernel spec for this very interpreter, so no installed kernel (or its absence) matters.
     spec = tmp_path / "kernels" / "ch37-python"
     spec.mkdir(parents=True)
-    (spec / "kernel.json").write_text(json.dumps({"argv": [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"],
-                                                  "display_name": "ch3.7", "language": "python"}))
-    km = KernelManager(kernel_name="ch37-python", kernel_spec_manager=KernelSpecManager(kernel_dirs=[str(spec.parent)]))
-    nb = nbformat.read(ct.NOTEBOOK, as_version=4)
+    (spec / "kernel.json").write_text(
+        json.dumps(
+            {
+                "argv": [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"],
+                "display_name": "ch3.7",
+                "language": "python",
+            }
+        )
+    )
+    km = KernelManager(
+        kernel_name="ch37-python", kernel_spec_manager=KernelSpecManager(kernel_dirs=[str(spec.parent)])
+    )
+    nb = nbformat.read(common.NOTEBOOK, as_version=4)
     out = tmp_path / "out"
     (argv_cell,) = [c for c in nb.cells if "argv" in c.metadata.get("tags", [])]
     argv = ["scale_data.py", "--smoke", "--seed", "0", "--no-rerun", "--out", str(out)]
     argv_cell.source = f"import sys\nsys.argv = {argv!r}"
-    env = dict(os.environ, HF_HUB_OFFLINE="1", HF_DATASETS_OFFLINE="1", MPLBACKEND="Agg",
-               CH37_CACHE_DIR=str(tmp_path / "cache"))  # an empty result cache: the notebook really runs
+    env = dict(
+        os.environ,
+        HF_HUB_OFFLINE="1",
+        HF_DATASETS_OFFLINE="1",
+        MPLBACKEND="Agg",
+        CH37_CACHE_DIR=str(tmp_path / "cache"),
+    )  # an empty result cache: the notebook really runs
     client = nbclient.NotebookClient(nb, km=km, timeout=600, resources={"metadata": {"path": str(ROOT)}})
     client.execute(env=env)
     text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs)
@@ -394,49 +571,116 @@ def test_notebook_runs_end_to_end_in_smoke_mode(tmp_path, smoke_sweep):
 # ----------------------------------------------------------------------------------------------
 # Wall-clock
 # ----------------------------------------------------------------------------------------------
+def test_wallclock_tiers_are_the_banners_tiers():
+    assert wallclock.TIERS is ch37.cli.TIERS  # one list of tiers, the one the banner reads
+
+
 def test_wallclock_row_replaces_only_its_tier(tmp_path):
     path = tmp_path / "wallclock.csv"
-    ct.write_wallclock_row(path, {"chapter": ct.CHAPTER_ID, "tier": "t4", "minutes": "1.37", "config_hash": "abc",
-                                  "date": "2025-01-01", "status": "measured"})
+    wallclock.write_wallclock_row(
+        path,
+        {
+            "chapter": CHAPTER_ID,
+            "tier": "t4",
+            "minutes": "1.37",
+            "config_hash": "abc",
+            "date": "2025-01-01",
+            "status": "measured",
+        },
+    )
     rows = list(csv.DictReader(path.open()))
-    assert [r["tier"] for r in rows] == list(ct.TIERS) and list(rows[0]) == list(ct.WALLCLOCK_FIELDS)
-    assert [r["status"] for r in rows] == ["pending", "pending", "measured", "pending", "pending"]
+    assert [r["tier"] for r in rows] == list(wallclock.TIERS) and list(rows[0]) == list(
+        wallclock.WALLCLOCK_FIELDS
+    )
+    assert [r["status"] for r in rows] == ["measured" if t == "t4" else "pending" for t in wallclock.TIERS]
     assert all(r["minutes"] == "" for r in rows if r["status"] == "pending")
-    ct.write_wallclock_row(path, {"chapter": ct.CHAPTER_ID, "tier": "cpu-2core", "minutes": "1.66", "config_hash": "def",
-                                  "date": "2025-01-02", "status": "measured"})
-    ct.write_wallclock_row(path, {"chapter": ct.CHAPTER_ID, "tier": "t4", "minutes": "1.40", "config_hash": "abc",
-                                  "date": "2025-01-03", "status": "measured"})
+    wallclock.write_wallclock_row(
+        path,
+        {
+            "chapter": CHAPTER_ID,
+            "tier": "cpu-2core",
+            "minutes": "1.66",
+            "config_hash": "def",
+            "date": "2025-01-02",
+            "status": "measured",
+        },
+    )
+    wallclock.write_wallclock_row(
+        path,
+        {
+            "chapter": CHAPTER_ID,
+            "tier": "t4",
+            "minutes": "1.40",
+            "config_hash": "abc",
+            "date": "2025-01-03",
+            "status": "measured",
+        },
+    )
     rows = {r["tier"]: r for r in csv.DictReader(path.open())}
-    assert len(rows) == len(ct.TIERS)
-    assert rows["t4"]["minutes"] == "1.40" and rows["cpu-2core"]["minutes"] == "1.66" and rows["mps"]["status"] == "pending"
-    assert chapter_io.expected_wallclock("t4", path).startswith("about 1.4 min")
-    assert "not yet measured" in chapter_io.expected_wallclock("mps", path)
+    assert len(rows) == len(wallclock.TIERS)
+    assert (
+        rows["t4"]["minutes"] == "1.40"
+        and rows["cpu-2core"]["minutes"] == "1.66"
+        and rows["mps"]["status"] == "pending"
+    )
+    assert ch37.cli.expected_wallclock("t4", path).startswith("about 1.4 min")
+    assert "not yet measured" in ch37.cli.expected_wallclock("mps", path)
 
 
 def test_wallclock_cli_smoke_never_writes(tmp_path, stub):
     path = tmp_path / "wallclock.csv"
-    p = run_script("chapter_tools.py", "wallclock", "--smoke", "--script", stub, "--csv", path)
+    p = run_script("-m", "tools.wallclock", "--smoke", "--script", stub, "--csv", path)
     assert "not written" in p.stdout and not path.exists()
-    p = run_script("chapter_tools.py", "wallclock", "--dry-run", "--script", stub, "--csv", path)
+    p = run_script("-m", "tools.wallclock", "--dry-run", "--script", stub, "--csv", path)
     assert "not written" in p.stdout and not path.exists()
-    p = run_script("chapter_tools.py", "wallclock", "--script", stub, "--csv", path, "--tier", "mps")
+    p = run_script("-m", "tools.wallclock", "--script", stub, "--csv", path, "--tier", "mps")
     row = {r["tier"]: r for r in csv.DictReader(path.open())}["mps"]
     assert row["status"] == "measured" and float(row["minutes"]) >= 0 and len(row["config_hash"]) == 12
 
 
 def test_config_hash_ignores_only_device_workers_cache():
     c = {"seed": 0, "epochs": 500, "device": "cpu", "workers": 2, "cache": False}
-    assert ct.config_hash(c) == ct.config_hash(dict(c, device="cuda", workers=8, cache=True)) != ct.config_hash(dict(c, epochs=499))
-    assert ct.config_hash(c) == ct.config_hash(dict(reversed(list(c.items()))))
+    h = wallclock.config_hash
+    assert h(c) == h(dict(c, device="cuda", workers=8, cache=True)) != h(dict(c, epochs=499))
+    assert h(c) == h(dict(reversed(list(c.items()))))
 
 
 def test_wallclock_csv_in_repo_is_well_formed():
-    rows = list(csv.DictReader(ct.WALLCLOCK.open()))
-    assert list(rows[0]) == list(ct.WALLCLOCK_FIELDS)
-    assert {r["tier"] for r in rows} >= set(ct.TIERS)
+    rows = list(csv.DictReader(common.WALLCLOCK.open()))
+    assert list(rows[0]) == list(wallclock.WALLCLOCK_FIELDS)
+    assert {r["tier"] for r in rows} >= set(wallclock.TIERS)
     for r in rows:
-        assert r["chapter"] == ct.CHAPTER_ID and r["status"] in ("measured", "pending")
+        assert r["chapter"] == CHAPTER_ID and r["status"] in ("measured", "pending")
         if r["status"] == "measured":
             assert float(r["minutes"]) > 0 and len(r["config_hash"]) == 12 and r["date"]
         else:
             assert r["minutes"] == ""
+
+
+# ----------------------------------------------------------------------------------------------
+# The tools themselves
+# ----------------------------------------------------------------------------------------------
+def test_every_tool_writes_through_the_one_atomic_helper():
+    """Code, not strings (the notebook's install cell may touch sys.path): no write but write_atomic,
+    no ROOT but ch37.ROOT, no sys.path edits."""
+    for path in sorted((ROOT / "tools").glob("*.py")):
+        tree = ast.parse(path.read_text())
+        defs = {n.name for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)}
+        attrs = {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)}
+        paths = [
+            n
+            for n in ast.walk(tree)
+            if isinstance(n, ast.Attribute)
+            and n.attr == "path"
+            and isinstance(n.value, ast.Name)
+            and n.value.id == "sys"
+        ]
+        assigned = {
+            t.id
+            for n in ast.walk(tree)
+            if isinstance(n, ast.Assign)
+            for t in n.targets
+            if isinstance(t, ast.Name)
+        }
+        assert "write_atomic" not in defs and not {"write_text", "write_bytes"} & attrs, path.name
+        assert not paths and "ROOT" not in assigned, path.name

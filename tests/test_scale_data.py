@@ -1,18 +1,22 @@
 """scale_data.py end to end at --smoke size: determinism, no data loss, bad flags, the lesson's invariants."""
+
 import hashlib
 import json
 import shutil
 
 import numpy as np
 import pytest
-
-import demo_data
 from conftest import run_script
+
+from ch37 import lerobot_io, stamps
+from ch37.seeds import env_seed
 
 
 def smoke(out, *extra, check=True, cache=False):
     flags = () if cache else ("--no-cache",)
-    return run_script("scale_data.py", "--smoke", "--seed", "0", "--no-rerun", "--out", out, *flags, *extra, check=check)
+    return run_script(
+        "scale_data.py", "--smoke", "--seed", "0", "--no-rerun", "--out", out, *flags, *extra, check=check
+    )
 
 
 @pytest.fixture(scope="module")
@@ -33,7 +37,7 @@ def tree_digest(path):
 
 
 def test_smoke_twice_is_byte_identical(runs):
-    (a, pa), (b, pb) = runs["a"], runs["b"]
+    (a, pa), (b, _) = runs["a"], runs["b"]
     for name in ("metrics.json", "cross_embodiment.json"):
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
     assert "headline:" in pa.stdout and "metrics.json" in pa.stdout.strip().splitlines()[-1]
@@ -57,11 +61,13 @@ def test_stats_match_lerobot_meta_stats(runs):
     for e in cross["embodiments"]:
         (root,) = (a / "demos").glob(f"{e['name']}_seed0_*")
         meta = json.loads((root / "meta" / "stats.json").read_text())
-        raw = demo_data.load_arrays(root)
+        raw = lerobot_io.load_arrays(root)
         for part, key in (("state", "observation.state"), ("action", "action")):
             ours, theirs = e["stats"][part], meta[key]
             for stat in ("min", "max", "mean"):
-                np.testing.assert_allclose(ours[stat], theirs[stat], atol=1e-5, err_msg=f"{e['name']} {key} {stat}")
+                np.testing.assert_allclose(
+                    ours[stat], theirs[stat], atol=1e-5, err_msg=f"{e['name']} {key} {stat}"
+                )
             np.testing.assert_allclose(ours["std"], theirs["std"], atol=1e-4, rtol=1e-3)
             # ours are global quantiles; LeRobot's q01/q99 are count-weighted means of per-episode
             # (histogram) quantiles. Check ours against the data, and LeRobot's convention against it too.
@@ -69,7 +75,9 @@ def test_stats_match_lerobot_meta_stats(runs):
             span = np.maximum(np.array(theirs["max"]) - np.array(theirs["min"]), 1e-6)
             for q, frac in (("q01", 0.01), ("q99", 0.99)):
                 np.testing.assert_allclose(ours[q], np.quantile(x, frac, axis=0), atol=1e-5)
-                per_ep = sum(np.quantile(x[ep == i], frac, axis=0) * (ep == i).sum() for i in np.unique(ep)) / len(ep)
+                per_ep = sum(
+                    np.quantile(x[ep == i], frac, axis=0) * (ep == i).sum() for i in np.unique(ep)
+                ) / len(ep)
                 assert np.all(np.abs(per_ep - np.array(theirs[q])) <= 0.05 * span + 1e-6), (e["name"], key, q)
             assert np.all(np.array(ours["q01"]) <= np.array(ours["q99"]))
 
@@ -101,25 +109,36 @@ def test_augmentation_is_nested(runs, tmp_path):
     starts = {}
     for out, k in ((tmp_path, 1), (a, 2)):
         (root,) = (out / "demos").glob(f"pusht_aug_seed0_*_k{k}")
-        d = demo_data.load_arrays(root, keys=("aug.start", "aug.source_episode", "episode_index"))
+        d = lerobot_io.load_arrays(root, keys=("aug.start", "aug.source_episode", "episode_index"))
         first = np.unique(d["episode_index"], return_index=True)[1]
-        starts[k] = {tuple(np.round(d["aug.start"][i], 6)) + (int(np.ravel(d["aug.source_episode"])[i]),) for i in first}
+        starts[k] = {
+            tuple(np.round(d["aug.start"][i], 6)) + (int(np.ravel(d["aug.source_episode"])[i]),)
+            for i in first
+        }
     assert starts[1] and starts[1] < starts[2]
 
 
 def test_aug_set_loads_with_provenance(runs):
     (root,) = (runs["a"][0] / "demos").glob("pusht_aug_seed0_*")
-    ds = demo_data.open_dataset(root)
+    ds = lerobot_io.open_dataset(root)
     m = json.loads((runs["a"][0] / "metrics.json").read_text())
     assert ds.num_episodes == m["kept"] and ds.num_frames == m["augmented_frames"]
     item = ds[0]
     assert item["aug.start"].shape == (5,) and "aug.source_episode" in item
 
 
-@pytest.mark.parametrize("argv,needle", [
-    (["--epochs", "0"], "--epochs"), (["--aug_pos_sigma", "-0.1"], "--aug_pos_sigma"),
-    (["--device", "tpu"], "--device"), (["--batch_size", "abc"], "batch_size"), (["--seed", "-2"], "--seed"),
-    (["--source_episodes", "-3"], "--source_episodes"), (["--lr", "nan"], "--lr")])
+@pytest.mark.parametrize(
+    "argv,needle",
+    [
+        (["--epochs", "0"], "--epochs"),
+        (["--aug_pos_sigma", "-0.1"], "--aug_pos_sigma"),
+        (["--device", "tpu"], "--device"),
+        (["--batch_size", "abc"], "batch_size"),
+        (["--seed", "-2"], "--seed"),
+        (["--source_episodes", "-3"], "--source_episodes"),
+        (["--lr", "nan"], "--lr"),
+    ],
+)
 def test_bad_flags_one_clear_line(tmp_path, argv, needle):
     p = run_script("scale_data.py", *argv, "--out", tmp_path / "o", check=False)
     err = p.stderr.strip().splitlines()
@@ -140,7 +159,7 @@ def test_user_dataset_is_used_as_given_and_never_touched(runs, tmp_path):
     (src,) = (runs["a"][0] / "demos").glob("pusht_seed0_*")
     mine = tmp_path / "my_pusht"
     shutil.copytree(src, mine)
-    (mine / demo_data.STAMP_NAME).unlink()  # the user's own set: no stamp of ours
+    (mine / stamps.STAMP_NAME).unlink()  # the user's own set: no stamp of ours
     before = tree_digest(mine)
     p = smoke(tmp_path / "o", "--pusht_data", mine)
     assert "used as given" in p.stdout
@@ -151,7 +170,7 @@ def test_mismatching_user_dataset_is_refused_untouched(runs, tmp_path):
     (aloha,) = (runs["a"][0] / "demos").glob("aloha_seed0_*")
     mine = tmp_path / "wrong"
     shutil.copytree(aloha, mine)
-    (mine / demo_data.STAMP_NAME).unlink()
+    (mine / stamps.STAMP_NAME).unlink()
     before = tree_digest(mine)
     p = smoke(tmp_path / "o", "--pusht_data", mine, check=False)
     assert p.returncode == 2 and "action" in p.stderr and len(p.stderr.strip().splitlines()) == 1
@@ -172,18 +191,20 @@ def test_foreign_directory_at_cache_path_is_refused_untouched(tmp_path):
     (cache / "thesis.tex").write_text("do not lose me")
     p = smoke(tmp_path, check=False)
     assert p.returncode == 2 and "did not make" in p.stderr
-    assert [x.name for x in cache.iterdir()] == ["thesis.tex"] and (cache / "thesis.tex").read_text() == "do not lose me"
+    assert [x.name for x in cache.iterdir()] == ["thesis.tex"] and (
+        cache / "thesis.tex"
+    ).read_text() == "do not lose me"
 
 
 def test_stale_set_we_made_is_rebuilt(runs, tmp_path):
     shutil.copytree(runs["a"][0] / "demos", tmp_path / "demos")
     (root,) = (tmp_path / "demos").glob("pusht_seed0_*")
-    stamp = json.loads((root / demo_data.STAMP_NAME).read_text())
+    stamp = json.loads((root / stamps.STAMP_NAME).read_text())
     stamp["generator_version"] = -1
-    (root / demo_data.STAMP_NAME).write_text(json.dumps(stamp))
+    (root / stamps.STAMP_NAME).write_text(json.dumps(stamp))
     p = smoke(tmp_path)
     assert "generated" in p.stdout
-    assert json.loads((root / demo_data.STAMP_NAME).read_text())["generator_version"] != -1
+    assert json.loads((root / stamps.STAMP_NAME).read_text())["generator_version"] != -1
     assert (tmp_path / "metrics.json").read_bytes() == (runs["a"][0] / "metrics.json").read_bytes()
 
 
@@ -194,7 +215,7 @@ def test_worker_count_never_changes_the_result(runs, tmp_path):
     assert (tmp_path / "metrics.json").read_bytes() == (a / "metrics.json").read_bytes()
     (r1,) = (tmp_path / "demos").glob("pusht_aug*")
     (r2,) = (a / "demos").glob("pusht_aug*")
-    d1, d2 = (demo_data.load_arrays(r, keys=("observation.state", "action", "aug.start")) for r in (r1, r2))
+    d1, d2 = (lerobot_io.load_arrays(r, keys=("observation.state", "action", "aug.start")) for r in (r1, r2))
     assert all(d1[k].tobytes() == d2[k].tobytes() for k in d1)
 
 
@@ -204,47 +225,86 @@ def test_result_cache_reuses_only_the_same_configuration(tmp_path, monkeypatch):
     assert "reusing" not in first.stdout
     again = smoke(tmp_path / "two", cache=True)  # same flags, another --out: served from the cache
     assert "reusing the result" in again.stdout and "augment:" not in again.stdout  # nothing recomputed
-    assert (tmp_path / "two" / "metrics.json").read_bytes() == (tmp_path / "one" / "metrics.json").read_bytes()
+    assert (tmp_path / "two" / "metrics.json").read_bytes() == (
+        tmp_path / "one" / "metrics.json"
+    ).read_bytes()
     assert str(tmp_path / "two") in again.stdout.strip().splitlines()[-1]
     other = smoke(tmp_path / "three", "--aug_yaw_sigma", "0.4", cache=True)  # a flag --smoke does not pin
     assert "reusing" not in other.stdout and "augment:" in other.stdout
-    assert (tmp_path / "three" / "metrics.json").read_bytes() != (tmp_path / "one" / "metrics.json").read_bytes()
+    assert (tmp_path / "three" / "metrics.json").read_bytes() != (
+        tmp_path / "one" / "metrics.json"
+    ).read_bytes()
 
 
 def test_result_key_changes_with_every_input():
-    import chapter_io
+    from ch37 import result_cache
 
-    base = {"seed": 0, "epochs": 500, "smoke": False, "device": "cpu", "out": "a", "workers": 2, "cache": True}
-    k = chapter_io.result_key(base)
-    assert chapter_io.result_key(dict(base, out="b", workers=1, cache=False)) == k  # where and how fast: same result
+    base = {
+        "seed": 0,
+        "epochs": 500,
+        "smoke": False,
+        "device": "cpu",
+        "out": "a",
+        "workers": 2,
+        "cache": True,
+    }
+    k = result_cache.result_key(base)
+    assert (
+        result_cache.result_key(dict(base, out="b", workers=1, cache=False)) == k
+    )  # where and how fast: same result
     for field, value in (("seed", 1), ("epochs", 499), ("smoke", True), ("device", "cuda"), ("lr", 0.01)):
-        assert chapter_io.result_key(dict(base, **{field: value})) != k, field
+        assert result_cache.result_key(dict(base, **{field: value})) != k, field
 
 
 def test_result_key_changes_with_every_code_file(tmp_path, monkeypatch):
-    import chapter_io
+    import ch37
+    from ch37 import result_cache
 
-    for name in chapter_io.CODE_FILES:
-        shutil.copyfile(chapter_io.ROOT / name, tmp_path / name)
-    monkeypatch.setattr(chapter_io, "ROOT", tmp_path)
+    for name in ch37.CODE_FILES:
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(ch37.ROOT / name, tmp_path / name)
+    monkeypatch.setattr(result_cache, "ROOT", tmp_path)
     config = {"seed": 0, "epochs": 500}
-    keys = {chapter_io.result_key(config)}
-    assert {"scale_data.py", "pusht_env.py", "scripted_expert.py", "chapter_io.py"} <= set(chapter_io.CODE_FILES)
-    for name in chapter_io.CODE_FILES:
+    keys = {result_cache.result_key(config)}
+    for name in ch37.CODE_FILES:
         with open(tmp_path / name, "a") as f:
             f.write("\n")
-        keys.add(chapter_io.result_key(config))
-    assert len(keys) == len(chapter_io.CODE_FILES) + 1
+        keys.add(result_cache.result_key(config))
+    assert len(keys) == len(ch37.CODE_FILES) + 1
+
+
+def test_code_files_list_every_file_that_shapes_a_result():
+    """A new module in ch37/ or a new lesson file must join ch37.CODE_FILES, or the cache could
+    replay a result the new code would not give."""
+    import ch37
+
+    lesson = {
+        "scale_data.py",
+        "pusht_env.py",
+        "pusht.xml",
+        "aloha_env.py",
+        "aloha.xml",
+        "scripted_expert.py",
+        "gen_demos_pusht.py",
+        "gen_demos_aloha.py",
+    }
+    shaping = {f"ch37/{p.name}" for p in (ch37.ROOT / "ch37").glob("*.py")} - {
+        "ch37/__init__.py",
+        "ch37/errors.py",
+        "ch37/result_cache.py",
+    }  # these never change a number
+    assert lesson | shaping <= set(ch37.CODE_FILES)
+    assert set(ch37.DATA_CODE) <= set(ch37.CODE_FILES)
 
 
 @pytest.mark.parametrize("workers", [1, 3])
 def test_lockstep_envs_step_each_env_as_if_alone(workers):
     """The evaluation's env pool: any worker count, any subset of envs per step, the same
     trajectories as stepping each env by itself."""
-    import chapter_io
+    from ch37.parallel import LockstepEnvs
     from pusht_env import PushTEnv
 
-    seeds = [demo_data.env_seed(0, "eval", j) for j in range(5)]
+    seeds = [env_seed(0, "eval", j) for j in range(5)]
     acts = np.random.default_rng(0).uniform(-1, 1, (30, len(seeds), 2))
     plan = [[j for j in range(len(seeds)) if (t + j) % 3] for t in range(len(acts))]  # envs stepped at t
     ref = []
@@ -253,7 +313,7 @@ def test_lockstep_envs_step_each_env_as_if_alone(workers):
         traj = [env.reset(s)]
         traj += [env.step(acts[t, j])[0] for t in range(len(acts)) if j in plan[t]]
         ref.append(np.stack(traj))
-    with chapter_io.LockstepEnvs(PushTEnv, seeds, workers=workers) as envs:
+    with LockstepEnvs(PushTEnv, seeds, workers=workers) as envs:
         obs = envs.reset()
         got = [[o] for o in obs]
         for t, idx in enumerate(plan):
@@ -266,10 +326,10 @@ def test_lockstep_envs_step_each_env_as_if_alone(workers):
 
 
 def test_lockstep_envs_raise_a_worker_error():
-    import chapter_io
+    from ch37.parallel import LockstepEnvs
     from pusht_env import PushTEnv
 
-    with chapter_io.LockstepEnvs(PushTEnv, [1, 2], workers=2) as envs:
+    with LockstepEnvs(PushTEnv, [1, 2], workers=2) as envs:
         envs.reset()
         with pytest.raises(ValueError, match="non-finite action"):
             envs.step([0, 1], np.array([[0.0, 0.0], [np.nan, 0.0]]))

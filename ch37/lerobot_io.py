@@ -1,8 +1,9 @@
-"""Plumbing for the chapter's demo sets: LeRobot v3 read/write, seeds, stamps.
+"""LeRobot v3 read and write for the chapter's demo sets: features, write_dataset, load_arrays.
 
-Kept out of scale_data.py so its regions read like the lesson. Everything here is a pure
-function of its arguments: no clock, no global RNG.
+Everything here is a pure function of its arguments: no clock, no global RNG. A set is written
+whole into a sibling temp folder and renamed into place, with the stamp (ch37.stamps) beside it.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -13,27 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ch37.errors import DataError
+from ch37.stamps import STAMP_NAME, holds_data, stamp_text
+
 # torchcodec needs system FFmpeg libraries and prints long tracebacks when they are missing;
 # pyav ships its own FFmpeg, so every dataset here is read and written through pyav.
 VIDEO_BACKEND = "pyav"
-STAMP_NAME = "scale_data_stamp.json"  # written by this project into every set it makes
-MADE_BY = "ch3.7-scale-data"  # the stamp's "made_by": only a set carrying it may ever be deleted
 IMAGE_KEY = "observation.images.top"
-
-# Env seeds are carved into disjoint blocks so that demos, augmentation draws and evaluation
-# starts never share a seed, for any --seed >= 0: env_seed = (seed * 4 + purpose) * 1e6 + i.
-PURPOSES = {"demo": 0, "aug": 1, "eval": 2}
-SEED_BLOCK = 1_000_000
-
-
-def env_seed(seed: int, purpose: str, i: int) -> int:
-    if not (0 <= i < SEED_BLOCK) or seed < 0:
-        raise ValueError(f"seed must be >= 0 and index in [0, {SEED_BLOCK}); got seed={seed}, i={i}")
-    return (seed * len(PURPOSES) + PURPOSES[purpose]) * SEED_BLOCK + i
-
-
-class DataError(Exception):
-    """A problem with a demo directory that the user must fix (printed as one line)."""
+IMAGE_SIZE = 96  # px, the optional top-down video is IMAGE_SIZE x IMAGE_SIZE RGB
 
 
 def _lerobot_dataset_class():
@@ -63,10 +51,6 @@ def _embed_images_if_any(embed):
     return embed_images
 
 
-def holds_data(path: Path) -> bool:
-    return path.exists() and (not path.is_dir() or any(path.iterdir()))
-
-
 def features(state_names, action_names, extra: dict | None = None, video: bool = False) -> dict:
     feats = {
         "observation.state": {"dtype": "float32", "shape": (len(state_names),), "names": list(state_names)},
@@ -74,7 +58,11 @@ def features(state_names, action_names, extra: dict | None = None, video: bool =
         "next.success": {"dtype": "bool", "shape": (1,), "names": None},
     }
     if video:
-        feats[IMAGE_KEY] = {"dtype": "video", "shape": (96, 96, 3), "names": ["height", "width", "channels"]}
+        feats[IMAGE_KEY] = {
+            "dtype": "video",
+            "shape": (IMAGE_SIZE, IMAGE_SIZE, 3),
+            "names": ["height", "width", "channels"],
+        }
     feats.update(extra or {})
     return feats
 
@@ -95,8 +83,9 @@ def _fast_fingerprints():
         arrow_dataset.generate_fingerprint = saved
 
 
-def write_dataset(out: Path, *, repo_id: str, fps: int, robot_type: str, task: str, feats: dict,
-                  episodes, stamp: dict) -> None:
+def write_dataset(
+    out: Path, *, repo_id: str, fps: int, robot_type: str, task: str, feats: dict, episodes, stamp: dict
+) -> None:
     """Write `episodes` (an iterable of dicts of per-frame arrays keyed like `feats`) to `out`.
 
     The set is built in a sibling temp directory and renamed into place, so an interrupted run
@@ -112,32 +101,35 @@ def write_dataset(out: Path, *, repo_id: str, fps: int, robot_type: str, task: s
     out.parent.mkdir(parents=True, exist_ok=True)
     use_videos = any(f["dtype"] == "video" for f in feats.values())
     try:
-        ds = LeRobotDataset.create(repo_id, fps=fps, features=feats, root=tmp, robot_type=robot_type,
-                                   use_videos=use_videos, video_backend=VIDEO_BACKEND)
+        ds = LeRobotDataset.create(
+            repo_id,
+            fps=fps,
+            features=feats,
+            root=tmp,
+            robot_type=robot_type,
+            use_videos=use_videos,
+            video_backend=VIDEO_BACKEND,
+        )
         with _fast_fingerprints():
             for ep in episodes:
                 for t in range(len(ep["action"])):
                     ds.add_frame({k: ep[k][t] for k in feats} | {"task": task})
                 ds.save_episode()
         ds.finalize()
-        stats = tmp / "meta" / "stats.json"  # lerobot orders its keys by string hash; sorted, equal sets are equal bytes
+        stats = (
+            tmp / "meta" / "stats.json"
+        )  # lerobot orders its keys by string hash; sorted, equal sets are equal bytes
         if stats.exists():
-            stats.write_text(json.dumps(json.loads(stats.read_text()), indent=4, sort_keys=True, ensure_ascii=False))
-        (tmp / STAMP_NAME).write_text(json.dumps(stamp, sort_keys=True, indent=1) + "\n")
+            stats.write_text(
+                json.dumps(json.loads(stats.read_text()), indent=4, sort_keys=True, ensure_ascii=False)
+            )
+        (tmp / STAMP_NAME).write_text(stamp_text(stamp))
         if out.exists():
             out.rmdir()  # empty directory (holds_data checked above)
         tmp.rename(out)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp)
-
-
-def read_stamp(root: Path) -> dict | None:
-    p = Path(root) / STAMP_NAME
-    try:
-        return json.loads(p.read_text())
-    except (OSError, json.JSONDecodeError):
-        return None
 
 
 def open_dataset(root: Path, repo_id: str = "local/demos"):

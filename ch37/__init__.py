@@ -1,0 +1,43 @@
+"""The plumbing of chapter 3.7: what scale_data.py imports but does not teach, one concern per module.
+
+errors        DataError and fail(): bad input ends in one line and exit 2
+files         write_atomic, dump_json, round_floats: results written whole or not at all
+cli           flag checks, device choice, the tier banner (GPU_TIERS, expected wall-clock)
+lerobot_io    LeRobot v3 read/write: features, write_dataset, load_arrays, schema checks
+seeds         env_seed: demos, augmentation and evaluation never share a start
+stamps        ownership stamps: only a folder this project made is ever rewritten
+demos         demo sets: rollout, generation, the private demo cache
+parallel      parallel_map over forked workers, LockstepEnvs for evaluation physics
+result_cache  reuse a finished run whose flags and code match
+viz           the PNG figure and the Rerun recording
+"""
+
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent  # the repository root: scale_data.py, the envs, meta.yaml
+CHAPTER_ID = "ch3.7-scale-data"
+
+# Every file whose bytes can change a result, in one list (paths from ROOT). The first group
+# shapes the frames of a demo set: a set's stamp carries their digest, so a cached set never
+# outlives its code. The whole list keys the result cache.
+DATA_CODE = (
+    "pusht_env.py",
+    "pusht.xml",
+    "aloha_env.py",
+    "aloha.xml",
+    "scripted_expert.py",
+    "ch37/demos.py",
+    "ch37/lerobot_io.py",
+    "ch37/seeds.py",
+)
+CODE_FILES = DATA_CODE + (
+    "scale_data.py",
+    "gen_demos_pusht.py",
+    "gen_demos_aloha.py",
+    "ch37/cli.py",
+    "ch37/files.py",
+    "ch37/parallel.py",
+    "ch37/stamps.py",
+    "ch37/viz.py",
+    "ch37/mlp_grads.py",
+)

@@ -1,0 +1,239 @@
+"""Demo sets: roll out an expert, write LeRobot v3, and keep a private cache of generated sets.
+
+A demo set is a pure function of (embodiment, episodes, seed, noise, video): episode i of seed s
+is rolled out from env seed seeds.env_seed(s, "demo", i), and the expert's action noise is
+drawn from a generator seeded with that same number. gen_demos_pusht.py and gen_demos_aloha.py
+are `main` with their embodiment; scale_data.py calls `ensure_demos`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ch37 import DATA_CODE, ROOT
+from ch37.errors import DataError
+from ch37.lerobot_io import IMAGE_KEY, IMAGE_SIZE, features, schema_problem, write_dataset
+from ch37.seeds import env_seed
+from ch37.stamps import MADE_BY, holds_data, read_stamp, replace_own_dir
+
+if sys.platform.startswith("linux"):  # headless rendering: EGL unless the user chose a GL backend
+    os.environ.setdefault("MUJOCO_GL", "egl")
+os.environ.setdefault("SVT_LOG", "1")  # the AV1 encoder's banner: errors only
+
+
+def code_digest(names=DATA_CODE) -> str:
+    """First 12 hex of sha256 over the bytes of `names` (paths from the repository root)."""
+    h = hashlib.sha256()
+    for name in names:
+        h.update((ROOT / name).read_bytes())
+    return h.hexdigest()[:12]
+
+
+# Any edit to the files that shape frames changes the version, so a cached set can never outlive
+# the code that made it.
+GENERATOR_VERSION = f"2+{code_digest()}"
+
+
+@dataclass(frozen=True)
+class Embodiment:
+    name: str  # "pusht" | "aloha"
+    env_module: object  # module with the Env class and STATE_NAMES, ACTION_NAMES, FPS, ROBOT_TYPE, TASK
+    env_class: str
+    expert_class: type
+    default_noise: float  # action noise std (m/s) when --noise is not given
+
+    def make_env(self):
+        return getattr(self.env_module, self.env_class)()
+
+
+def rollout(env, policy, obs, *, render: bool = False) -> dict:
+    """Run `policy` from `obs` (what reset or set_start returned) to the end of the episode.
+
+    Frame t pairs the obs before action t with action t.
+    Returns arrays: observation.state (T, obs_dim) float32, action (T, act_dim) float32,
+    next.success (T, 1) bool, and IMAGE_KEY (T, IMAGE_SIZE, IMAGE_SIZE, 3) uint8 when render is set.
+    """
+    policy.reset()
+    states, actions, succ, frames = [], [], [], []
+    done = False
+    while not done:
+        if render:
+            frames.append(env.render(IMAGE_SIZE))
+        act = policy.act(obs)
+        states.append(obs)
+        actions.append(act)
+        obs, _, done, info = env.step(act)
+        succ.append(bool(info["success"]))
+    ep = {
+        "observation.state": np.asarray(states, np.float32),
+        "action": np.asarray(actions, np.float32),
+        "next.success": np.asarray(succ, bool)[:, None],
+        "success": bool(succ[-1]),
+    }
+    if render:
+        ep[IMAGE_KEY] = np.asarray(frames, np.uint8)
+    return ep
+
+
+def progress(iterable, *, total: int, desc: str, quiet: bool = False):
+    """A tqdm bar on a terminal; silent when quiet or when stderr is not a TTY."""
+    from tqdm import tqdm
+
+    return tqdm(
+        iterable, total=total, desc=desc, unit="ep", leave=False, disable=quiet or not sys.stderr.isatty()
+    )
+
+
+def generate(
+    emb: Embodiment,
+    out: Path,
+    *,
+    episodes: int,
+    seed: int,
+    noise: float,
+    video: bool = False,
+    quiet: bool = False,
+) -> dict:
+    """Write a demo set to `out` and return its summary (episodes, frames, successes)."""
+    env = emb.make_env()
+    m = emb.env_module
+    summary = {"episodes": 0, "frames": 0, "successes": 0}
+
+    def episodes_iter():
+        for i in progress(range(episodes), total=episodes, desc=f"{emb.name} demos", quiet=quiet):
+            s = env_seed(seed, "demo", i)
+            ep = rollout(env, emb.expert_class(noise=noise, seed=s), env.reset(s), render=video)
+            summary["episodes"] += 1
+            summary["frames"] += len(ep["action"])
+            summary["successes"] += ep["success"]
+            yield ep
+
+    write_dataset(
+        out,
+        repo_id=f"local/{emb.name}_demos",
+        fps=m.FPS,
+        robot_type=m.ROBOT_TYPE,
+        task=m.TASK,
+        feats=features(m.STATE_NAMES, m.ACTION_NAMES, video=video),
+        episodes=episodes_iter(),
+        stamp=stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=video),
+    )
+    return summary
+
+
+def stamp_for(emb: Embodiment, *, episodes: int, seed: int, noise: float, video: bool) -> dict:
+    """Everything the frames of a generated set depend on; a cached set is reused only on equality."""
+    return {
+        "made_by": MADE_BY,
+        "embodiment": emb.name,
+        "episodes": int(episodes),
+        "seed": int(seed),
+        "noise": float(noise),
+        "video": bool(video),
+        "generator_version": GENERATOR_VERSION,
+    }
+
+
+def check_gl() -> str | None:
+    """None if headless rendering works here, else a one-line reason."""
+    import av
+
+    av.logging.set_level(av.logging.ERROR)  # FFmpeg's muxer chatter
+    try:
+        import mujoco
+
+        mujoco.Renderer(mujoco.MjModel.from_xml_string("<mujoco/>"), 8, 8).close()
+        return None
+    except Exception as e:  # no EGL/OSMesa/GLFW context: anything MuJoCo raises here means "no GL"
+        return (
+            f"no OpenGL backend for headless rendering ({type(e).__name__}); set MUJOCO_GL=egl or osmesa "
+            "with its library installed, or use --no-video"
+        )
+
+
+def main(emb: Embodiment, argv=None, default_out: str | None = None) -> int:
+    p = argparse.ArgumentParser(
+        description=f"Generate {emb.name} expert demos as a local LeRobot v3 dataset."
+    )
+    p.add_argument("--episodes", type=int, default=50, help="number of episodes to roll out (default 50)")
+    p.add_argument("--seed", type=int, default=0, help="dataset seed >= 0; seeds never share an episode")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path(default_out or f"outputs/demos/{emb.name}"),
+        help="directory for the dataset; must not already hold data",
+    )
+    p.add_argument(
+        "--noise",
+        type=float,
+        default=emb.default_noise,
+        help=f"std of Gaussian action noise, m/s (default {emb.default_noise})",
+    )
+    p.add_argument(
+        "--video",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help=f"also record a {IMAGE_SIZE}x{IMAGE_SIZE} top-down video (needs a headless GL backend)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    a = p.parse_args(argv)
+    problem = None
+    if a.episodes <= 0:
+        problem = f"--episodes must be positive, got {a.episodes}"
+    elif a.seed < 0:
+        problem = f"--seed must be >= 0, got {a.seed}"
+    elif not np.isfinite(a.noise) or a.noise < 0:
+        problem = f"--noise must be a finite number >= 0, got {a.noise}"
+    elif holds_data(a.out):
+        problem = f"{a.out} already holds data; pick another --out (nothing was touched)"
+    elif a.video:
+        problem = check_gl()
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
+        return 2
+    s = generate(emb, a.out, episodes=a.episodes, seed=a.seed, noise=a.noise, video=a.video, quiet=a.quiet)
+    print(
+        f"wrote {s['episodes']} {emb.name} episodes, {s['frames']} frames to {a.out} "
+        f"(expert successes {s['successes']}/{s['episodes']})"
+    )
+    return 0
+
+
+def ensure_demos(
+    emb, path: Path, *, user_given: bool, episodes: int, seed: int, noise: float, quiet: bool
+) -> str:
+    """Make sure `path` holds the demo set this run needs; return how it was obtained.
+
+    user_given: a set named by --pusht_data/--aloha_data. It is never modified. A set stamped by
+    this project must match the request; an unstamped set must have the right schema and is used
+    as given. Otherwise (our private cache) a stale set we made is rebuilt, and a directory we did
+    not make is refused.
+    """
+    m = emb.env_module
+    want = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=False)
+    stamp = read_stamp(path)
+    ours = stamp is not None and stamp.get("made_by") == want["made_by"]
+    if user_given:
+        if not holds_data(path):
+            raise DataError(
+                f"{path} does not exist or is empty; generate it with gen_demos_{emb.name}.py first"
+            )
+        if ours and stamp != want:
+            diff = ", ".join(f"{k}={stamp.get(k)} (need {v})" for k, v in want.items() if stamp.get(k) != v)
+            raise DataError(f"{path} does not match this run: {diff}; pass matching flags or another set")
+        problem = schema_problem(path, len(m.STATE_NAMES), len(m.ACTION_NAMES))
+        if problem:
+            raise DataError(problem)
+        return "matches its stamp" if ours else "your own set, used as given"
+    if ours and stamp == want:
+        return "cached"
+    replace_own_dir(path)  # a stale set we made is rebuilt; anything else is refused
+    s = generate(emb, path, episodes=episodes, seed=seed, noise=noise, quiet=quiet)
+    return f"generated ({s['successes']}/{s['episodes']} expert successes)"

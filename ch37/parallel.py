@@ -1,0 +1,161 @@
+"""Parallel execution on forked workers: parallel_map for independent jobs, LockstepEnvs for
+evaluation physics. Results never depend on the worker count: every job carries its own seed and
+every env is its own simulator.
+"""
+
+from __future__ import annotations
+
+import os
+
+_FORKED_WORK: tuple = ()  # (fn, jobs), set just before forking so workers inherit it unpickled
+
+
+def _run_job(i: int):
+    fn, jobs = _FORKED_WORK
+    return fn(jobs[i])
+
+
+def parallel_map(fn, jobs: list, *, workers: int, bar) -> list:
+    """[fn(j) for j in jobs], in order, on `workers` forked processes; the result never depends on
+    `workers`, because every job carries its own seed. Falls back to one process without fork.
+    `fn` is inherited through fork, not pickled, so a function defined in a script or notebook works."""
+    import multiprocessing as mp
+
+    global _FORKED_WORK
+    out = []
+    if workers > 1 and len(jobs) > 1 and "fork" in mp.get_all_start_methods():
+        _FORKED_WORK = (fn, jobs)
+        try:
+            with mp.get_context("fork").Pool(min(workers, len(jobs))) as pool:
+                for r in pool.imap(_run_job, range(len(jobs)), chunksize=max(1, len(jobs) // (4 * workers))):
+                    out.append(r)
+                    bar.update()
+        finally:
+            _FORKED_WORK = ()
+    else:
+        for j in jobs:
+            out.append(fn(j))
+            bar.update()
+    bar.close()
+    return out
+
+
+class LockstepEnvs:
+    """`len(seeds)` environments from `make_env()`, reset to `seeds` and stepped together, their
+    physics spread over `workers` forked processes (env i lives in worker i % workers) while the
+    caller keeps the policy. The result never depends on `workers`: every env is its own simulator
+    and receives the same actions. One process (no fork, or workers=1) runs them all in place.
+
+        with LockstepEnvs(PushTEnv, seeds, workers=2) as envs:
+            obs = envs.reset()                        # (N, obs_dim)
+            obs[idx], done, success = envs.step(idx, actions)   # idx: envs still running
+    """
+
+    def __init__(self, make_env, seeds, *, workers: int):
+        import multiprocessing as mp
+
+        self.seeds = [int(s) for s in seeds]
+        n = max(1, min(workers, len(self.seeds)))
+        self.parts = [list(range(w, len(self.seeds), n)) for w in range(n)]  # env indices per worker
+        self.conns, self.procs, self.local = [], [], None
+        if n == 1 or "fork" not in mp.get_all_start_methods():
+            self.parts, self.local = [list(range(len(self.seeds)))], [make_env() for _ in self.seeds]
+            return
+        ctx = mp.get_context("fork")
+        for part in self.parts:
+            parent, child = ctx.Pipe()
+            proc = ctx.Process(
+                target=_env_worker,
+                args=(child, make_env, [self.seeds[i] for i in part], len(self.procs)),
+                daemon=True,
+            )
+            proc.start()
+            child.close()
+            self.conns.append(parent)
+            self.procs.append(proc)
+
+    def _ask(self, msgs: dict) -> dict:
+        """{worker: request} -> {worker: reply}; every request is sent before any reply is read."""
+        if self.local is not None:
+            return {w: _env_serve(self.local, self.seeds, *m) for w, m in msgs.items()}
+        for w, m in msgs.items():
+            self.conns[w].send(m)
+        out = {w: self.conns[w].recv() for w in msgs}
+        for r in out.values():
+            if isinstance(r, BaseException):
+                raise r
+        return out
+
+    def reset(self):
+        import numpy as np
+
+        replies = self._ask({w: ("reset", None) for w in range(len(self.parts))})
+        self.obs_dim, self.obs_dtype = replies[0].shape[1], replies[0].dtype
+        obs = np.zeros((len(self.seeds), self.obs_dim), self.obs_dtype)
+        for w, part in enumerate(self.parts):
+            obs[part] = replies[w]
+        return obs
+
+    def step(self, idx, actions):
+        """Step envs `idx` with `actions` (len(idx), act_dim); returns their
+        (obs (len(idx), obs_dim), done (len(idx),) bool, success (len(idx),) bool)."""
+        import numpy as np
+
+        row = {int(i): k for k, i in enumerate(idx)}  # env index -> row of `actions`
+        asks = {}  # worker -> [(its local env index, row)]
+        for w, part in enumerate(self.parts):
+            mine = [(j, row[i]) for j, i in enumerate(part) if i in row]
+            if mine:
+                asks[w] = mine
+        replies = self._ask(
+            {w: ("step", ([j for j, _ in m], actions[[k for _, k in m]])) for w, m in asks.items()}
+        )
+        obs = np.zeros((len(row), self.obs_dim), self.obs_dtype)
+        done, success = np.zeros(len(row), bool), np.zeros(len(row), bool)
+        for w, m in asks.items():
+            rows = [k for _, k in m]
+            obs[rows], done[rows], success[rows] = replies[w]
+        return obs, done, success
+
+    def close(self) -> None:
+        for conn in self.conns:
+            conn.send(None)
+            conn.close()
+        for proc in self.procs:
+            proc.join()
+        self.conns, self.procs = [], []
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _env_serve(envs, seeds, cmd, arg):
+    """One request on a list of envs: ("reset", None) -> obs; ("step", (local idx, actions)) ->
+    (obs, done, success), arrays in the order asked."""
+    import numpy as np
+
+    if cmd == "reset":
+        return np.stack([e.reset(s) for e, s in zip(envs, seeds)])
+    local, actions = arg
+    obs, done, success = [], np.zeros(len(local), bool), np.zeros(len(local), bool)
+    for k, (j, a) in enumerate(zip(local, actions)):
+        o, _, done[k], info = envs[j].step(a)
+        obs.append(o)
+        success[k] = info["success"]
+    return np.stack(obs), done, success
+
+
+def _env_worker(conn, make_env, seeds, rank: int) -> None:
+    if hasattr(os, "sched_setaffinity"):  # one core each: woken together, they would otherwise
+        cpus = sorted(os.sched_getaffinity(0))  # often queue on the core of the process that woke them
+        os.sched_setaffinity(0, {cpus[rank % len(cpus)]})
+    envs = [make_env() for _ in seeds]
+    while (msg := conn.recv()) is not None:
+        try:
+            conn.send(_env_serve(envs, seeds, *msg))
+        except Exception as e:  # the caller re-raises it
+            conn.send(e)
+    conn.close()

@@ -1,0 +1,13 @@
+"""Instructor and engineer tooling for chapter 3.7, one job per module, each run from the repository root:
+
+    python -m tools.regions [--check | --write]  the regions of scale_data.py, their hashes vs meta.yaml
+    python -m tools.sweep --seeds 3 [FLAGS]      scale_data.py over seeds 0..2 -> sweep_seeds.json
+    python -m tools.sweep --aug 0 4 8 [FLAGS]    seed 0 over aug_per_demo 0, 4, 8 -> sweep_aug.json
+    python -m tools.meta                         meta.yaml: reference_run, exercise_checks, region_hashes
+    python -m tools.wallclock [--dry-run]        time the default run here, write its wallclock.csv row
+    python -m tools.notebook [--check]           scale_data.ipynb from the regions
+    python -m tools.bench [--smoke]              where the time of one run goes
+    python -m tools.bench_envs                   speed and competence of the envs and their experts
+
+Exit codes: 0 ok, 1 a check failed (drift, a stale notebook), 2 bad input (one `error:` line).
+"""

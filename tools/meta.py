@@ -1,0 +1,255 @@
+"""meta.yaml from the sweep files: reference_run, exercise_checks and region_hashes, never typed by hand.
+
+    python -m tools.meta [--sweep F] [--aug-sweep F] [--meta F]
+
+--sweep takes the seed sweep (default outputs/sweep/sweep_seeds.json, from `python -m tools.sweep
+--seeds 3`), --aug-sweep the aug sweep (default outputs/sweep/sweep_aug.json, from `python -m
+tools.sweep --aug 0 4 8`). The exercise answers and bands come from exercises/rules.py. What a
+smoke sweep gives is marked `provisional: true`. id, title, track, objectives and mimicgen are kept
+as found in meta.yaml.
+
+Exit codes: 0 ok, 2 bad input (a missing, corrupt or incomplete sweep file, bad flags).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from ch37 import CHAPTER_ID, ROOT
+from ch37.files import write_atomic
+from exercises.rules import RULES, derive_checks
+from tools.common import META, ToolError, _rel, parser, run_cli
+from tools.regions import drifted, region_hashes
+
+META_HEADER = """\
+# Chapter 3.7 metadata. Written by `python -m tools.meta` (reference_run, exercise_checks,
+# region_hashes: never typed by hand) and `python -m tools.regions --write` (region_hashes only).
+# id, title, track, objectives and mimicgen are kept as found here; edit them freely (comments are not kept).
+"""
+
+META_STATIC = {
+    "id": CHAPTER_ID,
+    "title": "Datasets at Scale",
+    "track": "robot learning / data",
+    "objectives": [
+        "Pool demos from two robots (PushT, 2-D actions; a bimanual ALOHA handoff, 6-D actions) into one "
+        "cross-embodiment set: per-embodiment normalization, zero-padding to the widest action, and an "
+        "action mask that keeps padded dimensions out of the loss.",
+        "Say what a shared policy can carry across embodiments (a network, an action head) and what it "
+        "cannot (the meaning of a raw state number: index 2 is the block's x in PushT, the right gripper "
+        "in ALOHA).",
+        "Grow the PushT set MimicGen-style: perturb each source start, re-solve it with the same scripted "
+        "expert in the real physics, keep only successes, and report the yield.",
+        "Measure the data-scale effect: the same behaviour-cloning MLP on source demos alone and on source "
+        "plus augmented, with a compute-matched control, rolled out on the same held-out starts.",
+    ],
+    "mimicgen": {
+        "repo": "NVlabs/mimicgen",
+        "tag": "v1.0.0",
+        "commit": "ea0988523f468ccf7570475f1906023f854962e9",
+        "files": [
+            {
+                "path": "mimicgen/utils/pose_utils.py",
+                "symbol": "transform_source_data_segment_using_object_pose",
+                "why": "how MimicGen moves a source end-effector segment into the new object's frame; "
+                "this chapter re-solves with its expert instead of replaying, because it owns an expert "
+                "for any start",
+            },
+            {
+                "path": "mimicgen/scripts/generate_dataset.py",
+                "why": "the generate-execute-keep-only-successes loop and its success_rate = successes / "
+                "attempts, the same bookkeeping as this chapter's yield",
+            },
+        ],
+    },
+}
+META_ORDER = (
+    "id",
+    "title",
+    "track",
+    "objectives",
+    "mimicgen",
+    "reference_run",
+    "exercise_checks",
+    "region_hashes",
+)
+# What each sweep file must hold for reference_run and derive_checks: top-level keys, then keys of every row.
+SWEEP_KEYS = {
+    "seeds": (("rows", "mean", "paired", "action_dims", "padded_action_dim"), ("seed", "delta", "ci95")),
+    "aug": (("rows",), ("aug_per_demo", "augmented", "ci95")),
+}
+PROVENANCE_KEYS = (
+    "command",
+    "date_utc",
+    "git",
+    "platform",
+    "packages",
+    "device",
+    "config",
+    "script_region_hashes",
+)
+
+
+def load_yaml(path: Path) -> dict:
+    """A YAML mapping ({} when the file does not exist); anything else is a ToolError."""
+    import yaml
+
+    path = Path(path)
+    if not path.exists():
+        return {}
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
+        raise ToolError(f"{_rel(path)} is not readable YAML ({' '.join(str(e).split())})") from None
+    if data is not None and not isinstance(data, dict):
+        raise ToolError(f"{_rel(path)} is not a YAML mapping")
+    return data or {}
+
+
+def _yaml_dumper():
+    import yaml
+
+    class Dumper(yaml.SafeDumper):
+        """Short all-scalar lists and mappings on one line ({n: 3, wins: 3}), the rest in block style."""
+
+    def flow(value) -> bool:
+        items = value.values() if isinstance(value, dict) else value
+        scalar = all(
+            isinstance(v, (int, float, bool, type(None))) or (isinstance(v, str) and len(v) < 40)
+            for v in items
+        )
+        return scalar and len(json.dumps(value)) <= 100
+
+    def mapping(d, v):
+        return d.represent_mapping("tag:yaml.org,2002:map", v.items(), flow_style=flow(v))
+
+    Dumper.add_representer(dict, mapping)
+    Dumper.add_representer(
+        list, lambda d, v: d.represent_sequence("tag:yaml.org,2002:seq", v, flow_style=flow(v))
+    )
+    return Dumper
+
+
+def write_meta(path: Path, meta: dict) -> None:
+    """meta.yaml in META_ORDER (unknown keys after), under META_HEADER, written atomically."""
+    import yaml
+
+    ordered = {k: meta[k] for k in META_ORDER if k in meta}
+    ordered.update({k: v for k, v in meta.items() if k not in ordered})
+    text = META_HEADER + yaml.dump(
+        ordered, Dumper=_yaml_dumper(), sort_keys=False, allow_unicode=True, width=110
+    )
+    write_atomic(Path(path), text)
+
+
+def _public(row: dict) -> dict:
+    """A sweep row for meta.yaml: per-run wall time left out (wallclock.csv is the timing of record)."""
+    return {k: v for k, v in row.items() if k != "wall_s"}
+
+
+def reference_run(seeds: dict, aug: dict) -> dict:
+    provisional = bool(seeds.get("smoke") or aug.get("smoke"))
+    if provisional:
+        note = "smoke-sized sweep: exercises the pipeline only; refresh with a full sweep"
+    else:
+        note = "default configuration; every number below was written by python -m tools.meta from the sweeps"
+    return {
+        "provisional": provisional,
+        "note": note,
+        "seeds": {
+            "rows": [_public(r) for r in seeds["rows"]],
+            "mean": seeds["mean"],
+            "paired": seeds["paired"],
+            "provenance": {k: seeds[k] for k in PROVENANCE_KEYS if k in seeds},
+        },
+        "aug_curve": {
+            "seed": aug.get("seed", 0),
+            "rows": [_public(r) for r in aug["rows"]],
+            "provenance": {k: aug[k] for k in PROVENANCE_KEYS if k in aug},
+        },
+        "rules": RULES,
+    }
+
+
+def read_sweep(path: Path, kind: str, flag: str) -> dict:
+    """A sweep file of `kind` ("seeds" or "aug") with every key meta needs; else a one-line ToolError."""
+    path = Path(path)
+    if not path.exists():
+        raise ToolError(
+            f"{_rel(path)} not found; run the sweeps first: python -m tools.sweep --seeds 3 "
+            "and python -m tools.sweep --aug 0 4 8"
+        )
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise ToolError(f"{_rel(path)} is not a readable JSON sweep file ({e}); re-run the sweep") from None
+    got = data.get("kind") if isinstance(data, dict) else type(data).__name__
+    if got != kind:
+        raise ToolError(
+            "--sweep takes the sweep_seeds.json file and --aug-sweep the sweep_aug.json file; "
+            f"{flag} {_rel(path)} holds {got!r}, not a {kind!r} sweep"
+        )
+    top, per_row = SWEEP_KEYS[kind]
+    missing = [k for k in top if k not in data]
+    rows = data.get("rows")
+    if "rows" not in missing and (not isinstance(rows, list) or not rows):
+        missing.append("rows (a non-empty list)")
+    elif isinstance(rows, list):
+        for i, r in enumerate(rows):
+            if not isinstance(r, dict):
+                missing.append(f"rows[{i}] (a mapping)")
+                continue
+            missing += [f"rows[{i}].{k}" for k in per_row if k not in r]
+            if "ci95" in r and not (isinstance(r["ci95"], dict) and "augmented" in r["ci95"]):
+                missing.append(f"rows[{i}].ci95.augmented")
+    if missing:
+        raise ToolError(f"{_rel(path)} is incomplete: it lacks {', '.join(missing[:5])}; re-run the sweep")
+    return data
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = parser("meta", __doc__)
+    p.add_argument(
+        "--sweep", type=Path, default=ROOT / "outputs/sweep/sweep_seeds.json", help="the seed sweep"
+    )
+    p.add_argument(
+        "--aug-sweep", type=Path, default=ROOT / "outputs/sweep/sweep_aug.json", help="the aug sweep"
+    )
+    p.add_argument("--meta", type=Path, default=META, help="default meta.yaml")
+    a = p.parse_args(argv)
+    seeds = read_sweep(a.sweep, "seeds", "--sweep")
+    aug = read_sweep(a.aug_sweep, "aug", "--aug-sweep")
+    current = region_hashes(a.script)
+    for name, s in (("seed", seeds), ("aug", aug)):
+        stale = drifted(current, s.get("script_region_hashes"))
+        if stale:
+            print(
+                f"warning: the {name} sweep ran a different scale_data.py (regions {', '.join(stale)} "
+                "changed since); re-run it if those changes can move the numbers",
+                file=sys.stderr,
+            )
+    old = load_yaml(a.meta)
+    meta = {k: old.get(k, v) for k, v in META_STATIC.items()}
+    meta.update({k: v for k, v in old.items() if k not in META_STATIC})
+    try:
+        meta["reference_run"] = reference_run(seeds, aug)
+        meta["exercise_checks"] = derive_checks(seeds, aug)
+    except ValueError as e:
+        raise ToolError(str(e)) from None
+    except (KeyError, TypeError, IndexError) as e:
+        raise ToolError(f"a sweep file is malformed ({type(e).__name__}: {e}); re-run the sweeps") from None
+    meta["region_hashes"] = current
+    write_meta(a.meta, meta)
+    ex = meta["exercise_checks"]
+    print(
+        f"wrote {_rel(a.meta)}: ex1 answer {ex['ex1']['answer']} band {ex['ex1']['band']}, "
+        f"ex3 answer {ex['ex3']['answer']} bands {ex['ex3']['band']}"
+        + (" (provisional: smoke sweep)" if meta["reference_run"]["provisional"] else "")
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    run_cli(main)

@@ -1,0 +1,141 @@
+"""Time the default run here and write this tier's row of wallclock.csv.
+
+    python -m tools.wallclock              time `scale_data.py --seed 0` cold, write this tier's row
+    python -m tools.wallclock --dry-run    print the row, write nothing
+    python -m tools.wallclock --smoke      time the --smoke run instead (printed only, never written)
+    python -m tools.wallclock --tier t4    name the tier instead of reading it from the device
+
+The run is cold (a fresh output folder, demos generated, the result cache off). The tiers are
+ch37.cli.TIERS, the list the banner of scale_data.py reads its expected wall-clock from. config_hash
+is the first 12 hex of sha256 over the run's config without the device, workers and cache, so the
+same configuration hashes the same on every tier.
+
+Exit codes: 0 ok, 2 bad input (bad flags, a failed run, a malformed wallclock.csv).
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime
+import hashlib
+import io
+import json
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from ch37 import CHAPTER_ID, ROOT
+from ch37.cli import TIERS, device_tier
+from ch37.files import write_atomic
+from tools.common import WALLCLOCK, ToolError, _rel, parser, run_cli, supports_flag
+
+WALLCLOCK_FIELDS = ("chapter", "tier", "minutes", "config_hash", "date", "status")
+HASH_EXCLUDE = (
+    "device",
+    "workers",
+    "cache",
+)  # the tier names the device; workers and cache only change speed
+
+
+def config_hash(config: dict) -> str:
+    """First 12 hex of sha256 over the run's config (metrics.json "config") as sorted compact JSON,
+    without HASH_EXCLUDE, so the same default configuration hashes the same on every tier."""
+    c = {k: v for k, v in config.items() if k not in HASH_EXCLUDE}
+    return hashlib.sha256(json.dumps(c, sort_keys=True, separators=(",", ":")).encode()).hexdigest()[:12]
+
+
+def _pending(tier: str) -> dict:
+    return {
+        "chapter": CHAPTER_ID,
+        "tier": tier,
+        "minutes": "",
+        "config_hash": "",
+        "date": "",
+        "status": "pending",
+    }
+
+
+def read_wallclock(path: Path) -> list[dict]:
+    """The rows of wallclock.csv, plus a pending row for every tier it lacks."""
+    path = Path(path)
+    if not path.exists():
+        return [_pending(t) for t in TIERS]
+    with path.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    if rows and set(rows[0]) != set(WALLCLOCK_FIELDS):
+        raise ToolError(f"{_rel(path)}: columns must be {','.join(WALLCLOCK_FIELDS)}")
+    have = {r["tier"] for r in rows}
+    return rows + [_pending(t) for t in TIERS if t not in have]
+
+
+def write_wallclock_row(path: Path, row: dict) -> list[dict]:
+    """Replace (or add) the row for row['tier']; keep every other row; known tiers first, in order."""
+    rows = [r for r in read_wallclock(path) if r["tier"] != row["tier"]] + [dict(row)]
+    order = {t: i for i, t in enumerate(TIERS)}
+    rows.sort(key=lambda r: (order.get(r["tier"], len(TIERS)), r["tier"]))
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=WALLCLOCK_FIELDS, lineterminator="\n")
+    w.writeheader()
+    w.writerows({k: r.get(k, "") for k in WALLCLOCK_FIELDS} for r in rows)
+    write_atomic(Path(path), buf.getvalue())
+    return rows
+
+
+def measure_wallclock(script: Path, smoke: bool, tier: str | None) -> dict:
+    """Run the chapter cold once and return its wallclock.csv row (tier from the device it used)."""
+    with tempfile.TemporaryDirectory(
+        prefix="ch37-wallclock-"
+    ) as tmp:  # cold: demos generated, as on a first run
+        cmd = [sys.executable, str(script), "--seed", "0", "--no-rerun", "--out", tmp] + (
+            ["--smoke"] if smoke else []
+        )
+        cmd += ["--no-cache"] if supports_flag(script, "--cache") else []  # time the work, never a replay
+        print(f"timing: {shlex.join(cmd)}", flush=True)
+        t0 = time.perf_counter()
+        p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        if p.returncode != 0:
+            tail = "\n".join((p.stdout + p.stderr).strip().splitlines()[-15:])
+            raise ToolError(f"the timed run exited {p.returncode}:\n{tail}")
+        config = json.loads((Path(tmp) / "metrics.json").read_text())["config"]
+    return {
+        "chapter": CHAPTER_ID,
+        "tier": tier or device_tier(config["device"]),
+        "minutes": f"{wall / 60:.2f}",
+        "config_hash": config_hash(config),
+        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d"),
+        "status": "measured",
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = parser("wallclock", __doc__)
+    p.add_argument("--dry-run", action="store_true", help="print the row, write nothing")
+    p.add_argument(
+        "--smoke", action="store_true", help="time the --smoke run instead (printed only, never written)"
+    )
+    p.add_argument(
+        "--tier", help=f"tier name (default: from the device the run used; known: {', '.join(TIERS)})"
+    )
+    p.add_argument("--csv", type=Path, default=WALLCLOCK, help="default wallclock.csv")
+    a = p.parse_args(argv)
+    row = measure_wallclock(a.script, a.smoke, a.tier)
+    if a.smoke:
+        row["status"] = "smoke"  # printed for the record, never written
+    print(",".join(WALLCLOCK_FIELDS))
+    print(",".join(row[k] for k in WALLCLOCK_FIELDS))
+    if a.smoke or a.dry_run:
+        print(
+            "not written (" + ("a smoke time never goes into wallclock.csv" if a.smoke else "--dry-run") + ")"
+        )
+        return 0
+    write_wallclock_row(a.csv, row)
+    print(f"wrote the {row['tier']} row of {_rel(a.csv)}")
+    return 0
+
+
+if __name__ == "__main__":
+    run_cli(main)
