@@ -6,12 +6,13 @@ cover too little of the start space for a policy to generalise. This script meet
 small MuJoCo robots of our own. It pools PushT (2-D actions) with a bimanual ALOHA cube handoff
 (6-D actions), then grows the PushT demos the way MimicGen does (perturb the start, re-solve with
 the expert, keep only successes) and trains the same behaviour-cloning MLP with and without the
-extra demos, so the data is the only difference.
+extra demos for the same number of gradient steps, at two budgets, so what the data buys is read
+apart from what more training buys.
 
   1. setup    flags, seeds, device, a two-line banner with the expected wall-clock
   2. wrangle  load both LeRobot sets, per-embodiment stats, normalize, zero-pad + action mask
   3. augment  perturbed PushT starts re-solved by the expert, kept only on success
-  4. measure  source-only vs source+augmented vs a compute-matched control, same eval starts
+  4. measure  a 2x2: data {source, source+augmented} x budget {short, full}, equal steps per budget
   5. emit     metrics.json, cross_embodiment.json, a PNG figure and a Rerun recording
 
 Run:    python scale_data.py --seed 0
@@ -47,7 +48,10 @@ flag(
 flag("--aug_per_demo", type=int, default=8, help="perturbed re-solves per PushT source demo (0 = none)")
 flag("--aug_pos_sigma", type=float, default=0.08, help="m; std of block and pusher xy perturbation")
 flag("--aug_yaw_sigma", type=float, default=0.5, help="rad; std of block yaw perturbation")
-flag("--epochs", type=int, default=500, help="passes over the data that sets a budget (see measure)")
+flag("--epochs", type=int, default=500, help="passes over a data set that make a budget (see measure)")
+flag(
+    "--full_steps", type=int, default=0, help="steps of the full budget (0: --epochs passes over source+aug)"
+)
 flag("--batch_size", type=int, default=128, help="frames per gradient step")
 flag("--lr", type=float, default=1e-3, help="Adam learning rate, cosine-decayed to 0")
 flag("--hidden_dim", type=int, default=512, help="width of both hidden layers of the BC MLP")
@@ -292,24 +296,28 @@ if kept:
 # --- endregion ---
 
 # --- region: measure ---
-# One MLP recipe, three arms. Same initial weights and same batch-order generator in every arm,
-# so the data is the only difference; the compute-matched arm trains on source+augmented for
-# exactly the source arm's number of steps, so "more data" is not confused with "more steps".
-# All arms roll out on the same held-out starts, in lockstep: one policy call per control step.
-from ch37.mlp_grads import mse_grads  # noqa: E402  (exact MLP gradients without autograd overhead)
+# What does the extra data buy? A first recipe trained each arm for 500 epochs of its own data, so
+# the augmented arm also took 7x the gradient steps, and data and compute moved together. Here a
+# 2x2 pulls them apart: data {source, source+augmented} x budget {short = --epochs passes over the
+# source set, full = --epochs passes over source+augmented}. The two arms of a budget take exactly
+# the same steps from the same initial weights and batch-order seed: within a budget the data is
+# the only difference. Every policy rolls out on the same held-out starts, in lockstep.
+from ch37.ensemble import BatchOrder, MLPStack  # noqa: E402  (arms side by side, see its docstring)
 from ch37.parallel import LockstepEnvs  # noqa: E402
 
 
+def mlp(hidden):  # the BC network: 10 -> hidden -> hidden -> 2, ReLU
+    return torch.nn.Sequential(
+        torch.nn.Linear(pusht_env.OBS_DIM, hidden), torch.nn.ReLU(),
+        torch.nn.Linear(hidden, hidden), torch.nn.ReLU(),
+        torch.nn.Linear(hidden, pusht_env.ACT_DIM),
+    )  # fmt: skip
+
+
 class BCPolicy(torch.nn.Module):
-    def __init__(self, states, actions, hidden):
+    def __init__(self, states, actions, net):
         super().__init__()
-        self.net = torch.nn.Sequential(
-            torch.nn.Linear(pusht_env.OBS_DIM, hidden),
-            torch.nn.ReLU(),
-            torch.nn.Linear(hidden, hidden),
-            torch.nn.ReLU(),
-            torch.nn.Linear(hidden, pusht_env.ACT_DIM),
-        )
+        self.net = net
         for name, x in (("s", states), ("a", actions)):  # min-max ranges of the arm's own data
             lo, hi = torch.as_tensor(x.min(0)), torch.as_tensor(x.max(0))
             self.register_buffer(f"{name}_lo", lo)
@@ -326,43 +334,37 @@ class BCPolicy(torch.nn.Module):
 
 
 torch.manual_seed(args.seed)
-no_data = np.zeros((1, pusht_env.OBS_DIM), np.float32), np.zeros((1, pusht_env.ACT_DIM), np.float32)
-init_weights = BCPolicy(*no_data, args.hidden_dim).net.state_dict()  # every arm starts from these
+init_weights = mlp(args.hidden_dim).state_dict()  # every arm starts from these
 
 
-def train(states, actions, *, steps=None):
-    """A fresh BCPolicy fit for args.epochs epochs (or exactly `steps` steps) -> (policy, steps, loss)."""
-    pol = BCPolicy(states, actions, args.hidden_dim)
-    pol.net.load_state_dict(init_weights)
-    pol.to(device)
-    s, a = torch.as_tensor(states, device=device), torch.as_tensor(actions, device=device)
-    x, y = pol.norm_s(s), pol.norm_a(a)  # normalize once, not per batch
-    per_epoch = math.ceil(len(x) / args.batch_size)
-    total = steps if steps is not None else args.epochs * per_epoch
-    # fused Adam: the same update rule in one kernel for all tensors, not a Python loop per tensor
-    opt = torch.optim.Adam(pol.net.parameters(), lr=args.lr, fused=device.type in ("cpu", "cuda"))
-    lrs = [args.lr * 0.5 * (1 + math.cos(math.pi * t / total)) for t in range(total)]  # cosine from lr to 0
-    gen = torch.Generator().manual_seed(args.seed)  # the same batch order stream in every arm
-    params = list(pol.net.parameters())
-    bar = progress(None, total=total, desc="train", quiet=args.smoke)
-    for first_step in range(0, total, per_epoch):
-        order = torch.randperm(len(x), generator=gen).to(device)
-        xs, ys = x[order], y[order]  # shuffle once per epoch; each batch is then a contiguous slice
-        for step in range(first_step, min(first_step + per_epoch, total)):
-            b = (step - first_step) * args.batch_size
-            # the gradients of mse_loss(pol.net(batch), target): bit for bit what loss.backward()
-            # leaves in param.grad, without autograd's per-op bookkeeping (a tenth of a step here)
-            for param, grad in zip(
-                params, mse_grads(pol.net, xs[b : b + args.batch_size], ys[b : b + args.batch_size])
-            ):
-                param.grad = grad
-            opt.param_groups[0]["lr"] = lrs[step]
-            opt.step()
-        bar.update(step + 1 - first_step)
+def train(datasets, steps):
+    """One BCPolicy per (states, actions) in `datasets`, trained side by side for exactly `steps`
+    steps of --batch_size rows; returns the policies and each one's final MSE on its own data."""
+    pols = [BCPolicy(x, y, mlp(args.hidden_dim)).to(device) for x, y in datasets]
+    tensors = [
+        (p.norm_s(torch.as_tensor(x, device=device)), p.norm_a(torch.as_tensor(y, device=device)))
+        for p, (x, y) in zip(pols, datasets)
+    ]  # fmt: skip  (normalized once, not per batch)
+    orders = [BatchOrder(len(x), args.batch_size, args.seed) for x, _ in tensors]  # same seed for every arm
+    model = MLPStack([init_weights] * len(pols)).to(device)  # arm e = slice e of every weight
+    opt = torch.optim.Adam(model.parameters(), lr=args.lr, fused=device.type in ("cpu", "cuda"))  # one kernel
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=steps)  # lr cosine-decayed to 0
+    bar = progress(None, total=steps, desc="train", quiet=args.smoke)
+    for _ in range(steps):
+        idx = [o.next() for o in orders]
+        xb = torch.stack([x[i] for (x, _), i in zip(tensors, idx)])  # (arms, B, 10)
+        yb = torch.stack([y[i] for (_, y), i in zip(tensors, idx)])  # (arms, B, 2)
+        loss = ((model(xb) - yb) ** 2).mean(dim=(1, 2)).sum()  # each arm's MSE; the sum keeps them apart
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        bar.update()
     bar.close()
-    with torch.no_grad():  # fit on the arm's whole training set, a digit-level fingerprint of the run
-        final_loss = torch.nn.functional.mse_loss(pol.net(x), y).item()
-    return pol.eval(), total, final_loss
+    with torch.no_grad():  # fit on each arm's whole training set, a digit-level fingerprint of the run
+        fits = [torch.nn.functional.mse_loss(model.load_into(p.net, e)(x), y).item()
+                for e, (p, (x, y)) in enumerate(zip(pols, tensors))]  # fmt: skip
+    return [p.eval() for p in pols], fits
 
 
 @torch.no_grad()
@@ -383,42 +385,51 @@ def evaluate(pol, seeds):
 
 
 def wilson(p_hat, n, z=1.96):  # 95% interval for a success rate from n episodes
-    centre, half = (
-        (p_hat + z * z / (2 * n)) / (1 + z * z / n),
-        z * math.sqrt(p_hat * (1 - p_hat) / n + z * z / (4 * n * n)) / (1 + z * z / n),
-    )
+    centre = (p_hat + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p_hat * (1 - p_hat) / n + z * z / (4 * n * n)) / (1 + z * z / n)
     return [max(0.0, centre - half), min(1.0, centre + half)]
 
 
-src_x, src_y = pusht["observation.state"], pusht["action"]
-all_x, all_y = np.concatenate([src_x, aug["observation.state"]]), np.concatenate([src_y, aug["action"]])
+data = {
+    "source": (pusht["observation.state"], pusht["action"]),
+    "augmented": (np.concatenate([pusht["observation.state"], aug["observation.state"]]),
+                  np.concatenate([pusht["action"], aug["action"]])),
+}  # fmt: skip
+budgets = {  # gradient steps: --epochs passes over a data set, --batch_size rows a step
+    "short": math.ceil(args.epochs * len(data["source"][0]) / args.batch_size),
+    "full": args.full_steps or math.ceil(args.epochs * len(data["augmented"][0]) / args.batch_size),
+}
 eval_seeds = [env_seed(args.seed, "eval", j) for j in range(args.eval_episodes)]  # disjoint from demos
 arms = {}
-for arm, (x, y, steps) in {
-    "source": (src_x, src_y, None),
-    "augmented": (all_x, all_y, None),
-    "compute_matched": (all_x, all_y, "source"),
-}.items():
+for budget, steps in budgets.items():
     t0 = time.perf_counter()
-    pol, n_steps, loss = train(x, y, steps=arms[steps]["steps"] if steps else None)
-    rate = evaluate(pol, eval_seeds)
-    arms[arm] = {
-        "frames": int(len(x)),
-        "steps": n_steps,
-        "final_loss": round(loss, 6),
-        "success": rate,
-        "ci95": wilson(rate, len(eval_seeds)),
-    }
+    pols, fits = train(list(data.values()), steps)  # both data arms of this budget, side by side
+    for (name, (x, _)), pol, fit in zip(data.items(), pols, fits):
+        rate = evaluate(pol, eval_seeds)
+        arms[f"{name}_{budget}"] = {"data": name, "budget": budget, "frames": len(x), "steps": steps,
+                                    "final_loss": round(fit, 6), "success": rate,
+                                    "ci95": wilson(rate, len(eval_seeds))}  # fmt: skip
+    print(f"budget {budget}: {steps} steps for each data arm ({time.perf_counter() - t0:.1f} s)")
+print(f"success (95% interval) on {len(eval_seeds)} held-out starts | " + " | ".join(
+    f"{b} = {n} steps" for b, n in budgets.items()))  # fmt: skip
+for name, (x, _) in data.items():
+    row = [arms[f"{name}_{b}"] for b in budgets]
     print(
-        f"{arm:16s} {len(x):6d} frames {n_steps:6d} steps  success {rate:.2f}  "
-        f"95% CI [{arms[arm]['ci95'][0]:.2f}, {arms[arm]['ci95'][1]:.2f}]  ({time.perf_counter() - t0:.1f} s)"
+        f"  {name:9s} {len(x):6d} frames | "
+        + " | ".join(f"{a['success']:.2f} [{a['ci95'][0]:.2f}, {a['ci95'][1]:.2f}]" for a in row)
     )
+effects = {  # success differences, each between two arms that differ in one thing only
+    "data_full": arms["augmented_full"]["success"] - arms["source_full"]["success"],  # the headline
+    "data_short": arms["augmented_short"]["success"] - arms["source_short"]["success"],
+    "compute_source": arms["source_full"]["success"] - arms["source_short"]["success"],
+    "compute_augmented": arms["augmented_full"]["success"] - arms["augmented_short"]["success"],
+}
 # --- endregion ---
 
 # --- region: emit ---
-# Coverage says why the extra demos help: count which cells of the spawn annulus (3 rings x 12
+# Coverage is one reason extra demos can help: count which cells of the spawn annulus (3 rings x 12
 # sectors) hold a block start. Then metrics.json (sorted, rounded, atomic), a PNG figure and a
-# Rerun recording, and the headline last.
+# Rerun recording, and the headline last: the data effect at equal steps.
 RINGS, SECTORS = 3, 12
 R_MIN, R_MAX = pusht_env.SPAWN_R_MIN, pusht_env.SPAWN_R_MAX  # m, the spawn annulus
 
@@ -432,57 +443,44 @@ def cells(starts):  # (N, 2) block xy -> set of (ring, sector) inside the annulu
 
 
 src_starts = np.array([first[e][2:4] for e in first])  # (12, 2) block xy
-aug_starts = np.array([k["aug.start"][0, :2] for k in kept]).reshape(-1, 2)  # (kept, 2)
+_, first_rows = np.unique(aug["episode_index"], return_index=True)  # each augmented episode's first frame
+aug_starts = aug["aug.start"][first_rows, :2]  # (kept, 2) block xy
 c_src, out_src = cells(src_starts)
 c_aug, out_aug = cells(aug_starts)
 metrics = {
-    "seed": args.seed,
-    "smoke": args.smoke,
-    "config": cli.result_config(args),
+    "seed": args.seed, "smoke": args.smoke, "config": cli.result_config(args),
     "action_dims": {name: int(demo["action"].shape[1]) for name, demo in sets.items()},
-    "padded_action_dim": PAD,
-    "source_demos": len(first),
-    "source_frames": int(len(src_x)),
-    "attempts": attempts,
-    "kept": len(kept),
-    "yield": yield_,
-    "augment_failures": failures,
-    "augmented_frames": int(len(aug["action"])),
-    "arms": arms,
-    "scale_effect": arms["augmented"]["success"] - arms["source"]["success"],
-    "compute_matched_effect": arms["compute_matched"]["success"] - arms["source"]["success"],
-    "coverage": {
-        "cells": RINGS * SECTORS,
-        "source": len(c_src),
-        "augmented": len(c_aug),
-        "union": len(c_src | c_aug),
-        "outside_annulus": {"source": out_src, "augmented": out_aug},
-    },
-}
-written = [
-    args.out / "cross_embodiment.json",
-    write_atomic(args.out / "metrics.json", dump_json(round_floats(metrics, 6))),
-]
+    "padded_action_dim": PAD, "source_demos": len(first), "source_frames": len(data["source"][0]),
+    "attempts": attempts, "kept": len(first_rows), "yield": yield_, "augment_failures": failures,
+    "augmented_frames": len(aug["action"]),
+    "budgets": budgets, "arms": arms, "effects": effects, "scale_effect": effects["data_full"],
+    "coverage": {"cells": RINGS * SECTORS, "source": len(c_src), "augmented": len(c_aug),
+                 "union": len(c_src | c_aug), "outside_annulus": {"source": out_src, "augmented": out_aug}},
+}  # fmt: skip
+metrics_path = write_atomic(args.out / "metrics.json", dump_json(round_floats(metrics, 6)))
+written = [args.out / "cross_embodiment.json", metrics_path]
 from ch37 import viz  # noqa: E402  (matplotlib and rerun drawing code, kept out of the lesson)
 
 annulus = (R_MIN, R_MAX, RINGS, SECTORS)
-written.append(
-    viz.figure(args.out / "scale_data.png", src_starts, aug_starts, arms, metrics["coverage"], annulus)
-)
+written.append(viz.figure(args.out / "scale_data.png", src_starts, aug_starts, metrics, annulus))
 if args.rerun:
-    written.append(
-        viz.recording(args.out / "scale_data.rrd", arms, metrics, src_starts, aug_starts, kept[:8], annulus)
-    )
-src_rate, aug_rate = arms["source"]["success"], arms["augmented"]["success"]
+    shown = [
+        {"observation.state": aug["observation.state"][aug["episode_index"] == e]}
+        for e in aug["episode_index"][first_rows[:8]]
+    ]  # fmt: skip  (a few augmented trajectories)
+    rrd = viz.recording(args.out / "scale_data.rrd", metrics, src_starts, aug_starts, shown, annulus)
+    written.append(rrd)
+rate = {name: arm["success"] for name, arm in arms.items()}
 opens = {".json": "JSON", ".png": "open as an image", ".rrd": "open with: rerun {}"}
 summary = (
-    f"headline: source-only {src_rate:.2f} -> source+augmented {aug_rate:.2f} "
-    f"({(aug_rate - src_rate) * 100:+.0f} points; compute-matched {arms['compute_matched']['success']:.2f}); "
+    f"headline, equal steps ({budgets['full']} each): source {rate['source_full']:.2f} -> source+augmented "
+    f"{rate['augmented_full']:.2f} ({effects['data_full'] * 100:+.0f} points)\n"
+    f"at the short budget ({budgets['short']} steps): {rate['source_short']:.2f} -> "
+    f"{rate['augmented_short']:.2f} ({effects['data_short'] * 100:+.0f}); more steps alone: source "
+    f"{effects['compute_source'] * 100:+.0f}, source+augmented {effects['compute_augmented'] * 100:+.0f}; "
     f"coverage {len(c_src)} -> {len(c_src | c_aug)} of {RINGS * SECTORS} cells\n"
-    + "wrote "
-    + ", ".join(f"{f} ({opens[f.suffix].format(f)})" for f in written)
-    + "\n"
-)
+    + "wrote " + ", ".join(f"{f} ({opens[f.suffix].format(f)})" for f in written) + "\n"
+)  # fmt: skip
 cache.store(written, summary)
 print(f"finished in {time.perf_counter() - t_start:.0f} s")
 print(summary, end="", flush=True)

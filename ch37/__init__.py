@@ -39,5 +39,5 @@ CODE_FILES = DATA_CODE + (
     "ch37/parallel.py",
     "ch37/stamps.py",
     "ch37/viz.py",
-    "ch37/mlp_grads.py",
+    "ch37/ensemble.py",
 )

@@ -18,7 +18,7 @@ SMOKE_DEFAULTS = dict(
     source_episodes=4, aug_per_demo=2, epochs=30, hidden_dim=64, eval_episodes=8, batch_size=64, device="cpu"
 )
 POSITIVE = ("source_episodes", "epochs", "batch_size", "hidden_dim", "eval_episodes", "workers")
-NON_NEGATIVE = ("aug_per_demo", "seed")
+NON_NEGATIVE = ("aug_per_demo", "seed", "full_steps")
 FINITE = ("aug_pos_sigma", "aug_yaw_sigma", "lr")
 NOT_IN_KEY = ("out", "cache", "workers")  # where results go and how fast they come never change them
 

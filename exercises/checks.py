@@ -261,21 +261,17 @@ def run_dir(seed: int, aug_per_demo: int, smoke: bool) -> Path:
     return out_root() / f"{'smoke_' if smoke else ''}seed{seed}_aug{aug_per_demo}"
 
 
-def run_chapter(seed: int, aug_per_demo: int, smoke: bool, say=print) -> dict:
-    """Run scale_data.py for one configuration and return its metrics (an identical earlier run is
-    reused by its cache)."""
+def run_chapter(seed: int, aug_per_demo: int, smoke: bool, say=print, extra: tuple = ()) -> dict:
+    """Run scale_data.py for one configuration (plus `extra` flags) and return its metrics (an
+    identical earlier run is reused by its cache)."""
     out = run_dir(seed, aug_per_demo, smoke)
+    flags = ["--seed", str(seed), "--aug_per_demo", str(aug_per_demo), "--no-rerun", "--out", str(out)]
     argv = [
         sys.executable,
         str(ROOT / "scale_data.py"),
-        "--seed",
-        str(seed),
-        "--aug_per_demo",
-        str(aug_per_demo),
-        "--no-rerun",
-        "--out",
-        str(out),
+        *flags,
         *(SMOKE_FLAGS if smoke else FULL_FLAGS),
+        *extra,
     ]
     say(f"running: python scale_data.py {' '.join(argv[2:])}")
     with tempfile.TemporaryFile("w+") as err:  # progress bars go to stderr; kept for the error message only
@@ -305,31 +301,31 @@ def run_chapter(seed: int, aug_per_demo: int, smoke: bool, say=print) -> dict:
     return json.loads(path.read_text())
 
 
+# The chapter's 2x2: data {source, augmented} x budget {short, full}; effects are differences of arms.
+ARMS = ("source_short", "augmented_short", "source_full", "augmented_full")
+EFFECTS = {
+    "data_full": ("augmented_full", "source_full"),
+    "data_short": ("augmented_short", "source_short"),
+    "compute_source": ("source_full", "source_short"),
+    "compute_augmented": ("augmented_full", "augmented_short"),
+}
+
+
 def check_run_sane(metrics: dict, ex: str = "ex1") -> None:
-    """What any run, even a smoke run, must satisfy: the keys exist and the numbers are in range."""
-    top = (
-        "arms",
-        "scale_effect",
-        "compute_matched_effect",
-        "kept",
-        "attempts",
-        "yield",
-        "augmented_frames",
-        "source_frames",
-    )
+    """What any run, even a smoke run, must satisfy: the keys exist, the numbers are in range, and the
+    two arms of each budget took the same number of steps."""
+    top = ("arms", "budgets", "effects", "scale_effect", "kept", "attempts", "yield", "augmented_frames",
+           "source_frames")  # fmt: skip
     missing = [k for k in top if k not in metrics]
     arms = metrics.get("arms") if isinstance(metrics.get("arms"), dict) else {}
-    for name in ("source", "augmented", "compute_matched"):
+    for name in ARMS:
         arm = arms.get(name)
-        missing += (
-            [f"arms.{name}"]
-            if not isinstance(arm, dict)
-            else [
-                f"arms.{name}.{k}"
-                for k in ("success", "ci95", "frames", "steps", "final_loss")
-                if k not in arm
-            ]
-        )
+        if not isinstance(arm, dict):
+            missing.append(f"arms.{name}")
+            continue
+        missing += [
+            f"arms.{name}.{k}" for k in ("success", "ci95", "frames", "steps", "final_loss") if k not in arm
+        ]
     if missing:
         raise ExerciseError(f"{ex}: metrics.json lacks {', '.join(missing)}; is scale_data.py up to date?")
     for name, arm in arms.items():
@@ -342,43 +338,58 @@ def check_run_sane(metrics: dict, ex: str = "ex1") -> None:
             raise ExerciseError(
                 f"{ex}: arm {name} has frames {arm['frames']}, steps {arm['steps']}, loss {arm['final_loss']}"
             )
+    for budget in ("short", "full"):
+        steps = {arms[f"{d}_{budget}"]["steps"] for d in ("source", "augmented")}
+        if steps != {metrics["budgets"].get(budget)}:
+            raise ExerciseError(
+                f"{ex}: the {budget} budget's arms took {sorted(steps)} steps, not both "
+                f"{metrics['budgets'].get(budget)}; the data is then not the only difference"
+            )
     if not (0 <= metrics["kept"] <= metrics["attempts"] and 0.0 <= metrics["yield"] <= 1.0):
         raise ExerciseError(
             f"{ex}: kept {metrics['kept']} of {metrics['attempts']} attempts, yield {metrics['yield']}"
         )
-    if arms["augmented"]["frames"] != metrics["source_frames"] + metrics["augmented_frames"]:
-        raise ExerciseError(f"{ex}: the augmented arm should train on source + augmented frames")
-    for key, arm in (("scale_effect", "augmented"), ("compute_matched_effect", "compute_matched")):
-        if abs(metrics[key] - (arms[arm]["success"] - arms["source"]["success"])) > 1e-5:
-            raise ExerciseError(f"{ex}: {key} {metrics[key]} is not {arm} minus source success")
+    for budget in ("short", "full"):
+        if arms[f"augmented_{budget}"]["frames"] != metrics["source_frames"] + metrics["augmented_frames"]:
+            raise ExerciseError(f"{ex}: the augmented arms should train on source + augmented frames")
+    for key, (plus, minus) in EFFECTS.items():
+        got = metrics["effects"].get(key)
+        if got is None or abs(got - (arms[plus]["success"] - arms[minus]["success"])) > 1e-5:
+            raise ExerciseError(f"{ex}: effects.{key} {got} is not {plus} minus {minus} success")
+    if abs(metrics["scale_effect"] - metrics["effects"]["data_full"]) > 1e-9:
+        raise ExerciseError(
+            f"{ex}: scale_effect {metrics['scale_effect']} is not the data effect at the full budget"
+        )
 
 
 def check_ex1_measured(metrics: dict, band: dict) -> list[str]:
-    """Assert the measured scale effect against meta.yaml's band (scale_effect_min and/or _max);
-    returns lines to print."""
+    """Assert the measured data effect at the full budget (scale_effect) against meta.yaml's band
+    (scale_effect_min and/or _max); returns lines to print."""
     check_run_sane(metrics, "ex1")
-    s, a = metrics["arms"]["source"]["success"], metrics["arms"]["augmented"]["success"]
+    arms, steps = metrics["arms"], metrics["budgets"]["full"]
+    s, a = arms["source_full"]["success"], arms["augmented_full"]["success"]
     eff, lo, hi = metrics["scale_effect"], band.get("scale_effect_min"), band.get("scale_effect_max")
     if lo is None and hi is None:
         raise ExerciseError(
             "ex1: meta.yaml's exercise_checks.ex1.band has neither scale_effect_min nor scale_effect_max"
         )
-    want = " and ".join(
-        x
-        for x in (
-            lo is not None and f"scale_effect >= {lo:+.3f}",
-            hi is not None and f"scale_effect <= {hi:+.3f}",
-        )
-        if x
+    bounds = (
+        lo is not None and f"scale_effect >= {lo:+.3f}",
+        hi is not None and f"scale_effect <= {hi:+.3f}",
     )
-    measured = f"source-only {s:.2f} -> source+augmented {a:.2f} ({eff * 100:+.0f} points)"
+    want = " and ".join(x for x in bounds if x)
+    measured = (
+        f"at {steps} steps each, source-only {s:.2f} -> source+augmented {a:.2f} ({eff * 100:+.0f} points)"
+    )
     if (lo is not None and eff < lo - 1e-9) or (hi is not None and eff > hi + 1e-9):
         raise ExerciseError(
             f"ex1: measured scale effect {eff:+.3f} ({measured}) is outside the band in meta.yaml "
             f"({want}); the chapter's claim does not hold on this run: report it, with your metrics.json"
         )
+    short = metrics["budgets"]["short"]
     return [
-        f"measured: {measured}, compute-matched {metrics['arms']['compute_matched']['success']:.2f}; "
+        f"measured: {measured}; at the short budget ({short} steps) "
+        f"{arms['source_short']['success']:.2f} -> {arms['augmented_short']['success']:.2f}; "
         f"meta.yaml band {want}: holds"
     ]
 
@@ -395,16 +406,21 @@ def step_lines(rates: dict) -> list[str]:
 
 
 def check_ex3_nested(runs: dict) -> None:
-    """runs {k: metrics}: nested augmented sets (frames 0 < 4 < 8) and one source arm in every run."""
+    """runs {k: metrics}: nested augmented sets (frames 0 < 4 < 8), one source set in every run, and
+    one full budget (the same steps) in every run, so the curve moves the data alone."""
     ks = sorted(runs)
     frames = [runs[k]["augmented_frames"] for k in ks]
     if frames[0] != 0 or runs[ks[0]]["kept"] != 0:
         raise ExerciseError(f"ex3: aug_per_demo {ks[0]} should add no frames, got {frames[0]}")
     if not all(x < y for x, y in zip(frames, frames[1:])):
         raise ExerciseError(f"ex3: augmented frames should grow with aug_per_demo {ks}, got {frames}")
-    if len({(runs[k]["arms"]["source"]["frames"], runs[k]["arms"]["source"]["steps"]) for k in ks}) != 1:
-        raise ExerciseError("ex3: the source-only arm differs between runs; the runs are not comparable")
-    if runs[ks[0]]["arms"]["augmented"]["frames"] != runs[ks[0]]["arms"]["source"]["frames"]:
+    if len({runs[k]["source_frames"] for k in ks}) != 1:
+        raise ExerciseError("ex3: the source set differs between runs; the runs are not comparable")
+    steps = {k: runs[k]["budgets"]["full"] for k in ks}
+    if len(set(steps.values())) != 1:
+        raise ExerciseError(f"ex3: the full budget differs between runs ({steps} steps); the curve would mix "
+                            "more data with more training")  # fmt: skip
+    if runs[ks[0]]["arms"]["augmented_full"]["frames"] != runs[ks[0]]["source_frames"]:
         raise ExerciseError(
             f"ex3: at aug_per_demo {ks[0]} the augmented arm should train on the source frames only"
         )
@@ -471,21 +487,31 @@ def run_ex2(say=print) -> None:
     )
 
 
+def ex3_runs(seed: int, ks, smoke: bool, say=print) -> dict:
+    """{k: metrics} for aug_per_demo in ks, all at one full budget: the largest k's run first (its
+    default full budget, --epochs passes over its data), then the others with --full_steps set to it."""
+    top = max(ks)
+    runs = {top: run_chapter(seed, top, smoke, say)}
+    steps = ("--full_steps", str(runs[top]["budgets"]["full"]))
+    runs.update({k: run_chapter(seed, k, smoke, say, extra=steps) for k in ks if k != top})
+    return {k: runs[k] for k in sorted(runs)}
+
+
 def run_ex3(say=print) -> None:
     meta = load_meta()["ex3"]
     pred = check_prediction(load_exercise("ex3"), EX3_CHOICES, "ex3")
     say(f"ex3: prediction {pred!r} recorded; running aug_per_demo {meta['aug_per_demo']}")
     smoke = smoke_mode()
-    runs = {int(k): run_chapter(int(meta.get("seed", 0)), int(k), smoke, say) for k in meta["aug_per_demo"]}
+    runs = ex3_runs(int(meta.get("seed", 0)), [int(k) for k in meta["aug_per_demo"]], smoke, say)
     for m in runs.values():
         check_run_sane(m, "ex3")
     check_ex3_nested(runs)
-    rates = {k: m["arms"]["augmented"]["success"] for k, m in runs.items()}
+    rates = {k: m["arms"]["augmented_full"]["success"] for k, m in runs.items()}
     tol = float(meta["plateau_tol"])
     if smoke:
         say("ex3: steps " + ", ".join(step_lines(rates)))
         say(
-            "ex3: smoke run (CH37_EXERCISE_SMOKE=1): keys, ranges and nested sizes checked "
+            "ex3: smoke run (CH37_EXERCISE_SMOKE=1): keys, ranges, nested sizes and equal budgets checked "
             f"(augmented frames {[runs[k]['augmented_frames'] for k in sorted(runs)]}); "
             "numbers are not meaningful, so the meta.yaml bands are skipped and the prediction is not scored"
         )
@@ -493,14 +519,15 @@ def run_ex3(say=print) -> None:
     for line in check_ex3_measured(rates, meta["band"], tol):
         say("ex3: " + line)
     shape = curve_shape(rates, tol)
+    reference = (
+        ""
+        if shape == meta.get("answer", shape)
+        else f" (the reference run in meta.yaml reads {meta['answer']!r})"
+    )
     say(
-        f"ex3: the data shows a {shape}; "
+        f"ex3: the data shows a {shape} at {runs[max(runs)]['budgets']['full']} steps each; "
         + verdict(pred, shape)
-        + (
-            ""
-            if shape == meta.get("answer", shape)
-            else f" (the reference run in meta.yaml reads {meta['answer']!r})"
-        )
+        + reference
     )
 
 

@@ -2,10 +2,12 @@
 
 Objective
     Commit to a prediction about the data-scale effect before you see it, then measure it.
-    scale_data.py trains the same behaviour-cloning MLP twice: on the 12 source PushT demos
-    alone, and on those 12 plus the augmented demos (each source start perturbed 8 times and
-    re-solved by the scripted expert, kept only when the expert succeeds). Same initial
-    weights, same batch order, same 50 held-out starts: the data is the only difference.
+    scale_data.py trains the same behaviour-cloning MLP on the 12 source PushT demos alone, and
+    on those 12 plus the augmented demos (each source start perturbed 8 times and re-solved by
+    the scripted expert, kept only when the expert succeeds). The question is about the full
+    budget: both arms take exactly the same number of gradient steps (500 passes over the
+    source + augmented set), from the same initial weights and batch-order seed, and roll out on
+    the same 50 held-out starts, so the data is the only difference.
 
 What to do
     1. Set PREDICTION below to one letter:
@@ -19,8 +21,9 @@ What to do
        (a few minutes on a laptop CPU), checks the measured effect against the band recorded
        in meta.yaml, and prints whether your prediction matched the measurement. A wrong
        prediction does not fail the check; a missing one does.
-    4. Afterwards, compare with the compute-matched arm in metrics.json: is the gain "more
-       data" or just "more gradient steps"?
+    4. Afterwards, read the whole 2x2 the run prints (and metrics.json's "effects"): at the short
+       budget (500 passes over the source set only) does the extra data still help? What does
+       that say about data and compute?
 
 How to check
     pytest exercises/checks.py -k ex1

@@ -69,28 +69,33 @@ def derive_checks(seeds: dict, aug: dict) -> dict:
         raise ValueError("the aug sweep must be at seed 0")
     if sorted(by_k) != [0, 4, 8]:
         raise ValueError(f"the aug sweep must cover aug_per_demo 0, 4, 8; it has {sorted(by_k)}")
-    s = {k: by_k[k]["augmented"] for k in (0, 4, 8)}
+    s = {k: by_k[k]["augmented_full"] for k in (0, 4, 8)}
     dims = seeds["action_dims"]
     return {
-        "ex1": {"seed": 0, "answer": answer, "band": ex1_band(answer, r0["delta"], r0["ci95"]["augmented"])},
+        "ex1": {
+            "seed": 0,
+            "answer": answer,
+            "band": ex1_band(answer, r0["delta"], r0["ci95"]["augmented_full"]),
+        },
         "ex2": {"pusht_mask_density": round(dims["pusht"] / seeds["padded_action_dim"], 6)},
         "ex3": {
             "seed": 0,
             "aug_per_demo": [0, 4, 8],
             "answer": ex3_answer(s[0], s[4], s[8]),
             "plateau_tol": PLATEAU_TOL,
-            "band": {str(k): success_band(s[k], by_k[k]["ci95"]["augmented"]) for k in (0, 4, 8)},
+            "band": {str(k): success_band(s[k], by_k[k]["ci95"]["augmented_full"]) for k in (0, 4, 8)},
         },
     }
 
 
 # The rules above in words, published in meta.yaml's reference_run beside the numbers they made.
 RULES = {
-    "ex1_answer": "A if augmented > source on every sweep seed, B if augmented < source on every seed, "
-    "else C",
+    "ex1_answer": "A if augmented > source at the full budget (equal steps) on every sweep seed, B if "
+    "augmented < source on every seed, else C",
     "ex1_band": "A: scale_effect_min = seed-0 effect / 2; B: scale_effect_max = seed-0 effect / 2; "
-    "C: seed-0 effect +- max(0.06, Wilson half-width / 2) of the seed-0 augmented arm",
-    "ex3_answer": f"the last step s8-s4 of augmented-arm success decides: climb if > +{PLATEAU_TOL}, "
+    "C: seed-0 effect +- max(0.06, Wilson half-width / 2) of the seed-0 augmented arm at the full budget",
+    "ex3_answer": f"all three runs at the aug_per_demo 8 run's full budget (the same steps); "
+    f"the last step s8-s4 of augmented-arm success decides: climb if > +{PLATEAU_TOL}, "
     f"fall if < -{PLATEAU_TOL}, else plateau; the first step s4-s0 is printed, not judged",
     "ex3_band": "measured success +- max(0.06, Wilson 95% half-width / 2), clipped to [0, 1]",
 }

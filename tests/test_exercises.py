@@ -120,11 +120,14 @@ def test_success_band_rule_margin_and_clipping():
 
 
 def test_derive_checks_refuses_bad_sweeps():
-    row = {"seed": 0, "delta": 0.1, "ci95": {"augmented": [0.2, 0.4]}}
+    row = {"seed": 0, "delta": 0.1, "ci95": {"augmented_full": [0.2, 0.4]}}
     seeds = {"rows": [row], "action_dims": {"pusht": 2}, "padded_action_dim": 6}
     aug = {
         "seed": 0,
-        "rows": [{"aug_per_demo": k, "augmented": 0.3, "ci95": {"augmented": [0.2, 0.4]}} for k in (0, 4, 8)],
+        "rows": [
+            {"aug_per_demo": k, "augmented_full": 0.3, "ci95": {"augmented_full": [0.2, 0.4]}}
+            for k in (0, 4, 8)
+        ],
     }
     ex = rules.derive_checks(seeds, aug)
     assert ex["ex1"]["answer"] == "A" and ex["ex2"] == {"pusht_mask_density": 0.333333}
@@ -312,25 +315,34 @@ def test_ex2_unfilled_fails_clearly_and_solutions_pass_under_pytest():
 
 # ---------------------------------------------------------------- measured claims: ex1 and ex3
 def make_metrics(
-    source=0.1, augmented=0.3, compute_matched=0.2, aug_frames=6000, kept=96, attempts=96, src_frames=838
+    source=0.1,
+    augmented=0.3,
+    short=(0.0, 0.02),
+    aug_frames=6000,
+    kept=96,
+    attempts=96,
+    src_frames=838,
+    full=9000,
 ):
-    def arm(s, frames, steps):
-        return {
-            "success": s,
-            "ci95": [max(0.0, s - 0.1), min(1.0, s + 0.1)],
-            "frames": frames,
-            "steps": steps,
-            "final_loss": 0.01,
-        }
+    """A well-formed metrics.json of the 2x2: `source`/`augmented` at the full budget, `short` the pair
+    (source, augmented) at the short one."""
 
+    def arm(s, frames, steps):
+        ci95 = [max(0.0, s - 0.1), min(1.0, s + 0.1)]
+        return {"success": s, "ci95": ci95, "frames": frames, "steps": steps, "final_loss": 0.01}
+
+    arms = {
+        "source_short": arm(short[0], src_frames, 3500),
+        "augmented_short": arm(short[1], src_frames + aug_frames, 3500),
+        "source_full": arm(source, src_frames, full),
+        "augmented_full": arm(augmented, src_frames + aug_frames, full),
+    }
+    effects = {k: round(arms[a]["success"] - arms[b]["success"], 6) for k, (a, b) in checks.EFFECTS.items()}
     return {
-        "arms": {
-            "source": arm(source, src_frames, 3500),
-            "augmented": arm(augmented, src_frames + aug_frames, 9000),
-            "compute_matched": arm(compute_matched, src_frames + aug_frames, 3500),
-        },
-        "scale_effect": round(augmented - source, 6),
-        "compute_matched_effect": round(compute_matched - source, 6),
+        "arms": arms,
+        "budgets": {"short": 3500, "full": full},
+        "effects": effects,
+        "scale_effect": effects["data_full"],
         "kept": kept,
         "attempts": attempts,
         "yield": kept / attempts if attempts else 0.0,
@@ -373,13 +385,17 @@ def test_ex1_band_from_meta(meta):
     "broken,needle",
     [
         (lambda m: m.pop("scale_effect"), "lacks scale_effect"),
-        (lambda m: m["arms"].pop("compute_matched"), "lacks arms.compute_matched"),
-        (lambda m: m["arms"]["source"].pop("ci95"), "lacks arms.source.ci95"),
-        (lambda m: m["arms"]["augmented"].update(success=1.2, ci95=[0.9, 1.3]), "not a valid rate"),
-        (lambda m: m["arms"]["augmented"].update(success=0.9), "not a valid rate"),
-        (lambda m: m.update(scale_effect=0.5), "is not augmented minus source"),
+        (lambda m: m["arms"].pop("source_short"), "lacks arms.source_short"),
+        (lambda m: m["arms"]["source_full"].pop("ci95"), "lacks arms.source_full.ci95"),
+        (lambda m: m["arms"]["augmented_full"].update(success=1.2, ci95=[0.9, 1.3]), "not a valid rate"),
+        (lambda m: m["arms"]["augmented_full"].update(success=0.9), "not a valid rate"),
+        (lambda m: m["effects"].update(data_full=0.5), "effects.data_full 0.5 is not augmented_full minus"),
+        (lambda m: m["effects"].update(compute_source=0.5), "effects.compute_source 0.5 is not source_full"),
+        (lambda m: m.update(scale_effect=0.5), "is not the data effect at the full budget"),
+        (lambda m: m["arms"]["augmented_full"].update(steps=100), "full budget's arms took \\[100, 9000\\]"),
+        (lambda m: m["arms"]["source_short"].update(steps=3000), "short budget's arms took \\[3000, 3500\\]"),
         (lambda m: m.update(kept=100), "kept 100 of 96"),
-        (lambda m: m["arms"]["augmented"].update(frames=838), "source \\+ augmented frames"),
+        (lambda m: m["arms"]["augmented_full"].update(frames=838), "source \\+ augmented frames"),
     ],
 )
 def test_broken_metrics_fail(broken, needle):
@@ -427,11 +443,12 @@ def test_ex3_bands_pass_inside_and_fail_outside(meta):
 
 def test_ex3_nested_sizes():
     runs = {
-        0: make_metrics(0.1, 0.1, 0.1, aug_frames=0, kept=0, attempts=0),
+        0: make_metrics(0.1, 0.1, aug_frames=0, kept=0, attempts=0),
         4: make_metrics(aug_frames=3000, attempts=48, kept=48),
         8: make_metrics(aug_frames=6000),
     }
-    runs[0]["arms"]["augmented"]["frames"] = runs[0]["arms"]["source"]["frames"]
+    for name in ("augmented_short", "augmented_full"):
+        runs[0]["arms"][name]["frames"] = runs[0]["source_frames"]
     checks.check_ex3_nested(runs)
     bad = {**runs, 8: make_metrics(aug_frames=3000)}
     with pytest.raises(ExerciseError, match="should grow"):
@@ -440,7 +457,10 @@ def test_ex3_nested_sizes():
     with pytest.raises(ExerciseError, match="should add no frames"):
         checks.check_ex3_nested(bad)
     bad = {**runs, 4: make_metrics(aug_frames=3000, src_frames=500)}
-    with pytest.raises(ExerciseError, match="source-only arm differs"):
+    with pytest.raises(ExerciseError, match="source set differs"):
+        checks.check_ex3_nested(bad)
+    bad = {**runs, 4: make_metrics(aug_frames=3000, full=5000)}  # each run at its own budget: refused
+    with pytest.raises(ExerciseError, match="full budget differs between runs"):
         checks.check_ex3_nested(bad)
 
 
@@ -502,16 +522,14 @@ def test_full_mode_asserts_bands_and_scores_predictions(tmp_path, monkeypatch):
         "ex1: your prediction was A (augmentation helps); the measurement says C" in text
     )  # scored, not failed
     assert "aug_per_demo 8: success" in text and "ex3: steps: 0 -> 4: " in text
-    shape = checks.curve_shape(
-        {
-            k: json.loads((tmp_path / "runs" / f"seed0_aug{k}" / "metrics.json").read_text())["arms"][
-                "augmented"
-            ]["success"]
-            for k in (0, 4, 8)
-        },
-        0.04,
-    )
-    assert f"ex3: the data shows a {shape}; " in text
+    runs = {
+        k: json.loads((tmp_path / "runs" / f"seed0_aug{k}" / "metrics.json").read_text()) for k in (0, 4, 8)
+    }
+    assert (
+        len({m["budgets"]["full"] for m in runs.values()}) == 1
+    )  # one budget: the curve moves the data alone
+    shape = checks.curve_shape({k: m["arms"]["augmented_full"]["success"] for k, m in runs.items()}, 0.04)
+    assert f"ex3: the data shows a {shape} at {runs[8]['budgets']['full']} steps each; " in text
 
 
 @pytest.mark.slow

@@ -225,28 +225,34 @@ def test_meta_yaml_schema():
 # ----------------------------------------------------------------------------------------------
 # meta.yaml from sweep files (the rules themselves: tests/test_exercises.py)
 # ----------------------------------------------------------------------------------------------
-def sweep_files(tmp_path, deltas, aug_success, smoke=False):
-    def row(extra, src, aug):
-        ci = {
-            k: [max(0, v - 0.1), min(1, v + 0.1)]
-            for k, v in (("source", src), ("augmented", aug), ("compute_matched", src))
-        }
-        return {
-            **extra,
-            "source": src,
-            "augmented": aug,
-            "compute_matched": src,
-            "delta": round(aug - src, 6),
-            "yield": 1.0,
-            "kept": 96,
-            "attempts": 96,
-            "coverage_source": 12,
-            "coverage_union": 32,
-            "ci95": ci,
-            "wall_s": 1,
-        }
+def sweep_row(extra, src, aug, short=(0.0, 0.0), n=50):
+    """A sweep row as tools.sweep.row_of writes it: `src`/`aug` at the full budget, `short` the pair at
+    the short one."""
+    rate = {"source_short": short[0], "augmented_short": short[1], "source_full": src, "augmented_full": aug}
+    return {
+        **extra,
+        **rate,
+        "data_full": round(aug - src, 6),
+        "data_short": round(short[1] - short[0], 6),
+        "compute_source": round(src - short[0], 6),
+        "compute_augmented": round(aug - short[1], 6),
+        "delta": round(aug - src, 6),
+        "steps": {"short": 1641, "full": 13641},
+        "eval_episodes": n,
+        "successes": {k: round(v * n) for k, v in rate.items()},
+        "yield": 1.0,
+        "kept": 96,
+        "attempts": 96,
+        "coverage_source": 12,
+        "coverage_union": 32,
+        "ci95": {k: [max(0, v - 0.1), min(1, v + 0.1)] for k, v in rate.items()},
+        "wall_s": 1,
+    }
 
-    rows = [row({"seed": s}, 0.1, 0.1 + d) for s, d in enumerate(deltas)]
+
+def sweep_files(tmp_path, deltas, aug_success, smoke=False):
+    row = sweep_row
+    rows = [row({"seed": s}, 0.3, 0.3 + d) for s, d in enumerate(deltas)]
     seeds = {
         "kind": "seeds",
         "smoke": smoke,
@@ -260,6 +266,7 @@ def sweep_files(tmp_path, deltas, aug_success, smoke=False):
         "rows": rows,
         "mean": sweep_tool.mean_row(rows),
         "paired": sweep_tool.paired(rows),
+        "pooled": sweep_tool.pooled(rows),
         "script_region_hashes": regions.region_hashes(),
     }
     aug = {
@@ -304,7 +311,8 @@ def test_meta_command_derives_checks_from_sweep_files(tmp_path, deltas, aug, ex1
     if ex1 == "A":
         assert ex["ex1"]["band"] == {"scale_effect_min": 0.14}
     assert m["reference_run"]["provisional"] is smoke
-    assert m["reference_run"]["seeds"]["paired"]["wins"] == sum(d > 0 for d in deltas)
+    assert m["reference_run"]["seeds"]["paired"]["data_full"]["wins"] == sum(d > 0 for d in deltas)
+    assert m["reference_run"]["seeds"]["pooled"]["source_full"]["episodes"] == 50 * len(deltas)
     assert m["region_hashes"] == regions.region_hashes()
     assert m["reference_run"]["rules"] == rules.RULES
 
@@ -325,7 +333,7 @@ CORRUPT_SWEEPS = [  # (which file, how it is broken, what the one error line say
     (
         "aug",
         lambda s: json.dumps(dict(s, rows=[dict(r, ci95={}) for r in s["rows"]])),
-        "rows[0].ci95.augmented",
+        "rows[0].ci95.augmented_full",
     ),
     ("aug", lambda s: json.dumps(dict(s, rows=s["rows"][:2])), "must cover aug_per_demo 0, 4, 8"),
     ("seeds", lambda s: json.dumps(dict(s, action_dims={})), "malformed"),
@@ -351,27 +359,33 @@ def test_meta_command_refuses_a_corrupt_sweep_file_in_one_line(tmp_path, which, 
 # ----------------------------------------------------------------------------------------------
 # Sweeps: the plumbing on a stub script (fast), then the real script at --smoke size
 # ----------------------------------------------------------------------------------------------
-STUB = textwrap.dedent('''
-    """Stand-in for scale_data.py: writes a metrics.json whose numbers depend on --seed and --aug_per_demo."""
+STUB = textwrap.dedent("""
+    \"\"\"Stand-in for scale_data.py: writes a metrics.json (the 2x2) whose numbers depend on --seed and
+    --aug_per_demo, and whose full budget is --full_steps or grows with the data.\"\"\"
     import argparse, json, pathlib
     p = argparse.ArgumentParser()
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--aug_per_demo", type=int, default=8)
+    p.add_argument("--full_steps", type=int, default=0)
     p.add_argument("--out", type=pathlib.Path)
     p.add_argument("--smoke", action="store_true")
     p.add_argument("--rerun", action=argparse.BooleanOptionalAction, default=True)
     a = p.parse_args()
     src, aug = 0.02 * (a.seed + 1), 0.02 * (a.seed + 1) + 0.03 * a.aug_per_demo
-    arm = lambda s: {"success": s, "ci95": [max(0.0, s - 0.1), min(1.0, s + 0.1)]}
+    budgets = {"short": 100, "full": a.full_steps or 100 * (1 + a.aug_per_demo)}
+    rate = {"source_short": src, "augmented_short": src, "source_full": src, "augmented_full": aug}
+    arm = lambda k: {"success": rate[k], "ci95": [max(0.0, rate[k] - 0.1), min(1.0, rate[k] + 0.1)]}
+    effects = {"data_full": aug - src, "data_short": 0.0, "compute_source": 0.0}
+    effects["compute_augmented"] = aug - src
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "metrics.json").write_text(json.dumps({
         "config": {"seed": a.seed, "aug_per_demo": a.aug_per_demo, "device": "cpu", "smoke": a.smoke,
-                   "rerun": a.rerun},
-        "arms": {"source": arm(src), "augmented": arm(aug), "compute_matched": arm((src + aug) / 2)},
+                   "rerun": a.rerun, "eval_episodes": 50, "full_steps": a.full_steps},
+        "arms": {k: arm(k) for k in rate}, "budgets": budgets, "effects": effects,
         "scale_effect": aug - src, "yield": 1.0, "kept": 12 * a.aug_per_demo, "attempts": 12 * a.aug_per_demo,
         "coverage": {"source": 12, "union": 12 + a.aug_per_demo}, "action_dims": {"pusht": 2, "aloha": 6},
         "padded_action_dim": 6}))
-''')
+""")
 
 
 @pytest.fixture
@@ -390,7 +404,9 @@ def test_sweep_aug_mode_and_flag_passthrough(tmp_path, stub):
     assert s["kind"] == "aug" and s["smoke"] is True and s["seed"] == 0
     assert [r["aug_per_demo"] for r in s["rows"]] == [0, 4, 8]
     assert [r["effective_aug_per_demo"] for r in s["rows"]] == [0, 4, 8]
-    assert s["rows"][0]["augmented"] == s["rows"][0]["source"]
+    assert s["rows"][0]["augmented_full"] == s["rows"][0]["source_full"]
+    # the largest k ran first at its own full budget; the others trained for exactly that many steps
+    assert {r["steps"]["full"] for r in s["rows"]} == {900} and s["full_steps"] == 900
     assert "climb" in p.stdout  # 0.02 -> 0.14 -> 0.26
     assert "--smoke" in s["command"] and s["config"]["smoke"] is True and "aug_per_demo" not in s["config"]
 
@@ -417,17 +433,22 @@ def test_sweep_refuses_flags_it_owns(tmp_path, stub):
 
 def test_paired_stats():
     rows = [
-        {"source": 0.02, "augmented": 0.30},
-        {"source": 0.08, "augmented": 0.20},
-        {"source": 0.14, "augmented": 0.26},
+        sweep_row({"seed": i}, src, aug)
+        for i, (src, aug) in enumerate([(0.02, 0.30), (0.08, 0.20), (0.14, 0.26)])
     ]
-    pr = sweep_tool.paired(rows)
+    pr = sweep_tool.paired(rows)["data_full"]
     assert (pr["n"], pr["wins"], pr["ties"], pr["losses"]) == (3, 3, 0, 0)
-    assert pr["mean_delta"] == pytest.approx(0.173333, abs=1e-6)
-    assert pr["std_delta"] == pytest.approx(0.092376, abs=1e-6)
-    assert pr["sem_delta"] == pytest.approx(0.092376 / 3**0.5, abs=1e-6)
-    one = sweep_tool.paired(rows[:1])
-    assert one["std_delta"] is None and one["sem_delta"] is None
+    assert pr["mean"] == pytest.approx(0.173333, abs=1e-6)
+    assert pr["std"] == pytest.approx(0.092376, abs=1e-6)
+    half = 4.303 * 0.092376 / 3**0.5  # t(0.975, 2 degrees of freedom)
+    assert pr["ci95"] == pytest.approx([0.173333 - half, 0.173333 + half], abs=1e-5)
+    one = sweep_tool.paired(rows[:1])["data_full"]
+    assert one["std"] is None and one["ci95"] is None
+    pooled = sweep_tool.pooled(rows)["augmented_full"]  # 15 + 10 + 13 of 150 episodes
+    assert (pooled["successes"], pooled["episodes"]) == (38, 150)
+    assert pooled["success"] == pytest.approx(38 / 150, abs=1e-6)
+    lo, hi = pooled["ci95"]
+    assert lo < 38 / 150 < hi and hi - lo == pytest.approx(0.139, abs=0.002)  # Wilson at n = 150
 
 
 @contextlib.contextmanager
@@ -460,21 +481,17 @@ def test_sweep_seeds_on_smoke_writes_the_table_and_paired_stats(smoke_sweep):
     for r in s["rows"]:
         m = json.loads((out / "seeds" / f"seed{r['seed']}" / "metrics.json").read_text())
         assert m["seed"] == r["seed"] and m["config"]["rerun"] is False
-        assert r["source"] == m["arms"]["source"]["success"] and r["kept"] == m["kept"]
+        assert r["source_full"] == m["arms"]["source_full"]["success"] and r["kept"] == m["kept"]
+        assert r["steps"] == m["budgets"] and r["successes"]["augmented_full"] == round(
+            m["arms"]["augmented_full"]["success"] * m["config"]["eval_episodes"]
+        )
         assert r["coverage_union"] == m["coverage"]["union"] and r["delta"] == pytest.approx(
             m["scale_effect"]
         )
-    assert set(s["mean"]) >= {
-        "source",
-        "augmented",
-        "compute_matched",
-        "delta",
-        "yield",
-        "kept",
-        "coverage_union",
-    }
-    assert s["paired"]["n"] == 2 and s["paired"]["wins"] + s["paired"]["ties"] + s["paired"]["losses"] == 2
-    assert s["paired"]["std_delta"] is not None and s["paired"]["sem_delta"] is not None
+    assert set(s["mean"]) >= {*sweep_tool.ARMS, *sweep_tool.EFFECTS, "yield", "kept", "coverage_union"}
+    pr = s["paired"]["data_full"]
+    assert pr["n"] == 2 and pr["wins"] + pr["ties"] + pr["losses"] == 2 and pr["ci95"] is not None
+    assert set(s["paired"]) == set(sweep_tool.EFFECTS) and set(s["pooled"]) == set(sweep_tool.ARMS)
     assert s["command"] == "python -m tools.sweep --seeds 2 --smoke --out-root " + str(out)
     assert s["date_utc"].endswith("Z") and s["platform"]["python"] == ".".join(map(str, sys.version_info[:3]))
     assert (
@@ -486,7 +503,8 @@ def test_sweep_seeds_on_smoke_writes_the_table_and_paired_stats(smoke_sweep):
     assert s["config"]["smoke"] is True and "seed" not in s["config"]
     assert s["script_region_hashes"] == regions.region_hashes()
     assert (
-        "paired: augmented beat source on" in p.stdout
+        "paired data_full: > 0 on" in p.stdout
+        and "pooled augmented_full:" in p.stdout
         and "mean" in p.stdout
         and "sweep_seeds.json" in p.stdout
     )

@@ -92,14 +92,33 @@ def test_masked_loss_gives_padded_dims_exactly_zero_gradient(runs):
 
 
 def test_aug_zero_reproduces_source_arm_to_the_digit(runs, tmp_path):
+    """--aug_per_demo 0: the two data rows of the 2x2 are the same data, so they must agree to the digit,
+    and the source row must equal the source row of the run with augmentation (same short budget)."""
     a = runs["a"][0]
     shutil.copytree(a / "demos", tmp_path / "demos")  # reuse the cached demo sets
     smoke(tmp_path, "--aug_per_demo", "0")
     m0 = json.loads((tmp_path / "metrics.json").read_text())
     m2 = json.loads((a / "metrics.json").read_text())
     assert m0["kept"] == 0 and m0["augmented_frames"] == 0
-    assert m0["arms"]["source"] == m2["arms"]["source"]
-    assert m0["arms"]["augmented"] == m0["arms"]["source"] == m0["arms"]["compute_matched"]
+    assert m0["budgets"]["short"] == m0["budgets"]["full"] == m2["budgets"]["short"]
+    for budget in ("short", "full"):
+        src, aug = dict(m0["arms"][f"source_{budget}"]), dict(m0["arms"][f"augmented_{budget}"])
+        assert src.pop("data") == "source" and aug.pop("data") == "augmented"
+        assert src == aug  # success, interval, steps, frames and the final loss to the digit
+    assert m0["arms"]["source_short"] == m2["arms"]["source_short"]
+    assert all(v == 0 for v in m0["effects"].values())
+
+
+def test_the_arms_of_a_budget_take_equal_steps(runs):
+    m = json.loads((runs["a"][0] / "metrics.json").read_text())
+    for budget, steps in m["budgets"].items():
+        assert m["arms"][f"source_{budget}"]["steps"] == m["arms"][f"augmented_{budget}"]["steps"] == steps
+    assert m["budgets"]["full"] > m["budgets"]["short"]  # more data, more steps at --epochs passes
+    batch, epochs = m["config"]["batch_size"], m["config"]["epochs"]
+    assert m["budgets"]["short"] == -(-epochs * m["source_frames"] // batch)
+    total = m["source_frames"] + m["augmented_frames"]
+    assert m["budgets"]["full"] == -(-epochs * total // batch)
+    assert m["scale_effect"] == m["effects"]["data_full"]
 
 
 def test_augmentation_is_nested(runs, tmp_path):

@@ -43,7 +43,8 @@ META_STATIC = {
         "Grow the PushT set MimicGen-style: perturb each source start, re-solve it with the same scripted "
         "expert in the real physics, keep only successes, and report the yield.",
         "Measure the data-scale effect: the same behaviour-cloning MLP on source demos alone and on source "
-        "plus augmented, with a compute-matched control, rolled out on the same held-out starts.",
+        "plus augmented for the same number of gradient steps, at a short and a full budget (a 2x2 of data x "
+        "compute), rolled out on the same held-out starts.",
     ],
     "mimicgen": {
         "repo": "NVlabs/mimicgen",
@@ -77,8 +78,11 @@ META_ORDER = (
 )
 # What each sweep file must hold for reference_run and derive_checks: top-level keys, then keys of every row.
 SWEEP_KEYS = {
-    "seeds": (("rows", "mean", "paired", "action_dims", "padded_action_dim"), ("seed", "delta", "ci95")),
-    "aug": (("rows",), ("aug_per_demo", "augmented", "ci95")),
+    "seeds": (
+        ("rows", "mean", "paired", "pooled", "action_dims", "padded_action_dim"),
+        ("seed", "delta", "ci95"),
+    ),
+    "aug": (("rows",), ("aug_per_demo", "augmented_full", "ci95")),
 }
 PROVENANCE_KEYS = (
     "command",
@@ -162,6 +166,7 @@ def reference_run(seeds: dict, aug: dict) -> dict:
             "rows": [_public(r) for r in seeds["rows"]],
             "mean": seeds["mean"],
             "paired": seeds["paired"],
+            "pooled": seeds["pooled"],
             "provenance": {k: seeds[k] for k in PROVENANCE_KEYS if k in seeds},
         },
         "aug_curve": {
@@ -202,8 +207,8 @@ def read_sweep(path: Path, kind: str, flag: str) -> dict:
                 missing.append(f"rows[{i}] (a mapping)")
                 continue
             missing += [f"rows[{i}].{k}" for k in per_row if k not in r]
-            if "ci95" in r and not (isinstance(r["ci95"], dict) and "augmented" in r["ci95"]):
-                missing.append(f"rows[{i}].ci95.augmented")
+            if "ci95" in r and not (isinstance(r["ci95"], dict) and "augmented_full" in r["ci95"]):
+                missing.append(f"rows[{i}].ci95.augmented_full")
     if missing:
         raise ToolError(f"{_rel(path)} is incomplete: it lacks {', '.join(missing[:5])}; re-run the sweep")
     return data

@@ -27,7 +27,10 @@ from exercises.rules import PLATEAU_TOL, ex3_answer
 from tools.common import ToolError, _rel, parser, provenance, run_cli
 
 SWEEP_OWNED = {"--seed", "--out", "--rerun", "--no-rerun"}
-MEAN_KEYS = ("source", "augmented", "compute_matched", "delta", "yield", "kept", "coverage_union")
+ARMS = ("source_short", "augmented_short", "source_full", "augmented_full")
+EFFECTS = ("data_full", "data_short", "compute_source", "compute_augmented")
+MEAN_KEYS = (*ARMS, *EFFECTS, "yield", "kept", "coverage_union")
+T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262, 10: 2.228}
 
 
 def _seed_demo_cache(root: Path, target: Path, seed: int) -> None:
@@ -59,19 +62,22 @@ def run_one(script: Path, out: Path, seed: int, flags: list[str], root: Path) ->
 
 
 def row_of(m: dict, **extra) -> dict:
-    a = m["arms"]
+    """One run's 2x2 as a sweep row: each arm's success, the effects, steps per budget, episodes."""
+    a, n = m["arms"], m["config"]["eval_episodes"]
     return {
         **extra,
-        "source": a["source"]["success"],
-        "augmented": a["augmented"]["success"],
-        "compute_matched": a["compute_matched"]["success"],
-        "delta": round(m["scale_effect"], 6),
+        **{arm: a[arm]["success"] for arm in ARMS},
+        **{e: round(m["effects"][e], 6) for e in EFFECTS},
+        "delta": round(m["scale_effect"], 6),  # the headline: data effect at the full budget
+        "steps": m["budgets"],
+        "eval_episodes": n,
+        "successes": {arm: round(a[arm]["success"] * n) for arm in ARMS},
         "yield": m["yield"],
         "kept": m["kept"],
         "attempts": m["attempts"],
         "coverage_source": m["coverage"]["source"],
         "coverage_union": m["coverage"]["union"],
-        "ci95": {k: a[k]["ci95"] for k in ("source", "augmented", "compute_matched")},
+        "ci95": {arm: a[arm]["ci95"] for arm in ARMS},
         "wall_s": m["_wall_s"],
     }
 
@@ -80,56 +86,87 @@ def mean_row(rows: list[dict]) -> dict:
     return {k: round(sum(r[k] for r in rows) / len(rows), 6) for k in MEAN_KEYS}
 
 
+def wilson(successes: int, n: int, z: float = 1.96) -> list[float]:
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return [round(max(0.0, centre - half), 6), round(min(1.0, centre + half), 6)]
+
+
 def paired(rows: list[dict]) -> dict:
-    """Augmented vs source on the same seed: wins, mean paired delta, its sample std and sem."""
-    d = [r["augmented"] - r["source"] for r in rows]
-    n = len(d)
-    mean = sum(d) / n
-    std = math.sqrt(sum((x - mean) ** 2 for x in d) / (n - 1)) if n > 1 else None
-    return {
-        "n": n,
-        "wins": sum(x > 0 for x in d),
-        "ties": sum(x == 0 for x in d),
-        "losses": sum(x < 0 for x in d),
-        "mean_delta": round(mean, 6),
-        "std_delta": None if std is None else round(std, 6),
-        "sem_delta": None if std is None else round(std / math.sqrt(n), 6),
-    }
+    """Per effect (data at each budget, compute per data set), the seeds' paired differences: wins,
+    ties, losses, mean, sample std, and a 95% t-interval over seeds (None with one seed)."""
+    out = {}
+    for key in EFFECTS:
+        d = [r[key] for r in rows]
+        n = len(d)
+        mean = sum(d) / n
+        std = math.sqrt(sum((x - mean) ** 2 for x in d) / (n - 1)) if n > 1 else None
+        half = None if std is None else T975.get(n - 1, 1.96) * std / math.sqrt(n)
+        out[key] = {
+            "n": n,
+            "wins": sum(x > 0 for x in d),
+            "ties": sum(x == 0 for x in d),
+            "losses": sum(x < 0 for x in d),
+            "mean": round(mean, 6),
+            "std": None if std is None else round(std, 6),
+            "ci95": None if half is None else [round(mean - half, 6), round(mean + half, 6)],
+        }
+    return out
+
+
+def pooled(rows: list[dict]) -> dict:
+    """Each arm's successes over all seeds' evaluation episodes, with a Wilson 95% interval."""
+    n = sum(r["eval_episodes"] for r in rows)
+    out = {}
+    for arm in ARMS:
+        k = sum(r["successes"][arm] for r in rows)
+        out[arm] = {"successes": k, "episodes": n, "success": round(k / n, 6), "ci95": wilson(k, n)}
+    return out
 
 
 def format_table(rows: list[dict], key: str, mean: dict | None = None) -> str:
-    cols = (
-        f"{'source':>7s} {'augmented':>9s} {'compute-matched':>15s} {'delta':>7s} {'yield':>6s} {'kept':>5s}"
-    )
-    out = [f"{key:>12s} {cols} {'coverage':>12s}"]
+    head = " ".join(f"{a:>15s}" for a in ARMS)
+    out = [
+        f"{key:>12s} {head} {'data@full':>9s} {'data@short':>10s} {'yield':>6s} {'kept':>5s} "
+        f"{'coverage':>10s}"
+    ]
     for r in rows + ([dict(mean, **{key: "mean"})] if mean else []):
-        if "coverage_source" in r:
-            cov = f"{r['coverage_source']} -> {r['coverage_union']}"
-        else:
-            cov = f"union {r['coverage_union']:.1f}"
-        kept = f"{r['kept']:5d}" if isinstance(r["kept"], int) else f"{r['kept']:5.1f}"
-        out.append(
-            f"{r[key]!s:>12s} {r['source']:7.3f} {r['augmented']:9.3f} {r['compute_matched']:15.3f} "
-            f"{r['delta']:+7.3f} {r['yield']:6.3f} {kept} {cov:>12s}"
+        cov = (
+            f"{r['coverage_source']} -> {r['coverage_union']}"
+            if "coverage_source" in r
+            else f"{r['coverage_union']:.1f}"
         )
+        kept = f"{r['kept']:5d}" if isinstance(r["kept"], int) else f"{r['kept']:5.1f}"
+        cells = " ".join(f"{r[a]:15.3f}" for a in ARMS)
+        out.append(f"{r[key]!s:>12s} {cells} {r['data_full']:+9.3f} {r['data_short']:+10.3f} "
+                   f"{r['yield']:6.3f} "
+                   f"{kept} {cov:>10s}")  # fmt: skip
     return "\n".join(out)
 
 
 def _print_summary(result: dict, rows: list[dict], kind: str) -> None:
     print()
+    steps = rows[0]["steps"]
+    print(
+        f"steps per arm: short {steps['short']}, full {steps['full']}"
+        + (" (seed 0)" if kind == "seeds" else "")
+    )
     print(format_table(rows, "seed" if kind == "seeds" else "aug_per_demo", result.get("mean")))
     if kind == "seeds":
-        pr = result["paired"]
-        std = "n/a" if pr["std_delta"] is None else f"{pr['std_delta']:.3f}"
-        sem = "n/a" if pr["sem_delta"] is None else f"{pr['sem_delta']:.3f}"
-        print(
-            f"paired: augmented beat source on {pr['wins']} of {pr['n']} seeds (ties {pr['ties']}, losses "
-            f"{pr['losses']}); mean paired delta {pr['mean_delta']:+.3f}, std {std}, sem {sem}"
-        )
+        for key, pr in result["paired"].items():
+            ci = "n/a" if pr["ci95"] is None else f"[{pr['ci95'][0]:+.3f}, {pr['ci95'][1]:+.3f}]"
+            print(f"paired {key}: > 0 on {pr['wins']} of {pr['n']} seeds "
+                  f"(ties {pr['ties']}, losses {pr['losses']}); "
+                  f"mean {pr['mean']:+.3f}, 95% interval over seeds {ci}")  # fmt: skip
+        for arm, pl in result["pooled"].items():
+            print(f"pooled {arm}: {pl['successes']}/{pl['episodes']} = {pl['success']:.3f} "
+                  f"[{pl['ci95'][0]:.3f}, {pl['ci95'][1]:.3f}]")  # fmt: skip
     else:
-        s = {r["aug_per_demo"]: r["augmented"] for r in rows}
+        s = {r["aug_per_demo"]: r["augmented_full"] for r in rows}
         if sorted(s) == [0, 4, 8]:
-            print(f"curve 0 -> 4 -> 8: {ex3_answer(s[0], s[4], s[8])} (plateau_tol {PLATEAU_TOL})")
+            print(f"curve 0 -> 4 -> 8 at {steps['full']} steps each: {ex3_answer(s[0], s[4], s[8])} "
+                  f"(plateau_tol {PLATEAU_TOL})")  # fmt: skip
 
 
 def sweep(
@@ -152,17 +189,19 @@ def sweep(
     prov = provenance(script)
     if seeds is not None:
         kind, runs = "seeds", [(s, [], f"seed{s}", {"seed": s}) for s in range(seeds)]
-    else:
-        kind, runs = "aug", [(0, ["--aug_per_demo", str(k)], f"aug{k}", {"aug_per_demo": k}) for k in aug]
-    rows, metrics = [], []
+    else:  # the largest k first; the others then train for its full budget, so only the data moves
+        order = sorted(aug, reverse=True)
+        kind, runs = "aug", [(0, ["--aug_per_demo", str(k)], f"aug{k}", {"aug_per_demo": k}) for k in order]
+    rows, metrics, full_steps = [], [], []
     for seed, extra, name, label in runs:
         print(f"sweep {kind}: {name} ...", end="", flush=True)
-        m = run_one(script, out_root / kind / name, seed, flags + extra, out_root)
-        print(
-            f" done ({m['_wall_s']:.0f} s): source {m['arms']['source']['success']:.2f} "
-            f"augmented {m['arms']['augmented']['success']:.2f}",
-            flush=True,
-        )
+        m = run_one(script, out_root / kind / name, seed, flags + extra + full_steps, out_root)
+        if kind == "aug" and not full_steps:
+            full_steps = ["--full_steps", str(m["budgets"]["full"])]
+        a = m["arms"]
+        print(f" done ({m['_wall_s']:.0f} s): at {m['budgets']['full']} steps "
+              f"source {a['source_full']['success']:.2f} "
+              f"augmented {a['augmented_full']['success']:.2f}", flush=True)  # fmt: skip
         effective = {}
         if kind == "aug":
             effective = {"effective_aug_per_demo": m["config"]["aug_per_demo"]}
@@ -174,7 +213,11 @@ def sweep(
                 )
         rows.append(row_of(m, **label, **effective))
         metrics.append(m)
-    varied = {"seed", "aug_per_demo"} if kind == "aug" else {"seed"}  # what changes from run to run
+    if kind == "aug":
+        rows.sort(key=lambda r: r["aug_per_demo"])
+    varied = (
+        {"seed", "aug_per_demo", "full_steps"} if kind == "aug" else {"seed"}
+    )  # what changes from run to run
     config = {k: v for k, v in metrics[0]["config"].items() if k not in varied}
     runs_command = [
         "python",
@@ -185,7 +228,7 @@ def sweep(
         "--out",
         str(out_root / kind / "{run}"),
     ]
-    runs_command += [*flags] + (["--aug_per_demo", "{k}"] if kind == "aug" else [])
+    runs_command += [*flags] + (["--aug_per_demo", "{k}", "[--full_steps {full}]"] if kind == "aug" else [])
     result = {
         "kind": kind,
         "smoke": smoke,
@@ -201,8 +244,10 @@ def sweep(
     if kind == "seeds":
         result["mean"] = mean_row(rows)
         result["paired"] = paired(rows)
+        result["pooled"] = pooled(rows)
     else:
         result["seed"] = 0
+        result["full_steps"] = rows[-1]["steps"]["full"]
     path = out_root / f"sweep_{kind}.json"
     write_atomic(path, json.dumps(result, indent=1, sort_keys=False) + "\n")
     _print_summary(result, rows, kind)
