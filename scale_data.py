@@ -473,7 +473,7 @@ if args.rerun:
 rate = {name: arm["success"] for name, arm in arms.items()}
 opens = {".json": "JSON", ".png": "open as an image", ".rrd": "open with: rerun {}"}
 summary = (
-    f"headline, equal steps ({budgets['full']} each): source {rate['source_full']:.2f} -> source+augmented "
+    f"headline: at equal steps ({budgets['full']} each), source {rate['source_full']:.2f} -> source+aug "
     f"{rate['augmented_full']:.2f} ({effects['data_full'] * 100:+.0f} points)\n"
     f"at the short budget ({budgets['short']} steps): {rate['source_short']:.2f} -> "
     f"{rate['augmented_short']:.2f} ({effects['data_short'] * 100:+.0f}); more steps alone: source "
