@@ -29,8 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ch37 import cli, result_cache
+from ch37 import cli, errors, result_cache
 
+errors.guard()  # a problem you can fix: one line, exit 2; Ctrl-C: exit 130, and the same command continues
 t_start = time.perf_counter()
 p = argparse.ArgumentParser(description="Chapter 3.7: Datasets at Scale (see the module docstring).")
 flag, on_off = p.add_argument, argparse.BooleanOptionalAction
@@ -67,6 +68,7 @@ flag(
     help="processes for re-solves and evaluation physics (default: cores); same results",
 )
 args = cli.parse(p)  # every flag checked here: a bad one is one line and exit 2, before any heavy import
+cli.claim_out(args)  # --out usable and locked, nothing of yours in the way, our old results there cleared
 
 import torch  # noqa: E402  (after the checks, so --help and flag errors are instant)
 

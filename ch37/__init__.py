@@ -1,15 +1,19 @@
 """The plumbing of chapter 3.7: what scale_data.py imports but does not teach, one concern per module.
 
-errors        DataError and fail(): bad input ends in one line and exit 2
-files         write_atomic, dump_json, round_floats: results written whole or not at all
-cli           flag checks, device choice, the tier banner (GPU_TIERS, expected wall-clock)
+errors        DataError, fail(), guard() / run_main(): one line and an exit code (2, 130 on Ctrl-C)
+files         write_atomic, place, dump_json, round_floats: whole files or none, no leftovers
+cli           flag checks and limits, claim_out, device choice, the tier banner
+outputs       claim(): an output folder checked up front, locked, owned file by file
 lerobot_io    LeRobot v3 read/write: features, write_dataset, load_arrays, schema checks
 seeds         env_seed: demos, augmentation and evaluation never share a start
-stamps        ownership stamps: only a folder this project made is ever rewritten
+stamps        ownership stamps: only files this project wrote are ever deleted or rewritten
 demos         demo sets: rollout, generation, the private demo cache
-parallel      parallel_map over forked workers, LockstepEnvs for evaluation physics
-result_cache  reuse a finished run whose flags and code match
+parallel      parallel_map over forked workers, LockstepEnvs for evaluation physics; workers die with the run
+result_cache  reuse a finished run whose flags and code match; entries verified by checksum
 viz           the PNG figure and the Rerun recording
+
+A command of its own (the data engine, a tool) gets the same guarantees from errors.run_main,
+outputs.claim (or outputs.check_out_path), stamps.replace_own_dir and parallel.worker_setup.
 """
 
 from pathlib import Path
@@ -36,6 +40,7 @@ CODE_FILES = DATA_CODE + (
     "gen_demos_aloha.py",
     "ch37/cli.py",
     "ch37/files.py",
+    "ch37/outputs.py",
     "ch37/parallel.py",
     "ch37/stamps.py",
     "ch37/viz.py",

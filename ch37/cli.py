@@ -10,6 +10,7 @@ from pathlib import Path
 
 from ch37 import ROOT
 from ch37.errors import fail
+from ch37.seeds import MAX_SEED, SEED_BLOCK
 
 # wallclock.csv's tiers: two CPU-side ones, then GPUs matched by a substring of the device name.
 GPU_TIERS = ("t4", "l4", "4090", "a100", "h100", "h200")
@@ -21,6 +22,49 @@ POSITIVE = ("source_episodes", "epochs", "batch_size", "hidden_dim", "eval_episo
 NON_NEGATIVE = ("aug_per_demo", "seed", "full_steps")
 FINITE = ("aug_pos_sigma", "aug_yaw_sigma", "lr")
 NOT_IN_KEY = ("out", "cache", "workers")  # where results go and how fast they come never change them
+# Upper bounds that come from the code: episode indices live in one seed block (ch37.seeds), and
+# every env seed must fit in 63 bits. The step limits bound a run's frames for the memory estimate.
+AT_MOST = {"seed": MAX_SEED, "source_episodes": SEED_BLOCK, "eval_episodes": SEED_BLOCK, "lr": 1.0}
+PUSHT_MAX_STEPS, ALOHA_MAX_STEPS = 300, 400  # pusht_env.MAX_STEPS, aloha_env.MAX_STEPS (not imported: slow)
+ENV_BYTES = 1 << 20  # one evaluation env (a MuJoCo model and data): about 0.6 MB measured
+
+
+def max_workers() -> int:
+    return max(8, 4 * (os.cpu_count() or 1))
+
+
+def available_memory() -> int | None:
+    """Bytes of RAM available now (Linux MemAvailable, else total physical memory), None if unknown."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def memory_estimate(args: argparse.Namespace) -> dict[str, int]:
+    """Bytes a run needs at most, per flag that drives it (every episode at its step limit)."""
+    frames = args.source_episodes * ((1 + args.aug_per_demo) * PUSHT_MAX_STEPS + ALOHA_MAX_STEPS)
+    h = args.hidden_dim
+    params = h * h + 14 * h + 2  # 10 -> h -> h -> 2
+    steps = args.epochs * math.ceil(frames / args.batch_size)
+    return {
+        "--source_episodes/--aug_per_demo": frames * 1024,  # ~10 copies of a frame's ~100 bytes
+        # weights, gradients, Adam's two moments, the initial weights (x4 bytes, x8 copies at worst),
+        # activations of a batch and of the whole set (the final loss), 3 layers of float32
+        "--hidden_dim": params * 32 + (min(args.batch_size, frames) + frames + args.eval_episodes) * h * 12,
+        "--epochs": steps * 32,  # the cosine schedule: one Python float per step
+        "--eval_episodes": args.eval_episodes * ENV_BYTES,
+    }
+
+
+def _gb(n: float) -> str:
+    return f"{n / 2**30:,.1f} GB" if n >= 2**30 else f"{n / 2**20:,.0f} MB"
 
 
 def result_config(args: argparse.Namespace) -> dict:
@@ -32,17 +76,27 @@ def result_config(args: argparse.Namespace) -> dict:
     }
 
 
+def _path(text: str) -> Path:
+    if not text.strip():
+        raise argparse.ArgumentTypeError("a path must not be empty")
+    return Path(text)
+
+
 def parse(p: argparse.ArgumentParser, argv=None) -> argparse.Namespace:
     """Parse and check scale_data.py's flags; any problem is one line and exit 2.
 
     --smoke pins a tiny CPU configuration (the same on every machine); flags given explicitly win."""
     p.error = lambda msg: fail(f"{msg} (see --help)")
+    for action in p._actions:  # an empty path would silently mean the current folder
+        if action.type is Path:
+            action.type = _path
     args = p.parse_args(argv)
     if args.smoke:
         p.set_defaults(**SMOKE_DEFAULTS)
         args = p.parse_args(argv)
     args.out = args.out or Path("outputs/ch3.7-scale-data" + ("-smoke" if args.smoke else ""))
-    args.workers = args.workers or min(8, os.cpu_count() or 1)
+    if args.workers is None:  # None, not 0: --workers 0 is an error below, not "the default"
+        args.workers = min(8, os.cpu_count() or 1)
     for name in POSITIVE:
         if getattr(args, name) <= 0:
             fail(f"--{name} must be a positive integer, got {getattr(args, name)}")
@@ -54,9 +108,38 @@ def parse(p: argparse.ArgumentParser, argv=None) -> argparse.Namespace:
         if not math.isfinite(v) or v < 0 or (name == "lr" and v == 0):
             kind = "positive" if name == "lr" else "non-negative"
             fail(f"--{name} must be a finite {kind} number, got {v}")
+    for name, most in AT_MOST.items():
+        if getattr(args, name) > most:
+            fail(f"--{name} must be at most {most}, got {getattr(args, name)}")
+    if args.workers > max_workers():
+        fail(f"--workers must be at most {max_workers()} (4 per CPU core), got {args.workers}")
     if args.device not in ("auto", "cpu", "cuda", "mps"):
         fail(f"--device must be auto, cpu, cuda or mps, got {args.device!r}")
+    need, free = memory_estimate(args), available_memory()
+    if free is not None and sum(need.values()) > free:
+        worst = max(need, key=need.get)
+        fail(
+            f"this configuration needs up to {_gb(sum(need.values()))} of memory, more than the "
+            f"{_gb(free)} available here (most of it from {worst}); lower {worst}"
+        )
     return args
+
+
+def claim_out(args: argparse.Namespace):
+    """--out taken for this run before any work (ch37.outputs.claim): usable, locked against a second
+    run, nothing of yours where this run writes, this program's earlier results there cleared."""
+    from ch37.outputs import claim
+    from ch37.result_cache import RESULT_FILES
+
+    demos = Path(args.out) / "demos"
+    reuses = [
+        demos / f"{name}_seed{args.seed}_ep{args.source_episodes}"  # the names the wrangle region uses
+        for name, given in (("pusht", args.pusht_data), ("aloha", args.aloha_data))
+        if given is None
+    ]
+    replaces = sorted(demos.glob(f"pusht_aug_seed{args.seed}_src*_k{args.aug_per_demo}"))  # augment's
+    inputs = {"--pusht_data": args.pusht_data, "--aloha_data": args.aloha_data}
+    return claim(args.out, inputs=inputs, results=RESULT_FILES, reuses=reuses, replaces=replaces)
 
 
 def pick_device(name: str) -> str:

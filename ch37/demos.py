@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from ch37 import DATA_CODE, ROOT
-from ch37.errors import DataError
+from ch37.errors import DataError, run_main
 from ch37.lerobot_io import IMAGE_KEY, IMAGE_SIZE, features, schema_problem, write_dataset
-from ch37.seeds import env_seed
-from ch37.stamps import MADE_BY, holds_data, read_stamp, replace_own_dir
+from ch37.seeds import MAX_SEED, SEED_BLOCK, env_seed
+from ch37.stamps import MADE_BY, changed_files, holds_data, is_ours, read_stamp, replace_own_dir
 
 if sys.platform.startswith("linux"):  # headless rendering: EGL unless the user chose a GL backend
     os.environ.setdefault("MUJOCO_GL", "egl")
@@ -36,9 +36,15 @@ def code_digest(names=DATA_CODE) -> str:
     return h.hexdigest()[:12]
 
 
-# Any edit to the files that shape frames changes the version, so a cached set can never outlive
-# the code that made it.
-GENERATOR_VERSION = f"2+{code_digest()}"
+def _lerobot_version() -> str:
+    from importlib.metadata import version
+
+    return version("lerobot")
+
+
+# Any edit to the files that shape frames, or another lerobot (the writer of its files), changes the
+# version, so a cached set can never outlive the code that made it.
+GENERATOR_VERSION = f"3+{code_digest()}+lerobot{_lerobot_version()}"
 
 
 @dataclass(frozen=True)
@@ -141,6 +147,11 @@ def stamp_for(emb: Embodiment, *, episodes: int, seed: int, noise: float, video:
     }
 
 
+def _usage_error(msg: str):
+    print(f"error: {msg} (see --help)", file=sys.stderr)
+    sys.exit(2)
+
+
 def check_gl() -> str | None:
     """None if headless rendering works here, else a one-line reason."""
     import av
@@ -159,6 +170,13 @@ def check_gl() -> str | None:
 
 
 def main(emb: Embodiment, argv=None, default_out: str | None = None) -> int:
+    """The generators' command line; every problem a user can fix is one line and exit 2, Ctrl-C 130."""
+    return run_main(_main, emb, argv, default_out)
+
+
+def _main(emb: Embodiment, argv=None, default_out: str | None = None) -> int:
+    from ch37.outputs import check_out_path
+
     p = argparse.ArgumentParser(
         description=f"Generate {emb.name} expert demos as a local LeRobot v3 dataset."
     )
@@ -183,18 +201,19 @@ def main(emb: Embodiment, argv=None, default_out: str | None = None) -> int:
         help=f"also record a {IMAGE_SIZE}x{IMAGE_SIZE} top-down video (needs a headless GL backend)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.error = lambda msg: _usage_error(msg)
     a = p.parse_args(argv)
     problem = None
-    if a.episodes <= 0:
-        problem = f"--episodes must be positive, got {a.episodes}"
-    elif a.seed < 0:
-        problem = f"--seed must be >= 0, got {a.seed}"
+    if not 0 < a.episodes <= SEED_BLOCK:
+        problem = f"--episodes must be in [1, {SEED_BLOCK}] (the demo seeds of one --seed), got {a.episodes}"
+    elif not 0 <= a.seed <= MAX_SEED:
+        problem = f"--seed must be in [0, {MAX_SEED}] (every env seed fits in 63 bits), got {a.seed}"
     elif not np.isfinite(a.noise) or a.noise < 0:
         problem = f"--noise must be a finite number >= 0, got {a.noise}"
     elif holds_data(a.out):
         problem = f"{a.out} already holds data; pick another --out (nothing was touched)"
-    elif a.video:
-        problem = check_gl()
+    else:
+        problem = check_out_path(a.out, "--out") or (check_gl() if a.video else None)
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         return 2
@@ -219,21 +238,31 @@ def ensure_demos(
     m = emb.env_module
     want = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=False)
     stamp = read_stamp(path)
-    ours = stamp is not None and stamp.get("made_by") == want["made_by"]
+    ours = is_ours(stamp)
+    matches = ours and all(stamp.get(k) == v for k, v in want.items())
+    changed = changed_files(path, stamp) if matches else []  # missing, truncated or edited since written
     if user_given:
         if not holds_data(path):
             raise DataError(
                 f"{path} does not exist or is empty; generate it with gen_demos_{emb.name}.py first"
             )
-        if ours and stamp != want:
+        if not path.is_dir():
+            raise DataError(f"{path} is a file, not a LeRobot dataset folder")
+        if ours and not matches:
             diff = ", ".join(f"{k}={stamp.get(k)} (need {v})" for k, v in want.items() if stamp.get(k) != v)
             raise DataError(f"{path} does not match this run: {diff}; pass matching flags or another set")
+        if changed:
+            raise DataError(
+                f"{path} is damaged: {', '.join(changed[:3])} changed since it was written; "
+                f"regenerate it with gen_demos_{emb.name}.py (it was not modified)"
+            )
         problem = schema_problem(path, len(m.STATE_NAMES), len(m.ACTION_NAMES))
         if problem:
             raise DataError(problem)
         return "matches its stamp" if ours else "your own set, used as given"
-    if ours and stamp == want:
+    if matches and not changed:
         return "cached"
-    replace_own_dir(path)  # a stale set we made is rebuilt; anything else is refused
+    replace_own_dir(path)  # a stale or damaged set we made is rebuilt; anything else is refused
     s = generate(emb, path, episodes=episodes, seed=seed, noise=noise, quiet=quiet)
-    return f"generated ({s['successes']}/{s['episodes']} expert successes)"
+    why = f"; {', '.join(changed[:3])} had changed since written" if changed else ""
+    return f"generated ({s['successes']}/{s['episodes']} expert successes{why})"

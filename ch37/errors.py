@@ -1,15 +1,130 @@
-"""The contract for bad input: one clear line on stderr and exit 2, never a traceback."""
+"""The contract for bad input: one clear line on stderr and an exit code, never a traceback.
+
+    DataError           a problem the user must fix (a flag, a path, a dataset): `error: ...`, exit 2
+    KeyboardInterrupt   Ctrl-C: `interrupted: ...`, exit 130; the same command continues where it stopped
+    Terminated          SIGTERM (raised by our handler): the same line, exit 143
+    OSError of the environment (disk full, read-only, permission denied): `error: ...`, exit 2
+
+Anything else is a genuine bug and keeps its traceback. CH37_DEBUG=1 shows the traceback for
+everything. Two ways in, one behaviour: `guard()` for a linear script (scale_data.py), `run_main(fn)`
+for a command with a main function (the generators, the tools, the data engine).
+"""
 
 from __future__ import annotations
 
+import atexit
+import errno
+import os
+import signal
 import sys
+import threading
+
+RESUME = "run the same command again to continue (nothing half-written was kept)"
+# errno values that say something about the user's machine or paths, not about our code
+_WRITABLE = "choose a folder you can write to"
+ENVIRONMENT_ERRNOS = {
+    errno.ENOSPC: "free some disk space",
+    errno.EDQUOT: "free some space in your quota",
+    errno.EROFS: _WRITABLE,
+    errno.EACCES: _WRITABLE,
+    errno.EPERM: _WRITABLE,
+    errno.ENOTDIR: "a part of the path is a file, not a folder: fix the path",
+    errno.EISDIR: "a folder is where a file should be: fix the path",
+    errno.ENAMETOOLONG: "use a shorter path",
+    errno.EMFILE: "raise the open-file limit (ulimit -n)",
+}
 
 
 class DataError(Exception):
     """A problem with a demo folder or an output folder that the user must fix (printed as one line)."""
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread so that cleanup (finally blocks, worker shutdown) runs."""
+
+
 def fail(msg: str, code: int = 2):
     """Print `error: msg` on stderr and exit with `code`."""
     print(f"error: {msg}", file=sys.stderr)
     sys.exit(code)
+
+
+def debug() -> bool:
+    """CH37_DEBUG=1 (or any value but 0/false/no): let every exception show its traceback."""
+    return os.environ.get("CH37_DEBUG", "").strip().lower() not in ("", "0", "false", "no")
+
+
+def one_line(exc: BaseException) -> tuple[int, str] | None:
+    """(exit code, the one line to print) for a problem the user can act on; None for a genuine bug."""
+    if isinstance(exc, Terminated):
+        return 143, f"terminated: {RESUME}"
+    if isinstance(exc, KeyboardInterrupt):
+        return 130, f"interrupted: {RESUME}"
+    if isinstance(exc, DataError):
+        return 2, "error: " + " ".join(str(exc).split())
+    if isinstance(exc, OSError) and exc.errno in ENVIRONMENT_ERRNOS:
+        where = f"{exc.filename}: " if exc.filename is not None else ""
+        return (
+            2,
+            f"error: {where}{exc.strerror}; {ENVIRONMENT_ERRNOS[exc.errno]}, then run the same command again",
+        )
+    return None
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated()
+
+
+def _in_notebook() -> bool:
+    return "ipykernel" in sys.modules or hasattr(sys, "ps1")
+
+
+def _exit_now(code: int) -> None:
+    """Exit with `code` from inside sys.excepthook: run atexit (worker shutdown), flush, leave."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not interrupt the shutdown
+    try:
+        atexit._run_exitfuncs()
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(code)
+
+
+def guard() -> None:
+    """For a linear script: every uncaught problem a user can act on becomes one line and its exit
+    code (see the module docstring); SIGTERM is handled like Ctrl-C. A no-op inside a notebook."""
+    if _in_notebook() or threading.current_thread() is not threading.main_thread():
+        return
+    previous = sys.excepthook
+
+    def hook(kind, exc, tb):
+        got = None if debug() else one_line(exc)
+        if got is None:
+            previous(kind, exc, tb)
+            return
+        print(got[1], file=sys.stderr)
+        _exit_now(got[0])
+
+    sys.excepthook = hook
+    signal.signal(signal.SIGTERM, _raise_terminated)
+
+
+def run_main(fn, *args, **kwargs) -> int:
+    """fn(*args, **kwargs) -> its exit code; a problem a user can act on is one line and its exit code
+    (see the module docstring). SIGTERM is handled like Ctrl-C while fn runs."""
+    main_thread = threading.current_thread() is threading.main_thread()
+    saved = signal.signal(signal.SIGTERM, _raise_terminated) if main_thread else None
+    try:
+        return fn(*args, **kwargs)
+    except (KeyboardInterrupt, DataError, OSError) as e:
+        got = None if debug() else one_line(e)
+        if got is None:
+            raise
+        print(got[1], file=sys.stderr)
+        return got[0]
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, saved)

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from ch37.errors import DataError
-from ch37.stamps import STAMP_NAME, holds_data, stamp_text
+from ch37.files import sweep_leftovers
+from ch37.stamps import STAMP_NAME, digests, holds_data, stamp_text
 
 # torchcodec needs system FFmpeg libraries and prints long tracebacks when they are missing;
 # pyav ships its own FFmpeg, so every dataset here is read and written through pyav.
@@ -89,16 +90,18 @@ def write_dataset(
     """Write `episodes` (an iterable of dicts of per-frame arrays keyed like `feats`) to `out`.
 
     The set is built in a sibling temp directory and renamed into place, so an interrupted run
-    never leaves a half-written set at `out`. `out` must not hold data.
+    never leaves a half-written set at `out`; what a killed run left is removed here. `out` must not
+    hold data. The stamp lists every file of the set with its sha256 (ch37.stamps).
     """
     LeRobotDataset = _lerobot_dataset_class()
     out = Path(out)
     if holds_data(out):
         raise DataError(f"{out} already holds data; pick another --out or remove it yourself")
     tmp = out.parent / f".{out.name}.partial-{os.getpid()}"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    sweep_leftovers(out.parent)
     if tmp.exists():
         shutil.rmtree(tmp)  # our own leftover from a crashed run with this pid
-    out.parent.mkdir(parents=True, exist_ok=True)
     use_videos = any(f["dtype"] == "video" for f in feats.values())
     try:
         ds = LeRobotDataset.create(
@@ -123,10 +126,17 @@ def write_dataset(
             stats.write_text(
                 json.dumps(json.loads(stats.read_text()), indent=4, sort_keys=True, ensure_ascii=False)
             )
-        (tmp / STAMP_NAME).write_text(stamp_text(stamp))
-        if out.exists():
-            out.rmdir()  # empty directory (holds_data checked above)
-        tmp.rename(out)
+        (tmp / STAMP_NAME).write_text(stamp_text(dict(stamp, files=digests(tmp))))
+        try:
+            if out.exists():
+                out.rmdir()  # empty directory (holds_data checked above)
+            tmp.rename(out)
+        except OSError as e:  # ENOTEMPTY/EEXIST: another process wrote `out` meanwhile
+            if not holds_data(out):
+                raise
+            raise DataError(
+                f"{out} was written by another run at the same time; run the same command again"
+            ) from e
     finally:
         if tmp.exists():
             shutil.rmtree(tmp)
@@ -137,10 +147,20 @@ def open_dataset(root: Path, repo_id: str = "local/demos"):
 
 
 def load_arrays(root: Path, keys=("observation.state", "action", "episode_index", "frame_index")) -> dict:
-    """Every frame of a local LeRobot dataset as numpy arrays, in dataset order."""
-    ds = open_dataset(root)
-    batch = ds.hf_dataset.with_format("numpy", columns=list(keys))[:]  # one columnar read, not row by row
-    return {k: np.asarray(batch[k]) for k in keys}
+    """Every frame of a local LeRobot dataset as numpy arrays, in dataset order. A set that cannot be
+    read (a truncated parquet, a missing file, a wrong schema) is a DataError of one line."""
+    try:
+        ds = open_dataset(root)
+        batch = ds.hf_dataset.with_format("numpy", columns=list(keys))[:]  # one columnar read
+        return {k: np.asarray(batch[k]) for k in keys}
+    except (KeyboardInterrupt, MemoryError):
+        raise
+    except Exception as e:  # pyarrow, datasets and lerobot each raise their own kinds on a damaged set
+        why = " ".join(str(e).split())[:160]
+        raise DataError(
+            f"{root} cannot be read as a LeRobot v3 dataset ({type(e).__name__}: {why}); "
+            "regenerate it (gen_demos_pusht.py / gen_demos_aloha.py) or pass another set"
+        ) from e
 
 
 def schema_problem(root: Path, state_dim: int, action_dim: int) -> str | None:

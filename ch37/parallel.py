@@ -1,13 +1,64 @@
 """Parallel execution on forked workers: parallel_map for independent jobs, LockstepEnvs for
 evaluation physics. Results never depend on the worker count: every job carries its own seed and
 every env is its own simulator.
+
+Workers die with the run: each asks the kernel for SIGKILL when its parent dies (Linux prctl
+PR_SET_PDEATHSIG; elsewhere a thread watching the parent pid), an env worker also stops at the end
+of its pipe, and Ctrl-C is the parent's alone (workers ignore SIGINT; the parent stops them), so an
+interrupted run prints one line, not a traceback from every process.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
+import sys
+import threading
 
 _FORKED_WORK: tuple = ()  # (fn, jobs), set just before forking so workers inherit it unpickled
+_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+
+
+@contextlib.contextmanager
+def _forking():
+    """Block SIGINT/SIGTERM while forking: a child is born with them blocked and unblocks them only
+    after its own handlers are set (worker_setup), so a Ctrl-C at that moment never reaches the
+    parent's Python handler in the child. Pending signals reach the parent when the block ends."""
+    can_mask = hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS) if can_mask else None
+    try:
+        yield
+    finally:
+        if can_mask:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def _die_with(parent: int) -> None:
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    else:  # no parent-death signal: a thread polls the parent's pid
+
+        def watch():
+            while os.getppid() == parent:
+                threading.Event().wait(1.0)
+            os._exit(1)
+
+        threading.Thread(target=watch, daemon=True).start()
+    if os.getppid() != parent:  # the parent died before the request above took effect
+        os._exit(1)
+
+
+def worker_setup(parent: int) -> None:
+    """First call in a forked worker: die with `parent`, leave Ctrl-C to it, end quietly on SIGTERM."""
+    _die_with(parent)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
 
 
 def _run_job(i: int):
@@ -26,7 +77,11 @@ def parallel_map(fn, jobs: list, *, workers: int, bar) -> list:
     if workers > 1 and len(jobs) > 1 and "fork" in mp.get_all_start_methods():
         _FORKED_WORK = (fn, jobs)
         try:
-            with mp.get_context("fork").Pool(min(workers, len(jobs))) as pool:
+            with _forking():
+                pool = mp.get_context("fork").Pool(
+                    min(workers, len(jobs)), initializer=worker_setup, initargs=(os.getpid(),)
+                )
+            with pool:
                 for r in pool.imap(_run_job, range(len(jobs)), chunksize=max(1, len(jobs) // (4 * workers))):
                     out.append(r)
                     bar.update()
@@ -64,12 +119,22 @@ class LockstepEnvs:
         ctx = mp.get_context("fork")
         for part in self.parts:
             parent, child = ctx.Pipe()
+            # the child closes every parent end it inherits, so its recv() ends when the parent dies
+            inherited = [*self.conns, parent]
             proc = ctx.Process(
                 target=_env_worker,
-                args=(child, make_env, [self.seeds[i] for i in part], len(self.procs)),
+                args=(
+                    child,
+                    make_env,
+                    [self.seeds[i] for i in part],
+                    len(self.procs),
+                    os.getpid(),
+                    inherited,
+                ),
                 daemon=True,
             )
-            proc.start()
+            with _forking():
+                proc.start()
             child.close()
             self.conns.append(parent)
             self.procs.append(proc)
@@ -117,19 +182,26 @@ class LockstepEnvs:
             obs[rows], done[rows], success[rows] = replies[w]
         return obs, done, success
 
-    def close(self) -> None:
+    def close(self, stop: bool = False) -> None:
+        """Ask each worker to end and wait for it; `stop`: kill them now (an exception is in flight)."""
         for conn in self.conns:
-            conn.send(None)
+            try:
+                if not stop:
+                    conn.send(None)
+            except OSError:  # the worker is already gone
+                pass
             conn.close()
         for proc in self.procs:
+            if stop:
+                proc.kill()
             proc.join()
         self.conns, self.procs = [], []
 
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, kind, exc, tb):
+        self.close(stop=kind is not None)
 
 
 def _env_serve(envs, seeds, cmd, arg):
@@ -148,14 +220,21 @@ def _env_serve(envs, seeds, cmd, arg):
     return np.stack(obs), done, success
 
 
-def _env_worker(conn, make_env, seeds, rank: int) -> None:
+def _env_worker(conn, make_env, seeds, rank: int, parent: int, inherited) -> None:
+    worker_setup(parent)
+    for c in inherited:
+        c.close()
     if hasattr(os, "sched_setaffinity"):  # one core each: woken together, they would otherwise
         cpus = sorted(os.sched_getaffinity(0))  # often queue on the core of the process that woke them
         os.sched_setaffinity(0, {cpus[rank % len(cpus)]})
     envs = [make_env() for _ in seeds]
-    while (msg := conn.recv()) is not None:
-        try:
-            conn.send(_env_serve(envs, seeds, *msg))
-        except Exception as e:  # the caller re-raises it
-            conn.send(e)
+    try:
+        while (msg := conn.recv()) is not None:
+            try:
+                reply = _env_serve(envs, seeds, *msg)
+            except Exception as e:  # the caller re-raises it
+                reply = e
+            conn.send(reply)
+    except (EOFError, OSError):  # the parent is gone: nothing left to serve
+        pass
     conn.close()

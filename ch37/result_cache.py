@@ -1,5 +1,10 @@
 """The result cache: a finished run is reused when its flags, every file that shapes it, the
 package versions and the user's own data all match (ch37.CODE_FILES lists the files).
+
+An entry holds exactly the files its run wrote into --out, its summary, and a manifest with the
+sha256 of each. A replay verifies every file before copying any; an entry that fails is discarded
+(one warning line) and the run computes the result again. The cache never breaks a run: a cache
+folder that cannot be read or written is skipped with one warning line.
 """
 
 from __future__ import annotations
@@ -8,14 +13,17 @@ import hashlib
 import json
 import os
 import shutil
+import sys
 from importlib.metadata import version
 from pathlib import Path
 
 from ch37 import CODE_FILES, ROOT
 from ch37.cli import NOT_IN_KEY
-from ch37.files import write_atomic
+from ch37.errors import DataError
+from ch37.files import sha256_bytes, sweep_leftovers, write_atomic
 
 RESULT_FILES = ("metrics.json", "cross_embodiment.json", "scale_data.png", "scale_data.rrd")
+MANIFEST, SUMMARY = "manifest.json", "summary.txt"
 
 
 def cache_root() -> Path:
@@ -23,10 +31,15 @@ def cache_root() -> Path:
 
 
 def _tree_digest(h, path: Path) -> None:
-    for p in sorted(Path(path).rglob("*")):
-        if p.is_file():
-            h.update(str(p.relative_to(path)).encode())
-            h.update(p.read_bytes())
+    try:
+        for p in sorted(Path(path).rglob("*")):
+            if p.is_file():
+                h.update(str(p.relative_to(path)).encode())
+                h.update(p.read_bytes())
+    except OSError as e:
+        raise DataError(
+            f"{path}: {e.filename or ''} cannot be read ({e.strerror}); check its permissions"
+        ) from e
 
 
 def result_key(config: dict) -> str:
@@ -45,6 +58,46 @@ def result_key(config: dict) -> str:
     return h.hexdigest()[:24]
 
 
+def _warn(msg: str) -> None:
+    print(f"warning: {msg}", file=sys.stderr, flush=True)
+
+
+def read_entry(entry: Path) -> dict[str, bytes] | str | None:
+    """{name: bytes} of a verified entry; None if there is no entry; else why it is bad (one phrase)."""
+    if not entry.exists():
+        return None
+    try:
+        manifest = json.loads((entry / MANIFEST).read_text())
+        if not isinstance(manifest, dict) or SUMMARY not in manifest or "metrics.json" not in manifest:
+            return f"its {MANIFEST} is incomplete"
+        out = {}
+        for name, digest in manifest.items():
+            if Path(name).name != name or name not in (*RESULT_FILES, SUMMARY):
+                return f"its {MANIFEST} names an unexpected file {name!r}"
+            data = (entry / name).read_bytes()
+            if sha256_bytes(data) != digest:
+                return f"{name} fails its checksum"
+            out[name] = data
+        return out
+    except FileNotFoundError as e:
+        return f"{Path(e.filename).name} is missing"
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        return f"it cannot be read ({type(e).__name__})"
+
+
+def discard_entry(entry: Path) -> None:
+    """Remove an entry's own files (the ones a cache entry can hold) and the folder if then empty."""
+    for name in (*RESULT_FILES, SUMMARY, MANIFEST):
+        try:
+            (entry / name).unlink(missing_ok=True)
+        except OSError:
+            pass
+    try:
+        entry.rmdir()
+    except OSError:
+        pass
+
+
 class ResultCache:
     """One run's entry: `replay()` in setup (True: the outputs are in place, stop), `store()` in emit."""
 
@@ -53,29 +106,65 @@ class ResultCache:
         self.key = result_key(vars(args))
 
     def replay(self) -> bool:
-        """Copy a cached run's outputs into --out and print its summary; False if there is none."""
-        src = cache_root() / self.key
-        if not self.enabled or not (src / "metrics.json").exists():
+        """Copy a cached run's outputs into --out and print its summary; False if there is none (or the
+        entry failed its check and was discarded: the run then computes the result again)."""
+        if not self.enabled:
+            return False
+        entry = cache_root() / self.key
+        got = read_entry(entry)
+        if got is None:
+            return False
+        if isinstance(got, str):
+            _warn(f"the cached result {entry} was damaged ({got}); discarded, computing it again")
+            discard_entry(entry)
             return False
         self.out.mkdir(parents=True, exist_ok=True)
-        for name in RESULT_FILES:
-            if (src / name).exists():
-                write_atomic(self.out / name, (src / name).read_bytes())
+        for name, data in got.items():
+            if name != SUMMARY:
+                write_atomic(self.out / name, data)
         print(
             f"reusing the result of an identical earlier run (same flags and code, cache key {self.key}; "
             "--no-cache runs it again)"
         )
-        print((src / "summary.txt").read_text().replace("{out}", str(self.out)), end="")
+        print(got[SUMMARY].decode().replace("{out}", str(self.out)), end="")
         return True
 
     def store(self, written: list[Path], summary: str) -> None:
         """Keep exactly the files this run wrote (`written`, inside --out) and its summary."""
-        dst = cache_root() / self.key
-        tmp = dst.with_name(f".{self.key}.tmp-{os.getpid()}")
-        tmp.mkdir(parents=True, exist_ok=True)
-        for path in written:
-            shutil.copyfile(path, tmp / Path(path).name)
-        (tmp / "summary.txt").write_text(summary.replace(str(self.out), "{out}"))
-        if dst.exists():
-            shutil.rmtree(dst)  # our own cache entry for the same key
-        tmp.rename(dst)
+        from ch37.outputs import claimed
+
+        claim = claimed(self.out)
+        names = [Path(p).name for p in written]
+        if claim is not None and not set(names) <= claim.written:
+            _warn(
+                f"not caching this result: {sorted(set(names) - claim.written)} were not written by this run"
+            )
+            return
+        root = cache_root()
+        dst = root / self.key
+        tmp = root / f".{self.key}.tmp-{os.getpid()}"
+        try:
+            root.mkdir(parents=True, exist_ok=True)
+            sweep_leftovers(root)
+            tmp.mkdir(exist_ok=True)
+            manifest = {}
+            for path, name in zip(written, names):
+                data = Path(path).read_bytes()
+                (tmp / name).write_bytes(data)
+                manifest[name] = sha256_bytes(data)
+            text = summary.replace(str(self.out), "{out}").encode()
+            (tmp / SUMMARY).write_bytes(text)
+            manifest[SUMMARY] = sha256_bytes(text)
+            (tmp / MANIFEST).write_text(json.dumps(manifest, sort_keys=True, indent=1) + "\n")
+            if isinstance(read_entry(dst), str):  # a damaged entry for this key: ours to replace
+                discard_entry(dst)
+            try:
+                os.rename(tmp, dst)
+            except OSError:  # a good entry for this key exists (another run stored the same result)
+                pass
+        except OSError as e:
+            _warn(
+                f"could not store this result in the cache {root} ({e.strerror}); the run itself is complete"
+            )
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)

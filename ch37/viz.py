@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ch37.files import write_atomic
+from ch37.files import place, write_atomic
 
 DATA_COLOURS = {"source": "tab:blue", "augmented": "tab:orange"}
 RERUN_APP_ID = "ch3_7_scale_data"  # letters, digits and underscores: accepted by Rerun as is
@@ -67,6 +67,17 @@ def recording(path: Path, metrics: dict, src_starts, aug_starts, trajectories, a
 
     rec = rr.RecordingStream(RERUN_APP_ID, recording_id=f"seed{metrics['seed']}")
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        _record(rec, tmp, arms, metrics, src_starts, aug_starts, trajectories, annulus)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return place(tmp, path)  # whole or not at all, and only over a file of ours (ch37.files)
+
+
+def _record(rec, tmp: Path, arms, metrics, src_starts, aug_starts, trajectories, annulus) -> None:
+    import rerun as rr
+
     rec.save(tmp)
     for arm in metrics["arms"].values():  # success vs frames of data, one curve per budget
         rec.set_time("frames", sequence=arm["frames"])
@@ -97,5 +108,3 @@ def recording(path: Path, metrics: dict, src_starts, aug_starts, trajectories, a
     )
     rec.flush()
     rec.disconnect()
-    os.replace(tmp, path)
-    return path

@@ -1,0 +1,216 @@
+"""An output folder (--out) owned file by file, checked up front, one run at a time.
+
+    claim(out, inputs=..., results=..., reuses=..., replaces=...)
+
+before any work: the folder must be usable (creatable, writable, not a file, not inside an input
+dataset, not a dataset itself); a lock makes a second run on the same folder wait until the first
+ends; nothing of the user's may sit where the run will write (a result name, a demo set to reuse
+or replace); what a killed run left is removed; and this program's results of an earlier run are
+cleared, so the folder never mixes two runs. From then on ch37.files.write_atomic into the folder
+refuses to overwrite a file the program did not write and records each file it writes, with its
+sha256, in the folder's stamp (ch37.stamps). The lock is released when the process ends.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+from ch37 import files
+from ch37.errors import DataError
+from ch37.stamps import LOCK_NAME, MADE_BY, STAMP_NAME, check_replaceable, holds_data, is_ours, read_stamp
+
+try:
+    import fcntl
+except ImportError:  # Windows: no advisory locks here; runs on one folder must then be kept apart by hand
+    fcntl = None
+
+_HELD: dict[Path, int] = {}  # folder (resolved) -> lock file descriptor held by this process
+
+
+def _close_locks_in_child() -> None:  # a forked worker must never keep a run's lock alive
+    for fd in _HELD.values():
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+    _HELD.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_close_locks_in_child)
+
+
+def check_out_path(path: Path, flag: str = "--out", create: bool = False) -> str | None:
+    """None if `path` can hold this program's output (created when `create`, else its parent is), else
+    one line saying why not. Nothing of the user's is touched."""
+    path = Path(path)
+    if str(path) == "":
+        return f"{flag} must not be empty"
+    if path.exists() and not path.is_dir():
+        return f"{flag} {path} is a file, not a folder; pass a folder path"
+    for up in path.parents:
+        if up.exists():
+            if not up.is_dir():
+                return f"{flag} {path} cannot be created: {up} is a file, not a folder"
+            break
+    where = path if create else path.parent
+    probe = where / f".{path.name or 'out'}.tmp-{os.getpid()}"
+    try:
+        where.mkdir(parents=True, exist_ok=True)
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        return f"{flag} {path} cannot be written ({e.strerror}); choose a folder you can write to"
+    return None
+
+
+class Claim:
+    """This process's hold on an output folder; see the module docstring."""
+
+    def __init__(self, out: Path, fd: int | None) -> None:
+        self.out, self.fd = Path(out), fd
+        self.written: set[str] = set()  # names written by this run
+        self.files: dict[str, str] = {}  # name -> sha256, every file of ours in the folder
+        self.pending: dict[str, str] = {}  # name -> sha256 of a write in flight (crash-safe record)
+
+    def manages(self, path: Path) -> bool:
+        return Path(path).name not in (STAMP_NAME, LOCK_NAME)
+
+    def _save(self) -> None:
+        stamp = {"made_by": MADE_BY, "kind": "results", "files": self.files, "pending": self.pending}
+        tmp = self.out / f".{STAMP_NAME}.tmp-{os.getpid()}"
+        tmp.write_text(json.dumps(stamp, sort_keys=True, indent=1) + "\n")
+        os.replace(tmp, self.out / STAMP_NAME)
+
+    def is_own(self, path: Path) -> bool:
+        """Whether the file at `path` is one this program wrote (its bytes as written)."""
+        name, path = Path(path).name, Path(path)
+        accepted = {self.files.get(name), self.pending.get(name)} - {None}
+        if not accepted or not path.is_file() or path.is_symlink():
+            return False
+        try:
+            return files.sha256_file(path) in accepted
+        except OSError:
+            return False
+
+    def before(self, path: Path, digest: str) -> None:
+        """A write of `path` is about to happen: refuse if a file not ours is there, else record it."""
+        path = Path(path)
+        if (path.exists() or path.is_symlink()) and not self.is_own(path):
+            raise DataError(
+                f"{path} was not written by this program (or was changed since); move it or pass "
+                "another --out (nothing was changed)"
+            )
+        self.pending[path.name] = digest
+        self._save()
+
+    def after(self, path: Path, digest: str) -> None:
+        self.files[path.name] = digest
+        self.pending.pop(path.name, None)
+        self.written.add(path.name)
+        self._save()
+
+    def release(self) -> None:
+        files.CLAIMED.pop(self.out.resolve(), None)
+        fd = _HELD.pop(self.out.resolve(), None)
+        if fd is not None:
+            os.close(fd)
+
+
+def _lock(out: Path) -> int | None:
+    """Hold out/LOCK_NAME exclusively; a second run waits here (saying so) until the first ends."""
+    if fcntl is None:
+        return None
+    key = out.resolve()
+    if key in _HELD:  # this process claimed it before (a notebook re-running its setup cell)
+        os.close(_HELD.pop(key))
+    fd = os.open(out / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+        print(
+            f"waiting: another run (pid {holder}) is writing to {out}; this one starts when it ends",
+            flush=True,
+        )
+        fcntl.flock(fd, fcntl.LOCK_EX)
+    except BaseException:
+        os.close(fd)
+        raise
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+    _HELD[key] = fd
+    return fd
+
+
+def claim(
+    out: Path,
+    *,
+    inputs: dict[str, Path | None] | None = None,
+    results: tuple[str, ...] = (),
+    reuses: list[Path] = (),
+    replaces: list[Path] = (),
+) -> Claim:
+    """Take `out` for this run; DataError (one line) if anything of the user's is in the way.
+
+    inputs    {flag: path} of datasets the run reads: `out` may not be one of them or inside one
+    results   the file names the run will write directly in `out`
+    reuses    demo-set folders the run reuses when valid: each must be absent or made by this program
+    replaces  folders the run will rebuild: each must hold only files this program wrote
+    """
+    out = Path(out)
+    problem = check_out_path(out, create=True)
+    if problem:
+        raise DataError(problem)
+    for flag, given in (inputs or {}).items():
+        if given is not None and (
+            out.resolve() == Path(given).resolve() or out.resolve().is_relative_to(Path(given).resolve())
+        ):
+            raise DataError(
+                f"--out {out} is inside {flag} {given}: results would be written into your dataset; "
+                "pass another --out"
+            )
+    stamp = read_stamp(out)
+    if (out / "meta" / "info.json").exists() or (is_ours(stamp) and stamp.get("kind") != "results"):
+        raise DataError(
+            f"--out {out} is a dataset folder; results would be mixed into it: pass another --out"
+        )
+    fd = _lock(out)
+    try:
+        files.sweep_leftovers(out)
+        if (out / "demos").is_dir():
+            files.sweep_leftovers(out / "demos")
+        c = Claim(out, fd)
+        stamp = read_stamp(out)  # again: the run we may have waited for has rewritten it
+        if is_ours(stamp) and stamp.get("kind") == "results":
+            c.files = {k: v for k, v in (stamp.get("files") or {}).items() if isinstance(v, str)}
+            c.pending = {k: v for k, v in (stamp.get("pending") or {}).items() if isinstance(v, str)}
+        mine = {name for name in set(c.files) | set(c.pending) if c.is_own(out / name)}
+        for name in results:
+            if (out / name).exists() and name not in mine:
+                raise DataError(
+                    f"{out / name} was not written by this program (or was changed since); move it or "
+                    "pass another --out (nothing was changed)"
+                )
+        for path in reuses:
+            if holds_data(path) and not is_ours(read_stamp(path)):
+                raise DataError(f"{path} holds data this program did not make; move it or pass another --out")
+        for path in replaces:
+            check_replaceable(path)
+        for name in sorted(mine):  # this program's results of an earlier run: never mixed with this one's
+            (out / name).unlink()
+        c.files, c.pending = {}, {}
+        c._save()
+    except BaseException:
+        _HELD.pop(out.resolve(), None)
+        if fd is not None:
+            os.close(fd)
+        raise
+    files.CLAIMED[out.resolve()] = c
+    return c
+
+
+def claimed(out: Path) -> Claim | None:
+    return files.CLAIMED.get(Path(out).resolve())
