@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import os
 import shutil
 from pathlib import Path
@@ -149,6 +150,10 @@ def open_dataset(root: Path, repo_id: str = "local/demos"):
 def load_arrays(root: Path, keys=("observation.state", "action", "episode_index", "frame_index")) -> dict:
     """Every frame of a local LeRobot dataset as numpy arrays, in dataset order. A set that cannot be
     read (a truncated parquet, a missing file, a wrong schema) is a DataError of one line."""
+    _lerobot_dataset_class()  # imports datasets, which sets its log level on import
+    datasets_log = logging.getLogger("datasets")  # it logs the same failure on stderr, twice
+    level = datasets_log.level
+    datasets_log.setLevel(logging.CRITICAL + 1)
     try:
         ds = open_dataset(root)
         batch = ds.hf_dataset.with_format("numpy", columns=list(keys))[:]  # one columnar read
@@ -156,11 +161,15 @@ def load_arrays(root: Path, keys=("observation.state", "action", "episode_index"
     except (KeyboardInterrupt, MemoryError):
         raise
     except Exception as e:  # pyarrow, datasets and lerobot each raise their own kinds on a damaged set
+        while (e.__cause__ or e.__context__) is not None:  # the root cause says what is wrong
+            e = e.__cause__ or e.__context__
         why = " ".join(str(e).split())[:160]
         raise DataError(
             f"{root} cannot be read as a LeRobot v3 dataset ({type(e).__name__}: {why}); "
             "regenerate it (gen_demos_pusht.py / gen_demos_aloha.py) or pass another set"
         ) from e
+    finally:
+        datasets_log.setLevel(level)
 
 
 def schema_problem(root: Path, state_dim: int, action_dim: int) -> str | None:

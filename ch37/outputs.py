@@ -42,27 +42,25 @@ if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_close_locks_in_child)
 
 
-def check_out_path(path: Path, flag: str = "--out", create: bool = False) -> str | None:
-    """None if `path` can hold this program's output (created when `create`, else its parent is), else
-    one line saying why not. Nothing of the user's is touched."""
+def check_out_path(path: Path, flag: str = "--out") -> str | None:
+    """None if `path` can hold this program's output, else one line saying why not. Creates nothing:
+    it writes and removes a probe file in `path`, or in its nearest existing parent folder."""
     path = Path(path)
     if str(path) == "":
         return f"{flag} must not be empty"
     if path.exists() and not path.is_dir():
         return f"{flag} {path} is a file, not a folder; pass a folder path"
-    for up in path.parents:
-        if up.exists():
-            if not up.is_dir():
-                return f"{flag} {path} cannot be created: {up} is a file, not a folder"
-            break
-    where = path if create else path.parent
+    where = path
+    while not where.exists() and where != where.parent:
+        where = where.parent
+    if not where.is_dir():
+        return f"{flag} {path} cannot be created: {where} is a file, not a folder"
     probe = where / f".{path.name or 'out'}.tmp-{os.getpid()}"
     try:
-        where.mkdir(parents=True, exist_ok=True)
         probe.write_bytes(b"")
         probe.unlink()
     except OSError as e:
-        return f"{flag} {path} cannot be written ({e.strerror}); choose a folder you can write to"
+        return f"{flag} {path} cannot be written ({e.strerror} in {where}); choose a folder you can write to"
     return None
 
 
@@ -112,11 +110,35 @@ class Claim:
         self.written.add(path.name)
         self._save()
 
+    def in_the_way(self, results, reuses, replaces) -> set[str]:
+        """Read the folder's stamp; DataError if a file or folder not ours sits where this run writes.
+        Returns the names of this program's files in the folder."""
+        out, stamp = self.out, read_stamp(self.out)
+        self.files, self.pending = {}, {}
+        if is_ours(stamp) and stamp.get("kind") == "results":
+            self.files = {k: v for k, v in (stamp.get("files") or {}).items() if isinstance(v, str)}
+            self.pending = {k: v for k, v in (stamp.get("pending") or {}).items() if isinstance(v, str)}
+        mine = {name for name in set(self.files) | set(self.pending) if self.is_own(out / name)}
+        for name in results:
+            if ((out / name).exists() or (out / name).is_symlink()) and name not in mine:
+                raise DataError(
+                    f"{out / name} was not written by this program (or was changed since); move it or "
+                    "pass another --out (nothing was changed)"
+                )
+        for path in reuses:
+            if holds_data(path) and not is_ours(read_stamp(path)):
+                raise DataError(f"{path} holds data this program did not make; move it or pass another --out")
+        for path in replaces:
+            check_replaceable(path)
+        return mine
+
     def release(self) -> None:
+        """Give the folder back (the lock too); the process ending does the same."""
         files.CLAIMED.pop(self.out.resolve(), None)
         fd = _HELD.pop(self.out.resolve(), None)
         if fd is not None:
             os.close(fd)
+        self.fd = None
 
 
 def _lock(out: Path) -> int | None:
@@ -153,7 +175,8 @@ def claim(
     reuses: list[Path] = (),
     replaces: list[Path] = (),
 ) -> Claim:
-    """Take `out` for this run; DataError (one line) if anything of the user's is in the way.
+    """Take `out` for this run; DataError (one line) if anything of the user's is in the way, in which
+    case nothing was created or changed.
 
     inputs    {flag: path} of datasets the run reads: `out` may not be one of them or inside one
     results   the file names the run will write directly in `out`
@@ -161,52 +184,33 @@ def claim(
     replaces  folders the run will rebuild: each must hold only files this program wrote
     """
     out = Path(out)
-    problem = check_out_path(out, create=True)
+    problem = check_out_path(out)
     if problem:
         raise DataError(problem)
     for flag, given in (inputs or {}).items():
-        if given is not None and (
-            out.resolve() == Path(given).resolve() or out.resolve().is_relative_to(Path(given).resolve())
-        ):
+        if given is not None and out.resolve().is_relative_to(Path(given).resolve()):
             raise DataError(
                 f"--out {out} is inside {flag} {given}: results would be written into your dataset; "
                 "pass another --out"
             )
     stamp = read_stamp(out)
     if (out / "meta" / "info.json").exists() or (is_ours(stamp) and stamp.get("kind") != "results"):
-        raise DataError(
-            f"--out {out} is a dataset folder; results would be mixed into it: pass another --out"
-        )
-    fd = _lock(out)
+        raise DataError(f"--out {out} is a dataset folder; results would mix into it: pass another --out")
+    c = Claim(out, None)
+    mine = c.in_the_way(results, reuses, replaces)  # before anything is created
+    out.mkdir(parents=True, exist_ok=True)
+    c.fd = _lock(out)
     try:
         files.sweep_leftovers(out)
         if (out / "demos").is_dir():
             files.sweep_leftovers(out / "demos")
-        c = Claim(out, fd)
-        stamp = read_stamp(out)  # again: the run we may have waited for has rewritten it
-        if is_ours(stamp) and stamp.get("kind") == "results":
-            c.files = {k: v for k, v in (stamp.get("files") or {}).items() if isinstance(v, str)}
-            c.pending = {k: v for k, v in (stamp.get("pending") or {}).items() if isinstance(v, str)}
-        mine = {name for name in set(c.files) | set(c.pending) if c.is_own(out / name)}
-        for name in results:
-            if (out / name).exists() and name not in mine:
-                raise DataError(
-                    f"{out / name} was not written by this program (or was changed since); move it or "
-                    "pass another --out (nothing was changed)"
-                )
-        for path in reuses:
-            if holds_data(path) and not is_ours(read_stamp(path)):
-                raise DataError(f"{path} holds data this program did not make; move it or pass another --out")
-        for path in replaces:
-            check_replaceable(path)
+        mine = c.in_the_way(results, reuses, replaces)  # again: a run we waited for may have changed it
         for name in sorted(mine):  # this program's results of an earlier run: never mixed with this one's
             (out / name).unlink()
         c.files, c.pending = {}, {}
         c._save()
     except BaseException:
-        _HELD.pop(out.resolve(), None)
-        if fd is not None:
-            os.close(fd)
+        c.release()
         raise
     files.CLAIMED[out.resolve()] = c
     return c

@@ -232,6 +232,11 @@ def check_mix(
         for name, got, exp in zip(("actions", "mask", "embodiment_id"), res, want):
             if not isinstance(got, np.ndarray):
                 raise ExerciseError(f"ex2: {name} must be a numpy array, got {type(got).__name__} ({case})")
+            if any(np.shares_memory(got, x) for x in (p_in, a_in)):
+                raise ExerciseError(
+                    f"ex2: {name} shares memory with an input array ({case}): a later change to one "
+                    "changes the other; build new arrays (np.zeros, np.concatenate, astype copies)"
+                )
             if got.shape != exp.shape:
                 raise ExerciseError(f"ex2: {name} has shape {got.shape}, expected {exp.shape} ({case})")
             if got.dtype != exp.dtype:
@@ -531,6 +536,24 @@ def run_ex3(say=print) -> None:
     )
 
 
+def main(argv: list[str] | None = None) -> int:
+    """python -m exercises.checks ex1|ex2|ex3: one check without pytest. Its report goes to stdout; a
+    failed check is one `error:` line on stderr and exit 1, a wrong command exit 2."""
+    argv = sys.argv[1:] if argv is None else argv
+    runs = {"ex1": run_ex1, "ex2": run_ex2, "ex3": run_ex3}
+    if len(argv) != 1 or argv[0] not in runs:
+        print(
+            f"error: usage: python -m exercises.checks ex1|ex2|ex3, got {' '.join(argv)!r}", file=sys.stderr
+        )
+        return 2
+    try:
+        runs[argv[0]](print)
+    except ExerciseError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def _wired(run, capsys):
     import pytest
 
@@ -560,3 +583,9 @@ def test_ex2_completion_wrangle(capsys):
 
 def test_ex3_hparam_aug_amount(capsys):
     _wired(run_ex3, capsys)
+
+
+if __name__ == "__main__":
+    from ch37.errors import run_main
+
+    sys.exit(run_main(main))

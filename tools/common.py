@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 from ch37 import ROOT
+from ch37.errors import run_main
 
 SCRIPT = ROOT / "scale_data.py"
 META = ROOT / "meta.yaml"
@@ -41,9 +42,10 @@ def parser(prog: str, doc: str) -> argparse.ArgumentParser:
 
 
 def run_cli(main) -> None:
-    """sys.exit(main(argv)); a ToolError becomes one `error:` line on stderr and exit code 2."""
+    """sys.exit(main(argv)); a ToolError becomes one `error:` line on stderr and exit code 2, and so do
+    the problems ch37.errors.run_main handles (Ctrl-C: exit 130)."""
     try:
-        code = main(sys.argv[1:])
+        code = run_main(main, sys.argv[1:])
     except ToolError as e:
         print(f"error: {e}", file=sys.stderr)
         code = 2

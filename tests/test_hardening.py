@@ -1,0 +1,616 @@
+"""Hardening (issue 14), as a hostile user meets it: every bad input ends in one line and the right
+exit code with the user's files byte-identical; two runs on one --out never collide; Ctrl-C,
+SIGTERM and SIGKILL leave no process behind and the same command then completes with the metrics
+of an uninterrupted run. Real commands in subprocesses, smoke size, fixtures shared.
+"""
+
+import hashlib
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ch37 import files, result_cache, stamps
+
+ROOT = Path(__file__).resolve().parent.parent
+SD = ("scale_data.py", "--smoke", "--seed", "0", "--no-rerun")  # + --out, + --no-cache where it matters
+META_SWEEP = {"kind": "seeds", "rows": [{"seed": 0}]}  # a sweep file missing most of its keys
+
+
+def env_for(cache: Path | None = None, **extra) -> dict:
+    env = dict(os.environ, PYTHONHASHSEED="0", **extra)
+    env.pop("CH37_DEBUG", None)
+    if cache is not None:
+        env["CH37_CACHE_DIR"] = str(cache)
+    return env
+
+
+def run(*args, env=None, timeout=300):
+    return subprocess.run(
+        [sys.executable, *map(str, args)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=env or env_for(),
+    )
+
+
+def snapshot(paths) -> dict:
+    """{file: sha256} of every file under `paths` (files or folders): a user's data, before and after."""
+    out = {}
+    for p in map(Path, paths):
+        for f in [p] if p.is_file() else sorted(x for x in p.rglob("*") if x.is_file()):
+            out[str(f)] = hashlib.sha256(f.read_bytes()).hexdigest()
+    return out
+
+
+@pytest.fixture(scope="module")
+def ref(tmp_path_factory):
+    """One uninterrupted smoke run (its demo sets, metrics and cache entry are the reference)."""
+    base = tmp_path_factory.mktemp("ref")
+    p = run(*SD, "--out", base / "out", env=env_for(base / "cache"))
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert p.stderr.strip() == "", p.stderr  # a clean run says nothing on stderr
+    demos = base / "out" / "demos"
+    return {
+        "base": base,
+        "out": base / "out",
+        "metrics": (base / "out" / "metrics.json").read_bytes(),
+        "pusht": demos / "pusht_seed0_ep4",
+        "aloha": demos / "aloha_seed0_ep4",
+        "cache": base / "cache",
+    }
+
+
+def user_set(ref, tmp, name="mine", which="pusht", stamped=False) -> Path:
+    """A copy of a generated set, as a user's own dataset (our stamp removed unless `stamped`)."""
+    dst = tmp / name
+    shutil.copytree(ref[which], dst)
+    if not stamped:
+        (dst / stamps.STAMP_NAME).unlink()
+    return dst
+
+
+# ---------------------------------------------------------------------------------------------
+# The table: (id, make(tmp, ref) -> (argv, files to protect, env or None), exit code, needle)
+# ---------------------------------------------------------------------------------------------
+def _file(tmp, name="afile", text="my notes\n"):
+    (tmp / name).write_text(text)
+    return tmp / name
+
+
+def _user_result(tmp, name):
+    out = tmp / "u"
+    out.mkdir()
+    (out / name).write_bytes(b"{}\n" if name.endswith(".json") else b"\x89PNG mine")
+    return out
+
+
+def _stale_own_set_with_notes(tmp, ref):
+    """Item 1: a 2-episode set we made, where a 4-episode set is wanted, with the user's notes inside."""
+    out = tmp / "o"
+    dst = out / "demos" / "pusht_seed0_ep4"
+    shutil.copytree(ref["pusht"], dst)
+    stamp = json.loads((dst / stamps.STAMP_NAME).read_text())
+    (dst / stamps.STAMP_NAME).write_text(json.dumps(dict(stamp, episodes=2)))
+    (dst / "my_annotations.txt").write_text("hours of labelling\n")
+    return [*SD, "--no-cache", "--out", out], [dst / "my_annotations.txt"], None
+
+
+def _corrupt(path: Path, size: int = 100) -> Path:
+    with open(path, "r+b") as f:
+        f.truncate(size)
+    return path
+
+
+def _user_set_corrupt(rel):
+    def make(tmp, ref):
+        mine = user_set(ref, tmp)
+        _corrupt(mine / rel)
+        return [*SD, "--no-cache", "--out", tmp / "o", "--pusht_data", mine], [mine], None
+
+    return make
+
+
+def _own_set_changed_as_user_data(tmp, ref):
+    mine = user_set(ref, tmp, stamped=True)
+    _corrupt(mine / "meta" / "stats.json", 10)
+    return [*SD, "--no-cache", "--out", tmp / "o", "--pusht_data", mine], [mine], None
+
+
+def _foreign_aug_set(tmp, ref):
+    """Item 9: the augment step's folder holds a user's file; refused before anything is written."""
+    out = tmp / "o"
+    aug = out / "demos" / "pusht_aug_seed0_src4_k2"
+    shutil.copytree(ref["out"] / "demos" / aug.name, aug)
+    (aug / "keep.txt").write_text("mine\n")
+    return [*SD, "--no-cache", "--out", out], [aug / "keep.txt"], None
+
+
+def _foreign_folder_at_demo_path(tmp, ref):
+    """The private demo path holds a folder this program did not make (no stamp)."""
+    d = tmp / "o" / "demos" / "pusht_seed0_ep4"
+    d.mkdir(parents=True)
+    return [*SD, "--no-cache", "--out", tmp / "o"], [_file(d, "thesis.tex")], None
+
+
+def _ex_dir(tmp, ex, text):
+    d = tmp / "answers"
+    d.mkdir(exist_ok=True)
+    (d / {"ex1": "ex1_predict_scale.py", "ex2": "ex2_completion_wrangle.py"}[ex]).write_text(text)
+    return d
+
+
+ALIASING_MIX = """\
+import numpy as np
+
+
+def mix_embodiments(p, a):
+    n, m = len(p), len(a)
+    ids = np.concatenate([np.zeros(n, np.int64), np.ones(m, np.int64)])
+    mask = np.concatenate([np.repeat(np.float32([[1, 1, 0, 0, 0, 0]]), n, 0), np.ones((m, 6), np.float32)])
+    if n == 0:  # nothing to pad: hand back the ALOHA array itself
+        return np.asarray(a, np.float32), mask, ids
+    act = np.concatenate([np.pad(np.asarray(p, np.float32), ((0, 0), (0, 4))), np.asarray(a, np.float32)])
+    return act, mask, ids
+"""
+
+
+def _checks(ex, answers_text=None, missing_dir=False):
+    def make(tmp, ref):
+        if missing_dir:
+            d = tmp / "no-such-folder"
+        else:
+            d = _ex_dir(tmp, ex, answers_text)
+        protect = [] if missing_dir else [d]
+        return ["-m", "exercises.checks", ex], protect, env_for(CH37_EXERCISE_DIR=str(d))
+
+    return make
+
+
+def _sd(*flags, cache=False):
+    return lambda tmp, ref: ([*SD, *(() if cache else ("--no-cache",)), "--out", tmp / "o", *flags], [], None)
+
+
+def _gen(which, *flags, out="new"):
+    return lambda tmp, ref: ([f"gen_demos_{which}.py", "--quiet", "--out", tmp / out, *flags], [], None)
+
+
+CASES = [
+    # scale_data.py: flags and limits (checked before any heavy import)
+    ("seed-overflow", _sd("--seed", str(2**64)), 2, "--seed must be at most"),
+    (
+        "eval-episodes-over-seed-block",
+        _sd("--eval_episodes", "1000001"),
+        2,
+        "--eval_episodes must be at most",
+    ),
+    ("source-episodes-over-seed-block", _sd("--source_episodes", "1000001"), 2, "--source_episodes"),
+    ("hidden-dim-beyond-ram", _sd("--hidden_dim", "1000000"), 2, "lower --hidden_dim"),
+    ("epochs-beyond-ram", _sd("--epochs", str(10**11)), 2, "lower --epochs"),
+    ("workers-zero", _sd("--workers", "0"), 2, "--workers must be a positive integer"),
+    ("workers-too-many", _sd("--workers", "100000"), 2, "--workers must be at most"),
+    ("lr-above-one", _sd("--lr", "5"), 2, "--lr must be at most"),
+    ("lr-inf", _sd("--lr", "inf"), 2, "--lr must be a finite"),
+    ("batch-size-not-int", _sd("--batch_size", "abc"), 2, "invalid int value"),
+    ("device-unknown", _sd("--device", "tpu"), 2, "--device must be"),
+    ("out-empty", lambda tmp, ref: ([*SD, "--out", ""], [], None), 2, "must not be empty"),
+    # scale_data.py: unusable --out (item 5)
+    ("out-is-a-file", lambda tmp, ref: ([*SD, "--out", _file(tmp)], [tmp / "afile"], None), 2, "is a file"),
+    (
+        "out-under-a-file",
+        lambda tmp, ref: ([*SD, "--out", _file(tmp) / "sub"], [tmp / "afile"], None),
+        2,
+        "afile is a file, not a folder",
+    ),
+    ("out-in-proc", lambda tmp, ref: ([*SD, "--out", "/proc/ch37-no/out"], [], None), 2, "cannot be written"),
+    # scale_data.py: the user's files in --out (item 2)
+    (
+        "user-metrics-in-out",
+        lambda tmp, ref: ([*SD, "--out", _user_result(tmp, "metrics.json")], [tmp / "u"], None),
+        2,
+        "metrics.json was not written by this program",
+    ),
+    (
+        "user-png-in-out",
+        lambda tmp, ref: ([*SD, "--out", _user_result(tmp, "scale_data.png")], [tmp / "u"], None),
+        2,
+        "scale_data.png was not written by this program",
+    ),
+    (
+        "out-is-the-pusht-data",
+        lambda tmp, ref: (
+            [*SD, "--out", user_set(ref, tmp), "--pusht_data", tmp / "mine"],
+            [tmp / "mine"],
+            None,
+        ),
+        2,
+        "is inside --pusht_data",
+    ),
+    (
+        "out-inside-the-aloha-data",
+        lambda tmp, ref: (
+            [*SD, "--out", user_set(ref, tmp, which="aloha") / "res", "--aloha_data", tmp / "mine"],
+            [tmp / "mine"],
+            None,
+        ),
+        2,
+        "is inside --aloha_data",
+    ),
+    (
+        "out-is-a-dataset",
+        lambda tmp, ref: ([*SD, "--out", user_set(ref, tmp)], [tmp / "mine"], None),
+        2,
+        "is a dataset folder",
+    ),
+    # scale_data.py: demo folders in the way (items 1, 9)
+    (
+        "foreign-folder-at-demo-path",
+        _foreign_folder_at_demo_path,
+        2,
+        "did not make",
+    ),
+    ("foreign-file-in-aug-set", _foreign_aug_set, 2, "holds files this program did not write (keep.txt)"),
+    ("stale-own-set-with-user-file", _stale_own_set_with_notes, 2, "did not write (my_annotations.txt)"),
+    # scale_data.py: datasets (item 4)
+    (
+        "user-data-missing",
+        lambda tmp, ref: ([*SD, "--out", tmp / "o", "--pusht_data", tmp / "nope"], [], None),
+        2,
+        "does not exist",
+    ),
+    (
+        "user-data-is-a-file",
+        lambda tmp, ref: ([*SD, "--out", tmp / "o", "--pusht_data", _file(tmp)], [tmp / "afile"], None),
+        2,
+        "is a file, not a LeRobot dataset",
+    ),
+    (
+        "user-data-truncated-parquet",
+        _user_set_corrupt("data/chunk-000/file-000.parquet"),
+        2,
+        "cannot be read",
+    ),
+    (
+        "user-data-truncated-episodes-meta",
+        _user_set_corrupt("meta/episodes/chunk-000/file-000.parquet"),
+        2,
+        "cannot be read",
+    ),
+    ("user-data-bad-info-json", _user_set_corrupt("meta/info.json"), 2, "not a LeRobot v3 dataset"),
+    ("own-set-given-damaged", _own_set_changed_as_user_data, 2, "is damaged: meta/stats.json changed"),
+    # the generators
+    (
+        "gen-pusht-out-holds-data",
+        lambda tmp, ref: (["gen_demos_pusht.py", "--out", ref["pusht"]], [ref["pusht"]], None),
+        2,
+        "already holds data",
+    ),
+    (
+        "gen-pusht-out-under-file",
+        lambda tmp, ref: (["gen_demos_pusht.py", "--out", _file(tmp) / "x"], [tmp / "afile"], None),
+        2,
+        "afile is a file, not a folder",
+    ),
+    (
+        "gen-aloha-out-in-proc",
+        lambda tmp, ref: (["gen_demos_aloha.py", "--out", "/proc/ch37-no/x"], [], None),
+        2,
+        "cannot be written",
+    ),
+    ("gen-aloha-too-many-episodes", _gen("aloha", "--episodes", "1000001"), 2, "--episodes must be in"),
+    ("gen-pusht-seed-overflow", _gen("pusht", "--seed", str(2**64)), 2, "--seed must be in"),
+    ("gen-aloha-noise-nan", _gen("aloha", "--noise", "nan"), 2, "--noise must be a finite"),
+    ("gen-pusht-unknown-flag", _gen("pusht", "--bogus"), 2, "unrecognized arguments: --bogus"),
+    # the tools (item 10)
+    (
+        "tools-regions-missing-script",
+        lambda tmp, ref: (["-m", "tools.regions", "--script", tmp / "gone.py"], [], None),
+        2,
+        "gone.py: no such file",
+    ),
+    (
+        "tools-meta-incomplete-sweep",
+        lambda tmp, ref: (
+            [
+                "-m",
+                "tools.meta",
+                "--sweep",
+                _file(tmp, "s.json", json.dumps(META_SWEEP)),
+                "--meta",
+                tmp / "m.yaml",
+            ],
+            [tmp / "s.json"],
+            None,
+        ),
+        2,
+        "is incomplete",
+    ),
+    (
+        "tools-meta-corrupt-sweep",
+        lambda tmp, ref: (
+            ["-m", "tools.meta", "--sweep", _file(tmp, "s.json", '{"kind": "se'), "--meta", tmp / "m.yaml"],
+            [tmp / "s.json"],
+            None,
+        ),
+        2,
+        "is not a readable JSON sweep file",
+    ),
+    # the exercise checks (item 10)
+    ("checks-ex2-output-aliases-input", _checks("ex2", ALIASING_MIX), 1, "shares memory with an input array"),
+    ("checks-ex1-no-prediction", _checks("ex1", "WHY = 'no letter'\n"), 1, "PREDICTION is missing"),
+    ("checks-missing-answer-folder", _checks("ex2", missing_dir=True), 1, "not found"),
+    ("checks-unknown-exercise", lambda tmp, ref: (["-m", "exercises.checks", "ex9"], [], None), 2, "usage"),
+]
+
+
+@pytest.mark.parametrize("make, code, needle", [c[1:] for c in CASES], ids=[c[0] for c in CASES])
+def test_bad_input_is_one_line_and_nothing_is_touched(ref, tmp_path, make, code, needle):
+    argv, protect, env = make(tmp_path, ref)
+    before, listing = snapshot(protect), set(tmp_path.rglob("*"))
+    assert all(Path(p).exists() for p in protect) and (before or not protect)
+    p = run(*argv, env=env)
+    err = [line for line in p.stderr.splitlines() if line.strip()]
+    assert p.returncode == code, p.stdout[-2000:] + p.stderr
+    assert len(err) == 1 and needle in err[0], p.stderr
+    assert "Traceback" not in p.stdout + p.stderr
+    assert snapshot(protect) == before  # the user's files, byte for byte
+    # a refused run wrote nothing: at most the folder it claimed, with its lock and empty stamp
+    new = {x for x in set(tmp_path.rglob("*")) - listing if not x.is_dir()}
+    assert {x.name for x in new} <= {stamps.LOCK_NAME, stamps.STAMP_NAME}, sorted(map(str, new))
+
+
+def test_the_table_is_big_enough():
+    assert len(CASES) >= 30 and len({c[0] for c in CASES}) == len(CASES)
+
+
+# ---------------------------------------------------------------------------------------------
+# Recovery: damaged cache entries and damaged sets of ours are discarded and remade, one line
+# ---------------------------------------------------------------------------------------------
+def test_damaged_cache_entry_and_damaged_own_set_are_remade(ref, tmp_path):
+    """A truncated cached metrics.json is never replayed: one warning line, the run recomputes. A
+    truncated parquet in a demo set this program made under --out is rebuilt, not crashed on."""
+    cache = tmp_path / "cache"
+    shutil.copytree(ref["cache"], cache)
+    (entry,) = [d for d in cache.iterdir() if d.is_dir()]
+    _corrupt(entry / "metrics.json", 50)
+    out = tmp_path / "o"
+    shutil.copytree(ref["out"] / "demos", out / "demos")
+    _corrupt(out / "demos" / "pusht_seed0_ep4" / "data" / "chunk-000" / "file-000.parquet")
+    (out / "notes.txt").write_text("mine\n")
+    before = snapshot([out / "notes.txt"])
+    p = run(*SD, "--out", out, env=env_for(cache))
+    assert p.returncode == 0, p.stdout + p.stderr
+    err = p.stderr.strip().splitlines()
+    assert (
+        len(err) == 1 and err[0].startswith("warning: the cached result") and "fails its checksum" in err[0]
+    )
+    assert (
+        "reusing" not in p.stdout and "data/chunk-000/file-000.parquet had changed since written" in p.stdout
+    )
+    assert (out / "metrics.json").read_bytes() == ref["metrics"]
+    assert snapshot([out / "notes.txt"]) == before
+    assert result_cache.read_entry(entry)["metrics.json"] == ref["metrics"]  # the entry is whole again
+
+
+@pytest.mark.parametrize(
+    "damage, why",
+    [
+        (lambda e: (e / "scale_data.png").unlink(), "scale_data.png is missing"),
+        (lambda e: (e / result_cache.MANIFEST).unlink(), "manifest.json is missing"),
+        (lambda e: (e / result_cache.MANIFEST).write_text("[1, 2"), "cannot be read"),
+        (lambda e: (e / result_cache.MANIFEST).write_text('{"../x": "0"}'), "incomplete"),
+        (
+            lambda e: (e / result_cache.SUMMARY).write_text("headline: made up\n"),
+            "summary.txt fails its checksum",
+        ),
+    ],
+)
+def test_damaged_cache_entries_are_refused_before_anything_is_copied(
+    ref, tmp_path, monkeypatch, capsys, damage, why
+):
+    (entry,) = [d for d in ref["cache"].iterdir() if d.is_dir()]
+    copy = tmp_path / "cache" / entry.name
+    shutil.copytree(entry, copy)
+    damage(copy)
+    monkeypatch.setenv("CH37_CACHE_DIR", str(tmp_path / "cache"))
+    cache = result_cache.ResultCache.__new__(result_cache.ResultCache)
+    cache.enabled, cache.out, cache.key = True, tmp_path / "out", entry.name
+    assert cache.replay() is False
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and why in err[0] and "discarded" in err[0]
+    assert not (tmp_path / "out").exists() and not copy.exists()
+
+
+def test_cache_stores_only_what_this_run_wrote(tmp_path, monkeypatch):
+    """A stray scale_data.rrd in --out (another seed's) never enters the cache."""
+    from ch37 import outputs
+
+    monkeypatch.setenv("CH37_CACHE_DIR", str(tmp_path / "cache"))
+    out = tmp_path / "out"
+    claim = outputs.claim(out, results=result_cache.RESULT_FILES)
+    try:
+        files.write_atomic(out / "metrics.json", "{}\n")
+        (out / "scale_data.rrd").write_bytes(b"another seed's recording")
+        cache = result_cache.ResultCache.__new__(result_cache.ResultCache)
+        cache.enabled, cache.out, cache.key = True, out, "k" * 24
+        cache.store([out / "metrics.json", out / "scale_data.rrd"], "summary\n")
+        assert not (tmp_path / "cache" / cache.key).exists()
+        cache.store([out / "metrics.json"], "summary\n")
+        got = result_cache.read_entry(tmp_path / "cache" / cache.key)
+        assert set(got) == {"metrics.json", "summary.txt"}
+    finally:
+        claim.release()
+
+
+# ---------------------------------------------------------------------------------------------
+# Ownership, file by file
+# ---------------------------------------------------------------------------------------------
+def test_claimed_out_refuses_a_foreign_file_and_clears_only_its_own(tmp_path):
+    from ch37 import outputs
+    from ch37.errors import DataError
+
+    out = tmp_path / "out"
+    claim = outputs.claim(out, results=("metrics.json", "b.json"))
+    files.write_atomic(out / "metrics.json", "1\n")
+    (out / "b.json").write_text("user's\n")
+    with pytest.raises(DataError, match="b.json was not written by this program"):
+        files.write_atomic(out / "b.json", "2\n")
+    assert (out / "b.json").read_text() == "user's\n"
+    claim.release()
+    (out / "metrics.json").write_text("edited by the user\n")  # ours once, changed since: theirs now
+    with pytest.raises(DataError, match="metrics.json was not written by this program"):
+        outputs.claim(out, results=("metrics.json",))
+    (out / "metrics.json").unlink()
+    (out / "b.json").unlink()
+    claim = outputs.claim(out, results=("metrics.json",))
+    files.write_atomic(out / "metrics.json", "3\n")
+    (out / "notes.txt").write_text("kept\n")
+    claim.release()
+    claim = outputs.claim(out, results=("metrics.json",))  # the next run clears its own old result only
+    assert not (out / "metrics.json").exists() and (out / "notes.txt").read_text() == "kept\n"
+    claim.release()
+
+
+def test_replace_own_dir_deletes_only_listed_files(ref, tmp_path):
+    from ch37.errors import DataError
+
+    mine = user_set(ref, tmp_path, stamped=True)
+    stamps.replace_own_dir(mine)
+    assert not mine.exists()
+    mine = user_set(ref, tmp_path, name="m2", stamped=True)
+    (mine / "data" / "extra.txt").write_text("x")
+    with pytest.raises(DataError, match=r"did not write \(data/extra.txt\)"):
+        stamps.replace_own_dir(mine)
+    assert (mine / "data" / "extra.txt").read_text() == "x" and (mine / stamps.STAMP_NAME).exists()
+
+
+def test_leftovers_of_dead_processes_are_swept_and_live_ones_kept(tmp_path):
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True
+    )
+    gone, alive = int(dead.stdout), os.getppid()
+    (tmp_path / f".set.partial-{gone}").mkdir()
+    (tmp_path / f".set.partial-{gone}" / "x").write_text("half")
+    (tmp_path / f".metrics.json.tmp-{gone}").write_text("half")
+    (tmp_path / f".metrics.json.tmp-{alive}").write_text("in flight")
+    (tmp_path / ".hidden.txt").write_text("user's")
+    assert sorted(files.sweep_leftovers(tmp_path)) == [f".metrics.json.tmp-{gone}", f".set.partial-{gone}"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".hidden.txt", f".metrics.json.tmp-{alive}"]
+
+
+def test_ex2_check_refuses_an_output_that_shares_memory_with_its_input():
+    from exercises import checks
+    from exercises.checks import ExerciseError
+
+    namespace = {}
+    exec(ALIASING_MIX, namespace)
+    with pytest.raises(ExerciseError, match="shares memory"):
+        checks.check_mix(namespace["mix_embodiments"])
+    p, a = np.zeros((0, 2), np.float32), np.ones((4, 6), np.float32)
+    assert np.shares_memory(namespace["mix_embodiments"](p, a)[0], a)  # the check's premise
+
+
+# ---------------------------------------------------------------------------------------------
+# Processes: concurrent runs, interrupts, kills
+# ---------------------------------------------------------------------------------------------
+def session_pids(sid: int) -> list[int]:
+    """Every live process in session `sid` (a run started with start_new_session: it and its workers)."""
+    pids = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                stat = (d / "stat").read_text()
+            except OSError:
+                continue
+            fields = stat[stat.rindex(")") + 2 :].split()  # after "pid (comm) "
+            if fields[0] != "Z" and int(fields[3]) == sid:
+                pids.append(int(d.name))
+    return pids
+
+
+def wait_for(pred, timeout=120.0, step=0.05):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(step)
+    return False
+
+
+linux_only = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+
+
+@linux_only
+def test_two_runs_on_one_out_never_collide(ref, tmp_path):
+    """Started together on one --out: one waits for the other (saying so), both succeed, same bytes."""
+    out, env = tmp_path / "o", env_for(tmp_path / "cache")
+    procs = [
+        subprocess.Popen(
+            [sys.executable, *SD, "--out", str(out)],
+            cwd=ROOT,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for _ in range(2)
+    ]
+    outs = [p.communicate(timeout=300) for p in procs]
+    for p, (so, se) in zip(procs, outs):
+        assert p.returncode == 0 and se.strip() == "" and "Traceback" not in so, so + se
+    assert sum("waiting: another run" in so for so, _ in outs) == 1
+    assert (out / "metrics.json").read_bytes() == ref["metrics"]
+    assert not [p for p in (out / "demos").iterdir() if p.name.startswith(".")]  # no half-written set
+
+
+@linux_only
+def test_kill_term_and_ctrl_c_leave_nothing_behind_and_the_same_command_continues(ref, tmp_path):
+    """SIGKILL, SIGTERM and Ctrl-C (SIGINT to the whole process group, as a terminal sends it) while
+    worker processes run: no process is left, Ctrl-C and SIGTERM print one line (exit 130 / 143)
+    saying the same command continues, and it does, with the metrics of an uninterrupted run."""
+    out = tmp_path / "o"
+    cmd = [sys.executable, *SD, "--no-cache", "--out", str(out)]
+    for sig, code, word in (
+        (signal.SIGKILL, -9, None),
+        (signal.SIGTERM, 143, "terminated"),
+        (signal.SIGINT, 130, "interrupted"),
+    ):
+        p = subprocess.Popen(
+            cmd,
+            cwd=ROOT,
+            env=env_for(),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
+        try:
+            assert wait_for(lambda: len(session_pids(p.pid)) > 1 or p.poll() is not None), "no workers seen"
+            assert p.poll() is None, "the run ended before its workers were seen"
+            if sig == signal.SIGINT:
+                os.killpg(p.pid, sig)
+            else:
+                os.kill(p.pid, sig)
+            so, se = p.communicate(timeout=60)
+        finally:
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGKILL)
+        assert p.returncode == code, so + se
+        assert wait_for(lambda: not session_pids(p.pid), timeout=10), f"left behind: {session_pids(p.pid)}"
+        if word:
+            err = se.strip().splitlines()
+            assert len(err) == 1 and err[0].startswith(word) and "run the same command again" in err[0], se
+            assert "Traceback" not in so + se
+    p = subprocess.run(cmd, cwd=ROOT, env=env_for(), capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0 and p.stderr.strip() == "", p.stdout + p.stderr
+    assert (out / "metrics.json").read_bytes() == ref["metrics"]
+    assert not [x for x in out.rglob(".*") if x.name != stamps.LOCK_NAME]  # no temp file, no partial set
