@@ -574,38 +574,44 @@ def test_two_runs_on_one_out_never_collide(ref, tmp_path):
 
 @linux_only
 def test_kill_term_and_ctrl_c_leave_nothing_behind_and_the_same_command_continues(ref, tmp_path):
-    """SIGKILL, SIGTERM and Ctrl-C (SIGINT to the whole process group, as a terminal sends it) while
-    worker processes run: no process is left, Ctrl-C and SIGTERM print one line (exit 130 / 143)
-    saying the same command continues, and it does, with the metrics of an uninterrupted run."""
+    """SIGKILL and SIGTERM to the run, and Ctrl-C (SIGINT to the whole process group, as a terminal
+    sends it), while worker processes run, in evaluation (env workers) or augmentation (a pool): no
+    process is left, SIGTERM and Ctrl-C print one line (exit 143 / 130) saying the same command
+    continues, and it does, with the metrics of an uninterrupted run and no leftovers."""
     out = tmp_path / "o"
     cmd = [sys.executable, *SD, "--no-cache", "--out", str(out)]
-    for sig, code, word in (
-        (signal.SIGKILL, -9, None),
-        (signal.SIGTERM, 143, "terminated"),
-        (signal.SIGINT, 130, "interrupted"),
+    for sig, phase, code, word in (
+        (signal.SIGKILL, "eval", -9, None),
+        (signal.SIGTERM, "augment", 143, "terminated"),
+        (signal.SIGINT, "eval", 130, "interrupted"),
     ):
-        p = subprocess.Popen(
-            cmd,
-            cwd=ROOT,
-            env=env_for(),
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            start_new_session=True,
-        )
+        log, errlog = tmp_path / f"{sig.name}.out", tmp_path / f"{sig.name}.err"
+        with open(log, "w") as stdout, open(errlog, "w") as stderr:  # files: a stray worker holds no pipe
+            p = subprocess.Popen(
+                cmd,
+                cwd=ROOT,
+                env=env_for(PYTHONUNBUFFERED="1"),
+                stdout=stdout,
+                stderr=stderr,
+                start_new_session=True,
+            )
         try:
-            assert wait_for(lambda: len(session_pids(p.pid)) > 1 or p.poll() is not None), "no workers seen"
-            assert p.poll() is None, "the run ended before its workers were seen"
+            # evaluation: after the first arm's line, the next arm's env workers; augment: the first pool
+            ready = (lambda: "\nsource " in log.read_text()) if phase == "eval" else (lambda: True)
+            seen = wait_for(lambda: p.poll() is not None or (ready() and len(session_pids(p.pid)) > 1))
+            assert seen and p.poll() is None, f"the run ended before its {phase} workers were seen"
             if sig == signal.SIGINT:
                 os.killpg(p.pid, sig)
             else:
                 os.kill(p.pid, sig)
-            so, se = p.communicate(timeout=60)
+            p.wait(timeout=60)
+            left = [] if wait_for(lambda: not session_pids(p.pid), timeout=10) else session_pids(p.pid)
         finally:
-            if p.poll() is None:
-                os.killpg(p.pid, signal.SIGKILL)
+            for pid in session_pids(p.pid):  # whatever this test started and is still there
+                os.kill(pid, signal.SIGKILL)
+        so, se = log.read_text(), errlog.read_text()
         assert p.returncode == code, so + se
-        assert wait_for(lambda: not session_pids(p.pid), timeout=10), f"left behind: {session_pids(p.pid)}"
+        assert not left, f"left behind after {sig.name}: {left}"
         if word:
             err = se.strip().splitlines()
             assert len(err) == 1 and err[0].startswith(word) and "run the same command again" in err[0], se
