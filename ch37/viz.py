@@ -68,14 +68,14 @@ def recording(path: Path, metrics: dict, src_starts, aug_starts, trajectories, a
     rec = rr.RecordingStream(RERUN_APP_ID, recording_id=f"seed{metrics['seed']}")
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
-        _record(rec, tmp, arms, metrics, src_starts, aug_starts, trajectories, annulus)
+        _record(rec, tmp, metrics, src_starts, aug_starts, trajectories, annulus)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     return place(tmp, path)  # whole or not at all, and only over a file of ours (ch37.files)
 
 
-def _record(rec, tmp: Path, arms, metrics, src_starts, aug_starts, trajectories, annulus) -> None:
+def _record(rec, tmp: Path, metrics, src_starts, aug_starts, trajectories, annulus) -> None:
     import rerun as rr
 
     rec.save(tmp)
