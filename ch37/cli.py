@@ -24,6 +24,7 @@ FINITE = ("aug_pos_sigma", "aug_yaw_sigma", "lr")
 NOT_IN_KEY = ("out", "cache", "workers")  # where results go and how fast they come never change them
 # Upper bounds that come from the code: episode indices live in one seed block (ch37.seeds), and
 # every env seed must fit in 63 bits. The step limits bound a run's frames for the memory estimate.
+# --epochs and --full_steps cost time, not memory: a huge value runs long (Ctrl-C stops it cleanly).
 AT_MOST = {"seed": MAX_SEED, "source_episodes": SEED_BLOCK, "eval_episodes": SEED_BLOCK, "lr": 1.0}
 PUSHT_MAX_STEPS, ALOHA_MAX_STEPS = 300, 400  # pusht_env.MAX_STEPS, aloha_env.MAX_STEPS (not imported: slow)
 ENV_BYTES = 1 << 20  # one evaluation env (a MuJoCo model and data): about 0.6 MB measured
@@ -50,15 +51,14 @@ def available_memory() -> int | None:
 def memory_estimate(args: argparse.Namespace) -> dict[str, int]:
     """Bytes a run needs at most, per flag that drives it (every episode at its step limit)."""
     frames = args.source_episodes * ((1 + args.aug_per_demo) * PUSHT_MAX_STEPS + ALOHA_MAX_STEPS)
-    h = args.hidden_dim
+    h, arms = args.hidden_dim, 2  # the two data arms of a budget train side by side (measure)
     params = h * h + 14 * h + 2  # 10 -> h -> h -> 2
-    steps = args.epochs * math.ceil(frames / args.batch_size)
+    act_row = (2 * h + 12) * 4 * 3  # one row through the net: activations and their gradients, float32
     return {
         "--source_episodes/--aug_per_demo": frames * 1024,  # ~10 copies of a frame's ~100 bytes
-        # weights, gradients, Adam's two moments, the initial weights (x4 bytes, x8 copies at worst),
-        # activations of a batch and of the whole set (the final loss), 3 layers of float32
-        "--hidden_dim": params * 32 + (min(args.batch_size, frames) + frames + args.eval_episodes) * h * 12,
-        "--epochs": steps * 32,  # the cosine schedule: one Python float per step
+        # per arm: weights, gradient, Adam's two moments, its policy's copy; plus the initial weights
+        "--hidden_dim": params * 4 * (5 * arms + 2) + (frames + args.eval_episodes) * act_row,
+        "--batch_size": args.batch_size * arms * (act_row + 8 + 48),  # a batch: rows, indices, activations
         "--eval_episodes": args.eval_episodes * ENV_BYTES,
     }
 
