@@ -597,8 +597,8 @@ def test_kill_term_and_ctrl_c_leave_nothing_behind_and_the_same_command_continue
                 start_new_session=True,
             )
         try:
-            # evaluation: after the first arm's line, the next arm's env workers; augment: the first pool
-            ready = (lambda: "\nsource " in log.read_text()) if phase == "eval" else (lambda: True)
+            # evaluation: after the short budget, the full budget's env workers; augment: the first pool
+            ready = (lambda: "\nbudget short:" in log.read_text()) if phase == "eval" else (lambda: True)
             seen = wait_for(lambda: p.poll() is not None or (ready() and len(session_pids(p.pid)) > 1))
             assert seen and p.poll() is None, f"the run ended before its {phase} workers were seen"
             if sig == signal.SIGINT:
