@@ -25,8 +25,8 @@ META_SWEEP = {"kind": "seeds", "rows": [{"seed": 0}]}  # a sweep file missing mo
 
 
 def env_for(cache: Path | None = None, **extra) -> dict:
-    env = dict(os.environ, PYTHONHASHSEED="0", **extra)
-    env.pop("CH37_DEBUG", None)
+    env = {k: v for k, v in os.environ.items() if k != "CH37_DEBUG"}
+    env.update(PYTHONHASHSEED="0", **extra)
     if cache is not None:
         env["CH37_CACHE_DIR"] = str(cache)
     return env
@@ -371,6 +371,24 @@ def test_bad_input_is_one_line_and_nothing_is_touched(ref, tmp_path, make, code,
 
 def test_the_table_is_big_enough():
     assert len(CASES) >= 30 and len({c[0] for c in CASES}) == len(CASES)
+
+
+def test_genuine_bugs_keep_their_traceback_and_ch37_debug_shows_every_one(tmp_path):
+    import errno
+
+    from ch37 import errors
+
+    with pytest.raises(ValueError):  # not a user's problem: it surfaces as it is
+        errors.run_main(int, "not a number")
+    assert errors.one_line(ValueError("x")) is None and errors.one_line(RuntimeError("x")) is None
+    code, line = errors.one_line(OSError(errno.ENOSPC, "No space left on device", "/x/metrics.json"))
+    assert code == 2 and line == (
+        "error: /x/metrics.json: No space left on device; free some disk space, "
+        "then run the same command again"
+    )
+    assert errors.one_line(KeyboardInterrupt())[0] == 130 and errors.one_line(errors.Terminated())[0] == 143
+    p = run(*SD, "--out", _file(tmp_path), env=env_for(CH37_DEBUG="1"))
+    assert p.returncode == 1 and "Traceback" in p.stderr and "DataError: --out" in p.stderr
 
 
 # ---------------------------------------------------------------------------------------------
