@@ -13,6 +13,7 @@ sha256, in the folder's stamp (ch37.stamps). The lock is released when the proce
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 from pathlib import Path
@@ -158,6 +159,11 @@ def _lock(out: Path) -> int | None:
             flush=True,
         )
         fcntl.flock(fd, fcntl.LOCK_EX)
+    except OSError as e:
+        os.close(fd)
+        if e.errno in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS):  # a file system without locks
+            return None
+        raise
     except BaseException:
         os.close(fd)
         raise
