@@ -8,6 +8,7 @@ seeds         env_seed: demos, augmentation and evaluation never share a start
 stamps        ownership stamps: only a folder this project made is ever rewritten
 demos         demo sets: rollout, generation, the private demo cache
 parallel      parallel_map over forked workers, LockstepEnvs for evaluation physics
+engine        one augmentation attempt: perturb a source start, re-solve it, keep it on success
 result_cache  reuse a finished run whose flags and code match
 viz           the PNG figure and the Rerun recording
 """
@@ -40,4 +41,5 @@ CODE_FILES = DATA_CODE + (
     "ch37/stamps.py",
     "ch37/viz.py",
     "ch37/mlp_grads.py",
+    "ch37/engine.py",
 )
