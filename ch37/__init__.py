@@ -9,6 +9,8 @@ stamps        ownership stamps: only a folder this project made is ever rewritte
 demos         demo sets: rollout, generation, the private demo cache
 parallel      parallel_map over forked workers, LockstepEnvs for evaluation physics
 engine        one augmentation attempt: perturb a source start, re-solve it, keep it on success
+shards        a data-engine run on disk: fixed shards (LeRobot sets with stamps), merge, stats over frames
+executors     where the shards run: local processes or Ray
 result_cache  reuse a finished run whose flags and code match
 viz           the PNG figure and the Rerun recording
 """
@@ -42,4 +44,6 @@ CODE_FILES = DATA_CODE + (
     "ch37/viz.py",
     "ch37/mlp_grads.py",
     "ch37/engine.py",
+    "ch37/shards.py",
+    "ch37/executors.py",
 )
