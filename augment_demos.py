@@ -91,6 +91,17 @@ def read_source(src: Path) -> dict:
         names = feats[key].get("names")
         if names is not None and list(names) != list(want):
             raise DataError(f"--src {src}: {key} names {names} are not PushT's {list(want)}")
+    import datasets
+    import pyarrow.parquet as pq
+
+    for f in sorted(src.glob("data/*/*.parquet")) + sorted(src.glob("meta/episodes/*/*.parquet")):
+        try:
+            pq.read_metadata(f)
+        except Exception as e:  # pyarrow's errors for a broken file vary by what is broken
+            raise DataError(
+                f"--src {src}: {f.relative_to(src)} is not a readable parquet file ({e})"
+            ) from None
+    datasets.logging.set_verbosity(datasets.logging.CRITICAL)  # a failure below is our one line, not a log
     try:
         arrays = load_arrays(src, keys=("observation.state", "action", "episode_index"))
     except Exception as e:  # pyarrow, datasets and lerobot each raise their own kinds for a broken set
@@ -107,8 +118,9 @@ def read_source(src: Path) -> dict:
     return arrays
 
 
-def check_out(out: Path, src: Path, config: dict) -> dict | None:
-    """None for a new run; the run's stamp for a run of this command with these settings; else DataError."""
+def check_out(out: Path, src: Path, config: dict | None = None) -> dict | None:
+    """None for a new run; the run's stamp for a run of this command (with `config`, when given);
+    DataError for anything else: --out overlapping --src, data this program did not make, other settings."""
     from ch37.stamps import MADE_BY, holds_data, read_stamp
 
     o, s = out.resolve(), src.resolve()
@@ -119,10 +131,14 @@ def check_out(out: Path, src: Path, config: dict) -> dict | None:
     stamp = read_stamp(out)
     if not out.is_dir() or stamp is None or stamp.get("made_by") != MADE_BY or stamp.get("kind") != "engine":
         raise DataError(f"{out} holds data this program did not make; move it or pass another --out")
-    if stamp.get("config") != config:
-        old = stamp.get("config") or {}
-        diff = ", ".join(f"{k}={old.get(k)} (now {v})" for k, v in config.items() if old.get(k) != v)
-        raise DataError(f"{out} holds a run with other settings: {diff}; pass another --out")
+    old = stamp.get("config") or {}
+    if config is not None and old != config:
+        diff = ", ".join(
+            f"{k} differs" if isinstance(v, dict) else f"{k}={old.get(k)} (now {v})"
+            for k, v in config.items()
+            if old.get(k) != v
+        )
+        raise DataError(f"{out} holds a run with other settings ({diff}); pass another --out")
     return stamp
 
 
@@ -196,6 +212,7 @@ def run(a: argparse.Namespace) -> int:
     from ch37.files import dump_json, round_floats, write_atomic
     from ch37.stamps import MADE_BY, STAMP_NAME, stamp_text
 
+    check_out(a.out, a.src)  # before reading the source: a folder that is not ours is refused at once
     arrays = read_source(a.src)
     sources = engine.sources(arrays)
     if max(sources) >= 1_000_000:

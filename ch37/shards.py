@@ -33,7 +33,11 @@ from ch37 import DATA_CODE
 from ch37.demos import code_digest
 from ch37.stamps import MADE_BY, STAMP_NAME, read_stamp, stamp_text
 
-SHARD_SIZE = 100  # attempts per shard: ~0.1 MB of parquet, a few seconds of one core
+SHARD_SIZE = 100  # attempts per shard: ~0.4 MB of parquet, a few seconds of one core
+# Merged data files rotate at this size (LeRobot's default is 100 MB). aggregate_datasets appends a
+# shard by reading the current file into pandas and rewriting it, so this bounds the merge's
+# memory and its rewrite cost per shard, whatever the run's size.
+DATA_FILE_MB = 20
 SHARDS_DIR = "shards"
 REPORT_NAME = "generation_report.json"
 RUN_KIND = "engine"
@@ -201,6 +205,7 @@ def merge(out: Path, n_shards: int) -> int:
                 "local/pusht_aug",
                 roots=roots,
                 aggr_root=tmp,
+                data_files_size_in_mb=DATA_FILE_MB,
             )
         write_frame_stats(tmp)
         (tmp / "data").rename(out / "data")
