@@ -251,13 +251,18 @@ def run(a: argparse.Namespace) -> int:
     tasks = [
         (i, plan[i], {e: sources[e] for e in sorted({e for e, _ in plan[i]})}, config, scratch) for i in todo
     ]
-    if a.ray is None:
+    timing = {"start_s": 0.0}
+    if not tasks:
+        executor, results = "none (every shard was already made)", []
+    elif a.ray is None:
         executor = f"local processes ({min(a.workers, max(1, len(tasks)))})"
         results = executors.run_local(shards.make_shard, tasks, workers=a.workers)
     else:
         address = None if a.ray == "local" else a.ray
         executor = f"ray {'local, ' + str(a.workers) + ' CPUs' if address is None else address}"
-        results = executors.run_ray(shards.make_shard, tasks, address=address, workers=a.workers)
+        results = executors.run_ray(
+            shards.make_shard, tasks, address=address, workers=a.workers, timing=timing
+        )
     attempts_done = sum(st["attempts"] for st in done.values())
     total = sum(len(s) for s in plan)
     bar = tqdm(total=total, initial=attempts_done, desc="augment", unit="attempt", leave=False,
@@ -308,6 +313,7 @@ def run(a: argparse.Namespace) -> int:
             "executor": executor,
             "seconds": seconds,
             "seconds_generate": t_merge - t_gen,
+            "seconds_start_executor": timing["start_s"],  # of seconds_generate: starting or joining Ray
             "seconds_merge": time.perf_counter() - t_merge,
             "demos_per_s": made["kept"] / seconds,
             "command": " ".join(shlex.quote(x) for x in [Path(sys.executable).name, *sys.argv]),

@@ -74,9 +74,15 @@ def start_ray(address: str | None, workers: int):
     return ray
 
 
-def run_ray(fn, tasks: list, *, address: str | None, workers: int):
-    """fn(*args) for each args in `tasks` as Ray tasks of one CPU each, at most 2 per CPU in flight."""
+def run_ray(fn, tasks: list, *, address: str | None, workers: int, timing: dict | None = None):
+    """fn(*args) for each args in `tasks` as Ray tasks of one CPU each, at most 2 per CPU in flight.
+    `timing`, if given, receives "start_s": the seconds Ray took to start or join."""
+    import time
+
+    t0 = time.perf_counter()
     ray = start_ray(address, workers)
+    if timing is not None:
+        timing["start_s"] = time.perf_counter() - t0
     try:
         remote = ray.remote(num_cpus=1, max_retries=0)(fn)
         window = max(2, 2 * int(ray.cluster_resources().get("CPU", workers)))

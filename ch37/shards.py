@@ -206,6 +206,7 @@ def merge(out: Path, n_shards: int) -> int:
                 roots=roots,
                 aggr_root=tmp,
                 data_files_size_in_mb=DATA_FILE_MB,
+                concatenate_data=False,
             )
         write_frame_stats(tmp)
         (tmp / "data").rename(out / "data")

@@ -95,10 +95,13 @@ def point(src: Path, out: Path, n: int, executor: str, workers: int, shard_size:
         "shard_size": rep["settings"]["shard_size"],
         "wall_s": m["wall_s"],
         "generate_s": rep["seconds_generate"],
+        "start_executor_s": rep["seconds_start_executor"],  # of generate_s
         "merge_s": rep["seconds_merge"],
         "other_s": m["wall_s"] - rep["seconds_generate"] - rep["seconds_merge"],
         "demos_per_s": rep["kept"] / m["wall_s"],
-        "generate_demos_per_s_per_worker": rep["kept"] / rep["seconds_generate"] / workers,
+        "generate_demos_per_s_per_worker": rep["kept"]
+        / (rep["seconds_generate"] - rep["seconds_start_executor"])
+        / workers,
         "merge_s_per_shard": rep["seconds_merge"] / rep["shards"]["total"],
         "peak_rss_driver_mb": m["peak_rss_driver_mb"],
         "peak_rss_largest_mb": m["peak_rss_largest_mb"],
@@ -117,8 +120,9 @@ def estimate(rows: list[dict], cores: int) -> dict:
     ray = [r for r in rows if r["demos_requested"] == big and r["executor"] == "ray"]
     base = local[0] if local else ray[0]
     rate = base["generate_demos_per_s_per_worker"]  # validated demos per second per core, write included
-    ray_factor = ray[0]["generate_s"] / local[0]["generate_s"] if (ray and local) else 1.0
-    start = (ray or local)[0]["other_s"]  # imports, reading the source, starting Ray
+    busy = [r["generate_s"] - r["start_executor_s"] for r in (ray[:1] + local[:1])]
+    ray_factor = busy[0] / busy[1] if (ray and local) else 1.0
+    start = (ray or local)[0]["other_s"] + (ray or local)[0]["start_executor_s"]  # imports, source, Ray
     merge_per_shard, shard = base["merge_s_per_shard"], base["shard_size"]
     out = {
         "measured_at_demos": big,
