@@ -269,27 +269,19 @@ def run(a: argparse.Namespace) -> int:
                disable=a.quiet or not sys.stderr.isatty())  # fmt: skip
     made = {"attempts": 0, "kept": 0}
     t_gen = time.perf_counter()
-    try:
-        for r in results:
-            st = r["stamp"]
-            if st["versions"] != versions:
-                raise DataError(
-                    f"a worker has {st['versions']}, this machine {versions}: install the same versions"
-                )
-            shards.save_shard(a.out, st["shard"], r)
-            done[st["shard"]] = st
-            made["attempts"] += st["attempts"]
-            made["kept"] += st["kept"]
-            bar.update(st["attempts"])
-            rate = made["kept"] / max(time.perf_counter() - t_gen, 1e-9)
-            bar.set_postfix_str(f"{rate:.1f} demos/s, yield {made['kept'] / made['attempts']:.3f}")
-    except KeyboardInterrupt:
-        bar.close()
-        print(
-            f"interrupted: {len(done)} of {len(plan)} shards saved; run the same command to finish",
-            file=sys.stderr,
-        )
-        return 130
+    for r in results:
+        st = r["stamp"]
+        if st["versions"] != versions:
+            raise DataError(
+                f"a worker has {st['versions']}, this machine {versions}: install the same versions"
+            )
+        shards.save_shard(a.out, st["shard"], r)
+        done[st["shard"]] = st
+        made["attempts"] += st["attempts"]
+        made["kept"] += st["kept"]
+        bar.update(st["attempts"])
+        rate = made["kept"] / max(time.perf_counter() - t_gen, 1e-9)
+        bar.set_postfix_str(f"{rate:.1f} demos/s, yield {made['kept'] / made['attempts']:.3f}")
     bar.close()
     t_merge = time.perf_counter()
     merged = shards.merge(a.out, len(plan))
@@ -336,6 +328,11 @@ def main(argv=None) -> int:
         return run(a)
     except DataError as e:
         fail(str(e))
+    except KeyboardInterrupt:
+        print(
+            "interrupted: the shards saved so far are kept; run the same command to finish", file=sys.stderr
+        )
+        return 130
 
 
 if __name__ == "__main__":

@@ -20,7 +20,9 @@ def _call(task):
 
 
 def _die_with_parent() -> None:
-    """A worker whose caller was killed stops too (Linux), instead of finishing its shard for nobody."""
+    """A worker whose caller was killed stops too (Linux), instead of finishing its shard for nobody;
+    Ctrl-C is the caller's to handle (the pool is torn down with it), not every worker's."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     if sys.platform.startswith("linux"):
         import ctypes
 
