@@ -235,6 +235,7 @@ def run(a: argparse.Namespace) -> int:
     if stamp and stamp.get("complete"):
         old = shards.read_json(report_path)
         if old:
+            shards.remove_shards(a.out)  # left over if a run was stopped right after its stamp
             print("already complete (same command, same settings); nothing to do")
             print(summary_line(old, a.out))
             return 0
@@ -316,6 +317,7 @@ def run(a: argparse.Namespace) -> int:
     assert report["kept"] == merged, (report["kept"], merged)
     write_atomic(report_path, dump_json(round_floats(report, 4)))
     write_atomic(a.out / STAMP_NAME, stamp_text(run_stamp | {"complete": True}))
+    shards.remove_shards(a.out)
     if merged == 0:
         print(f"no attempt succeeded: no dataset written, only {report_path}")
     print(summary_line(report, a.out))
