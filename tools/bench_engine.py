@@ -113,6 +113,38 @@ def point(src: Path, out: Path, n: int, executor: str, workers: int, shard_size:
     return row
 
 
+def per_demo_costs(src: Path, n: int = 100) -> dict:
+    """Where one core's time per kept demo goes, in this process: the re-solve vs LeRobot's write."""
+    import tempfile
+
+    import pusht_env
+    from ch37 import engine
+    from ch37.lerobot_io import features, load_arrays, write_dataset
+
+    sources = engine.sources(load_arrays(src))
+    jobs = [(e, k) for k in range(n) for e in sources][:n]
+    kw = dict(seed=0, pos_sigma=0.08, yaw_sigma=0.5)
+    engine.attempt(sources[jobs[0][0]], 10**6, **kw)  # warm up
+    t0 = time.perf_counter()
+    eps = [engine.attempt(sources[e], k, **kw) for e, k in jobs]
+    t1 = time.perf_counter()
+    eps = [ep for ep in eps if not isinstance(ep, str)]
+    feats = features(pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, engine.PROVENANCE)
+    meta = dict(
+        repo_id="local/x", fps=pusht_env.FPS, robot_type="r", task=pusht_env.TASK, feats=feats, stamp={}
+    )
+    with tempfile.TemporaryDirectory() as tmp:
+        write_dataset(Path(tmp) / "warm", episodes=eps[:2], **meta)
+        t2 = time.perf_counter()
+        write_dataset(Path(tmp) / "set", episodes=eps, **meta)
+        t3 = time.perf_counter()
+    return {
+        "attempts": n,
+        "resolve_ms_per_attempt": (t1 - t0) / n * 1e3,
+        "write_ms_per_demo": (t3 - t2) / len(eps) * 1e3,
+    }
+
+
 def estimate(rows: list[dict], cores: int) -> dict:
     """10^5 and 10^6 demos on `cores` Ray cores, from the largest measured size."""
     big = max(r["demos_requested"] for r in rows)
@@ -169,6 +201,11 @@ def main(argv=None) -> int:
 
             if gen_demos_pusht.main(["--episodes", str(SOURCE_EPISODES), "--out", str(src), "--quiet"]) != 0:
                 raise ToolError(f"could not make the source set at {src}")
+    costs = per_demo_costs(src)
+    print(
+        f"one core, in process: re-solve {costs['resolve_ms_per_attempt']:.1f} ms per attempt, "
+        f"LeRobot write (write_dataset) {costs['write_ms_per_demo']:.1f} ms per demo"
+    )
     rows = []
     print(f"{'demos':>6s} {'executor':8s} {'kept':>6s} {'wall s':>7s} {'gen s':>7s} {'merge s':>7s} "
           f"{'demos/s':>8s} {'/worker':>7s} {'RSS MB driver/largest/tree':>27s}")  # fmt: skip
@@ -193,6 +230,7 @@ def main(argv=None) -> int:
         )
     print("assumptions: " + "; ".join(est["assumptions"]))
     result = {
+        "per_demo_costs": costs,
         "runs": rows,
         "estimate": est,
         "cluster_cores": a.cluster_cores,
