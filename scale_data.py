@@ -210,60 +210,34 @@ write_atomic(args.out / "cross_embodiment.json", dump_json(round_floats(cross, 6
 # No action is invented. Each (source demo, k) draws from its own seeded stream, so the set for
 # aug_per_demo=4 is a subset of the set for 8 and the scaling curve compares nested data.
 import pusht_env  # noqa: E402
-from ch37.demos import progress, rollout  # noqa: E402
+from ch37 import engine  # noqa: E402
+from ch37.demos import progress  # noqa: E402
 from ch37.lerobot_io import features, write_dataset  # noqa: E402
 from ch37.parallel import parallel_map  # noqa: E402
 from ch37.seeds import env_seed  # noqa: E402
 from ch37.stamps import MADE_BY, replace_own_dir  # noqa: E402
-from scripted_expert import PushTExpert  # noqa: E402
-
-R_LO, R_HI = 0.08, 0.26  # m; the block is kept on a band slightly wider than the spawn annulus
-
-
-def perturbed_start(first_state, rng, tries=100):
-    """(block x, y, yaw, pusher x, y) near a source start, or None if no valid draw was found."""
-    px, py, bx, by, s, c = (float(v) for v in first_state[:6])
-    for _ in range(tries):
-        nbx, nby = bx + rng.normal(0, args.aug_pos_sigma), by + rng.normal(0, args.aug_pos_sigma)
-        yaw = math.atan2(s, c) + rng.normal(0, args.aug_yaw_sigma)
-        npx, npy = np.clip(
-            [px + rng.normal(0, args.aug_pos_sigma), py + rng.normal(0, args.aug_pos_sigma)],
-            -pusht_env.PUSHER_HALF,
-            pusht_env.PUSHER_HALF,
-        )
-        if R_LO <= math.hypot(nbx, nby) <= R_HI and pusht_env.pusher_clear(nbx, nby, yaw, npx, npy):
-            return (nbx, nby, math.atan2(math.sin(yaw), math.cos(yaw)), float(npx), float(npy))
-    return None
-
 
 pusht = sets["pusht"]
-ep_ids = np.unique(pusht["episode_index"])
-first = {int(e): pusht["observation.state"][np.flatnonzero(pusht["episode_index"] == e)[0]] for e in ep_ids}
-env = pusht_env.PushTEnv()
+sources = engine.sources(pusht)  # {episode: its frames}; re-solving reads only the first state
+first = {e: src.states[0] for e, src in sources.items()}
 
 
-def resolve(job):  # (source episode, k) -> the expert's demo from a perturbed start, or why there is none
+def grow(job):  # (source episode, k) -> the expert's demo from a perturbed start, or why there is none
     e, k = job
-    rng = np.random.default_rng([env_seed(args.seed, "aug", e), k])  # own stream per (demo, k)
-    start = perturbed_start(first[e], rng)
-    if start is None:
-        return "no_valid_start"
-    ep = rollout(env, PushTExpert(noise=0.0), env.set_start(*start))
-    if not ep["success"]:
-        return "expert_failed"
-    n = len(ep["action"])
-    ep["aug.source_episode"] = np.full((n, 1), e, np.int64)  # provenance, stored on every frame
-    ep["aug.start"] = np.tile(np.float32(start), (n, 1))
-    return ep
+    # ch37.engine.attempt makes the three moves (augment_demos.py scales the same function out):
+    #   perturb   first[e]: block xy, yaw and pusher xy, drawn from this (demo, k)'s own stream
+    #   re-solve  put the simulator there; the noise-free expert solves it in the real physics
+    #   keep      the demo, with its provenance, only if the expert succeeds (else the reason)
+    return engine.attempt(
+        sources[e], k, seed=args.seed, pos_sigma=args.aug_pos_sigma, yaw_sigma=args.aug_yaw_sigma
+    )
 
 
 jobs = [(e, k) for e in first for k in range(args.aug_per_demo)]
 bar = progress(None, total=len(jobs), desc="augment", quiet=args.smoke)
-results = parallel_map(resolve, jobs, workers=args.workers, bar=bar)
+results = parallel_map(grow, jobs, workers=args.workers, bar=bar)
 kept = [r for r in results if not isinstance(r, str)]
-failures = {
-    why: sum(r == why for r in results if isinstance(r, str)) for why in ("expert_failed", "no_valid_start")
-}
+failures = {why: sum(r == why for r in results) for why in engine.FAILURES["resolve"]}
 attempts = len(jobs)
 yield_ = len(kept) / attempts if attempts else 0.0
 print(f"augment: {attempts} attempts, {len(kept)} kept, yield {yield_:.2f}, failures {failures}")
@@ -272,16 +246,11 @@ try:
     replace_own_dir(aug_path)
 except DataError as e:
     fail(str(e))
-START_NAMES = ["block_x", "block_y", "block_yaw", "pusher_x", "pusher_y"]  # what set_start takes
-extra = {
-    "aug.source_episode": {"dtype": "int64", "shape": (1,), "names": None},
-    "aug.start": {"dtype": "float32", "shape": (len(START_NAMES),), "names": START_NAMES},
-}
 aug = {
     "observation.state": np.zeros((0, pusht_env.OBS_DIM), np.float32),
     "action": np.zeros((0, pusht_env.ACT_DIM), np.float32),
     "episode_index": np.zeros(0, np.int64),
-    "aug.start": np.zeros((0, len(START_NAMES)), np.float32),
+    "aug.start": np.zeros((0, len(engine.START_NAMES)), np.float32),
 }
 if kept:
     write_dataset(
@@ -290,7 +259,7 @@ if kept:
         fps=pusht_env.FPS,
         robot_type=pusht_env.ROBOT_TYPE,
         task=pusht_env.TASK,
-        feats=features(pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, extra),
+        feats=features(pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, engine.PROVENANCE),
         episodes=kept,
         stamp={"made_by": MADE_BY, "kind": "augmented", "seed": args.seed},
     )

@@ -9,6 +9,10 @@ seeds         env_seed: demos, augmentation and evaluation never share a start
 stamps        ownership stamps: only files this project wrote are ever deleted or rewritten
 demos         demo sets: rollout, generation, the private demo cache
 parallel      parallel_map over forked workers, LockstepEnvs for evaluation physics; workers die with the run
+engine        one augmentation attempt: perturb a source start, re-solve it, keep it on success
+shards        a data-engine run on disk: fixed shards (LeRobot sets with stamps), merge, stats over frames
+executors     where the shards run: local processes or Ray
+ensemble      several MLPs as one module: the arms of a training budget side by side
 result_cache  reuse a finished run whose flags and code match; entries verified by checksum
 viz           the PNG figure and the Rerun recording
 
@@ -45,4 +49,7 @@ CODE_FILES = DATA_CODE + (
     "ch37/stamps.py",
     "ch37/viz.py",
     "ch37/ensemble.py",
+    "ch37/engine.py",
+    "ch37/shards.py",
+    "ch37/executors.py",
 )

@@ -8,6 +8,7 @@
     python -m tools.notebook [--check]           scale_data.ipynb from the regions
     python -m tools.bench [--smoke]              where the time of one run goes
     python -m tools.bench_envs                   speed and competence of the envs and their experts
+    python -m tools.bench_engine                 the data engine: demos/s local vs Ray, peak memory
 
 Exit codes: 0 ok, 1 a check failed (drift, a stale notebook), 2 bad input (one `error:` line).
 """

@@ -1,0 +1,98 @@
+"""Where the data engine's shards run: local processes (the default) or Ray. Both yield each task's
+result as soon as it is done, in any order; the caller saves it and drops it, so memory holds a
+few shards, not the run. Which executor ran a shard never changes its bytes: a shard is a pure
+function of its arguments (see ch37.shards)."""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import signal
+import sys
+
+from ch37 import ROOT
+from ch37.errors import DataError
+
+
+def _call(task):
+    fn, args = task
+    return fn(*args)
+
+
+def _die_with_parent() -> None:
+    """A worker whose caller was killed stops too (Linux), instead of finishing its shard for nobody;
+    Ctrl-C is the caller's to handle (the pool is torn down with it), not every worker's."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+
+
+def run_local(fn, tasks: list, *, workers: int):
+    """fn(*args) for each args in `tasks`, on `workers` processes (in this process when 1)."""
+    if workers <= 1 or len(tasks) <= 1:
+        for args in tasks:
+            yield fn(*args)
+        return
+    method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
+    with mp.get_context(method).Pool(min(workers, len(tasks)), initializer=_die_with_parent) as pool:
+        yield from pool.imap_unordered(_call, [(fn, args) for args in tasks], chunksize=1)
+
+
+def start_ray(address: str | None, workers: int):
+    """Start a private local Ray (address None: `workers` CPUs, no dashboard) or join a cluster.
+
+    Joining ships this repository to the cluster's workers as their working directory; they need
+    the same Python packages (pip install the project with its `ray` extra on every node)."""
+    try:
+        import ray
+    except ImportError:
+        raise DataError("--ray needs Ray: pip install -e '.[ray]' (or pip install ray)") from None
+    import logging
+
+    common = dict(include_dashboard=False, logging_level=logging.ERROR, log_to_driver=False)
+    try:
+        if address is None:  # "local": always a new instance, never a cluster that happens to run here
+            # its workers inherit this environment: the repository on their path (a runtime_env
+            # would start a second pool of workers, seconds more on a small machine)
+            saved = os.environ.get("PYTHONPATH")
+            os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), saved]))
+            try:
+                ray.init(address="local", num_cpus=workers, **common)
+            finally:
+                if saved is None:
+                    os.environ.pop("PYTHONPATH")
+                else:
+                    os.environ["PYTHONPATH"] = saved
+        else:
+            excludes = [".git", ".venv", "outputs", "*.ipynb", "tests"]
+            ray.init(address=address, runtime_env={"working_dir": str(ROOT), "excludes": excludes}, **common)
+    except (ConnectionError, RuntimeError, ValueError) as e:
+        why = (str(e).strip().splitlines() or [type(e).__name__])[0]
+        verb = "start" if address is None else "join"
+        raise DataError(f"could not {verb} Ray ({address or 'local'}): {why}") from None
+    return ray
+
+
+def run_ray(fn, tasks: list, *, address: str | None, workers: int, timing: dict | None = None):
+    """fn(*args) for each args in `tasks` as Ray tasks of one CPU each, at most 2 per CPU in flight.
+    `timing`, if given, receives "start_s": the seconds Ray took to start or join."""
+    import time
+
+    t0 = time.perf_counter()
+    ray = start_ray(address, workers)
+    if timing is not None:
+        timing["start_s"] = time.perf_counter() - t0
+    try:
+        remote = ray.remote(num_cpus=1, max_retries=0)(fn)
+        window = max(2, 2 * int(ray.cluster_resources().get("CPU", workers)))
+        todo, pending = list(tasks), []
+        while todo or pending:
+            while todo and len(pending) < window:
+                pending.append(remote.remote(*todo.pop(0)))
+            done, pending = ray.wait(pending, num_returns=1)
+            yield ray.get(done[0])
+    finally:
+        ray.shutdown()

@@ -1,0 +1,306 @@
+"""The data engine: one attempt as a pure function, augment_demos.py's shards, merge, stats, executors,
+resume after SIGKILL, and its refusals. Real MuJoCo, real LeRobot, real Ray, real subprocesses."""
+
+import json
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from conftest import ROOT, run_script
+
+import gen_demos_aloha
+import gen_demos_pusht
+import pusht_env
+from ch37 import engine, shards
+from ch37.lerobot_io import load_arrays, open_dataset
+from ch37.stamps import MADE_BY, STAMP_NAME
+
+PER_DEMO, SHARD = 4, 2  # 3 sources x 4 = 12 attempts in 6 shards: enough to kill one run mid-way
+SETTINGS = ["--per_demo", str(PER_DEMO), "--shard_size", str(SHARD), "--quiet"]
+
+
+def tree(root, skip=(shards.REPORT_NAME,)):
+    """{relative path: bytes} of every file under root (the report holds timings, so it is left out)."""
+    return {
+        p.relative_to(root).as_posix(): p.read_bytes()
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and p.name not in skip
+    }
+
+
+def augment(*args, check=True):
+    return run_script(ROOT / "augment_demos.py", *args, check=check)
+
+
+@pytest.fixture(scope="module")
+def src(tmp_path_factory):
+    out = tmp_path_factory.mktemp("src") / "pusht3"
+    assert gen_demos_pusht.main(["--episodes", "3", "--seed", "0", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def reference(src, tmp_path_factory):
+    """The run every other run must equal byte for byte: --workers 1."""
+    out = tmp_path_factory.mktemp("ref") / "aug"
+    p = augment("--src", src, "--out", out, "--workers", "1", *SETTINGS)
+    assert p.stdout.strip().splitlines()[-1].startswith("augment_demos: 12 attempts")
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# One attempt
+# ----------------------------------------------------------------------------------------------
+def test_attempt_is_a_pure_function_with_provenance(src):
+    sources = engine.sources(load_arrays(src))
+    kw = dict(seed=0, pos_sigma=0.08, yaw_sigma=0.5)
+    a = engine.attempt(sources[1], 2, env=pusht_env.PushTEnv(), **kw)
+    shared = pusht_env.PushTEnv()
+    engine.attempt(sources[0], 0, env=shared, **kw)  # another attempt first, on the same simulator
+    b = engine.attempt(sources[1], 2, env=shared, **kw)
+    assert not isinstance(a, str) and a["success"]
+    assert all(a[k].tobytes() == b[k].tobytes() for k in ("observation.state", "action", "aug.start"))
+    n = len(a["action"])
+    assert a["aug.source_episode"].shape == (n, 1) and (a["aug.source_episode"] == 1).all()
+    start = a["aug.start"][0]
+    assert a["aug.start"].shape == (n, 5) and (a["aug.start"] == start).all()
+    # the first frame is the simulator placed at the recorded start, and the start differs from the source's
+    env = pusht_env.PushTEnv()
+    first = env.set_start(
+        *engine.perturbed_start(sources[1].states[0], engine.attempt_rng(0, 1, 2), 0.08, 0.5)
+    )
+    assert a["observation.state"][0].tobytes() == first.tobytes()
+    assert np.abs(start[:2] - sources[1].states[0][2:4]).max() > 1e-4
+    other_k = engine.attempt(sources[1], 3, **kw)
+    assert other_k["aug.start"][0].tobytes() != start.tobytes()
+
+
+def test_perturbed_starts_stay_on_the_band_and_clear_of_the_block():
+    rng = np.random.default_rng(0)
+    state = np.array([0.3, 0.3, 0.15, 0.0, 0.0, 1.0, 0, 0, 0, 1], np.float32)
+    for _ in range(200):
+        bx, by, yaw, px, py = engine.perturbed_start(state, rng, 0.08, 0.5)
+        assert engine.R_LO <= math.hypot(bx, by) <= engine.R_HI and -math.pi <= yaw <= math.pi
+        assert max(abs(px), abs(py)) <= pusht_env.PUSHER_HALF
+        assert pusht_env.pusher_clear(bx, by, yaw, px, py)
+
+
+def test_an_impossible_perturbation_is_a_reason_not_a_demo(src):
+    sources = engine.sources(load_arrays(src))
+    assert engine.attempt(sources[0], 0, seed=0, pos_sigma=5.0, yaw_sigma=0.5) == "no_valid_start"
+    assert "no_valid_start" in engine.FAILURES["resolve"]
+
+
+# ----------------------------------------------------------------------------------------------
+# A run: what it writes
+# ----------------------------------------------------------------------------------------------
+def test_run_writes_the_attempts_in_order_loadable_with_provenance(src, reference):
+    sources = engine.sources(load_arrays(src))
+    want = [
+        engine.attempt(sources[e], k, seed=0, pos_sigma=0.08, yaw_sigma=0.5)
+        for e in range(3)
+        for k in range(4)
+    ]
+    want = [w for w in want if not isinstance(w, str)]
+    keys = ("observation.state", "action", "episode_index", "aug.start", "aug.source_episode")
+    got = load_arrays(reference, keys=keys)
+    for key in ("observation.state", "action", "aug.start", "aug.source_episode"):
+        assert got[key].tobytes() == np.concatenate([w[key] for w in want]).reshape(got[key].shape).tobytes()
+    ds = open_dataset(reference)
+    assert ds.num_episodes == len(want) and ds.fps == pusht_env.FPS
+    frame = ds[len(want[0]["action"])]  # first frame of the second kept episode
+    assert int(frame["aug.source_episode"]) == int(want[1]["aug.source_episode"][0, 0])
+    assert np.allclose(frame["aug.start"].numpy(), want[1]["aug.start"][0])
+    assert not (reference / shards.SHARDS_DIR).exists()  # shards are removed once merged
+    stamp = json.loads((reference / STAMP_NAME).read_text())
+    assert stamp["made_by"] == MADE_BY and stamp["complete"] and stamp["config"]["source"]["episodes"] == 3
+    rep = json.loads((reference / shards.REPORT_NAME).read_text())
+    assert rep["attempts"] == 12 and rep["kept"] == len(want) == rep["dataset"]["episodes"]
+    assert rep["kept"] + sum(rep["failures"].values()) == rep["attempts"]
+    assert rep["frames"] == len(got["action"]) and rep["yield"] == round(rep["kept"] / 12, 4)
+    assert {e: v["attempts"] for e, v in rep["per_source"].items()} == {"0": 4, "1": 4, "2": 4}
+    assert rep["source"]["sha256"] == stamp["config"]["source"]["sha256"]
+    lengths = [len(w["action"]) for w in want]
+    assert rep["episode_length"]["min"] == min(lengths) and rep["episode_length"]["max"] == max(lengths)
+    assert rep["shards"] == {"total": 6, "made_this_run": 6, "reused": 0}
+    assert rep["seconds"] > 0 and rep["demos_per_s"] > 0 and "augment_demos.py" in rep["command"]
+    assert {"lerobot", "mujoco", "numpy", "python"} <= set(rep["versions"])
+
+
+def test_stats_are_over_all_frames(reference):
+    """LeRobot 0.6.1's merge averages per-episode quantiles (lerobot issue 4156); ours are numpy's."""
+    import pandas as pd
+
+    df = pd.concat(pd.read_parquet(f) for f in sorted((reference / "data").rglob("*.parquet")))
+    stats = json.loads((reference / "meta" / "stats.json").read_text())
+    raw = (reference / "meta" / "stats.json").read_text()
+    assert raw == json.dumps(json.loads(raw), indent=4, sort_keys=True, ensure_ascii=False)
+    for key in ("observation.state", "action", "aug.start", "frame_index", "index", "next.success"):
+        col = df[key].to_numpy()
+        x = np.stack(col).astype(np.float64) if isinstance(col[0], np.ndarray) else col.astype(np.float64)
+        x = x.reshape(len(df), -1)
+        st = stats[key]
+        assert st["count"] == [len(df)]
+        for name, ref in (("min", x.min(0)), ("max", x.max(0)), ("mean", x.mean(0)), ("std", x.std(0))):
+            np.testing.assert_allclose(st[name], ref, rtol=1e-12, atol=1e-12, err_msg=f"{key} {name}")
+        for name, q in (("q01", 0.01), ("q10", 0.10), ("q50", 0.50), ("q90", 0.90), ("q99", 0.99)):
+            np.testing.assert_allclose(st[name], np.quantile(x, q, axis=0), rtol=1e-12, atol=1e-12)
+    ep = np.stack(df["episode_index"].to_numpy())
+    assert sorted(set(ep.tolist())) == list(range(len(set(ep.tolist()))))  # merged episodes renumbered
+
+
+# ----------------------------------------------------------------------------------------------
+# Same bytes: any worker count, Ray, and a killed run finished by the same command
+# ----------------------------------------------------------------------------------------------
+def test_two_workers_same_bytes(src, reference, tmp_path):
+    augment("--src", src, "--out", tmp_path / "w2", "--workers", "2", *SETTINGS)
+    assert tree(tmp_path / "w2") == tree(reference)
+
+
+def test_local_ray_same_bytes(src, reference, tmp_path):
+    """A real Ray started by the command on this machine (2 CPUs) and shut down at its end."""
+    p = augment("--src", src, "--out", tmp_path / "ray", "--ray", "--workers", "2", *SETTINGS)
+    assert tree(tmp_path / "ray") == tree(reference)
+    rep = json.loads((tmp_path / "ray" / shards.REPORT_NAME).read_text())
+    assert rep["executor"].startswith("ray local") and rep["versions"]["ray"]
+    assert "Traceback" not in p.stderr
+
+
+def test_killed_run_is_finished_by_the_same_command(src, reference, tmp_path):
+    out = tmp_path / "killed"
+    cmd = [sys.executable, str(ROOT / "augment_demos.py"), "--src", str(src), "--out", str(out)]
+    cmd += ["--workers", "1", *SETTINGS]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 300
+    while not list((out / shards.SHARDS_DIR).glob("shard-*")) and proc.poll() is None:
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.communicate()
+    assert proc.returncode == -signal.SIGKILL
+    done = sorted(p.name for p in (out / shards.SHARDS_DIR).glob("shard-*"))
+    assert 1 <= len(done) < 6 and not (out / "meta").exists()
+    # what a kill can leave behind: a shard cut off mid-save, and a shard folder without a stamp
+    (out / shards.SHARDS_DIR / ".shard-00005.partial" / "data").mkdir(parents=True)
+    if "shard-00004" not in done:  # (one worker makes the shards in order; the kill came early)
+        (out / shards.SHARDS_DIR / "shard-00004").mkdir()
+        (out / shards.SHARDS_DIR / "shard-00004" / "junk.parquet").write_bytes(b"half a file")
+    augment(*cmd[2:])
+    assert tree(out) == tree(reference)
+    rep = json.loads((out / shards.REPORT_NAME).read_text())
+    assert rep["shards"]["reused"] == len(done) and rep["shards"]["made_this_run"] == 6 - len(done)
+    assert rep["attempts"] == 12  # the report covers the whole run, reused shards included
+    again = augment(*cmd[2:])  # a finished run: nothing to do, nothing changed
+    assert "already complete" in again.stdout and tree(out) == tree(reference)
+
+
+# ----------------------------------------------------------------------------------------------
+# Bad input: one line, exit 2, nothing touched
+# ----------------------------------------------------------------------------------------------
+def _wrong_schema(tmp, src):
+    bad = tmp / "wrong_schema"
+    shutil.copytree(src, bad)
+    info = json.loads((bad / "meta" / "info.json").read_text())
+    info["features"]["observation.state"]["shape"] = [7]
+    (bad / "meta" / "info.json").write_text(json.dumps(info))
+    return bad
+
+
+def _renamed_state(tmp, src):
+    bad = tmp / "renamed"
+    shutil.copytree(src, bad)
+    info = json.loads((bad / "meta" / "info.json").read_text())
+    info["features"]["observation.state"]["names"] = [f"x{i}" for i in range(10)]
+    (bad / "meta" / "info.json").write_text(json.dumps(info))
+    return bad
+
+
+def _corrupt_parquet(tmp, src):
+    bad = tmp / "corrupt"
+    shutil.copytree(src, bad)
+    for f in (bad / "data").rglob("*.parquet"):
+        f.write_bytes(b"PAR1 this is not a parquet file")
+    return bad
+
+
+def _no_data_files(tmp, src):
+    bad = tmp / "no_data"
+    shutil.copytree(src, bad)
+    shutil.rmtree(bad / "data")
+    return bad
+
+
+def _aloha(tmp, src):
+    out = tmp / "aloha"
+    assert gen_demos_aloha.main(["--episodes", "1", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def _user_out(tmp):
+    out = tmp / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("precious")
+    return out
+
+
+def _other_settings_out(tmp):
+    out = tmp / "other"
+    out.mkdir()
+    stamp = {"made_by": MADE_BY, "kind": "engine", "config": {"per_demo": 99}, "complete": True}
+    (out / STAMP_NAME).write_text(json.dumps(stamp))
+    return out
+
+
+def _demo_set_out(tmp):  # a set this project made, but not an engine run: never overwritten
+    out = tmp / "demo_set"
+    assert gen_demos_pusht.main(["--episodes", "1", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+BAD = [  # (id, make src or None (the good one), make out or None (a new folder), extra flags, needle)
+    ("missing_src", lambda t, s: t / "nope", None, [], "not a folder"),
+    ("src_is_a_file", lambda t, s: s / "meta" / "info.json", None, [], "not a folder"),
+    ("not_lerobot", lambda t, s: t, None, [], "not a LeRobot v3 dataset"),
+    ("wrong_schema", _wrong_schema, None, [], "observation.state"),
+    ("aloha_set", _aloha, None, [], "'action' has shape [6]"),
+    ("renamed_state", _renamed_state, None, [], "names"),
+    ("corrupt_parquet", _corrupt_parquet, None, [], "not a readable parquet file"),
+    ("no_data_files", _no_data_files, None, [], "could not be read"),
+    ("out_holds_user_data", None, _user_out, [], "did not make"),
+    ("out_other_settings", None, _other_settings_out, [], "other settings"),
+    ("out_is_a_demo_set", None, _demo_set_out, [], "did not make"),
+    ("out_inside_src", None, lambda t: None, ["--out", "{src}/aug"], "overlaps"),
+    ("per_demo_0", None, None, ["--per_demo", "0"], "--per_demo"),
+    ("shard_size_0", None, None, ["--shard_size", "0"], "--shard_size"),
+    ("workers_0", None, None, ["--workers", "0"], "--workers"),
+    ("seed_negative", None, None, ["--seed", "-1"], "--seed"),
+    ("pos_sigma_nan", None, None, ["--pos_sigma", "nan"], "--pos_sigma"),
+    ("yaw_sigma_negative", None, None, ["--yaw_sigma", "-1"], "--yaw_sigma"),
+    ("mode_unknown", None, None, ["--mode", "teleport"], "--mode"),
+]
+
+
+@pytest.mark.parametrize("make_src,make_out,extra,needle", [b[1:] for b in BAD], ids=[b[0] for b in BAD])
+def test_bad_input_is_one_line_and_exit_2(src, tmp_path, make_src, make_out, extra, needle):
+    work = tmp_path / "work"
+    work.mkdir()
+    the_src = make_src(work, src) if make_src else src
+    out = (make_out(tmp_path) if make_out else None) or tmp_path / "out"
+    before = {p: tree(p, skip=()) if p.is_dir() else None for p in (src, the_src, out) if p.exists()}
+    args = ["--src", the_src, "--out", out, "--workers", "1", "--quiet"]
+    args += [a.format(src=src) for a in extra]
+    p = augment(*args, check=False)
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2, (p.returncode, p.stdout, p.stderr)
+    assert len(err) == 1 and err[0].startswith("error: ") and needle in err[0], p.stderr
+    assert "Traceback" not in p.stderr + p.stdout
+    for path, files in before.items():
+        assert (tree(path, skip=()) if path.is_dir() else None) == files, path
+    if make_out is None:
+        assert not out.exists() and not (src / "aug").exists()
