@@ -5,6 +5,7 @@ function of its arguments (see ch37.shards)."""
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
 import signal
@@ -41,6 +42,22 @@ def run_local(fn, tasks: list, *, workers: int):
         yield from pool.imap_unordered(_call, [(fn, args) for args in tasks], chunksize=1)
 
 
+@contextlib.contextmanager
+def _stderr_silenced():
+    """File descriptor 2 to /dev/null for a while: Ray's C++ client logs a warning per retry straight
+    to it when a cluster cannot be joined; the one-line error after it says what happened."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 2)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
 def start_ray(address: str | None, workers: int):
     """Start a private local Ray (address None: `workers` CPUs, no dashboard) or join a cluster.
 
@@ -68,11 +85,16 @@ def start_ray(address: str | None, workers: int):
                     os.environ["PYTHONPATH"] = saved
         else:
             excludes = [".git", ".venv", "outputs", "*.ipynb", "tests"]
-            ray.init(address=address, runtime_env={"working_dir": str(ROOT), "excludes": excludes}, **common)
+            with _stderr_silenced():
+                ray.init(
+                    address=address, runtime_env={"working_dir": str(ROOT), "excludes": excludes}, **common
+                )
     except (ConnectionError, RuntimeError, ValueError) as e:
         why = (str(e).strip().splitlines() or [type(e).__name__])[0]
-        verb = "start" if address is None else "join"
-        raise DataError(f"could not {verb} Ray ({address or 'local'}): {why}") from None
+        hint = (
+            "" if address is None else " (is it running? a cluster with token auth needs RAY_AUTH_MODE=token)"
+        )
+        raise DataError(f"could not {'start' if address is None else 'join'} Ray{hint}: {why}") from None
     return ray
 
 

@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -304,3 +305,44 @@ def test_bad_input_is_one_line_and_exit_2(src, tmp_path, make_src, make_out, ext
         assert (tree(path, skip=()) if path.is_dir() else None) == files, path
     if make_out is None:
         assert not out.exists() and not (src / "aug").exists()
+
+
+@pytest.mark.slow
+def test_joining_a_ray_cluster_same_bytes(src, reference, tmp_path):
+    """--ray ADDRESS: a real single-node cluster started with `ray start --head`, stopped at the end."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = dict(os.environ, RAY_AUTH_MODE="token")  # Ray 2.60 clusters authenticate with a token
+    ray_bin = Path(sys.executable).with_name("ray")
+    head = subprocess.Popen(
+        [str(ray_bin), "start", "--head", "--block", "--port", str(port), "--num-cpus", "2"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    try:
+        cmd = [
+            sys.executable,
+            str(ROOT / "augment_demos.py"),
+            "--src",
+            str(src),
+            "--out",
+            str(tmp_path / "joined"),
+        ]
+        cmd += ["--ray", f"127.0.0.1:{port}", *SETTINGS]
+        for _ in range(30):  # the head takes a few seconds to listen
+            p = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+            if p.returncode == 0 or "could not join" not in p.stderr:
+                break
+            time.sleep(2)
+        assert p.returncode == 0, p.stderr
+    finally:
+        head.terminate()  # `ray start --block` stops the processes it started
+        head.wait(timeout=60)
+    assert tree(tmp_path / "joined") == tree(reference)
+    rep = json.loads((tmp_path / "joined" / shards.REPORT_NAME).read_text())
+    assert rep["executor"] == f"ray 127.0.0.1:{port}"
