@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import ast
-import math
 import resource
 import statistics
 import sys
@@ -104,15 +103,13 @@ def run_once(argv: list[str]) -> dict:
             add(phase, time.perf_counter() - t0, times)
             if isinstance(node, ast.FunctionDef) and node.name == "train":
 
-                def train(*a, _f=ns["train"], **k):
+                def train(datasets, steps, _f=ns["train"]):
                     t0 = time.perf_counter()
-                    out = _f(*a, **k)
-                    arm = f"train arm {len(facts['train_steps']) + 1}"
+                    out = _f(datasets, steps)
+                    arm = f"train budget {len(facts['train_steps']) + 1} ({len(datasets)} arms side by side)"
                     add(arm, time.perf_counter() - t0)
-                    facts["train_steps"][arm] = out[1]
-                    n, b = len(a[0]), ns["args"].batch_size
-                    epoch = math.ceil(n / b)  # steps per epoch; the last batch of each epoch is short
-                    facts["train_rows"][arm] = sum(min(b, n - (t % epoch) * b) for t in range(out[1]))
+                    facts["train_steps"][arm] = steps * len(datasets)  # arm-steps
+                    facts["train_rows"][arm] = steps * len(datasets) * ns["args"].batch_size  # full batches
                     return out
 
                 ns["train"] = train
