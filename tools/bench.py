@@ -174,10 +174,10 @@ def main() -> None:
                     f"  {steps} steps, {sec / steps * 1e3:.2f} ms/step, {rate:.0f} GFLOP/s "
                     f"= {rate / gflops:.0%} of matmul"
                 )
-            print(f"  of which {sub:34s} {med('inner', sub):8.2f}{extra}")
+            print(f"  of which {sub:44s} {med('inner', sub):8.2f}{extra}")
     total_steps, flops = sum(f["train_steps"].values()), sum(f["train_rows"].values()) * per_row
     train_s = statistics.median(
-        sum(v for k, v in r["inner"].items() if k.startswith("train arm")) for r in runs
+        sum(v for k, v in r["inner"].items() if k.startswith("train budget")) for r in runs
     )
     rate = flops / train_s / 1e9
     print(f"{'wall (one run, in process)':40s} {statistics.median(walls):8.2f}")
