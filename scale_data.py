@@ -212,7 +212,6 @@ write_atomic(args.out / "cross_embodiment.json", dump_json(round_floats(cross, 6
 import pusht_env  # noqa: E402
 from ch37 import engine  # noqa: E402
 from ch37.demos import progress  # noqa: E402
-from ch37.lerobot_io import features, write_dataset  # noqa: E402
 from ch37.parallel import parallel_map  # noqa: E402
 from ch37.seeds import env_seed  # noqa: E402
 from ch37.stamps import MADE_BY, replace_own_dir  # noqa: E402
@@ -253,16 +252,8 @@ aug = {
     "aug.start": np.zeros((0, len(engine.START_NAMES)), np.float32),
 }
 if kept:
-    write_dataset(
-        aug_path,
-        repo_id="local/pusht_aug",
-        fps=pusht_env.FPS,
-        robot_type=pusht_env.ROBOT_TYPE,
-        task=pusht_env.TASK,
-        feats=features(pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, engine.PROVENANCE),
-        episodes=kept,
-        stamp={"made_by": MADE_BY, "kind": "augmented", "seed": args.seed},
-    )
+    stamp = {"made_by": MADE_BY, "kind": "augmented", "seed": args.seed}
+    engine.write_kept(aug_path, kept, repo_id="local/pusht_aug", stamp=stamp)  # a LeRobot v3 set
     aug = load_arrays(aug_path, keys=tuple(aug))  # train on what is on disk
 # --- endregion ---
 

@@ -90,9 +90,7 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
 
     Returns {"files": {relative path: bytes}, "stamp": the shard's stamp}. The stamp holds the
     counts the report needs (attempts, kept, failures by reason, per source, episode lengths)."""
-    import pusht_env
     from ch37 import engine
-    from ch37.lerobot_io import features, write_dataset
 
     kept, failures, per_source, lengths = [], {}, {}, {}
     for e, k in jobs:
@@ -126,16 +124,7 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
         return {"files": {STAMP_NAME: stamp_text(stamp).encode()}, "stamp": stamp}
     with tempfile.TemporaryDirectory(prefix=".scratch-", dir=scratch) as tmp:
         root = Path(tmp) / "set"
-        write_dataset(
-            root,
-            repo_id="local/pusht_aug_shard",
-            fps=pusht_env.FPS,
-            robot_type=pusht_env.ROBOT_TYPE,
-            task=pusht_env.TASK,
-            feats=features(pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, engine.PROVENANCE),
-            episodes=kept,
-            stamp=stamp,
-        )
+        engine.write_kept(root, kept, repo_id="local/pusht_aug_shard", stamp=stamp)
         files = {
             p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
         }
