@@ -9,7 +9,8 @@ seeds         env_seed: demos, augmentation and evaluation never share a start
 stamps        ownership stamps: only files this project wrote are ever deleted or rewritten
 demos         demo sets: rollout, generation, the private demo cache
 parallel      parallel_map over forked workers, LockstepEnvs for evaluation physics; workers die with the run
-engine        one augmentation attempt: perturb a source start, re-solve it, keep it on success
+engine        one augmentation attempt: perturb a source start, re-solve or replay it, keep it on success
+recipe        the measure region's BC recipe (network, training loop, rollout), loaded for more arms
 shards        a data-engine run on disk: fixed shards (LeRobot sets with stamps), merge, stats over frames
 executors     where the shards run: local processes or Ray
 ensemble      several MLPs as one module: the arms of a training budget side by side
@@ -52,4 +53,5 @@ CODE_FILES = DATA_CODE + (
     "ch37/engine.py",
     "ch37/shards.py",
     "ch37/executors.py",
+    "ch37/recipe.py",
 )

@@ -15,8 +15,18 @@ The three moves of mode "resolve":
   3. keep      only if the env reports success (else expert_failed); the kept episode carries its
                provenance on every frame: aug.source_episode and aug.start (the start it was solved from)
 
-A second mode (MimicGen's replay of the source path in the perturbed block frame) is one more entry
-in MODES with its own failure reasons; Source already carries the source demo's whole path for it.
+Mode "replay" is MimicGen's own move, for when no solver is on tap: the same perturbed start (the
+same draw), then
+  2. transform the source demo's pusher path and commands, expressed relative to the source block's
+               start pose, are re-expressed in the perturbed block's pose (transform_segment: the
+               planar SE(2) analog of MimicGen's transform_source_data_segment_using_object_pose)
+  3. approach  the pusher moves from its own start to the first transformed waypoint (as MimicGen
+               interpolates into a segment), then the transformed commands run open-loop
+  4. keep      only if the env reports success; otherwise the reason (REPLAY_FAILURES)
+
+keep_first(...) grows a set the MimicGen way: attempts k = 0, 1, 2, ... per source demo until
+per_demo of them are kept (or ATTEMPTS_PER_KEPT x per_demo were tried); the kept set is the first
+per_demo successes in k order, whatever batches the attempts ran in.
 """
 
 from __future__ import annotations
@@ -94,8 +104,114 @@ def _resolve_mode(source: Source, rng, pos_sigma: float, yaw_sigma: float, env):
     return ep, start
 
 
-MODES = {"resolve": _resolve_mode}  # mode -> (source, rng, pos_sigma, yaw_sigma, env) -> (ep, start) | reason
-FAILURES = {"resolve": ("expert_failed", "no_valid_start")}  # every reason a mode can return
+def block_pose(state) -> np.ndarray:
+    """(x m, y m, yaw rad) of the block in a PushT observation."""
+    return np.array([state[2], state[3], math.atan2(state[4], state[5])])
+
+
+def rotation(yaw: float) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s], [s, c]])
+
+
+def transform_segment(points, vectors, src_pose, new_pose):
+    """Re-express a path that was made relative to an object at `src_pose` for the object at `new_pose`.
+
+    points (T, 2) world positions (m) and vectors (T, 2) world velocities (m/s); poses (x, y, yaw).
+    A point is first written in the source object's frame, q = R(-yaw0) (p - xy0), then put back in the
+    world from the new pose, p' = R(yaw1) q + xy1; a velocity only rotates, v' = R(yaw1 - yaw0) v.
+    Returns (points' (T, 2), vectors' (T, 2)); an identical pose returns the inputs (to float rounding).
+    """
+    x0, y0, yaw0 = (float(v) for v in src_pose)
+    x1, y1, yaw1 = (float(v) for v in new_pose)
+    in_object = (np.asarray(points, np.float64) - (x0, y0)) @ rotation(-yaw0).T  # (T, 2) object frame
+    moved = in_object @ rotation(yaw1).T + (x1, y1)
+    turned = np.asarray(vectors, np.float64) @ rotation(yaw1 - yaw0).T
+    return moved, turned
+
+
+APPROACH_GAIN = 10.0  # 1/s: approach speed per m of distance to the first waypoint
+APPROACH_SPEED = 0.8  # m/s, the expert's own top speed
+APPROACH_TOL = 0.002  # m: close enough to the first waypoint to start the segment
+APPROACH_STEPS = 60  # control steps (6 s) before the segment starts regardless
+MOVED_TOL = (0.002, 0.02)  # m, rad: the approach "hit the block" if it moved it more than this
+REACH = pusht_env.WALL_INNER - pusht_env.PUSHER_RADIUS  # m: the pusher centre's reach from the centre
+
+
+def replay(env, start, source: Source) -> tuple[dict, str | None]:
+    """Replay `source` from `start` (see START_NAMES): approach, then its transformed commands open-loop.
+
+    Returns the episode (the frames and actions actually executed, as ch37.demos.rollout returns them)
+    and, when the env did not report success, the reason: approach_blocked (the approach moved the
+    block), path_off_table (a transformed waypoint lies beyond the walls), out_of_time (the episode
+    ended before the segment did), or finished_off_target (the segment ran to its end off target).
+    """
+    path, commands = transform_segment(
+        source.states[:, :2], source.actions, block_pose(source.states[0]), start[:3]
+    )
+    obs = env.set_start(*start)
+    states, actions, succ = [], [], []
+    done = False
+
+    def act(a):
+        nonlocal obs, done
+        a = np.asarray(a, np.float32)
+        states.append(obs)
+        actions.append(a)
+        obs, _, done, info = env.step(a)
+        succ.append(bool(info["success"]))
+
+    before = env.block_pose
+    for _ in range(APPROACH_STEPS):  # 3. approach the first waypoint on a straight line
+        gap = path[0] - env.pusher_pos
+        dist = float(np.hypot(*gap))
+        if dist <= APPROACH_TOL or done:
+            break
+        act(gap / dist * min(APPROACH_GAIN * dist, APPROACH_SPEED))
+    shift = env.block_pose - before
+    blocked = (
+        math.hypot(shift[0], shift[1]) > MOVED_TOL[0] or abs(pusht_env.wrap_angle(shift[2])) > MOVED_TOL[1]
+    )
+    executed = 0
+    for a in commands:  # the transformed segment, open-loop: the object is never looked at again
+        if done:
+            break
+        act(a)
+        executed += 1
+    ep = {
+        "observation.state": np.asarray(states, np.float32).reshape(-1, pusht_env.OBS_DIM),
+        "action": np.asarray(actions, np.float32).reshape(-1, pusht_env.ACT_DIM),
+        "next.success": np.asarray(succ, bool).reshape(-1, 1),
+        "success": env.success,
+    }
+    if env.success:
+        return ep, None
+    if blocked:
+        return ep, "approach_blocked"
+    if np.any(np.abs(path) > REACH):
+        return ep, "path_off_table"
+    if executed < len(commands):
+        return ep, "out_of_time"
+    return ep, "finished_off_target"
+
+
+def _replay_mode(source: Source, rng, pos_sigma: float, yaw_sigma: float, env):
+    start = perturbed_start(source.states[0], rng, pos_sigma, yaw_sigma)  # 1. perturb (the same draw)
+    if start is None:
+        return "no_valid_start"
+    ep, why = replay(env, start, source)  # 2-3. transform, approach, execute
+    return why or (ep, start)  # 4. keep only on the env's success
+
+
+MODES = {
+    "resolve": _resolve_mode,
+    "replay": _replay_mode,
+}  # (source, rng, sigmas, env) -> (ep, start) | reason
+FAILURES = {  # every reason a mode can return
+    "resolve": ("expert_failed", "no_valid_start"),
+    "replay": ("approach_blocked", "path_off_table", "out_of_time", "finished_off_target", "no_valid_start"),
+}
+ATTEMPTS_PER_KEPT = 10  # keep_first gives up on a source demo after this many attempts per wanted demo
 
 _ENV = None  # one simulator per process, fully reset by set_start before every attempt
 
@@ -123,6 +239,46 @@ def attempt(
     ep["aug.source_episode"] = np.full((n, 1), source.episode, np.int64)  # provenance, on every frame
     ep["aug.start"] = np.tile(np.float32(start), (n, 1))
     return ep
+
+
+def keep_first(episodes, per_demo: int, run_jobs, *, reasons, cap: int = ATTEMPTS_PER_KEPT):
+    """The first `per_demo` kept attempts (k = 0, 1, ...) of each source episode, the MimicGen way.
+
+    run_jobs([(episode, k), ...]) -> [attempt result, ...] in the same order (any executor).
+    Attempts run in rounds: k < per_demo first, then, for an episode still short, more k's sized by
+    its yield so far. Whatever the rounds, the kept set is the first per_demo successes in k order
+    and `attempts` counts k's up to the last one kept (all cap x per_demo when an episode falls
+    short), so kept, attempts and failures are pure functions of the arguments.
+    Returns (kept episodes in (episode, k) order, attempts, {reason: count} over counted attempts).
+    """
+    limit = cap * per_demo
+    done = {e: [] for e in episodes}  # episode -> results for k = 0, 1, ... in order
+    while True:
+        jobs = []
+        for e, got in done.items():
+            n_kept = sum(not isinstance(r, str) for r in got)
+            if n_kept >= per_demo or len(got) >= limit:
+                continue
+            rate = max(n_kept / len(got), 1 / cap) if got else 1.0
+            more = min(math.ceil((per_demo - n_kept) / rate), limit - len(got))
+            jobs += [(e, k) for k in range(len(got), len(got) + more)]
+        if not jobs:
+            break
+        for (e, _), r in zip(jobs, run_jobs(jobs)):
+            done[e].append(r)
+    kept, attempts, failures = [], 0, dict.fromkeys(reasons, 0)
+    for got in done.values():
+        n = 0
+        for r in got:
+            if n == per_demo:
+                break  # attempted in a round, but beyond the last one this episode keeps: not counted
+            attempts += 1
+            if isinstance(r, str):
+                failures[r] += 1
+            else:
+                kept.append(r)
+                n += 1
+    return kept, attempts, failures
 
 
 def write_kept(root, kept: list[dict], *, repo_id: str, stamp: dict) -> None:

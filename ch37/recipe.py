@@ -1,0 +1,66 @@
+"""The chapter's BC recipe, taken from scale_data.py's measure region, for commands that train more arms.
+
+    recipe = load(hidden_dim=512, batch_size=128, lr=1e-3, seed=0, device="cpu")
+    pols, fits = recipe.train([(states, actions), ...], steps)   # arms side by side, equal steps
+    rate = recipe.evaluate(pols[0], eval_seeds)                  # success on held-out starts
+    lo, hi = recipe.wilson(rate, len(eval_seeds))
+
+The measure region is the one home of the network, the training loop, the rollout and the interval.
+load() executes its definitions (imports, functions, classes, and the seeded initial weights) from the
+script's own text, so the Scale Lab and the replay comparison train exactly what the lesson trains;
+an edit to the region changes them too. Nothing else of the script runs.
+"""
+
+from __future__ import annotations
+
+import ast
+from types import SimpleNamespace
+
+from ch37 import ROOT
+
+SCRIPT = ROOT / "scale_data.py"
+REGION = "measure"
+
+
+def _region_nodes(tree: ast.Module, lines: list[str]) -> list[ast.stmt]:
+    """The statements of `tree` that sit inside the REGION markers."""
+    start = next(i for i, line in enumerate(lines, 1) if line.startswith(f"# --- region: {REGION} ---"))
+    end = next(i for i, line in enumerate(lines, 1) if i > start and line.startswith("# --- endregion ---"))
+    return [node for node in tree.body if start < node.lineno < end]
+
+
+def _wanted(node: ast.stmt) -> bool:
+    """Definitions, imports, and the two statements that make the initial weights."""
+    if isinstance(node, (ast.Import, ast.ImportFrom, ast.FunctionDef, ast.ClassDef)):
+        return True
+    if isinstance(node, ast.Assign):
+        return [getattr(t, "id", None) for t in node.targets] == ["init_weights"]
+    return isinstance(node, ast.Expr) and ast.unparse(node).startswith("torch.manual_seed(")
+
+
+def load(*, hidden_dim: int, batch_size: int, lr: float, seed: int, device: str = "cpu", workers: int = 1):
+    """The measure region's mlp, BCPolicy, train, evaluate and wilson, bound to these settings.
+
+    `seed` seeds the initial weights and every arm's batch order, as --seed does in the chapter;
+    `workers` are the evaluation's physics processes (1: in this process)."""
+    import math
+
+    import numpy as np
+    import torch
+
+    import pusht_env
+    from ch37.demos import progress
+
+    text = SCRIPT.read_text()
+    nodes = [n for n in _region_nodes(ast.parse(text), text.splitlines()) if _wanted(n)]
+    args = SimpleNamespace(
+        hidden_dim=hidden_dim, batch_size=batch_size, lr=lr, seed=seed, workers=workers, smoke=True
+    )  # smoke=True only silences the progress bars
+    ns = {"args": args, "device": torch.device(device), "torch": torch, "np": np, "math": math,
+          "pusht_env": pusht_env, "progress": progress, "__name__": "ch37_recipe"}  # fmt: skip
+    exec(compile(ast.Module(nodes, []), str(SCRIPT), "exec"), ns)
+    names = ("mlp", "BCPolicy", "train", "evaluate", "wilson", "init_weights")
+    missing = [n for n in names if n not in ns]
+    if missing:
+        raise RuntimeError(f"scale_data.py's {REGION} region no longer defines {missing}")
+    return SimpleNamespace(**{n: ns[n] for n in names})
