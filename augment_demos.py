@@ -31,7 +31,7 @@ def parse(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--src", type=Path, required=True, help="source LeRobot v3 PushT set (never modified)")
     p.add_argument(
-        "--per_demo", type=int, default=10, help="perturbed starts per source episode (default 10)"
+        "--per_demo", type=int, default=10, help="attempts (perturbed starts) per source episode (default 10)"
     )
     p.add_argument(
         "--out", type=Path, required=True, help="output folder: new, or a run of this command to finish"
@@ -42,7 +42,11 @@ def parse(argv=None) -> argparse.Namespace:
     )
     p.add_argument("--yaw_sigma", type=float, default=SIGMA_DEFAULTS[1], help="rad; block yaw noise std")
     p.add_argument(
-        "--mode", choices=("resolve",), default="resolve", help="resolve: the expert solves each start"
+        "--mode",
+        choices=("resolve", "replay"),  # ch37.engine.MODES (not imported here: --help stays instant)
+        default="resolve",
+        help="resolve: the expert solves each start; replay: the source path transformed into the new "
+        "block pose, executed open-loop, kept only on success (MimicGen's move; most attempts fail here)",
     )
     p.add_argument(
         "--workers", type=int, default=min(8, os.cpu_count() or 1), help="local processes (default: cores)"

@@ -4,14 +4,14 @@ Open X-Embodiment and DROID are piles of demos from many robots. Two problems me
 you pool data: robots disagree on action size and on what a state number means, and a dozen demos
 cover too little of the start space for a policy to generalise. This script meets both on two
 small MuJoCo robots of our own. It pools PushT (2-D actions) with a bimanual ALOHA cube handoff
-(6-D actions), then grows the PushT demos the way MimicGen does (perturb the start, re-solve with
-the expert, keep only successes) and trains the same behaviour-cloning MLP with and without the
-extra demos for the same number of gradient steps, at two budgets, so what the data buys is read
-apart from what more training buys.
+(6-D actions), then grows the PushT demos MimicGen-style (perturb the start, re-solve with the
+expert, keep only successes; --aug_mode replay makes MimicGen's own move instead) and trains the
+same behaviour-cloning MLP with and without the extra demos for the same number of gradient steps,
+at two budgets, so what the data buys is read apart from what more training buys.
 
   1. setup    flags, seeds, device, a two-line banner with the expected wall-clock
   2. wrangle  load both LeRobot sets, per-embodiment stats, normalize, zero-pad + action mask
-  3. augment  perturbed PushT starts re-solved by the expert, kept only on success
+  3. augment  perturbed PushT starts re-solved by the expert (or replayed), kept only on success
   4. measure  a 2x2: data {source, source+augmented} x budget {short, full}, equal steps per budget
   5. emit     metrics.json, cross_embodiment.json, a PNG figure and a Rerun recording
 
@@ -46,7 +46,20 @@ flag(
     default=12,
     help="expert demos per robot; 12 is coverage-starved on purpose",
 )
-flag("--aug_per_demo", type=int, default=8, help="perturbed re-solves per PushT source demo (0 = none)")
+flag("--aug_per_demo", type=int, default=8, help="generated demos kept per PushT source demo (0 = none)")
+flag(
+    "--aug_mode",
+    choices=("resolve", "replay"),
+    default="resolve",
+    help="resolve: the expert solves each perturbed start; replay: MimicGen's move, the source path "
+    "transformed into the new block pose and executed open-loop (no solver)",
+)
+flag(
+    "--aug_tries",
+    type=int,
+    default=100,
+    help="attempts per wanted demo before a source demo gives up (replay's success filter rejects most)",
+)
 flag("--aug_pos_sigma", type=float, default=0.08, help="m; std of block and pusher xy perturbation")
 flag("--aug_yaw_sigma", type=float, default=0.5, help="rad; std of block yaw perturbation")
 flag("--epochs", type=int, default=500, help="passes over a data set that make a budget (see measure)")
@@ -207,8 +220,10 @@ write_atomic(args.out / "cross_embodiment.json", dump_json(round_floats(cross, 6
 # --- region: augment ---
 # MimicGen-style growth: take each source demo's first state, perturb the block pose and pusher,
 # put the simulator there and let the same expert solve it; keep the demo only if it succeeds.
-# No action is invented. Each (source demo, k) draws from its own seeded stream, so the set for
-# aug_per_demo=4 is a subset of the set for 8 and the scaling curve compares nested data.
+# No action is invented. Each (source demo, k) draws from its own seeded stream, and a source demo
+# keeps its first --aug_per_demo successes in k order, so the set for aug_per_demo=4 is a subset of
+# the set for 8 and the scaling curve compares nested data. --aug_mode replay has no solver: it
+# replays the source path in the new block pose, and the success filter decides what is kept.
 import pusht_env  # noqa: E402
 from ch37 import engine  # noqa: E402
 from ch37.demos import progress  # noqa: E402
@@ -221,26 +236,36 @@ sources = engine.sources(pusht)  # {episode: its frames}; re-solving reads only 
 first = {e: src.states[0] for e, src in sources.items()}
 
 
-def grow(job):  # (source episode, k) -> the expert's demo from a perturbed start, or why there is none
+def grow(job):  # (source episode, k) -> a demo from a perturbed start, or why there is none
     e, k = job
-    # ch37.engine.attempt makes the three moves (augment_demos.py scales the same function out):
+    # ch37.engine.attempt makes the moves (augment_demos.py scales the same function out):
     #   perturb   first[e]: block xy, yaw and pusher xy, drawn from this (demo, k)'s own stream
     #   re-solve  put the simulator there; the noise-free expert solves it in the real physics
-    #   keep      the demo, with its provenance, only if the expert succeeds (else the reason)
+    #             (replay: transform the source path into the new block pose, execute it open-loop)
+    #   keep      the demo, with its provenance, only if the env reports success (else the reason)
     return engine.attempt(
-        sources[e], k, seed=args.seed, pos_sigma=args.aug_pos_sigma, yaw_sigma=args.aug_yaw_sigma
-    )
+        sources[e], k, seed=args.seed, pos_sigma=args.aug_pos_sigma, yaw_sigma=args.aug_yaw_sigma,
+        mode=args.aug_mode,
+    )  # fmt: skip
 
 
-jobs = [(e, k) for e in first for k in range(args.aug_per_demo)]
-bar = progress(None, total=len(jobs), desc="augment", quiet=args.smoke)
-results = parallel_map(grow, jobs, workers=args.workers, bar=bar)
-kept = [r for r in results if not isinstance(r, str)]
-failures = {why: sum(r == why for r in results) for why in engine.FAILURES["resolve"]}
-attempts = len(jobs)
+wanted = len(first) * args.aug_per_demo
+bar = progress(None, total=wanted, desc=f"augment ({args.aug_mode})", quiet=args.smoke)
+kept, attempts, failures = engine.keep_first(
+    first,
+    args.aug_per_demo,
+    lambda jobs: parallel_map(grow, jobs, workers=args.workers, bar=bar),
+    reasons=engine.FAILURES[args.aug_mode],
+    cap=args.aug_tries,
+)  # fmt: skip  (attempts k = 0, 1, ... per source demo, in rounds, until its demos are kept)
 yield_ = len(kept) / attempts if attempts else 0.0
-print(f"augment: {attempts} attempts, {len(kept)} kept, yield {yield_:.2f}, failures {failures}")
-aug_path = args.out / "demos" / f"pusht_aug_seed{args.seed}_src{len(first)}_k{args.aug_per_demo}"
+print(
+    f"augment ({args.aug_mode}): {attempts} attempts, {len(kept)} kept of {wanted} wanted, yield {yield_:.2f}"
+)
+if attempts > len(kept):  # the success filter at work: what it threw away, and why
+    print(f"  the success filter rejected {attempts - len(kept)} of {attempts} attempts: " + ", ".join(
+        f"{why} {n}" for why, n in failures.items() if n))  # fmt: skip
+aug_path = args.out / "demos" / cli.aug_dir_name(args.seed, len(first), args.aug_per_demo, args.aug_mode)
 try:
     replace_own_dir(aug_path)
 except DataError as e:
@@ -413,7 +438,8 @@ metrics = {
     "seed": args.seed, "smoke": args.smoke, "config": cli.result_config(args),
     "action_dims": {name: int(demo["action"].shape[1]) for name, demo in sets.items()},
     "padded_action_dim": PAD, "source_demos": len(first), "source_frames": len(data["source"][0]),
-    "attempts": attempts, "kept": len(first_rows), "yield": yield_, "augment_failures": failures,
+    "aug_mode": args.aug_mode, "attempts": attempts, "kept": len(first_rows), "yield": yield_,
+    "augment_failures": failures,
     "augmented_frames": len(aug["action"]),
     "budgets": budgets, "arms": arms, "effects": effects, "scale_effect": effects["data_full"],
     "coverage": {"cells": RINGS * SECTORS, "source": len(c_src), "augmented": len(c_aug),

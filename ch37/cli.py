@@ -18,7 +18,7 @@ TIERS = ("cpu-2core", "mps", *GPU_TIERS)
 SMOKE_DEFAULTS = dict(
     source_episodes=4, aug_per_demo=2, epochs=30, hidden_dim=64, eval_episodes=8, batch_size=64, device="cpu"
 )
-POSITIVE = ("source_episodes", "epochs", "batch_size", "hidden_dim", "eval_episodes", "workers")
+POSITIVE = ("source_episodes", "epochs", "batch_size", "hidden_dim", "eval_episodes", "workers", "aug_tries")
 NON_NEGATIVE = ("aug_per_demo", "seed", "full_steps")
 FINITE = ("aug_pos_sigma", "aug_yaw_sigma", "lr")
 NOT_IN_KEY = ("out", "cache", "workers")  # where results go and how fast they come never change them
@@ -125,6 +125,11 @@ def parse(p: argparse.ArgumentParser, argv=None) -> argparse.Namespace:
     return args
 
 
+def aug_dir_name(seed, n_sources, per_demo, mode: str) -> str:
+    """The augment region's folder under OUT/demos; re-solve keeps the name it always had."""
+    return f"pusht_aug_seed{seed}_src{n_sources}_k{per_demo}" + ("" if mode == "resolve" else f"_{mode}")
+
+
 def claim_out(args: argparse.Namespace):
     """--out taken for this run before any work (ch37.outputs.claim): usable, locked against a second
     run, nothing of yours where this run writes, this program's earlier results there cleared."""
@@ -137,7 +142,7 @@ def claim_out(args: argparse.Namespace):
         for name, given in (("pusht", args.pusht_data), ("aloha", args.aloha_data))
         if given is None
     ]
-    replaces = sorted(demos.glob(f"pusht_aug_seed{args.seed}_src*_k{args.aug_per_demo}"))  # augment's
+    replaces = sorted(demos.glob(aug_dir_name(args.seed, "*", args.aug_per_demo, args.aug_mode)))  # augment's
     inputs = {"--pusht_data": args.pusht_data, "--aloha_data": args.aloha_data}
     return claim(args.out, inputs=inputs, results=RESULT_FILES, reuses=reuses, replaces=replaces)
 

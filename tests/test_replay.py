@@ -1,0 +1,210 @@
+"""Replay mode (MimicGen's move): the SE(2) transform, replay of a source demo in the real physics,
+the success filter's reasons, and keep_first's rule (the first successes in k order)."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+import pusht_env
+from ch37 import engine
+from ch37.demos import rollout
+from ch37.seeds import env_seed
+from scripted_expert import PushTExpert
+
+
+def test_transform_identity_returns_the_path():
+    rng = np.random.default_rng(0)
+    pts, vel = rng.normal(size=(20, 2)), rng.normal(size=(20, 2))
+    pose = (0.13, -0.07, 2.1)
+    moved, turned = engine.transform_segment(pts, vel, pose, pose)
+    np.testing.assert_allclose(moved, pts, atol=1e-12)
+    np.testing.assert_allclose(turned, vel, atol=1e-12)
+
+
+def test_transform_rotation_about_the_object():
+    # object at the origin turned by +90 degrees: a point 1 m ahead of it goes to 1 m to its left
+    moved, turned = engine.transform_segment(
+        [[1.0, 0.0], [0.0, 2.0]], [[0.5, 0.0]], (0, 0, 0), (0, 0, math.pi / 2)
+    )
+    np.testing.assert_allclose(moved, [[0.0, 1.0], [-2.0, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(turned, [[0.0, 0.5]], atol=1e-12)
+
+
+def test_transform_translation_moves_points_not_velocities():
+    moved, turned = engine.transform_segment([[1.5, 2.0]], [[0.3, -0.4]], (1.0, 2.0, 0.0), (3.0, -1.0, 0.0))
+    np.testing.assert_allclose(moved, [[3.5, -1.0]], atol=1e-12)
+    np.testing.assert_allclose(turned, [[0.3, -0.4]], atol=1e-12)
+
+
+def test_transform_keeps_the_path_rigid_relative_to_the_object():
+    """A general pose change: every point keeps its offset from the object in the object's own frame."""
+    rng = np.random.default_rng(1)
+    pts = rng.normal(size=(30, 2))
+    src, new = (0.2, -0.1, 0.7), (-0.3, 0.25, -2.4)
+    moved, _ = engine.transform_segment(pts, np.zeros_like(pts), src, new)
+    off_src = (pts - src[:2]) @ engine.rotation(-src[2]).T
+    off_new = (moved - new[:2]) @ engine.rotation(-new[2]).T
+    np.testing.assert_allclose(off_new, off_src, atol=1e-12)
+    d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
+    np.testing.assert_allclose(np.linalg.norm(moved[:, None] - moved[None], axis=-1), d, atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def env():
+    return pusht_env.PushTEnv()
+
+
+def expert_source(env, i):
+    """Source demo i of seed 0, rolled out from the start its first (float32) frame describes."""
+    obs = env.reset(env_seed(0, "demo", i))
+    start = tuple(float(v) for v in engine.block_pose(obs)) + (float(obs[0]), float(obs[1]))
+    ep = rollout(env, PushTExpert(noise=0.0), env.set_start(*start))
+    assert ep["success"]
+    return engine.Source(i, ep["observation.state"], ep["action"]), start
+
+
+def test_identity_replay_reproduces_the_source(env):
+    source, start = expert_source(env, 0)
+    ep, why = engine.replay(env, start, source)
+    assert why is None and ep["success"]
+    assert len(ep["action"]) == len(source.actions)  # no approach: the pusher is on the first waypoint
+    np.testing.assert_allclose(ep["observation.state"], source.states, atol=1e-6)
+    np.testing.assert_allclose(ep["action"], source.actions, atol=1e-6)
+
+
+def test_a_moved_block_makes_the_replay_miss_and_names_why(env):
+    """Shift the whole start 6 cm: the replayed push lands 6 cm off, where the transformed target
+    would be; the filter rejects it and says it ran to its end off target."""
+    source, start = expert_source(env, 0)
+    shifted = (start[0] + 0.06, start[1], start[2], start[3] + 0.06, start[4])
+    ep, why = engine.replay(env, shifted, source)
+    assert not ep["success"]
+    assert why == "finished_off_target"
+    assert math.hypot(*env.block_pose[:2]) > pusht_env.SUCCESS_POS_TOL
+
+
+def test_kept_replays_hold_the_actions_actually_executed(env):
+    """Small perturbations keep some replays; re-executing a kept demo's recorded actions from its
+    recorded start reproduces its frames and its success (the approach included)."""
+    source, _ = expert_source(env, 1)
+    results = [
+        engine.attempt(source, k, seed=0, pos_sigma=0.004, yaw_sigma=0.02, mode="replay", env=env)
+        for k in range(12)
+    ]
+    kept = [r for r in results if not isinstance(r, str)]
+    assert kept, results
+    assert all(r in engine.FAILURES["replay"] for r in results if isinstance(r, str))
+    k = next(k for k, r in enumerate(results) if not isinstance(r, str))
+    ep = results[k]
+    start = engine.perturbed_start(source.states[0], engine.attempt_rng(0, source.episode, k), 0.004, 0.02)
+    np.testing.assert_allclose(ep["aug.start"][0], start, atol=1e-6)  # the provenance names this start
+    obs = env.set_start(*start)
+    assert len(ep["action"]) > 0
+    for s, a in zip(ep["observation.state"], ep["action"]):
+        np.testing.assert_allclose(obs, s, atol=1e-6)
+        obs, _, done, info = env.step(a)
+    assert info["success"] and done
+
+
+def test_replay_rejects_most_attempts_at_the_chapter_sigmas(env):
+    """The honesty gate bites: at the chapter's perturbation, open-loop replay misses far more often
+    than the re-solving expert (which keeps every one of these)."""
+    source, _ = expert_source(env, 2)
+    modes = {
+        m: [
+            engine.attempt(source, k, seed=0, pos_sigma=0.08, yaw_sigma=0.5, mode=m, env=env)
+            for k in range(10)
+        ]
+        for m in ("resolve", "replay")
+    }
+    assert all(not isinstance(r, str) for r in modes["resolve"])
+    assert sum(not isinstance(r, str) for r in modes["replay"]) <= 3
+
+
+def table_runner(table, log):
+    """run_jobs over a fixed {(episode, k): result} table, recording each round it is asked for."""
+
+    def run(jobs):
+        log.append(list(jobs))
+        return [table[j] for j in jobs]
+
+    return run
+
+
+def test_keep_first_takes_the_first_successes_in_k_order():
+    ok = {"action": np.zeros((1, 2))}
+    pattern = {0: "x.xx.x.x..", 1: "..........", 2: "xxxxxxxxxx"}  # x = kept, . = failed
+    table = {
+        (e, k): ("miss" if c == "." else {**ok, "k": k, "e": e})
+        for e, p in pattern.items()
+        for k, c in enumerate(p)
+    }
+    log = []
+    kept, attempts, failures = engine.keep_first(
+        [0, 1, 2], 3, table_runner(table, log), reasons=("miss",), cap=3
+    )
+    assert [(r["e"], r["k"]) for r in kept] == [(0, 0), (0, 2), (0, 3), (2, 0), (2, 1), (2, 2)]
+    assert attempts == 4 + 9 + 3  # up to the third kept; episode 1 gives up at cap x per_demo = 9
+    assert failures == {"miss": 1 + 9}
+    assert log[0] == [(e, k) for e in (0, 1, 2) for k in range(3)]  # round one: k < per_demo for all
+
+
+def test_keep_first_matches_one_attempt_at_a_time():
+    """Against the plain rule (try k = 0, 1, ... one by one until per_demo kept or the cap), on random
+    yields from 0 to 1: the rounds keep_first batches its attempts into never change the outcome."""
+    rng = np.random.default_rng(0)
+    for trial in range(50):
+        per_demo, cap = int(rng.integers(1, 5)), int(rng.integers(1, 6))
+        rates = rng.uniform(0, 1, size=4)
+        table = {
+            (e, k): ({"k": k} if rng.uniform() < rates[e] else "miss")
+            for e in range(4)
+            for k in range(cap * per_demo)
+        }
+        want_kept, want_attempts, want_miss = [], 0, 0
+        for e in range(4):
+            n = 0
+            for k in range(cap * per_demo):
+                if n == per_demo:
+                    break
+                want_attempts += 1
+                if table[e, k] == "miss":
+                    want_miss += 1
+                else:
+                    want_kept.append((e, k))
+                    n += 1
+        log = []
+        kept, attempts, failures = engine.keep_first(
+            range(4), per_demo, table_runner(table, log), reasons=("miss",), cap=cap
+        )
+        assert attempts == want_attempts and failures == {"miss": want_miss}, trial
+        assert len(kept) == len(want_kept)
+        assert [r["k"] for r in kept] == [k for _, k in want_kept], trial
+
+
+def test_scale_data_replay_names_its_mode_and_what_the_filter_rejected(tmp_path):
+    from conftest import ROOT, run_script
+
+    p = run_script(ROOT / "scale_data.py", "--smoke", "--seed", "0", "--no-cache", "--no-rerun",
+                   "--aug_mode", "replay", "--aug_tries", "20", "--out", tmp_path / "run")  # fmt: skip
+    m = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert m["aug_mode"] == "replay" and m["config"]["aug_mode"] == "replay"
+    assert m["yield"] < 1 and m["attempts"] > m["kept"]
+    assert sum(m["augment_failures"].values()) == m["attempts"] - m["kept"]
+    assert set(m["augment_failures"]) == set(engine.FAILURES["replay"])
+    assert f"the success filter rejected {m['attempts'] - m['kept']} of {m['attempts']}" in p.stdout
+    assert (tmp_path / "run" / "demos" / "pusht_aug_seed0_src4_k2_replay").is_dir() or m["kept"] == 0
+
+
+def test_augment_demos_replay_reports_reasons(tmp_path):
+    from conftest import ROOT, run_script
+
+    src = tmp_path / "src"
+    run_script(ROOT / "gen_demos_pusht.py", "--episodes", "2", "--seed", "0", "--out", src)
+    run_script(ROOT / "augment_demos.py", "--src", src, "--per_demo", "3", "--mode", "replay",
+               "--out", tmp_path / "aug", "--workers", "1", "--quiet")  # fmt: skip
+    rep = json.loads((tmp_path / "aug" / "generation_report.json").read_text())
+    assert rep["attempts"] == 6 and rep["settings"]["mode"] == "replay"
+    assert sum(rep["failures"].values()) == rep["attempts"] - rep["kept"]
