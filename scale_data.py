@@ -258,6 +258,7 @@ kept, attempts, failures = engine.keep_first(
     reasons=engine.FAILURES[args.aug_mode],
     cap=args.aug_tries,
 )  # fmt: skip  (attempts k = 0, 1, ... per source demo, in rounds, until its demos are kept)
+bar.close()
 yield_ = len(kept) / attempts if attempts else 0.0
 print(
     f"augment ({args.aug_mode}): {attempts} attempts, {len(kept)} kept of {wanted} wanted, yield {yield_:.2f}"

@@ -69,10 +69,14 @@ def _run_job(i: int):
 def parallel_map(fn, jobs: list, *, workers: int, bar) -> list:
     """[fn(j) for j in jobs], in order, on `workers` forked processes; the result never depends on
     `workers`, because every job carries its own seed. Falls back to one process without fork.
-    `fn` is inherited through fork, not pickled, so a function defined in a script or notebook works."""
+    `fn` is inherited through fork, not pickled, so a function defined in a script or notebook works.
+    `bar` (a tqdm bar, or None) advances once per job and is left open for the caller to close."""
     import multiprocessing as mp
 
+    from ch37.demos import progress
+
     global _FORKED_WORK
+    bar = bar if bar is not None else progress(None, total=len(jobs), desc="", quiet=True)
     out = []
     if workers > 1 and len(jobs) > 1 and "fork" in mp.get_all_start_methods():
         _FORKED_WORK = (fn, jobs)
@@ -91,7 +95,6 @@ def parallel_map(fn, jobs: list, *, workers: int, bar) -> list:
         for j in jobs:
             out.append(fn(j))
             bar.update()
-    bar.close()
     return out
 
 

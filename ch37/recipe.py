@@ -8,7 +8,8 @@
 The measure region is the one home of the network, the training loop, the rollout and the interval.
 load() executes its definitions (imports, functions, classes, and the seeded initial weights) from the
 script's own text, so the Scale Lab and the replay comparison train exactly what the lesson trains;
-an edit to the region changes them too. Nothing else of the script runs.
+an edit to the region changes them too. Nothing else of the script runs. coverage() does the same
+for the emit region's start-coverage count (`cells` and the annulus it divides).
 """
 
 from __future__ import annotations
@@ -19,14 +20,24 @@ from types import SimpleNamespace
 from ch37 import ROOT
 
 SCRIPT = ROOT / "scale_data.py"
-REGION = "measure"
 
 
-def _region_nodes(tree: ast.Module, lines: list[str]) -> list[ast.stmt]:
-    """The statements of `tree` that sit inside the REGION markers."""
-    start = next(i for i, line in enumerate(lines, 1) if line.startswith(f"# --- region: {REGION} ---"))
+def _region_nodes(tree: ast.Module, lines: list[str], region: str) -> list[ast.stmt]:
+    """The statements of `tree` that sit inside the markers of `region`."""
+    start = next(i for i, line in enumerate(lines, 1) if line.startswith(f"# --- region: {region} ---"))
     end = next(i for i, line in enumerate(lines, 1) if i > start and line.startswith("# --- endregion ---"))
     return [node for node in tree.body if start < node.lineno < end]
+
+
+def _run(region: str, wanted, ns: dict, names: tuple) -> SimpleNamespace:
+    """Execute the statements of `region` that `wanted` picks, in `ns`; return `names` from it."""
+    text = SCRIPT.read_text()
+    nodes = [n for n in _region_nodes(ast.parse(text), text.splitlines(), region) if wanted(n)]
+    exec(compile(ast.Module(nodes, []), str(SCRIPT), "exec"), ns)
+    missing = [n for n in names if n not in ns]
+    if missing:
+        raise RuntimeError(f"scale_data.py's {region} region no longer defines {missing}")
+    return SimpleNamespace(**{n: ns[n] for n in names})
 
 
 def _wanted(node: ast.stmt) -> bool:
@@ -51,16 +62,30 @@ def load(*, hidden_dim: int, batch_size: int, lr: float, seed: int, device: str 
     import pusht_env
     from ch37.demos import progress
 
-    text = SCRIPT.read_text()
-    nodes = [n for n in _region_nodes(ast.parse(text), text.splitlines()) if _wanted(n)]
     args = SimpleNamespace(
         hidden_dim=hidden_dim, batch_size=batch_size, lr=lr, seed=seed, workers=workers, smoke=True
     )  # smoke=True only silences the progress bars
     ns = {"args": args, "device": torch.device(device), "torch": torch, "np": np, "math": math,
           "pusht_env": pusht_env, "progress": progress, "__name__": "ch37_recipe"}  # fmt: skip
-    exec(compile(ast.Module(nodes, []), str(SCRIPT), "exec"), ns)
-    names = ("mlp", "BCPolicy", "train", "evaluate", "wilson", "init_weights")
-    missing = [n for n in names if n not in ns]
-    if missing:
-        raise RuntimeError(f"scale_data.py's {REGION} region no longer defines {missing}")
-    return SimpleNamespace(**{n: ns[n] for n in names})
+    return _run("measure", _wanted, ns, ("mlp", "BCPolicy", "train", "evaluate", "wilson", "init_weights"))
+
+
+def coverage():
+    """The emit region's `cells(starts)` -> (set of (ring, sector), count outside), and its annulus:
+    RINGS, SECTORS, R_MIN, R_MAX."""
+    import numpy as np
+
+    import pusht_env
+
+    names = ("RINGS", "SECTORS", "R_MIN", "R_MAX", "cells")
+
+    def wanted(node):
+        if isinstance(node, ast.FunctionDef):
+            return node.name in names
+        if isinstance(node, ast.Assign) and len(node.targets) == 1:
+            t = node.targets[0]
+            ids = [e.id for e in t.elts] if isinstance(t, ast.Tuple) else [getattr(t, "id", None)]
+            return all(i in names for i in ids)
+        return False
+
+    return _run("emit", wanted, {"np": np, "pusht_env": pusht_env}, names)
