@@ -1,11 +1,13 @@
 """meta.yaml from the sweep files: reference_run, exercise_checks and region_hashes, never typed by hand.
 
-    python -m tools.meta [--sweep F] [--aug-sweep F] [--meta F]
+    python -m tools.meta [--sweep F] [--aug-sweep F] [--replay DIR] [--meta F]
 
 --sweep takes the seed sweep (default outputs/sweep/sweep_seeds.json, from `python -m tools.sweep
 --seeds 3`), --aug-sweep the aug sweep (default outputs/sweep/sweep_aug.json, from `python -m
 tools.sweep --aug 0 4 8`). The exercise answers and bands come from exercises/rules.py. What a
-smoke sweep gives is marked `provisional: true`. id, title, track, objectives and mimicgen are kept
+smoke sweep gives is marked `provisional: true`. The `replay` section comes from --replay DIR's
+replay_compare.json and replay_sigma.json (`python -m tools.replay --seeds 5` and `--sigma ...`) when
+they are there, and is kept as found otherwise. id, title, track, objectives and mimicgen are kept
 as found in meta.yaml.
 
 Exit codes: 0 ok, 2 bad input (a missing, corrupt or incomplete sweep file, bad flags).
@@ -55,8 +57,8 @@ META_STATIC = {
                 "path": "mimicgen/utils/pose_utils.py",
                 "symbol": "transform_source_data_segment_using_object_pose",
                 "why": "how MimicGen moves a source end-effector segment into the new object's frame; "
-                "this chapter re-solves with its expert instead of replaying, because it owns an expert "
-                "for any start",
+                "ch37.engine.transform_segment is its planar (SE(2)) analog, used by --aug_mode replay; "
+                "the chapter's default re-solves with its expert, because it owns one for any start",
             },
             {
                 "path": "mimicgen/scripts/generate_dataset.py",
@@ -73,6 +75,7 @@ META_ORDER = (
     "objectives",
     "mimicgen",
     "reference_run",
+    "replay",
     "exercise_checks",
     "region_hashes",
 )
@@ -214,6 +217,47 @@ def read_sweep(path: Path, kind: str, flag: str) -> dict:
     return data
 
 
+def replay_section(folder: Path) -> dict | None:
+    """meta.yaml's `replay` section from tools.replay's two files in `folder` (None if neither is there)."""
+    out = {}
+    for name, kind in (("replay_compare.json", "compare"), ("replay_sigma.json", "sigma")):
+        f = Path(folder) / name
+        if not f.exists():
+            continue
+        try:
+            d = json.loads(f.read_text(encoding="utf-8"))
+            if kind == "compare":
+                out[kind] = {
+                    "command": d["command"],
+                    "seeds": [r["seed"] for r in d["rows"]],
+                    "steps": [r["steps"] for r in d["rows"]],
+                    "modes": d["modes"],
+                    "pooled": d["pooled"],
+                    "differences": d["differences"],
+                    "per_seed": [
+                        {
+                            "seed": r["seed"],
+                            **{a: v["success"] for a, v in r["arms"].items()},
+                            "replay_kept": r["modes"]["replay"]["kept"],
+                            "replay_attempts": r["modes"]["replay"]["attempts"],
+                        }
+                        for r in d["rows"]
+                    ],  # fmt: skip
+                }
+            else:
+                out[kind] = {
+                    "command": d["command"],
+                    "rows": [{k: r[k] for k in ("multiplier", "mode", "attempts", "kept", "yield", "ci95",
+                                                "failures", "kept_block_shift_m")} for r in d["rows"]],
+                }  # fmt: skip
+            out["provisional"] = bool(out.get("provisional") or d.get("smoke"))
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            raise ToolError(
+                f"{_rel(f)} is not a complete tools.replay file ({e}); re-run python -m tools.replay"
+            )
+    return out or None
+
+
 def main(argv: list[str] | None = None) -> int:
     p = parser("meta", __doc__)
     p.add_argument(
@@ -221,6 +265,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument(
         "--aug-sweep", type=Path, default=ROOT / "outputs/sweep/sweep_aug.json", help="the aug sweep"
+    )
+    p.add_argument(
+        "--replay",
+        type=Path,
+        default=ROOT / "outputs/replay",
+        help="folder of python -m tools.replay's files",
     )
     p.add_argument("--meta", type=Path, default=META, help="default meta.yaml")
     a = p.parse_args(argv)
@@ -245,6 +295,9 @@ def main(argv: list[str] | None = None) -> int:
         raise ToolError(str(e)) from None
     except (KeyError, TypeError, IndexError) as e:
         raise ToolError(f"a sweep file is malformed ({type(e).__name__}: {e}); re-run the sweeps") from None
+    replay = replay_section(a.replay)
+    if replay is not None:
+        meta["replay"] = replay
     meta["region_hashes"] = current
     write_meta(a.meta, meta)
     ex = meta["exercise_checks"]
