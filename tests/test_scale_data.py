@@ -243,13 +243,13 @@ def test_result_cache_reuses_only_the_same_configuration(tmp_path, monkeypatch):
     first = smoke(tmp_path / "one", cache=True)
     assert "reusing" not in first.stdout
     again = smoke(tmp_path / "two", cache=True)  # same flags, another --out: served from the cache
-    assert "reusing the result" in again.stdout and "augment:" not in again.stdout  # nothing recomputed
+    assert "reusing the result" in again.stdout and "augment (resolve):" not in again.stdout  # nothing recomputed
     assert (tmp_path / "two" / "metrics.json").read_bytes() == (
         tmp_path / "one" / "metrics.json"
     ).read_bytes()
     assert str(tmp_path / "two") in again.stdout.strip().splitlines()[-1]
     other = smoke(tmp_path / "three", "--aug_yaw_sigma", "0.4", cache=True)  # a flag --smoke does not pin
-    assert "reusing" not in other.stdout and "augment:" in other.stdout
+    assert "reusing" not in other.stdout and "augment (resolve):" in other.stdout
     assert (tmp_path / "three" / "metrics.json").read_bytes() != (
         tmp_path / "one" / "metrics.json"
     ).read_bytes()
