@@ -115,7 +115,7 @@ LAB_STYLE = {  # curve -> (colour, line style, label)
     "fresh": ("tab:blue", "-", "fresh expert demos"),
     "resolve": ("tab:orange", "-", "12 sources + re-solve (engine)"),
     "replay": ("tab:green", "-", "12 sources + replay (engine), at demos kept"),
-    "resolve_fixed": ("tab:red", "--", "re-solve at the fixed budget (N=108's steps)"),
+    "resolve_fixed": ("tab:red", "-.", "re-solve at the fixed budget (N=108's steps)"),
 }
 LAB_DEFAULT = ("resolve", "108")  # the chapter's default point: 12 sources + 96 re-solves
 
@@ -149,7 +149,7 @@ def scale_lab_figure(path: Path, result: dict) -> Path:
         ax.plot([r["demos"]], [r["success"]], "*", color="k", ms=14, zorder=5,
                 label=f"the chapter's default point (N={n}, re-solve)")  # fmt: skip
     ceiling = result["expert"]["success"]
-    ax.axhline(ceiling, color="0.3", ls=":", lw=1.5, label=f"expert's own success ({ceiling:.2f})")
+    ax.axhline(ceiling, color="0.3", ls="--", lw=1.5, label=f"expert's own success ({ceiling:.2f})")
     cfg = result["config"]
     ax.set_xscale("log")
     ns = cfg["n"]
