@@ -99,3 +99,28 @@ def test_bad_input_is_one_line_and_exit_2(argv, needle, tmp_path):
     assert p.returncode == 2 and p.stdout == ""
     assert p.stderr.startswith("error: ") and p.stderr.count("\n") == 1 and needle in p.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_meta_writes_the_scale_lab_section_from_the_json_and_keeps_it_otherwise(local, tmp_path):
+    import yaml
+    from test_packaging import sweep_files
+
+    a, b = sweep_files(tmp_path, [0.1, 0.2], [0.0, 0.1, 0.2])
+    meta = tmp_path / "meta.yaml"
+    meta.write_text(yaml.safe_dump({"scale_lab": {"kept": True}}))
+    base = ["-m", "tools.meta", "--sweep", a, "--aug-sweep", b, "--meta", meta]
+    run_script(*base, "--scale-lab", tmp_path / "absent.json")
+    assert yaml.safe_load(meta.read_text())["scale_lab"] == {"kept": True}  # no lab: left as found
+    run_script(*base, "--scale-lab", local / "scale_lab.json")
+    sec = yaml.safe_load(meta.read_text())["scale_lab"]
+    r = json.loads((local / "scale_lab.json").read_text())
+    assert sec["provisional"] is True and sec["command"] == "python scale_lab.py --smoke"
+    assert sec["seeds"] == [0, 1] and set(sec["curves"]) == {"fresh", "resolve", "replay", "resolve_fixed"}
+    row = sec["curves"]["resolve"][36]
+    assert row["success"] == r["curves"]["resolve"]["36"]["success"] and row["demos"] == 36
+    assert row["steps"] == r["curves"]["resolve"]["36"]["steps"]
+    assert sec["generation"]["resolve"]["kept"] == 192
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"kind": "seeds"}')
+    p = run_script(*base, "--scale-lab", bad, check=False)
+    assert p.returncode == 2 and p.stderr.startswith("error: ") and p.stderr.count("\n") == 1
