@@ -15,7 +15,7 @@ shards        a data-engine run on disk: fixed shards (LeRobot sets with stamps)
 executors     where the shards run: local processes or Ray
 ensemble      several MLPs as one module: the arms of a training budget side by side
 result_cache  reuse a finished run whose flags and code match; entries verified by checksum
-viz           the PNG figure and the Rerun recording
+viz           the PNG figures and the Rerun recordings (the chapter's and the Scale Lab's)
 
 A command of its own (the data engine, a tool) gets the same guarantees from errors.run_main,
 outputs.claim (or outputs.check_out_path), stamps.replace_own_dir and parallel.worker_setup.

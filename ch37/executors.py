@@ -24,6 +24,8 @@ def _die_with_parent() -> None:
     """A worker whose caller was killed stops too (Linux), instead of finishing its shard for nobody;
     Ctrl-C is the caller's to handle (the pool is torn down with it), not every worker's."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # the pool ends its workers with SIGTERM: no handler of
+    # the caller's (ch37.errors.run_main raises on SIGTERM) may turn that into a traceback
     if sys.platform.startswith("linux"):
         import ctypes
 

@@ -108,3 +108,87 @@ def _record(rec, tmp: Path, metrics, src_starts, aug_starts, trajectories, annul
     )
     rec.flush()
     rec.disconnect()
+
+
+# The Scale Lab (scale_lab.py): success against demos, one line per curve.
+LAB_STYLE = {  # curve -> (colour, line style, label)
+    "fresh": ("tab:blue", "-", "fresh expert demos"),
+    "resolve": ("tab:orange", "-", "12 sources + re-solve (engine)"),
+    "replay": ("tab:green", "-", "12 sources + replay (engine), at demos kept"),
+    "resolve_fixed": ("tab:red", "-.", "re-solve at the fixed budget (N=108's steps)"),
+}
+LAB_DEFAULT = ("resolve", "108")  # the chapter's default point: 12 sources + 96 re-solves
+
+
+def _lab_rows(result: dict, curve: str):
+    """(demos, success, low, high) arrays of one curve, in N order; demos is the mean actually trained on."""
+    rows = sorted(result["curves"][curve].items(), key=lambda kv: int(kv[0]))
+    demos = np.array([r["demos"] for _, r in rows], float)
+    rate = np.array([r["success"] for _, r in rows], float)
+    lo = np.array([r["ci95"][0] for _, r in rows], float)
+    hi = np.array([r["ci95"][1] for _, r in rows], float)
+    return demos, rate, lo, hi
+
+
+def scale_lab_figure(path: Path, result: dict) -> Path:
+    """Success vs demos (log x), one line per curve with its pooled 95% band, the chapter's default
+    point marked and the expert's own success as the ceiling."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 4.8))
+    for curve, (colour, ls, label) in LAB_STYLE.items():
+        demos, rate, lo, hi = _lab_rows(result, curve)
+        ax.plot(demos, rate, ls, color=colour, marker="o", ms=4, label=label)
+        ax.fill_between(demos, lo, hi, color=colour, alpha=0.15, lw=0)
+    curve, n = LAB_DEFAULT
+    if n in result["curves"][curve]:
+        r = result["curves"][curve][n]
+        ax.plot([r["demos"]], [r["success"]], "*", color="k", ms=14, zorder=5,
+                label=f"the chapter's default point (N={n}, re-solve)")  # fmt: skip
+    ceiling = result["expert"]["success"]
+    ax.axhline(ceiling, color="0.3", ls="--", lw=1.5, label=f"expert's own success ({ceiling:.2f})")
+    cfg = result["config"]
+    ax.set_xscale("log")
+    ns = cfg["n"]
+    ax.set_xticks(ns, [str(n) for n in ns])
+    ax.minorticks_off()
+    ax.set(ylim=(0, 1.02), xlabel="PushT demos trained on (log scale)",
+           ylabel="success rate on held-out starts",
+           title=f"BC success vs demos: mean over seeds {cfg['seeds']}, band = Wilson 95% of "
+                 f"{cfg['eval_episodes'] * len(cfg['seeds'])} pooled episodes"
+                 + (" (smoke)" if result.get("smoke") else ""))  # fmt: skip
+    ax.title.set_fontsize(9)
+    ax.legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    plt.close(fig)
+    return write_atomic(path, buf.getvalue())
+
+
+def scale_lab_recording(path: Path, result: dict) -> Path:
+    """The Scale Lab's curves as Rerun scalars on a "demos" timeline (scale_lab/CURVE/success, ci95_*)."""
+    import rerun as rr
+
+    rec = rr.RecordingStream(RERUN_APP_ID, recording_id="scale_lab")
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        rec.save(tmp)
+        for curve in LAB_STYLE:
+            for demos, rate, lo, hi in zip(*_lab_rows(result, curve)):
+                rec.set_time("demos", sequence=int(round(demos)))
+                rec.log(f"scale_lab/{curve}/success", rr.Scalars(rate))
+                rec.log(f"scale_lab/{curve}/ci95_low", rr.Scalars(lo))
+                rec.log(f"scale_lab/{curve}/ci95_high", rr.Scalars(hi))
+                rec.log("scale_lab/expert/success", rr.Scalars(result["expert"]["success"]))
+        text = rr.TextDocument(f"{result['command']}\n{result['interval']}")
+        rec.log("scale_lab/summary", text, static=True)
+        rec.flush()
+        rec.disconnect()
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return place(tmp, path)

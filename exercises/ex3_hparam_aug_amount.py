@@ -26,6 +26,9 @@ What to do
        success against the bands in meta.yaml, and prints each step and the shape the data shows.
     4. Look at the 95% intervals in each metrics.json: with 50 evaluation starts, which of the
        steps could be noise?
+    5. Three points cannot say whether the curve keeps climbing past them, or where it bends:
+       `python scale_lab.py` (the Scale Lab, see the README) measures it at 12 to 972 demos,
+       for fresh expert demos and both data engines, over three seeds.
 
 How to check
     pytest exercises/checks.py -k ex3

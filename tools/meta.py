@@ -1,14 +1,15 @@
 """meta.yaml from the sweep files: reference_run, exercise_checks and region_hashes, never typed by hand.
 
-    python -m tools.meta [--sweep F] [--aug-sweep F] [--replay DIR] [--meta F]
+    python -m tools.meta [--sweep F] [--aug-sweep F] [--replay DIR] [--scale-lab F] [--meta F]
 
 --sweep takes the seed sweep (default outputs/sweep/sweep_seeds.json, from `python -m tools.sweep
 --seeds 3`), --aug-sweep the aug sweep (default outputs/sweep/sweep_aug.json, from `python -m
 tools.sweep --aug 0 4 8`). The exercise answers and bands come from exercises/rules.py. What a
-smoke sweep gives is marked `provisional: true`. The `replay` section comes from --replay DIR's
-replay_compare.json and replay_sigma.json (`python -m tools.replay --seeds 5` and `--sigma ...`) when
-they are there, and is kept as found otherwise. id, title, track, objectives and mimicgen are kept
-as found in meta.yaml.
+smoke sweep gives is marked `provisional: true`. id, title, track, objectives and mimicgen are kept
+as found in meta.yaml. The `replay` section comes from --replay DIR's replay_compare.json and
+replay_sigma.json (`python -m tools.replay --seeds 5` and `--sigma ...`), the `scale_lab` section
+from --scale-lab (default outputs/scale_lab/scale_lab.json, from `python scale_lab.py`), each when
+its files exist, and left as found otherwise; smoke-sized ones are marked `provisional: true` too.
 
 Exit codes: 0 ok, 2 bad input (a missing, corrupt or incomplete sweep file, bad flags).
 """
@@ -76,6 +77,7 @@ META_ORDER = (
     "mimicgen",
     "reference_run",
     "replay",
+    "scale_lab",
     "exercise_checks",
     "region_hashes",
 )
@@ -258,6 +260,67 @@ def replay_section(folder: Path) -> dict | None:
     return out or None
 
 
+SCALE_LAB_KEYS = ("command", "config", "expert", "generation", "curves", "points", "seconds")
+
+
+def read_scale_lab(path: Path) -> dict | None:
+    """scale_lab.json with every key the section needs; None when the file does not exist."""
+    path = Path(path)
+    if not path.exists():
+        return None
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise ToolError(f"{_rel(path)} is not a readable scale_lab.json ({e}); re-run scale_lab.py") from None
+    if not isinstance(data, dict) or data.get("kind") != "scale_lab":
+        raise ToolError(f"--scale-lab {_rel(path)} is not a scale_lab.json written by scale_lab.py")
+    missing = [k for k in SCALE_LAB_KEYS if k not in data]
+    if missing:
+        raise ToolError(f"{_rel(path)} is incomplete: it lacks {', '.join(missing)}; re-run scale_lab.py")
+    return data
+
+
+def scale_lab_section(lab: dict) -> dict:
+    """meta.yaml's scale_lab: per curve per N the mean success over seeds, its pooled Wilson interval,
+    the demos actually trained on (mean over seeds) and the steps per seed; engine yields; wall time."""
+    cfg = lab["config"]
+    provisional = bool(cfg.get("smoke"))
+    curves = {
+        curve: {
+            int(n): {"success": r["success"], "ci95": r["ci95"], "demos": r["demos"], "steps": r["steps"]}
+            for n, r in sorted(rows.items(), key=lambda kv: int(kv[0]))
+        }
+        for curve, rows in lab["curves"].items()
+    }
+    generation = {}
+    for mode, by_seed in lab["generation"].items():
+        attempts = sum(g["attempts"] for g in by_seed.values())
+        kept = sum(g["kept"] for g in by_seed.values())
+        generation[mode] = {
+            "attempts": attempts,
+            "kept": kept,
+            "yield": round(kept / attempts, 4) if attempts else 0,
+        }
+    return {
+        "provisional": provisional,
+        "note": (
+            "smoke-sized lab: exercises the pipeline only; refresh with python scale_lab.py"
+            if provisional
+            else "success vs total PushT demos; every number below was written by python -m tools.meta "
+            "from scale_lab.json"
+        ),
+        "command": lab["command"],
+        "seeds": cfg["seeds"],
+        "eval_episodes": cfg["eval_episodes"],
+        "interval": "Wilson 95% over all seeds' evaluation episodes pooled",
+        "expert": {"success": lab["expert"]["success"], "ci95": lab["expert"]["ci95"]},
+        "fixed_steps": lab.get("fixed_steps"),
+        "generation": generation,
+        "curves": curves,
+        "wall_s": round(lab["seconds"]["total"]),
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     p = parser("meta", __doc__)
     p.add_argument(
@@ -272,10 +335,17 @@ def main(argv: list[str] | None = None) -> int:
         default=ROOT / "outputs/replay",
         help="folder of python -m tools.replay's files",
     )
+    p.add_argument(
+        "--scale-lab",
+        type=Path,
+        default=ROOT / "outputs/scale_lab/scale_lab.json",
+        help="the Scale Lab's results (section left as found when the file does not exist)",
+    )
     p.add_argument("--meta", type=Path, default=META, help="default meta.yaml")
     a = p.parse_args(argv)
     seeds = read_sweep(a.sweep, "seeds", "--sweep")
     aug = read_sweep(a.aug_sweep, "aug", "--aug-sweep")
+    lab = read_scale_lab(a.scale_lab)
     current = region_hashes(a.script)
     for name, s in (("seed", seeds), ("aug", aug)):
         stale = drifted(current, s.get("script_region_hashes"))
@@ -291,10 +361,14 @@ def main(argv: list[str] | None = None) -> int:
     try:
         meta["reference_run"] = reference_run(seeds, aug)
         meta["exercise_checks"] = derive_checks(seeds, aug)
+        if lab is not None:
+            meta["scale_lab"] = scale_lab_section(lab)
     except ValueError as e:
         raise ToolError(str(e)) from None
     except (KeyError, TypeError, IndexError) as e:
-        raise ToolError(f"a sweep file is malformed ({type(e).__name__}: {e}); re-run the sweeps") from None
+        raise ToolError(
+            f"a sweep file or scale_lab.json is malformed ({type(e).__name__}: {e}); re-run it"
+        ) from None
     replay = replay_section(a.replay)
     if replay is not None:
         meta["replay"] = replay
