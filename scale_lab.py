@@ -11,7 +11,9 @@ each over seeds 0..2 and 100 held-out starts per seed.
   resolve_fixed   resolve, but every N trained for the chapter's full budget (N = 108's steps)
 
 Budget: at each N every curve takes the same gradient steps, --epochs passes over the resolve set at
-that N (so resolve at N = 108 is exactly the chapter's augmented_full arm). resolve_fixed holds the
+that N (so resolve at N = 108 is exactly the chapter's augmented_full arm). Replay usually keeps
+fewer than N demos (its success filter rejects most attempts); its point then sits at the demos it
+kept and trains --epochs passes over them, the same rule at its own N. resolve_fixed holds the
 steps at N = 108's for every N (computed from the resolve set at 108 even when 108 is not in --n):
 resolve against resolve_fixed reads data apart from compute.
 
@@ -362,7 +364,12 @@ def run(a: argparse.Namespace) -> int:
         for curve in CURVES:
             for n in a.n:
                 x, y, demos = data(curve, n, s)
-                steps = fixed if curve == "resolve_fixed" else steps_at(n, s)
+                if curve == "resolve_fixed":
+                    steps = fixed
+                elif demos < n:  # replay fell short of N: --epochs passes over the demos it kept
+                    steps = math.ceil(a.epochs * len(x) / a.batch_size)
+                else:
+                    steps = steps_at(n, s)
                 if curve == "fresh" or demos == SOURCES:  # N = 12, or an engine that kept nothing
                     same = ("fresh", demos)
                 else:

@@ -208,3 +208,43 @@ def test_augment_demos_replay_reports_reasons(tmp_path):
     rep = json.loads((tmp_path / "aug" / "generation_report.json").read_text())
     assert rep["attempts"] == 6 and rep["settings"]["mode"] == "replay"
     assert sum(rep["failures"].values()) == rep["attempts"] - rep["kept"]
+
+
+def test_tools_replay_smoke_feeds_meta_yaml(tmp_path):
+    """python -m tools.replay (smoke) writes both files; tools.meta turns them into meta.yaml's
+    `replay` section, marked provisional, and leaves the section as found when they are absent."""
+    import yaml
+    from conftest import run_script
+    from test_packaging import sweep_files
+
+    out = tmp_path / "replay"
+    run_script("-m", "tools.replay", "--smoke", "--seeds", "1", "--sigma", "1", "--attempts", "2",
+               "--sigma_seeds", "1", "--out", out)  # fmt: skip
+    cmp_ = json.loads((out / "replay_compare.json").read_text())
+    (row,) = cmp_["rows"]
+    steps = row["steps"]
+    assert {a: v["frames"] for a, v in row["arms"].items()}["source"] < row["arms"]["resolve_all"]["frames"]
+    assert row["arms"]["replay"]["demos"] == row["arms"]["resolve_matched"]["demos"]  # matched counts
+    assert steps == -(-30 * row["arms"]["resolve_all"]["frames"] // 64)  # the chapter's full budget
+    a, b = sweep_files(tmp_path, [0.1, 0.2], [0.0, 0.1, 0.2])
+    meta = tmp_path / "meta.yaml"
+    meta.write_text(yaml.safe_dump({"replay": {"kept": True}}))
+    base = [
+        "-m",
+        "tools.meta",
+        "--sweep",
+        a,
+        "--aug-sweep",
+        b,
+        "--meta",
+        meta,
+        "--scale-lab",
+        tmp_path / "no",
+    ]
+    run_script(*base, "--replay", tmp_path / "absent")
+    assert yaml.safe_load(meta.read_text())["replay"] == {"kept": True}
+    run_script(*base, "--replay", out)
+    sec = yaml.safe_load(meta.read_text())["replay"]
+    assert sec["provisional"] is True
+    assert sec["compare"]["per_seed"][0]["replay"] == row["arms"]["replay"]["success"]
+    assert [r["mode"] for r in sec["sigma"]["rows"]] == ["resolve", "replay"]
