@@ -340,17 +340,10 @@ def run(a: argparse.Namespace) -> int:
         g = generated.get(("resolve" if curve == "resolve_fixed" else curve, s))
         if g is None:
             return f["observation.state"][src], f["action"][src], SOURCES
-        # rank of each generated episode within its source: the first per_source(n) of each are taken
-        ep, first = np.unique(g["episode_index"], return_index=True)
-        ep_src = g["aug.source_episode"].reshape(-1)[first]
-        rank = np.zeros(len(ep), int)
-        for e in np.unique(ep_src):
-            rank[ep_src == e] = np.arange((ep_src == e).sum())
-        take = set(ep[rank < per_source(n)].tolist())
-        rows = np.isin(g["episode_index"], list(take))
+        rows = engine.first_per_source(g["episode_index"], g["aug.source_episode"], per_source(n))
         x = np.concatenate([f["observation.state"][src], g["observation.state"][rows]])
         y = np.concatenate([f["action"][src], g["action"][rows]])
-        return x, y, SOURCES + len(take)
+        return x, y, SOURCES + len(np.unique(g["episode_index"][rows]))
 
     def steps_at(n: int, s: int) -> int:
         frames = len(data("resolve", n, s)[0])
@@ -391,9 +384,9 @@ def run(a: argparse.Namespace) -> int:
     t_train = time.perf_counter() - t0
 
     # --- 4. emit ------------------------------------------------------------------------------------
-    from ch37.recipe import load  # for wilson only (the recipe's own interval)
+    from ch37.recipe import interval
 
-    wilson = load(hidden_dim=8, batch_size=1, lr=1e-3, seed=0).wilson
+    wilson = interval()  # the measure region's Wilson interval
     for p in points:
         p.update(results[p.pop("unit")])
     points.sort(key=lambda p: (CURVES.index(p["curve"]), p["n"], p["seed"]))

@@ -281,6 +281,21 @@ def keep_first(episodes, per_demo: int, run_jobs, *, reasons, cap: int = ATTEMPT
     return kept, attempts, failures
 
 
+def first_per_source(episode_index, source_episode, take) -> np.ndarray:
+    """Row mask of a kept set: the first `take` episodes (in episode order) of each source demo.
+
+    episode_index (N,) and source_episode (N,) or (N, 1) are the set's columns (aug.source_episode);
+    take is one count for every source demo, or {source episode: count} (absent: 0). Because
+    keep_first keeps in attempt order, this is the set keep_first would have kept with that count."""
+    ep, first = np.unique(episode_index, return_index=True)
+    src = np.asarray(source_episode).reshape(-1)[first]  # each episode's source demo
+    rank = np.zeros(len(ep), int)  # its place among its source demo's episodes
+    for e in np.unique(src):
+        rank[src == e] = np.arange((src == e).sum())
+    limit = np.array([take.get(int(e), 0) for e in src]) if isinstance(take, dict) else take
+    return np.isin(episode_index, ep[rank < limit])
+
+
 def write_kept(root, kept: list[dict], *, repo_id: str, stamp: dict) -> None:
     """Write kept episodes (with their provenance) to `root` as one LeRobot v3 PushT set."""
     from ch37.lerobot_io import features, write_dataset

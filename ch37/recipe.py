@@ -9,12 +9,14 @@ The measure region is the one home of the network, the training loop, the rollou
 load() executes its definitions (imports, functions, classes, and the seeded initial weights) from the
 script's own text, so the Scale Lab and the replay comparison train exactly what the lesson trains;
 an edit to the region changes them too. Nothing else of the script runs. coverage() does the same
-for the emit region's start-coverage count (`cells` and the annulus it divides).
+for the emit region's start-coverage count (`cells` and the annulus it divides), interval() for
+the region's Wilson interval alone (no torch), the one every tool that reports a rate uses.
 """
 
 from __future__ import annotations
 
 import ast
+import functools
 from types import SimpleNamespace
 
 from ch37 import ROOT
@@ -70,6 +72,19 @@ def load(*, hidden_dim: int, batch_size: int, lr: float, seed: int, device: str 
     return _run("measure", _wanted, ns, ("mlp", "BCPolicy", "train", "evaluate", "wilson", "init_weights"))
 
 
+@functools.cache
+def interval():
+    """The measure region's `wilson(p_hat, n)`: 95% Wilson interval [lo, hi] of a success rate p_hat
+    measured over n episodes. Only that function is executed, so this needs no torch."""
+    import math
+
+    def wanted(node):
+        return isinstance(node, ast.FunctionDef) and node.name == "wilson"
+
+    return _run("measure", wanted, {"math": math}, ("wilson",)).wilson
+
+
+@functools.cache
 def coverage():
     """The emit region's `cells(starts)` -> (set of (ring, sector), count outside), and its annulus:
     RINGS, SECTORS, R_MIN, R_MAX."""

@@ -15,6 +15,16 @@ DATA_COLOURS = {"source": "tab:blue", "augmented": "tab:orange"}
 RERUN_APP_ID = "ch3_7_scale_data"  # letters, digits and underscores: accepted by Rerun as is
 
 
+def save_png(fig, path: Path, dpi=None) -> Path:
+    """A matplotlib figure to `path` as PNG, atomically (whole file or none); the figure is closed."""
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    plt.close(fig)
+    return write_atomic(path, buf.getvalue())
+
+
 def figure(path: Path, src_starts, aug_starts, metrics: dict, annulus) -> Path:
     """Coverage map of block starts over the spawn annulus + the 2x2's success bars with 95% intervals."""
     import matplotlib
@@ -55,10 +65,7 @@ def figure(path: Path, src_starts, aug_starts, metrics: dict, annulus) -> Path:
     )
     ax1.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
-    plt.close(fig)
-    return write_atomic(path, buf.getvalue())
+    return save_png(fig, path, dpi=100)
 
 
 def recording(path: Path, metrics: dict, src_starts, aug_starts, trajectories, annulus) -> Path:
@@ -163,10 +170,7 @@ def scale_lab_figure(path: Path, result: dict) -> Path:
     ax.title.set_fontsize(9)
     ax.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
-    plt.close(fig)
-    return write_atomic(path, buf.getvalue())
+    return save_png(fig, path, dpi=100)
 
 
 def scale_lab_recording(path: Path, result: dict) -> Path:

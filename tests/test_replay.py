@@ -248,3 +248,13 @@ def test_tools_replay_smoke_feeds_meta_yaml(tmp_path):
     assert sec["provisional"] is True
     assert sec["compare"]["per_seed"][0]["replay"] == row["arms"]["replay"]["success"]
     assert [r["mode"] for r in sec["sigma"]["rows"]] == ["resolve", "replay"]
+
+
+def test_first_per_source_takes_each_source_demos_first_episodes():
+    """Episodes 0..5 from sources 3, 3, 7, 3, 7, 7 (two frames each): the first ones per source."""
+    ep = np.repeat(np.arange(6), 2)
+    src = np.repeat([3, 3, 7, 3, 7, 7], 2)[:, None]
+    assert np.unique(ep[engine.first_per_source(ep, src, 2)]).tolist() == [0, 1, 2, 4]
+    assert np.unique(ep[engine.first_per_source(ep, src, {3: 3, 7: 1})]).tolist() == [0, 1, 2, 3]
+    assert not engine.first_per_source(ep, src, 0).any()
+    assert engine.first_per_source(ep, src, {7: 9}).tolist() == np.isin(ep, [2, 4, 5]).tolist()

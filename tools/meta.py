@@ -219,6 +219,9 @@ def read_sweep(path: Path, kind: str, flag: str) -> dict:
     return data
 
 
+SIGMA_ROW_KEYS = ("multiplier", "mode", "attempts", "kept", "yield", "ci95", "failures", "kept_block_shift_m")
+
+
 def replay_section(folder: Path) -> dict | None:
     """meta.yaml's `replay` section from tools.replay's two files in `folder` (None if neither is there)."""
     out = {}
@@ -244,19 +247,18 @@ def replay_section(folder: Path) -> dict | None:
                             "replay_attempts": r["modes"]["replay"]["attempts"],
                         }
                         for r in d["rows"]
-                    ],  # fmt: skip
+                    ],
                 }
             else:
                 out[kind] = {
                     "command": d["command"],
-                    "rows": [{k: r[k] for k in ("multiplier", "mode", "attempts", "kept", "yield", "ci95",
-                                                "failures", "kept_block_shift_m")} for r in d["rows"]],
-                }  # fmt: skip
+                    "rows": [{k: r[k] for k in SIGMA_ROW_KEYS} for r in d["rows"]],
+                }
             out["provisional"] = bool(out.get("provisional") or d.get("smoke"))
         except (OSError, ValueError, KeyError, TypeError) as e:
             raise ToolError(
                 f"{_rel(f)} is not a complete tools.replay file ({e}); re-run python -m tools.replay"
-            )
+            ) from None
     return out or None
 
 

@@ -44,13 +44,6 @@ DEFAULTS = dict(
 )
 
 
-def wilson(k: int, n: int, z: float = 1.96) -> list[float]:
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return [max(0.0, centre - half), min(1.0, centre + half)]
-
-
 def source_set(out: Path, seed: int, episodes: int, quiet: bool) -> dict:
     """The chapter's PushT source demos of `seed` (generated once under OUT/demos, then read back)."""
     from ch37.demos import ensure_demos
@@ -86,6 +79,7 @@ def grow(
 
 def on_disk(out: Path, name: str, kept: list, seed: int) -> dict:
     """Write kept episodes as a LeRobot v3 set under OUT/demos/NAME and read them back (train on disk)."""
+    import pusht_env
     from ch37 import engine
     from ch37.lerobot_io import load_arrays
     from ch37.stamps import MADE_BY, replace_own_dir
@@ -93,11 +87,11 @@ def on_disk(out: Path, name: str, kept: list, seed: int) -> dict:
     keys = ("observation.state", "action", "episode_index", "aug.source_episode", "aug.start")
     if not kept:
         return {
-            "observation.state": np.zeros((0, 10), np.float32),
-            "action": np.zeros((0, 2), np.float32),
+            "observation.state": np.zeros((0, pusht_env.OBS_DIM), np.float32),
+            "action": np.zeros((0, pusht_env.ACT_DIM), np.float32),
             "episode_index": np.zeros(0, np.int64),
             "aug.source_episode": np.zeros((0, 1), np.int64),
-            "aug.start": np.zeros((0, 5), np.float32),
+            "aug.start": np.zeros((0, len(engine.START_NAMES)), np.float32),
         }
     path = out / "demos" / name
     replace_own_dir(path)
@@ -107,20 +101,6 @@ def on_disk(out: Path, name: str, kept: list, seed: int) -> dict:
     return load_arrays(path, keys=keys)
 
 
-def episodes_of(d: dict, take: dict[int, int]) -> np.ndarray:
-    """Row mask: the first take[e] episodes (in set order) whose source demo is e."""
-    ep, src = d["episode_index"], d["aug.source_episode"].reshape(-1)
-    keep = np.zeros(len(ep), bool)
-    seen: dict[int, list] = {}
-    for i in np.unique(ep):
-        rows = ep == i
-        e = int(src[rows][0])
-        if len(seen.setdefault(e, [])) < take.get(e, 0):
-            seen[e].append(int(i))
-            keep |= rows
-    return keep
-
-
 def per_source(d: dict) -> dict[int, int]:
     _, first = np.unique(d["episode_index"], return_index=True)
     e, n = np.unique(d["aug.source_episode"].reshape(-1)[first], return_counts=True)
@@ -128,8 +108,6 @@ def per_source(d: dict) -> dict[int, int]:
 
 
 def compare_seed(out: Path, seed: int, c: dict, workers: int, quiet: bool) -> dict:
-    import torch
-
     from ch37 import engine, recipe
     from ch37.seeds import env_seed
 
@@ -165,7 +143,9 @@ def compare_seed(out: Path, seed: int, c: dict, workers: int, quiet: bool) -> di
     src_cells, _ = recipe.coverage().cells(np.array([s.states[0][2:4] for s in sources.values()]))
     row["coverage_source"] = len(src_cells)
     match = per_source(sets["replay"])  # replay keeps fewer: cut re-solve to its count per source demo
-    m = episodes_of(sets["resolve"], match)
+    m = engine.first_per_source(
+        sets["resolve"]["episode_index"], sets["resolve"]["aug.source_episode"], match
+    )
     x, y = src["observation.state"], src["action"]
 
     def plus(d, rows=slice(None)):
@@ -180,7 +160,6 @@ def compare_seed(out: Path, seed: int, c: dict, workers: int, quiet: bool) -> di
     steps = math.ceil(
         c["epochs"] * len(data["resolve_all"][0]) / c["batch_size"]
     )  # the chapter's full budget
-    torch.manual_seed(seed)
     r = recipe.load(
         hidden_dim=c["hidden_dim"], batch_size=c["batch_size"], lr=1e-3, seed=seed, workers=workers
     )
@@ -208,11 +187,14 @@ def compare_seed(out: Path, seed: int, c: dict, workers: int, quiet: bool) -> di
 
 
 def summarize(rows: list[dict], eval_episodes: int) -> dict:
+    from ch37.recipe import interval
+
+    wilson = interval()
     n = eval_episodes * len(rows)
     pooled = {}
     for a in ARMS:
         k = sum(round(r["arms"][a]["success"] * eval_episodes) for r in rows)
-        pooled[a] = {"successes": k, "episodes": n, "rate": k / n, "ci95": wilson(k, n)}
+        pooled[a] = {"successes": k, "episodes": n, "rate": k / n, "ci95": wilson(k / n, n)}
     diffs = {}
     for name, (hi, lo) in {
         "replay_vs_source": ("replay", "source"),
@@ -250,7 +232,9 @@ def sigma_table(
 ) -> dict:
     from ch37 import engine
     from ch37.parallel import parallel_map
+    from ch37.recipe import interval
 
+    wilson = interval()
     srcs = {s: engine.sources(source_set(out, s, c["source_episodes"], quiet)) for s in seeds}
     rows = []
     for m in mults:
@@ -279,7 +263,7 @@ def sigma_table(
                     "attempts": len(jobs),
                     "kept": len(kept),
                     "yield": len(kept) / len(jobs),
-                    "ci95": wilson(len(kept), len(jobs)),
+                    "ci95": wilson(len(kept) / len(jobs), len(jobs)),
                     "failures": fails,
                     "kept_block_shift_m": {
                         "median": float(np.median(shift)) if shift else None,
@@ -317,12 +301,9 @@ def sigma_plot(path: Path, table: dict) -> Path:
     ax.set_title("How far can you push the start before the task stops being the task?", fontsize=9)
     ax.legend()
     fig.tight_layout()
-    import io
+    from ch37.viz import save_png
 
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    plt.close(fig)
-    return write_atomic(path, buf.getvalue())
+    return save_png(fig, path)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -86,11 +86,11 @@ def mean_row(rows: list[dict]) -> dict:
     return {k: round(sum(r[k] for r in rows) / len(rows), 6) for k in MEAN_KEYS}
 
 
-def wilson(successes: int, n: int, z: float = 1.96) -> list[float]:
-    p = successes / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return [round(max(0.0, centre - half), 6), round(min(1.0, centre + half), 6)]
+def wilson(successes: int, n: int) -> list[float]:
+    """The measure region's Wilson 95% interval (ch37.recipe.interval), rounded to 6 places."""
+    from ch37.recipe import interval
+
+    return [round(v, 6) for v in interval()(successes / n, n)]
 
 
 def paired(rows: list[dict]) -> dict:
