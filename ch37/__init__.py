@@ -2,7 +2,8 @@
 
 errors        DataError, fail(), guard() / run_main(): one line and an exit code (2, 130 on Ctrl-C)
 files         write_atomic, place, dump_json, round_floats: whole files or none, no leftovers
-cli           flag checks and limits, claim_out, device choice, the tier banner
+config        the chapter's defaults and smoke settings, the one flag parser and checker
+cli           scale_data.py's flag limits, claim_out, device choice, the tier banner
 outputs       claim(): an output folder checked up front, locked, owned file by file
 lerobot_io    LeRobot v3 read/write: features, write_dataset, load_arrays, schema checks
 seeds         env_seed: demos, augmentation and evaluation never share a start
@@ -10,7 +11,6 @@ stamps        ownership stamps: only files this project wrote are ever deleted o
 demos         demo sets: rollout, generation, the private demo cache
 parallel      parallel_map over forked workers, LockstepEnvs for evaluation physics; workers die with the run
 engine        one augmentation attempt: perturb a source start, re-solve or replay it, keep it on success
-recipe        the measure region's BC recipe (network, training loop, rollout), loaded for more arms
 shards        a data-engine run on disk: fixed shards (LeRobot sets with stamps), merge, stats over frames
 executors     where the shards run: local processes or Ray
 ensemble      several MLPs as one module: the arms of a training budget side by side
@@ -41,6 +41,7 @@ DATA_CODE = (
 )
 CODE_FILES = DATA_CODE + (
     "scale_data.py",
+    "bc_recipe.py",
     "gen_demos_pusht.py",
     "gen_demos_aloha.py",
     "ch37/cli.py",
@@ -53,5 +54,5 @@ CODE_FILES = DATA_CODE + (
     "ch37/engine.py",
     "ch37/shards.py",
     "ch37/executors.py",
-    "ch37/recipe.py",
+    "ch37/config.py",
 )

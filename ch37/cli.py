@@ -4,24 +4,19 @@ from __future__ import annotations
 
 import argparse
 import csv
-import math
 import os
 from pathlib import Path
 
-from ch37 import ROOT
-from ch37.errors import fail
+from ch37 import ROOT, config
+from ch37.errors import DataError
 from ch37.seeds import MAX_SEED, SEED_BLOCK
 
 # wallclock.csv's tiers: two CPU-side ones, then GPUs matched by a substring of the device name.
 GPU_TIERS = ("t4", "l4", "4090", "a100", "h100", "h200")
 TIERS = ("cpu-2core", "mps", *GPU_TIERS)
-SMOKE_DEFAULTS = dict(
-    source_episodes=4, aug_per_demo=2, epochs=30, hidden_dim=64, eval_episodes=8, batch_size=64, device="cpu"
-)
 POSITIVE = ("source_episodes", "epochs", "batch_size", "hidden_dim", "eval_episodes", "workers", "aug_tries")
 NON_NEGATIVE = ("aug_per_demo", "seed", "full_steps")
 FINITE = ("aug_pos_sigma", "aug_yaw_sigma", "lr")
-NOT_IN_KEY = ("out", "cache", "workers")  # where results go and how fast they come never change them
 # Upper bounds that come from the code: episode indices live in one seed block (ch37.seeds), and
 # every env seed must fit in 63 bits. The step limits bound a run's frames for the memory estimate.
 # --epochs and --full_steps cost time, not memory: a huge value runs long (Ctrl-C stops it cleanly).
@@ -72,53 +67,30 @@ def result_config(args: argparse.Namespace) -> dict:
     return {
         k: (str(v) if isinstance(v, Path) else v)
         for k, v in sorted(vars(args).items())
-        if k not in NOT_IN_KEY
+        if k not in config.NOT_IN_KEY
     }
 
 
-def _path(text: str) -> Path:
-    if not text.strip():
-        raise argparse.ArgumentTypeError("a path must not be empty")
-    return Path(text)
-
-
 def parse(p: argparse.ArgumentParser, argv=None) -> argparse.Namespace:
-    """Parse and check scale_data.py's flags; any problem is one line and exit 2.
+    """Parse and check scale_data.py's flags (`p` from ch37.config.parser); a problem is a DataError.
 
     --smoke pins a tiny CPU configuration (the same on every machine); flags given explicitly win."""
-    p.error = lambda msg: fail(f"{msg} (see --help)")
-    for action in p._actions:  # an empty path would silently mean the current folder
-        if action.type is Path:
-            action.type = _path
     args = p.parse_args(argv)
     if args.smoke:
-        p.set_defaults(**SMOKE_DEFAULTS)
+        p.set_defaults(**config.SMOKE)
         args = p.parse_args(argv)
     args.out = args.out or Path("outputs/ch3.7-scale-data" + ("-smoke" if args.smoke else ""))
     if args.workers is None:  # None, not 0: --workers 0 is an error below, not "the default"
         args.workers = min(8, os.cpu_count() or 1)
-    for name in POSITIVE:
-        if getattr(args, name) <= 0:
-            fail(f"--{name} must be a positive integer, got {getattr(args, name)}")
-    for name in NON_NEGATIVE:
-        if getattr(args, name) < 0:
-            fail(f"--{name} must be >= 0, got {getattr(args, name)}")
-    for name in FINITE:
-        v = getattr(args, name)
-        if not math.isfinite(v) or v < 0 or (name == "lr" and v == 0):
-            kind = "positive" if name == "lr" else "non-negative"
-            fail(f"--{name} must be a finite {kind} number, got {v}")
-    for name, most in AT_MOST.items():
-        if getattr(args, name) > most:
-            fail(f"--{name} must be at most {most}, got {getattr(args, name)}")
+    config.check(args, positive=POSITIVE, non_negative=NON_NEGATIVE, finite=FINITE, at_most=AT_MOST)
     if args.workers > max_workers():
-        fail(f"--workers must be at most {max_workers()} (4 per CPU core), got {args.workers}")
+        raise DataError(f"--workers must be at most {max_workers()} (4 per CPU core), got {args.workers}")
     if args.device not in ("auto", "cpu", "cuda", "mps"):
-        fail(f"--device must be auto, cpu, cuda or mps, got {args.device!r}")
+        raise DataError(f"--device must be auto, cpu, cuda or mps, got {args.device!r}")
     need, free = memory_estimate(args), available_memory()
     if free is not None and sum(need.values()) > free:
         worst = max(need, key=need.get)
-        fail(
+        raise DataError(
             f"this configuration needs up to {_gb(sum(need.values()))} of memory, more than the "
             f"{_gb(free)} available here (most of it from {worst}); lower {worst}"
         )
@@ -126,7 +98,7 @@ def parse(p: argparse.ArgumentParser, argv=None) -> argparse.Namespace:
 
 
 def aug_dir_name(seed, n_sources, per_demo, mode: str) -> str:
-    """The augment region's folder under OUT/demos; re-solve keeps the name it always had."""
+    """The augment region's folder under OUT/demos (re-solve's name has no mode suffix)."""
     return f"pusht_aug_seed{seed}_src{n_sources}_k{per_demo}" + ("" if mode == "resolve" else f"_{mode}")
 
 
@@ -134,7 +106,6 @@ def claim_out(args: argparse.Namespace):
     """--out taken for this run before any work (ch37.outputs.claim): usable, locked against a second
     run, nothing of yours where this run writes, this program's earlier results there cleared."""
     from ch37.outputs import claim
-    from ch37.result_cache import RESULT_FILES
 
     demos = Path(args.out) / "demos"
     reuses = [
@@ -144,7 +115,7 @@ def claim_out(args: argparse.Namespace):
     ]
     replaces = sorted(demos.glob(aug_dir_name(args.seed, "*", args.aug_per_demo, args.aug_mode)))  # augment's
     inputs = {"--pusht_data": args.pusht_data, "--aloha_data": args.aloha_data}
-    return claim(args.out, inputs=inputs, results=RESULT_FILES, reuses=reuses, replaces=replaces)
+    return claim(args.out, inputs=inputs, results=config.RESULT_FILES, reuses=reuses, replaces=replaces)
 
 
 def pick_device(name: str) -> str:
@@ -155,7 +126,7 @@ def pick_device(name: str) -> str:
     if name == "auto":
         return next(d for d in ("cuda", "mps", "cpu") if available[d])
     if not available[name]:
-        fail(f"--device {name} is not available on this machine; use --device cpu or auto")
+        raise DataError(f"--device {name} is not available on this machine; use --device cpu or auto")
     return name
 
 

@@ -20,6 +20,7 @@ import numpy as np
 from ch37 import DATA_CODE, ROOT
 from ch37.errors import DataError, run_main
 from ch37.lerobot_io import IMAGE_KEY, IMAGE_SIZE, features, schema_problem, write_dataset
+from ch37.parallel import progress
 from ch37.seeds import MAX_SEED, SEED_BLOCK, env_seed
 from ch37.stamps import MADE_BY, changed_files, holds_data, is_ours, read_stamp, replace_own_dir
 
@@ -86,15 +87,6 @@ def rollout(env, policy, obs, *, render: bool = False) -> dict:
     if render:
         ep[IMAGE_KEY] = np.asarray(frames, np.uint8)
     return ep
-
-
-def progress(iterable, *, total: int, desc: str, quiet: bool = False):
-    """A tqdm bar on a terminal; silent when quiet or when stderr is not a TTY."""
-    from tqdm import tqdm
-
-    return tqdm(
-        iterable, total=total, desc=desc, unit="ep", leave=False, disable=quiet or not sys.stderr.isatty()
-    )
 
 
 def generate(

@@ -38,6 +38,7 @@ import numpy as np
 
 import pusht_env
 from ch37.demos import rollout
+from ch37.parallel import parallel_map
 from ch37.seeds import env_seed
 from scripted_expert import PushTExpert
 
@@ -211,6 +212,20 @@ FAILURES = {  # every reason a mode can return
     "resolve": ("expert_failed", "no_valid_start"),
     "replay": ("approach_blocked", "path_off_table", "out_of_time", "finished_off_target", "no_valid_start"),
 }
+KEPT_KEYS = ("observation.state", "action", "episode_index", "aug.source_episode", "aug.start")
+
+
+def empty_kept() -> dict:
+    """KEPT_KEYS' columns of a set with no episode, for a run that kept none."""
+    widths = {
+        "observation.state": pusht_env.OBS_DIM,
+        "action": pusht_env.ACT_DIM,
+        "aug.start": len(START_NAMES),
+    }
+    out = {k: np.zeros((0, w), np.float32) for k, w in widths.items()}
+    return out | {"episode_index": np.zeros(0, np.int64), "aug.source_episode": np.zeros((0, 1), np.int64)}
+
+
 ATTEMPTS_PER_KEPT = 10  # keep_first gives up on a source demo after this many attempts per wanted demo
 
 _ENV = None  # one simulator per process, fully reset by set_start before every attempt
@@ -296,10 +311,38 @@ def first_per_source(episode_index, source_episode, take) -> np.ndarray:
     return np.isin(episode_index, ep[rank < limit])
 
 
-def write_kept(root, kept: list[dict], *, repo_id: str, stamp: dict) -> None:
-    """Write kept episodes (with their provenance) to `root` as one LeRobot v3 PushT set."""
-    from ch37.lerobot_io import features, write_dataset
+def run_attempts(sources: dict, jobs, *, seed, pos_sigma, yaw_sigma, mode="resolve", workers=1, bar=None):
+    """[attempt(sources[e], k, ...) for (e, k) in jobs], in order, on `workers` forked processes."""
 
-    feats = features(pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, PROVENANCE)
-    write_dataset(root, repo_id=repo_id, fps=pusht_env.FPS, robot_type=pusht_env.ROBOT_TYPE,
-                  task=pusht_env.TASK, feats=feats, episodes=kept, stamp=stamp)  # fmt: skip
+    def one(job):
+        e, k = job
+        return attempt(sources[e], k, seed=seed, pos_sigma=pos_sigma, yaw_sigma=yaw_sigma, mode=mode)
+
+    return parallel_map(one, jobs, workers=workers, bar=bar)
+
+
+def grow(sources: dict, per_demo: int, *, mode="resolve", cap=ATTEMPTS_PER_KEPT, workers=1, bar=None, **how):
+    """The engine's one entry: the first `per_demo` kept attempts of every source demo (keep_first),
+    attempted in `mode` with the perturbation `how` (seed, pos_sigma, yaw_sigma) on `workers` processes.
+    Returns (kept episodes in (episode, k) order, attempts, {reason: count})."""
+    return keep_first(
+        sorted(sources), per_demo,
+        lambda jobs: run_attempts(sources, jobs, mode=mode, workers=workers, bar=bar, **how),
+        reasons=FAILURES[mode], cap=cap,
+    )  # fmt: skip
+
+
+def save(root, kept: list[dict], *, repo_id: str, stamp: dict) -> None:
+    """Write kept episodes (with their provenance) to `root` as one LeRobot v3 PushT set under our
+    stamp; what was at `root` must be ours (ch37.stamps.replace_own_dir), and nothing is written
+    when nothing was kept."""
+    from ch37.lerobot_io import features, write_dataset
+    from ch37.stamps import MADE_BY, replace_own_dir
+
+    replace_own_dir(root)
+    if kept:
+        feats = features(pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, PROVENANCE)
+        write_dataset(
+            root, repo_id=repo_id, fps=pusht_env.FPS, robot_type=pusht_env.ROBOT_TYPE, task=pusht_env.TASK,
+            feats=feats, episodes=kept, stamp={"made_by": MADE_BY} | stamp,
+        )  # fmt: skip

@@ -128,3 +128,8 @@ def run_main(fn, *args, **kwargs) -> int:
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, saved)
+
+
+def main(fn) -> None:
+    """A command's entry point: sys.exit(run_main(fn, argv)) with the process's own arguments."""
+    sys.exit(run_main(fn, sys.argv[1:]))

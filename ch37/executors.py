@@ -6,42 +6,21 @@ function of its arguments (see ch37.shards)."""
 from __future__ import annotations
 
 import contextlib
-import multiprocessing as mp
 import os
-import signal
 import sys
 
 from ch37 import ROOT
 from ch37.errors import DataError
+from ch37.parallel import imap
 
 
-def _call(task):
-    fn, args = task
-    return fn(*args)
-
-
-def _die_with_parent() -> None:
-    """A worker whose caller was killed stops too (Linux), instead of finishing its shard for nobody;
-    Ctrl-C is the caller's to handle (the pool is torn down with it), not every worker's."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # the pool ends its workers with SIGTERM: no handler of
-    # the caller's (ch37.errors.run_main raises on SIGTERM) may turn that into a traceback
-    if sys.platform.startswith("linux"):
-        import ctypes
-
-        PR_SET_PDEATHSIG = 1
-        ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
-
-
-def run_local(fn, tasks: list, *, workers: int):
-    """fn(*args) for each args in `tasks`, on `workers` processes (in this process when 1)."""
-    if workers <= 1 or len(tasks) <= 1:
-        for args in tasks:
-            yield fn(*args)
-        return
-    method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-    with mp.get_context(method).Pool(min(workers, len(tasks)), initializer=_die_with_parent) as pool:
-        yield from pool.imap_unordered(_call, [(fn, args) for args in tasks], chunksize=1)
+def run(fn, tasks: list, *, workers: int, ray: str | None = None, timing: dict | None = None):
+    """fn(*args) for each args in `tasks`, yielded in completion order: on `workers` local processes
+    (ch37.parallel's pool) when `ray` is None, else on Ray ("local": a private local Ray with `workers`
+    CPUs; an address: that cluster). `timing`, if given, receives "start_s": Ray's start or join."""
+    if ray is None:
+        return imap(lambda args: fn(*args), tasks, workers=workers, ordered=False, chunksize=1)
+    return run_ray(fn, tasks, address=None if ray == "local" else ray, workers=workers, timing=timing)
 
 
 @contextlib.contextmanager

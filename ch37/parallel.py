@@ -1,6 +1,6 @@
-"""Parallel execution on forked workers: parallel_map for independent jobs, LockstepEnvs for
-evaluation physics. Results never depend on the worker count: every job carries its own seed and
-every env is its own simulator.
+"""Parallel execution on forked workers, the project's one pool: imap / parallel_map for independent
+jobs (ch37.executors adds Ray), LockstepEnvs for evaluation physics. Results never depend on the
+worker count: every job carries its own seed and every env is its own simulator.
 
 Workers die with the run: each asks the kernel for SIGKILL when its parent dies (Linux prctl
 PR_SET_PDEATHSIG; elsewhere a thread watching the parent pid), an env worker also stops at the end
@@ -16,7 +16,7 @@ import signal
 import sys
 import threading
 
-_FORKED_WORK: tuple = ()  # (fn, jobs), set just before forking so workers inherit it unpickled
+_FORKED_WORK: tuple = ()  # (fn, jobs) in a pool worker, set by its initializer
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
 
@@ -61,39 +61,53 @@ def worker_setup(parent: int) -> None:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
 
 
+def progress(iterable, *, total: int, desc: str, quiet: bool = False):
+    """A tqdm bar on a terminal; silent when quiet or when stderr is not a TTY."""
+    from tqdm import tqdm
+
+    return tqdm(
+        iterable, total=total, desc=desc, unit="ep", leave=False, disable=quiet or not sys.stderr.isatty()
+    )
+
+
+def _pool_init(parent: int, fn, jobs) -> None:
+    global _FORKED_WORK
+    worker_setup(parent)
+    _FORKED_WORK = (fn, jobs)  # inherited through fork with the initializer's arguments, never pickled
+
+
 def _run_job(i: int):
     fn, jobs = _FORKED_WORK
     return fn(jobs[i])
 
 
-def parallel_map(fn, jobs: list, *, workers: int, bar) -> list:
-    """[fn(j) for j in jobs], in order, on `workers` forked processes; the result never depends on
-    `workers`, because every job carries its own seed. Falls back to one process without fork.
-    `fn` is inherited through fork, not pickled, so a function defined in a script or notebook works.
-    `bar` (a tqdm bar, or None) advances once per job and is left open for the caller to close."""
+def imap(fn, jobs: list, *, workers: int, ordered: bool = True, chunksize: int | None = None):
+    """fn(job) for each job, yielded as they finish (in job order when `ordered`), on `workers` forked
+    processes; in this process without fork or with one worker. The results never depend on `workers`:
+    every job carries its own seed. `fn` reaches the workers through fork, not pickling, so a function
+    defined in a script or a notebook works."""
     import multiprocessing as mp
 
-    from ch37.demos import progress
+    jobs = list(jobs)
+    if workers <= 1 or len(jobs) <= 1 or "fork" not in mp.get_all_start_methods():
+        yield from map(fn, jobs)
+        return
+    with _forking():
+        pool = mp.get_context("fork").Pool(
+            min(workers, len(jobs)), initializer=_pool_init, initargs=(os.getpid(), fn, jobs)
+        )
+    with pool:
+        get = pool.imap if ordered else pool.imap_unordered
+        yield from get(_run_job, range(len(jobs)), chunksize=chunksize or max(1, len(jobs) // (4 * workers)))
 
-    global _FORKED_WORK
-    bar = bar if bar is not None else progress(None, total=len(jobs), desc="", quiet=True)
+
+def parallel_map(fn, jobs: list, *, workers: int, bar=None) -> list:
+    """[fn(j) for j in jobs], in order, on `workers` forked processes (see imap); `bar` (a tqdm bar,
+    or None) advances once per job and is left open for the caller to close."""
     out = []
-    if workers > 1 and len(jobs) > 1 and "fork" in mp.get_all_start_methods():
-        _FORKED_WORK = (fn, jobs)
-        try:
-            with _forking():
-                pool = mp.get_context("fork").Pool(
-                    min(workers, len(jobs)), initializer=worker_setup, initargs=(os.getpid(),)
-                )
-            with pool:
-                for r in pool.imap(_run_job, range(len(jobs)), chunksize=max(1, len(jobs) // (4 * workers))):
-                    out.append(r)
-                    bar.update()
-        finally:
-            _FORKED_WORK = ()
-    else:
-        for j in jobs:
-            out.append(fn(j))
+    for r in imap(fn, jobs, workers=workers):
+        out.append(r)
+        if bar is not None:
             bar.update()
     return out
 

@@ -18,11 +18,11 @@ from importlib.metadata import version
 from pathlib import Path
 
 from ch37 import CODE_FILES, ROOT
-from ch37.cli import NOT_IN_KEY
+from ch37.config import NOT_IN_KEY, RESULT_FILES
 from ch37.errors import DataError
 from ch37.files import sha256_bytes, sweep_leftovers, write_atomic
+from ch37.outputs import claimed
 
-RESULT_FILES = ("metrics.json", "cross_embodiment.json", "scale_data.png", "scale_data.rrd")
 MANIFEST, SUMMARY = "manifest.json", "summary.txt"
 
 
@@ -131,8 +131,6 @@ class ResultCache:
 
     def store(self, written: list[Path], summary: str) -> None:
         """Keep exactly the files this run wrote (`written`, inside --out) and its summary."""
-        from ch37.outputs import claimed
-
         claim = claimed(self.out)
         names = [Path(p).name for p in written]
         if claim is not None and not set(names) <= claim.written:

@@ -1,0 +1,135 @@
+"""The chapter's behaviour-cloning recipe: the one home of the network, the training loop, the rollout
+and the numbers a result is read with. scale_data.py's measure region, the Scale Lab and the tools
+all import it, so they train and score exactly what the lesson does.
+
+    init = init_weights(hidden_dim, seed)                   # every arm starts from these
+    pols, fits = train([(states, actions), ...], steps, init, batch_size=128, lr=1e-3, seed=0)
+    rate = evaluate(pols[0], eval_seeds)                    # success on held-out PushT starts
+    lo, hi = wilson(rate, len(eval_seeds))                  # its 95% interval
+    covered, outside = cells(block_xy)                      # spawn-annulus cells a set of starts covers
+
+Shapes: a state is PushT's observation (10 numbers, see pusht_env.py), an action its pusher
+velocity (2 numbers, m/s). Everything here is a pure function of its arguments.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+import pusht_env
+from ch37.ensemble import BatchOrder, MLPStack
+from ch37.parallel import LockstepEnvs, progress
+
+
+def mlp(hidden: int) -> torch.nn.Sequential:  # the BC network: 10 -> hidden -> hidden -> 2, ReLU
+    return torch.nn.Sequential(
+        torch.nn.Linear(pusht_env.OBS_DIM, hidden),
+        torch.nn.ReLU(),
+        torch.nn.Linear(hidden, hidden),
+        torch.nn.ReLU(),
+        torch.nn.Linear(hidden, pusht_env.ACT_DIM),
+    )
+
+
+class BCPolicy(torch.nn.Module):
+    """The network with min-max normalization of its own training data held in buffers."""
+
+    def __init__(self, states, actions, net):
+        super().__init__()
+        self.net = net
+        for name, x in (("s", states), ("a", actions)):  # min-max ranges of the arm's own data
+            lo, hi = torch.as_tensor(x.min(0)), torch.as_tensor(x.max(0))
+            self.register_buffer(f"{name}_lo", lo)
+            self.register_buffer(f"{name}_span", torch.where(hi - lo > 1e-6, hi - lo, torch.ones_like(lo)))
+
+    def norm_s(self, s):  # -> [-1, 1]
+        return 2 * (s - self.s_lo) / self.s_span - 1
+
+    def norm_a(self, a):
+        return 2 * (a - self.a_lo) / self.a_span - 1
+
+    def forward(self, s):  # raw state (B, 10) -> raw action (B, 2), m/s
+        return (self.net(self.norm_s(s)) + 1) / 2 * self.a_span + self.a_lo
+
+
+def init_weights(hidden: int, seed: int) -> dict:
+    """The initial weights every arm of a comparison starts from: a pure function of (hidden, seed)."""
+    torch.manual_seed(seed)
+    return mlp(hidden).state_dict()
+
+
+def train(
+    datasets, steps: int, init: dict, *, batch_size: int, lr: float, seed: int, device="cpu", quiet=True
+):
+    """One BCPolicy per (states, actions) in `datasets`, trained side by side for exactly `steps`
+    steps of `batch_size` rows from the weights `init`, every arm with the same batch-order seed.
+    Returns the policies and each one's final MSE on its own (normalized) data."""
+    device = torch.device(device)
+    hidden = init["0.weight"].shape[0]
+    pols = [BCPolicy(x, y, mlp(hidden)).to(device) for x, y in datasets]
+    tensors = [  # normalized once, not per batch
+        (p.norm_s(torch.as_tensor(x, device=device)), p.norm_a(torch.as_tensor(y, device=device)))
+        for p, (x, y) in zip(pols, datasets)
+    ]
+    orders = [BatchOrder(len(x), batch_size, seed) for x, _ in tensors]  # same seed for every arm
+    model = MLPStack([init] * len(pols)).to(device)  # arm e = slice e of every weight (ch37.ensemble)
+    opt = torch.optim.Adam(model.parameters(), lr=lr, fused=device.type in ("cpu", "cuda"))  # one kernel
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=steps)  # lr cosine-decayed to 0
+    bar = progress(None, total=steps, desc="train", quiet=quiet)
+    for _ in range(steps):
+        idx = [o.next() for o in orders]
+        xb = torch.stack([x[i] for (x, _), i in zip(tensors, idx)])  # (arms, B, 10)
+        yb = torch.stack([y[i] for (_, y), i in zip(tensors, idx)])  # (arms, B, 2)
+        loss = ((model(xb) - yb) ** 2).mean(dim=(1, 2)).sum()  # each arm's MSE; the sum keeps them apart
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        bar.update()
+    bar.close()
+    with torch.no_grad():  # fit on each arm's whole training set, a digit-level fingerprint of the run
+        nets = [model.load_into(p.net, e) for e, p in enumerate(pols)]
+        fits = [torch.nn.functional.mse_loss(net(x), y).item() for net, (x, y) in zip(nets, tensors)]
+    return [p.eval() for p in pols], fits
+
+
+@torch.no_grad()
+def evaluate(pol, seeds, *, workers: int = 1) -> float:
+    """Success rate of `pol` on PushT starts env.reset(seed), all episodes stepped in lockstep, their
+    physics on `workers` processes (1: in this process); the rate never depends on `workers`."""
+    device = next(pol.buffers()).device
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # a (N, 10) batch needs no second thread; leave the cores to the physics workers
+    with LockstepEnvs(pusht_env.PushTEnv, seeds, workers=workers) as envs:
+        obs = envs.reset()  # (N, 10)
+        live, success = np.ones(len(seeds), bool), np.zeros(len(seeds), bool)
+        while live.any():
+            idx = np.flatnonzero(live)
+            act = pol(torch.as_tensor(obs[idx], device=device)).cpu().numpy()  # one call for every live env
+            obs[idx], done, success[idx] = envs.step(idx, act)
+            live[idx] = ~done
+    torch.set_num_threads(threads)
+    return float(success.mean())
+
+
+def wilson(p_hat: float, n: int, z: float = 1.96) -> list[float]:  # 95% interval of a rate over n episodes
+    centre = (p_hat + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p_hat * (1 - p_hat) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return [max(0.0, centre - half), min(1.0, centre + half)]
+
+
+# Coverage: the spawn annulus split into rings by radius and sectors by angle.
+RINGS, SECTORS = 3, 12
+R_MIN, R_MAX = pusht_env.SPAWN_R_MIN, pusht_env.SPAWN_R_MAX  # m, the spawn annulus
+ANNULUS = (R_MIN, R_MAX, RINGS, SECTORS)
+
+
+def cells(starts) -> tuple[set, int]:  # (N, 2) block xy -> {(ring, sector)} inside, and the count outside
+    r, th = np.hypot(starts[:, 0], starts[:, 1]), np.arctan2(starts[:, 1], starts[:, 0]) % (2 * np.pi)
+    inside = (r >= R_MIN) & (r <= R_MAX)
+    ring = np.minimum(((r - R_MIN) / (R_MAX - R_MIN) * RINGS).astype(int), RINGS - 1)
+    sector = np.minimum((th / (2 * np.pi) * SECTORS).astype(int), SECTORS - 1)
+    return {(int(i), int(j)) for i, j, ok in zip(ring, sector, inside) if ok}, int((~inside).sum())
