@@ -26,7 +26,7 @@ resolve against resolve_fixed reads data apart from compute.
 Every task is a pure function of its arguments with one torch thread, so local processes (the
 default) and Ray (--ray, --ray ADDRESS) give the same scale_lab.json, up to its "seconds" fields.
 
-Run:    python scale_lab.py                          (the full lab; see the README for its wall time)
+Run:    python scale_lab.py                          (the full lab; docs/scale_lab.md has its wall time)
         python scale_lab.py --n 12 108               (two points)
         python scale_lab.py --ray [ADDRESS]          (on a private local Ray, or a cluster)
 Smoke:  python scale_lab.py --smoke                  (seconds; N = 12, 24, 36, seeds 0 and 1)
@@ -34,150 +34,91 @@ Smoke:  python scale_lab.py --smoke                  (seconds; N = 12, 24, 36, s
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
-import sys
 import time
+from argparse import BooleanOptionalAction
 from pathlib import Path
 
-from ch37.errors import DataError, run_main
+from ch37 import config
+from ch37.config import CHAPTER as D
+from ch37.errors import DataError, main
+from ch37.seeds import MAX_SEED, SEED_BLOCK
 
 CURVES = ("fresh", "resolve", "replay", "resolve_fixed")
 MODES = ("resolve", "replay")  # the engine modes behind the generated curves
-SOURCES = 12  # the chapter's --source_episodes: the seed set every generated curve grows from
-FIXED_N = 108  # the chapter's default point: 12 sources + 8 re-solves each; its steps are the fixed budget
-SMOKE_DEFAULTS = dict(n=[12, 24, 36], seeds=[0, 1], eval_episodes=4, hidden_dim=32, epochs=5, batch_size=64)
+SOURCES = D.source_episodes  # the seed set every generated curve grows from
+FIXED_N = SOURCES * (1 + D.aug_per_demo)  # the chapter's default point (108): its steps are the fixed budget
+SMOKE = dict(n=[12, 24, 36], seeds=[0, 1], eval_episodes=4, hidden_dim=32, epochs=5, batch_size=64)
+INTERVAL = "per point: Wilson 95% over its eval starts; per curve: Wilson over all seeds' episodes pooled"
 RESULTS = ("scale_lab.json", "scale_lab.png", "scale_lab.rrd")
+SHAPING = tuple(
+    "n seeds eval_episodes epochs batch_size lr hidden_dim pos_sigma yaw_sigma replay_tries smoke".split()
+)
 
 
 # --- 1. parse ---------------------------------------------------------------------------------------
-def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
+def parser():
+    p = config.parser(__doc__.split("\n\n")[0])
     flag = p.add_argument
-    flag(
-        "--n",
-        type=int,
-        nargs="+",
-        default=[12, 36, 108, 324, 972],
-        help="total demos per point; >= 12 and N - 12 divisible by 12 (12 sources, equal growth each)",
-    )
-    flag(
-        "--seeds",
-        type=int,
-        nargs="+",
-        default=[0, 1, 2],
-        help="seeds >= 0; each draws its own demos and eval starts, disjoint from the others'",
-    )
-    flag(
-        "--eval_episodes",
-        type=int,
-        default=100,
-        help="held-out starts per point (the chapter's 50 are the first 50); 100: +-0.1 at worst",
-    )
-    flag("--epochs", type=int, default=500, help="passes over the resolve set at N that make N's step budget")
-    flag("--batch_size", type=int, default=128, help="frames per gradient step (the chapter's)")
-    flag("--lr", type=float, default=1e-3, help="Adam learning rate, cosine-decayed to 0 (the chapter's)")
-    flag(
-        "--hidden_dim",
-        type=int,
-        default=512,
-        help="width of both hidden layers of the BC MLP (the chapter's)",
-    )
-    flag(
-        "--pos_sigma",
-        type=float,
-        default=0.08,
-        help="m; the engine's block and pusher xy noise (the chapter's)",
-    )
-    flag("--yaw_sigma", type=float, default=0.5, help="rad; the engine's block yaw noise (the chapter's)")
-    flag(
-        "--replay_tries",
-        type=int,
-        default=10,
-        help="replay attempts per wanted demo before a source gives up (yield is ~2%% at these sigmas)",
-    )
+    flag("--n", type=int, nargs="+", default=[12, 36, 108, 324, 972], help="total demos per point (N)")
+    flag("--seeds", type=int, nargs="+", default=[0, 1, 2], help="each draws disjoint demos and eval starts")
+    flag("--eval_episodes", type=int, default=100, help="held-out starts per point; 100: +-0.1 at worst")
+    flag("--epochs", type=int, default=D.epochs, help="passes over the resolve set at N: N's step budget")
+    flag("--batch_size", type=int, default=D.batch_size, help="frames per gradient step (the chapter's)")
+    flag("--lr", type=float, default=D.lr, help="Adam learning rate, cosine-decayed to 0 (the chapter's)")
+    flag("--hidden_dim", type=int, default=D.hidden_dim, help="width of both hidden layers of the BC MLP")
+    flag("--pos_sigma", type=float, default=D.aug_pos_sigma, help="m; the engine's block and pusher xy noise")
+    flag("--yaw_sigma", type=float, default=D.aug_yaw_sigma, help="rad; the engine's block yaw noise")
+    flag("--replay_tries", type=int, default=10, help="replay attempts per wanted demo (yield ~2%% here)")
     flag("--out", type=Path, help="output folder (default outputs/scale_lab, -smoke appended with --smoke)")
     flag(
         "--workers",
         type=int,
         default=os.cpu_count() or 1,
-        help="local processes, or CPUs of a local Ray (default: cores); same results",
+        help="local processes or a local Ray's CPUs; same results",
     )
-    flag(
-        "--ray",
-        nargs="?",
-        const="local",
-        metavar="ADDRESS",
-        help="run on Ray: alone, a private local Ray with --workers CPUs; with ADDRESS, join that cluster",
-    )
-    flag("--rerun", action=argparse.BooleanOptionalAction, default=True, help="write scale_lab.rrd")
-    flag(
-        "--smoke",
-        action="store_true",
-        help="tiny settings for tests (seconds): N 12 24 36, seeds 0 1, 4 starts; explicit flags win",
-    )
+    flag("--ray", nargs="?", const="local", metavar="ADDRESS", help="a private local Ray, or join ADDRESS")
+    flag("--rerun", action=BooleanOptionalAction, default=True, help="write scale_lab.rrd")
+    flag("--smoke", action="store_true", help="tiny settings for tests (seconds); explicit flags win")
     return p
 
 
-def parse(argv=None) -> argparse.Namespace:
+def parse(argv=None):
     """The flags, checked; a problem is a DataError (one line, exit 2)."""
     p = parser()
-
-    def error(msg):
-        raise DataError(f"{msg} (see --help)")
-
-    p.error = error
     a = p.parse_args(argv)
     if a.smoke:
-        p.set_defaults(**SMOKE_DEFAULTS)
+        p.set_defaults(**SMOKE)
         a = p.parse_args(argv)
     a.out = a.out if a.out is not None else Path("outputs/scale_lab" + ("-smoke" if a.smoke else ""))
-    if str(a.out).strip() == "":
-        raise DataError("--out must not be empty")
     bad = [n for n in a.n if n < SOURCES or (n - SOURCES) % SOURCES]
     if bad:
         raise DataError(
             f"--n {bad[0]}: every N must be >= {SOURCES} with N - {SOURCES} divisible by {SOURCES} "
             f"({SOURCES} source demos, each grown by the same count), e.g. 12 36 108"
         )
-    a.n = sorted(set(a.n))
-    from ch37.seeds import MAX_SEED, SEED_BLOCK
-
+    a.n, a.seeds = sorted(set(a.n)), sorted(set(a.seeds))
     if any(not 0 <= s <= MAX_SEED for s in a.seeds):
         raise DataError(f"--seeds must be in [0, {MAX_SEED}], got {a.seeds}")
-    a.seeds = sorted(set(a.seeds))
-    for name in ("eval_episodes", "epochs", "batch_size", "hidden_dim", "replay_tries", "workers"):
-        if getattr(a, name) <= 0:
-            raise DataError(f"--{name} must be a positive integer, got {getattr(a, name)}")
+    positive = ("eval_episodes", "epochs", "batch_size", "hidden_dim", "replay_tries", "workers")
+    config.check(a, positive=positive, finite=("pos_sigma", "yaw_sigma", "lr"))
     if max(a.n) > SEED_BLOCK or a.eval_episodes > SEED_BLOCK:
         raise DataError(f"--n and --eval_episodes must be at most {SEED_BLOCK} (one seed block)")
-    for name in ("pos_sigma", "yaw_sigma", "lr"):
-        v = getattr(a, name)
-        if not math.isfinite(v) or v < 0 or (name == "lr" and v == 0):
-            raise DataError(f"--{name} must be a finite {'positive' if name == 'lr' else 'non-negative'} "
-                            f"number, got {v}")  # fmt: skip
     return a
 
 
-def config(a: argparse.Namespace) -> dict:
-    """The settings that shape the numbers (not where they go, nor how fast they come)."""
-    keys = ("n", "seeds", "eval_episodes", "epochs", "batch_size", "lr", "hidden_dim", "pos_sigma",
-            "yaw_sigma", "replay_tries", "smoke")  # fmt: skip
-    return {k: getattr(a, k) for k in keys} | {"sources": SOURCES, "fixed_n": FIXED_N}
-
-
-def command(a: argparse.Namespace) -> str:
+def command(a) -> str:
     """The command that gives these numbers, with only the result-shaping flags that differ from their
     defaults (so the local and the Ray run write the same line)."""
     p = parser()
     if a.smoke:
-        p.set_defaults(**SMOKE_DEFAULTS)
+        p.set_defaults(**SMOKE)
     parts = ["python scale_lab.py"] + (["--smoke"] if a.smoke else [])
-    for k, v in config(a).items():
-        if k in ("smoke", "sources", "fixed_n") or v == p.get_default(k):
-            continue
-        parts.append(f"--{k} " + (" ".join(map(str, v)) if isinstance(v, list) else str(v)))
+    for k in SHAPING[:-1]:
+        v = getattr(a, k)
+        if v != p.get_default(k):
+            parts.append(f"--{k} " + (" ".join(map(str, v)) if isinstance(v, list) else str(v)))
     return " ".join(parts)
 
 
@@ -188,22 +129,11 @@ def per_source(n: int) -> int:
 
 
 def grow(mode: str, seed: int, srcs: dict, per_demo: int, cap: int, pos_sigma: float, yaw_sigma: float):
-    """The data engine's first `per_demo` kept attempts per source in (episode, k) order, in this process.
-
-    Pure: attempt k of source e draws from its own seeded stream (ch37.engine), so the result does not
-    depend on where this runs. Returns (mode, seed, kept episodes, attempts, failures, seconds)."""
+    """The data engine's set for (mode, seed), in this process (a pure function: see ch37.engine)."""
     from ch37 import engine
 
-    t0 = time.perf_counter()
-
-    def run_jobs(jobs):
-        return [engine.attempt(srcs[e], k, seed=seed, pos_sigma=pos_sigma, yaw_sigma=yaw_sigma, mode=mode)
-                for e, k in jobs]  # fmt: skip
-
-    kept, attempts, failures = engine.keep_first(
-        sorted(srcs), per_demo, run_jobs, reasons=engine.FAILURES[mode], cap=cap
-    )
-    return mode, seed, kept, attempts, failures, time.perf_counter() - t0
+    how = dict(seed=seed, pos_sigma=pos_sigma, yaw_sigma=yaw_sigma)
+    return (mode, seed, *engine.grow(srcs, per_demo, mode=mode, cap=cap, **how))
 
 
 def expert_success(seed: int, eval_seeds: list[int]):
@@ -212,24 +142,45 @@ def expert_success(seed: int, eval_seeds: list[int]):
     from ch37.demos import rollout
     from scripted_expert import PushTExpert
 
-    t0 = time.perf_counter()
     env = pusht_env.PushTEnv()
-    wins = sum(rollout(env, PushTExpert(noise=0.0), env.reset(s))["success"] for s in eval_seeds)
-    return "expert", seed, wins, time.perf_counter() - t0
+    return (
+        "expert",
+        seed,
+        sum(rollout(env, PushTExpert(noise=0.0), env.reset(s))["success"] for s in eval_seeds),
+    )
 
 
-def phase1(fn, *args):  # noqa: D401
-    """One phase-1 task (a module-level entry, so Ray and worker processes can import it)."""
-    return fn(*args)
+def generate(a, srcs: dict, eval_seeds: dict, gen_paths: dict, max_per: dict):
+    """Phase 1: the engine's sets, one task per (mode, seed), written as LeRobot sets and read back;
+    the expert's ceiling per seed beside them. Returns (expert wins, generation report, sets)."""
+    from ch37 import engine, executors
+    from ch37.lerobot_io import load_arrays
 
-
-def fresh_demos(path: Path, seed: int, episodes: int) -> str:
-    """Episodes 0..episodes-1 of the chapter's PushT demo generator at `seed` (its private cache)."""
-    from ch37.demos import ensure_demos
-    from gen_demos_pusht import PUSHT
-
-    return ensure_demos(PUSHT, path, user_given=False, episodes=episodes, seed=seed,
-                        noise=PUSHT.default_noise, quiet=True)  # fmt: skip
+    cap = {"resolve": engine.ATTEMPTS_PER_KEPT, "replay": a.replay_tries}
+    tasks = [(grow, m, s, srcs[s], max_per[m], cap[m], a.pos_sigma, a.yaw_sigma) for m, s in gen_paths]
+    tasks += [(expert_success, s, eval_seeds[s]) for s in a.seeds]  # the long ones first
+    expert, generation, generated = {}, {}, {}
+    for got in executors.run(lambda fn, *args: fn(*args), tasks, workers=a.workers, ray=a.ray):
+        if got[0] == "expert":
+            expert[got[1]] = got[2]
+            continue
+        mode, s, kept, attempts, failures = got
+        stamp = {"kind": "augmented", "seed": s, "mode": mode}
+        engine.save(gen_paths[(mode, s)], kept, repo_id=f"local/pusht_{mode}", stamp=stamp)
+        generation.setdefault(mode, {})[str(s)] = {
+            "attempts": attempts,
+            "kept": len(kept),
+            "yield": len(kept) / attempts if attempts else 0.0,
+            "failures": failures,
+            "per_demo_wanted": max_per[mode],
+            "cap": cap[mode] * max_per[mode],
+        }
+        if kept:  # train on what is on disk
+            generated[(mode, s)] = load_arrays(gen_paths[(mode, s)], keys=engine.KEPT_KEYS)
+    for mode, by_seed in sorted(generation.items()):
+        kept_of = ", ".join(f"seed {s} kept {g['kept']}/{g['attempts']}" for s, g in sorted(by_seed.items()))
+        print(f"{mode}: {kept_of}")
+    return expert, {m: dict(sorted(g.items())) for m, g in sorted(generation.items())}, generated
 
 
 # --- 3. train (phase 2) ------------------------------------------------------------------------------
@@ -238,106 +189,41 @@ def train_point(key: tuple, x, y, steps: int, seed: int, eval_seeds: list[int], 
     `eval_seeds`. One torch thread, evaluation in this process: a pure function of its arguments."""
     import torch
 
-    torch.set_num_threads(1)
-    from ch37 import recipe
+    import bc_recipe as bc
 
+    torch.set_num_threads(1)
     t0 = time.perf_counter()
-    r = recipe.load(seed=seed, device="cpu", workers=1, **hp)
-    (pol,), (fit,) = r.train([(x, y)], steps)
-    rate = r.evaluate(pol, eval_seeds)
-    out = {"success": rate, "ci95": r.wilson(rate, len(eval_seeds)), "final_loss": fit}
+    (pol,), (fit,) = bc.train(
+        [(x, y)],
+        steps,
+        bc.init_weights(hp["hidden_dim"], seed),
+        seed=seed,
+        batch_size=hp["batch_size"],
+        lr=hp["lr"],
+    )
+    rate = bc.evaluate(pol, eval_seeds)
+    out = {"success": rate, "ci95": bc.wilson(rate, len(eval_seeds)), "final_loss": fit}
     return key, out | {"seconds": time.perf_counter() - t0}
 
 
-def executor(a: argparse.Namespace, fn, tasks: list):
-    """fn(*task) for every task, results in completion order: local processes or Ray."""
-    from ch37 import executors
+class Data:
+    """The training data of every point: nested prefixes of the fresh and the generated sets."""
 
-    if a.ray is None:
-        return executors.run_local(fn, tasks, workers=a.workers)
-    return executors.run_ray(fn, tasks, address=None if a.ray == "local" else a.ray, workers=a.workers)
+    def __init__(self, a, fresh: dict, generated: dict):
+        self.a, self.fresh, self.generated = a, fresh, generated
 
+    def at(self, curve: str, n: int, s: int):
+        """(states, actions, actual demos) of a curve at nominal N."""
+        import numpy as np
 
-def pooled(successes: list[float], n_each: int, wilson) -> tuple[float, list[float]]:
-    """Mean success over seeds and the Wilson interval of all their episodes pooled."""
-    mean = sum(successes) / len(successes)
-    return mean, wilson(mean, n_each * len(successes))
+        from ch37 import engine
 
-
-def run(a: argparse.Namespace) -> int:
-    t_start = time.perf_counter()
-    from ch37.outputs import claim
-
-    demos_dir = a.out / "demos"
-    max_n = max(a.n)
-    max_per = {"resolve": max(per_source(max_n), per_source(FIXED_N)), "replay": per_source(max_n)}
-    fresh_paths = {s: demos_dir / f"pusht_seed{s}_ep{max_n}" for s in a.seeds}
-    gen_paths = {(m, s): demos_dir / f"pusht_{m}_seed{s}_src{SOURCES}_per{max_per[m]}"
-                 for m in MODES for s in a.seeds if max_per[m] > 0}  # fmt: skip
-    claim(a.out, results=RESULTS, reuses=list(fresh_paths.values()), replaces=list(gen_paths.values()))
-    import numpy as np
-
-    import scale_lab as lab  # this file as a module: its functions are what workers and Ray import
-    from ch37 import engine
-    from ch37.files import dump_json, round_floats, write_atomic
-    from ch37.lerobot_io import load_arrays
-    from ch37.seeds import env_seed
-    from ch37.stamps import MADE_BY, replace_own_dir
-
-    where = "local processes" if a.ray is None else f"ray {a.ray}"
-    print(f"scale lab: N {a.n}, seeds {a.seeds}, {a.eval_episodes} eval starts, on {where} ({a.workers})")
-    eval_seeds = {s: [env_seed(s, "eval", j) for j in range(a.eval_episodes)] for s in a.seeds}
-
-    # fresh demo sets: files on this machine, made here (or found in the chapter's demo cache)
-    t0 = time.perf_counter()
-    fresh = {}
-    for s in a.seeds:
-        how = fresh_demos(fresh_paths[s], s, max_n)
-        fresh[s] = load_arrays(fresh_paths[s], keys=("observation.state", "action", "episode_index"))
-        print(f"fresh demos, seed {s}: {max_n} episodes, {len(fresh[s]['action'])} frames ({how})")
-    print(f"fresh demos ready in {time.perf_counter() - t0:.1f} s")
-
-    # phase 1: the engine's sets, one task per (mode, seed), and the expert's ceiling per seed
-    t0 = time.perf_counter()
-    srcs = {s: engine.sources({k: v[fresh[s]["episode_index"] < SOURCES] for k, v in fresh[s].items()})
-            for s in a.seeds}  # fmt: skip
-    tasks = [(lab.expert_success, s, eval_seeds[s]) for s in a.seeds]
-    cap = {"resolve": engine.ATTEMPTS_PER_KEPT, "replay": a.replay_tries}
-    tasks += [(lab.grow, m, s, srcs[s], max_per[m], cap[m], a.pos_sigma, a.yaw_sigma)
-              for m, s in gen_paths]  # fmt: skip
-    tasks.sort(key=lambda t: t[0] is lab.expert_success)  # the long ones first
-    expert, generation, kept_sets = {}, {}, {}
-    for got in lab.executor(a, lab.phase1, tasks):
-        if got[0] == "expert":
-            expert[got[1]] = got[2]
-            continue
-        mode, s, kept, attempts, failures, _ = got
-        path = gen_paths[(mode, s)]
-        replace_own_dir(path)
-        if kept:
-            stamp = {"made_by": MADE_BY, "kind": "augmented", "seed": s, "mode": mode}
-            engine.write_kept(path, kept, repo_id=f"local/pusht_{mode}", stamp=stamp)
-        generation.setdefault(mode, {})[str(s)] = {
-            "attempts": attempts, "kept": len(kept), "yield": len(kept) / attempts if attempts else 0.0,
-            "failures": failures, "per_demo_wanted": max_per[mode],
-            "cap": cap[mode] * max_per[mode],
-        }  # fmt: skip
-        kept_sets[(mode, s)] = len(kept)
-    keys = ("observation.state", "action", "episode_index", "aug.source_episode")
-    generated = {ms: load_arrays(gen_paths[ms], keys=keys) for ms, k in kept_sets.items() if k}  # on disk
-    for mode, by_seed in generation.items():
-        kept_of = ", ".join(f"seed {s} kept {g['kept']}/{g['attempts']}" for s, g in by_seed.items())
-        print(f"{mode}: {kept_of}")
-    print(f"generated in {time.perf_counter() - t0:.1f} s")
-
-    def data(curve: str, n: int, s: int):
-        """(states, actions, actual demos) of a curve at nominal N: nested prefixes of the sets above."""
-        f = fresh[s]
+        f = self.fresh[s]
         if curve == "fresh" or n == SOURCES:
             rows = f["episode_index"] < n
             return f["observation.state"][rows], f["action"][rows], n
         src = f["episode_index"] < SOURCES
-        g = generated.get(("resolve" if curve == "resolve_fixed" else curve, s))
+        g = self.generated.get(("resolve" if curve == "resolve_fixed" else curve, s))
         if g is None:
             return f["observation.state"][src], f["action"][src], SOURCES
         rows = engine.first_per_source(g["episode_index"], g["aug.source_episode"], per_source(n))
@@ -345,85 +231,117 @@ def run(a: argparse.Namespace) -> int:
         y = np.concatenate([f["action"][src], g["action"][rows]])
         return x, y, SOURCES + len(np.unique(g["episode_index"][rows]))
 
-    def steps_at(n: int, s: int) -> int:
-        frames = len(data("resolve", n, s)[0])
-        return math.ceil(a.epochs * frames / a.batch_size)
+    def steps_at(self, n: int, s: int) -> int:  # the budget at N: --epochs passes over the resolve set
+        return math.ceil(self.a.epochs * len(self.at("resolve", n, s)[0]) / self.a.batch_size)
 
-    # phase 2: one task per distinct (data, steps, seed); the same data and steps are trained once
+    def points(self):
+        """Every (curve, N, seed) point and the distinct (data, steps, seed) runs behind them."""
+        a, points, units = self.a, [], {}
+        for s in a.seeds:
+            fixed = self.steps_at(FIXED_N, s)
+            for curve in CURVES:
+                for n in a.n:
+                    x, y, demos = self.at(curve, n, s)
+                    if curve == "resolve_fixed":
+                        steps = fixed
+                    elif demos < n:  # replay fell short of N: --epochs passes over the demos it kept
+                        steps = math.ceil(a.epochs * len(x) / a.batch_size)
+                    else:
+                        steps = self.steps_at(n, s)
+                    if curve == "fresh" or demos == SOURCES:  # N = 12, or an engine that kept nothing
+                        same = ("fresh", demos)
+                    else:
+                        same = ("resolve" if curve == "resolve_fixed" else curve, n)
+                    unit = (*same, s, steps)
+                    units.setdefault(unit, (x, y))
+                    points.append(
+                        {
+                            "curve": curve,
+                            "n": n,
+                            "demos": demos,
+                            "seed": s,
+                            "frames": len(x),
+                            "steps": steps,
+                            "unit": unit,
+                        }
+                    )
+        return points, units
+
+
+def train_all(a, points: list, units: dict, eval_seeds: dict) -> dict:
+    """Phase 2: one task per distinct run, largest budget first (so the last task is short)."""
+    from ch37 import executors
+
     hp = {"hidden_dim": a.hidden_dim, "batch_size": a.batch_size, "lr": a.lr}
-    points, units = [], {}
-    for s in a.seeds:
-        fixed = steps_at(FIXED_N, s)
-        for curve in CURVES:
-            for n in a.n:
-                x, y, demos = data(curve, n, s)
-                if curve == "resolve_fixed":
-                    steps = fixed
-                elif demos < n:  # replay fell short of N: --epochs passes over the demos it kept
-                    steps = math.ceil(a.epochs * len(x) / a.batch_size)
-                else:
-                    steps = steps_at(n, s)
-                if curve == "fresh" or demos == SOURCES:  # N = 12, or an engine that kept nothing
-                    same = ("fresh", demos)
-                else:
-                    same = ("resolve" if curve == "resolve_fixed" else curve, n)
-                unit = (*same, s, steps)
-                units.setdefault(unit, (x, y))
-                points.append({"curve": curve, "n": n, "demos": demos, "seed": s, "frames": len(x),
-                               "steps": steps, "unit": unit})  # fmt: skip
-    order = sorted(units, key=lambda u: (-u[3], u))  # largest budget first: the last task is short
+    order = sorted(units, key=lambda u: (-u[3], u))
     tasks = [(u, units[u][0], units[u][1], u[3], u[2], eval_seeds[u[2]], hp) for u in order]
     print(f"training: {len(points)} points, {len(tasks)} distinct runs, {sum(u[3] for u in order):,} steps")
-    t0 = time.perf_counter()
     results = {}
-    for i, (u, r) in enumerate(lab.executor(a, lab.train_point, tasks), 1):
+    for i, (u, r) in enumerate(executors.run(train_point, tasks, workers=a.workers, ray=a.ray), 1):
         results[tuple(u)] = r
         names = ", ".join(f"{p['curve']} N={p['n']}" for p in points if p["unit"] == u)
-        print(f"  [{i}/{len(tasks)}] seed {u[2]}, {u[3]} steps: {names}: success {r['success']:.2f} "
-              f"({r['seconds']:.1f} s)", flush=True)  # fmt: skip
-    t_train = time.perf_counter() - t0
+        print(
+            f"  [{i}/{len(tasks)}] seed {u[2]}, {u[3]} steps: {names}: success {r['success']:.2f} "
+            f"({r['seconds']:.1f} s)",
+            flush=True,
+        )
+    return results
 
-    # --- 4. emit ------------------------------------------------------------------------------------
-    from ch37.recipe import interval
 
-    wilson = interval()  # the measure region's Wilson interval
-    for p in points:
-        p.update(results[p.pop("unit")])
-    points.sort(key=lambda p: (CURVES.index(p["curve"]), p["n"], p["seed"]))
+# --- 4. emit ------------------------------------------------------------------------------------------
+def pooled(successes: list[float], n_each: int) -> tuple[float, list[float]]:
+    """Mean success over seeds and the Wilson interval of all their episodes pooled."""
+    from bc_recipe import wilson
+
+    mean = sum(successes) / len(successes)
+    return mean, wilson(mean, n_each * len(successes))
+
+
+def curves_of(a, points: list) -> dict:
     curves = {}
     for curve in CURVES:
-        rows = {}
+        curves[curve] = {}
         for n in a.n:
             pts = [p for p in points if p["curve"] == curve and p["n"] == n]
-            mean, ci = pooled([p["success"] for p in pts], a.eval_episodes, wilson)
-            rows[str(n)] = {
+            mean, ci = pooled([p["success"] for p in pts], a.eval_episodes)
+            curves[curve][str(n)] = {
                 "success": mean,
                 "ci95": ci,
                 "demos": sum(p["demos"] for p in pts) / len(pts),
                 "steps": [p["steps"] for p in pts],
                 "frames": [p["frames"] for p in pts],
             }
-        curves[curve] = rows
-    ceiling = {str(s): expert[s] / a.eval_episodes for s in a.seeds}
-    e_mean, e_ci = pooled(list(ceiling.values()), a.eval_episodes, wilson)
-    result = {
-        "kind": "scale_lab",
-        "command": command(a),
-        "config": config(a),
-        "smoke": a.smoke,
-        "fixed_steps": {str(s): steps_at(FIXED_N, s) for s in a.seeds},
-        "expert": {"per_seed": ceiling, "success": e_mean, "ci95": e_ci},
-        "generation": generation,
-        "curves": curves,
-        "points": points,
-        "interval": "per point: Wilson 95% over its eval starts; per curve: Wilson over all seeds' "
-        "episodes pooled",
-        "seconds": {"total": time.perf_counter() - t_start, "train": t_train},
-    }
-    result = round_floats(result, 6)
-    written = [write_atomic(a.out / "scale_lab.json", dump_json(result))]
-    from ch37 import viz
+    return curves
 
+
+def emit(a, points, results, expert, generation, data, t_start, t_train) -> None:
+    """scale_lab.json (sorted, rounded, atomic), the figure and the recording, and the curves printed."""
+    from ch37 import viz
+    from ch37.files import dump_json, round_floats, write_atomic
+
+    for p in points:
+        p.update(results[p.pop("unit")])
+    points.sort(key=lambda p: (CURVES.index(p["curve"]), p["n"], p["seed"]))
+    curves = curves_of(a, points)
+    ceiling = {str(s): expert[s] / a.eval_episodes for s in a.seeds}
+    e_mean, e_ci = pooled(list(ceiling.values()), a.eval_episodes)
+    result = round_floats(
+        {
+            "kind": "scale_lab",
+            "command": command(a),
+            "smoke": a.smoke,
+            "config": {k: getattr(a, k) for k in SHAPING} | {"sources": SOURCES, "fixed_n": FIXED_N},
+            "fixed_steps": {str(s): data.steps_at(FIXED_N, s) for s in a.seeds},
+            "expert": {"per_seed": ceiling, "success": e_mean, "ci95": e_ci},
+            "generation": generation,
+            "curves": curves,
+            "points": points,
+            "interval": INTERVAL,
+            "seconds": {"total": time.perf_counter() - t_start, "train": t_train},
+        },
+        6,
+    )
+    written = [write_atomic(a.out / "scale_lab.json", dump_json(result))]
     written.append(viz.scale_lab_figure(a.out / "scale_lab.png", result))
     if a.rerun:
         written.append(viz.scale_lab_recording(a.out / "scale_lab.rrd", result))
@@ -431,12 +349,58 @@ def run(a: argparse.Namespace) -> int:
     for curve, rows in curves.items():
         print(f"  {curve:13s} " + "  ".join(f"{n}: {r['success']:.2f}" for n, r in rows.items()))
     print(f"finished in {time.perf_counter() - t_start:.0f} s; wrote " + ", ".join(map(str, written)))
+
+
+def run(a) -> int:
+    t_start = time.perf_counter()
+    from ch37 import engine
+    from ch37.lerobot_io import load_arrays
+    from ch37.outputs import claim
+    from ch37.seeds import env_seed
+
+    max_n = max(a.n)
+    max_per = {"resolve": max(per_source(max_n), per_source(FIXED_N)), "replay": per_source(max_n)}
+    fresh_paths = {s: a.out / "demos" / f"pusht_seed{s}_ep{max_n}" for s in a.seeds}
+    gen_paths = {
+        (m, s): a.out / "demos" / f"pusht_{m}_seed{s}_src{SOURCES}_per{max_per[m]}"
+        for m in MODES
+        for s in a.seeds
+        if max_per[m] > 0
+    }
+    claim(a.out, results=RESULTS, reuses=list(fresh_paths.values()), replaces=list(gen_paths.values()))
+    where = "local processes" if a.ray is None else f"ray {a.ray}"
+    print(f"scale lab: N {a.n}, seeds {a.seeds}, {a.eval_episodes} eval starts, on {where} ({a.workers})")
+    eval_seeds = {s: [env_seed(s, "eval", j) for j in range(a.eval_episodes)] for s in a.seeds}
+    fresh = {}
+    for s in a.seeds:  # fresh demo sets: made here, or found in the chapter's demo cache
+        how = fresh_demos(fresh_paths[s], s, max_n)
+        fresh[s] = load_arrays(fresh_paths[s], keys=("observation.state", "action", "episode_index"))
+        print(f"fresh demos, seed {s}: {max_n} episodes, {len(fresh[s]['action'])} frames ({how})")
+    t0 = time.perf_counter()
+    srcs = {
+        s: engine.sources({k: v[fresh[s]["episode_index"] < SOURCES] for k, v in fresh[s].items()})
+        for s in a.seeds
+    }
+    expert, generation, generated = generate(a, srcs, eval_seeds, gen_paths, max_per)
+    print(f"generated in {time.perf_counter() - t0:.1f} s")
+    data = Data(a, fresh, generated)
+    points, units = data.points()
+    t0 = time.perf_counter()
+    results = train_all(a, points, units, eval_seeds)
+    t_train = time.perf_counter() - t0
+    emit(a, points, results, expert, generation, data, t_start, t_train)
     return 0
 
 
-def main(argv=None) -> int:
-    return run_main(lambda: run(parse(argv)))
+def fresh_demos(path: Path, seed: int, episodes: int) -> str:
+    """Episodes 0..episodes-1 of the chapter's PushT demo generator at `seed` (its private cache)."""
+    from ch37.demos import ensure_demos
+    from gen_demos_pusht import PUSHT
+
+    return ensure_demos(
+        PUSHT, path, user_given=False, episodes=episodes, seed=seed, noise=PUSHT.default_noise, quiet=True
+    )
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main(lambda argv: run(parse(argv)))
