@@ -124,9 +124,14 @@ sets = {}
 for emb, given in ((PUSHT, args.pusht_data), (ALOHA, args.aloha_data)):
     path = given or args.out / "demos" / f"{emb.name}_seed{args.seed}_ep{args.source_episodes}"
     how = ensure_demos(
-        emb, path, user_given=given is not None, episodes=args.source_episodes, seed=args.seed,
-        noise=emb.default_noise, quiet=args.smoke,
-    )  # fmt: skip
+        emb,
+        path,
+        user_given=given is not None,
+        episodes=args.source_episodes,
+        seed=args.seed,
+        noise=emb.default_noise,
+        quiet=args.smoke,
+    )
     d = load_arrays(path)  # read back through LeRobotDataset, as any LeRobot user would
     sets[emb.name] = dict(d, path=path, emb=emb)
     lo, hi = d["action"].min(0), d["action"].max(0)
@@ -160,9 +165,8 @@ for emb_id, demo in enumerate(sets.values()):
     n_rows, act_dim = act.shape
     pile["state"].append(state.astype(np.float32))
     pile["action"].append(np.pad(act, ((0, 0), (0, PAD - act_dim))).astype(np.float32))  # (N, 6) zero-padded
-    pile["mask"].append(
-        np.repeat((np.arange(PAD) < act_dim).astype(np.float32)[None], n_rows, 0)
-    )  # (N, 6) 1 = real
+    real = (np.arange(PAD) < act_dim).astype(np.float32)  # (6,) 1 = a real dim, 0 = padding
+    pile["mask"].append(np.repeat(real[None], n_rows, 0))  # (N, 6)
     pile["emb_id"].append(np.full(n_rows, emb_id, np.int64))
 pile = {k: np.concatenate(v) for k, v in pile.items()}
 STATE_DIM = pile["state"].shape[1]  # 10 for both robots: the same width, different meanings
@@ -240,10 +244,16 @@ bar = progress(None, total=wanted, desc=f"augment ({args.aug_mode})", quiet=args
 #   re-solve  put the simulator there; the noise-free expert solves it in the real physics
 #             (replay: transform the source path into the new block pose, execute it open-loop)
 #   keep      the demo, with its provenance, only if the env reports success (else the reason)
+perturb = dict(seed=args.seed, pos_sigma=args.aug_pos_sigma, yaw_sigma=args.aug_yaw_sigma)  # m, rad
 kept, attempts, failures = engine.grow(
-    sources, args.aug_per_demo, mode=args.aug_mode, cap=args.aug_tries, workers=args.workers, bar=bar,
-    seed=args.seed, pos_sigma=args.aug_pos_sigma, yaw_sigma=args.aug_yaw_sigma,
-)  # fmt: skip
+    sources,
+    args.aug_per_demo,
+    mode=args.aug_mode,
+    cap=args.aug_tries,
+    workers=args.workers,
+    bar=bar,
+    **perturb,
+)
 bar.close()
 yield_ = len(kept) / attempts if attempts else 0.0
 print(
@@ -254,9 +264,8 @@ if attempts > len(kept):  # the success filter at work: what it threw away, and 
     print(f"  the success filter rejected {attempts - len(kept)} of {attempts} attempts: {why}")
 aug_path = args.out / "demos" / cli.aug_dir_name(args.seed, len(sources), args.aug_per_demo, args.aug_mode)
 engine.save(aug_path, kept, repo_id="local/pusht_aug", stamp={"kind": "augmented", "seed": args.seed})
-aug = (
-    load_arrays(aug_path, keys=engine.KEPT_KEYS) if kept else engine.empty_kept()
-)  # train on what is on disk
+# train on what is on disk: the kept demos read back as any LeRobot user would
+aug = load_arrays(aug_path, keys=engine.KEPT_KEYS) if kept else engine.empty_kept()
 # --- endregion ---
 
 # --- region: measure ---
@@ -283,21 +292,20 @@ budgets = {  # gradient steps: --epochs passes over a data set, --batch_size row
 }
 eval_seeds = [env_seed(args.seed, "eval", j) for j in range(args.eval_episodes)]  # disjoint from demos
 init = bc.init_weights(args.hidden_dim, args.seed)  # every arm of both budgets starts from these
+recipe = dict(batch_size=args.batch_size, lr=args.lr, seed=args.seed, device=device)
 arms = {}
 for budget, steps in budgets.items():
     t0 = time.perf_counter()
-    pols, fits = bc.train(  # both data arms of this budget, side by side
-        list(data.values()), steps, init, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
-        device=device, quiet=args.smoke,
-    )  # fmt: skip
+    # both data arms of this budget, side by side: same steps, same init, same batch order
+    pols, fits = bc.train(list(data.values()), steps, init, quiet=args.smoke, **recipe)
     for (name, (x, _)), pol, fit in zip(data.items(), pols, fits):
         rate = bc.evaluate(pol, eval_seeds, workers=args.workers)
         arms[f"{name}_{budget}"] = {"data": name, "budget": budget, "frames": len(x), "steps": steps,
                                     "final_loss": round(fit, 6), "success": rate,
                                     "ci95": bc.wilson(rate, len(eval_seeds))}  # fmt: skip
     print(f"budget {budget}: {steps} steps for each data arm ({time.perf_counter() - t0:.1f} s)")
-print(f"success (95% interval) on {len(eval_seeds)} held-out starts | " + " | ".join(
-    f"{b} = {n} steps" for b, n in budgets.items()))  # fmt: skip
+steps_named = " | ".join(f"{b} = {n} steps" for b, n in budgets.items())
+print(f"success (95% interval) on {len(eval_seeds)} held-out starts | {steps_named}")
 for name, (x, _) in data.items():
     row = [arms[f"{name}_{b}"] for b in budgets]
     print(
@@ -338,23 +346,23 @@ from ch37 import viz  # noqa: E402  (matplotlib and rerun drawing code, kept out
 
 written.append(viz.figure(args.out / "scale_data.png", src_starts, aug_starts, metrics, bc.ANNULUS))
 if args.rerun:
-    shown = [
+    shown = [  # a few augmented trajectories
         {"observation.state": aug["observation.state"][aug["episode_index"] == e]}
         for e in aug["episode_index"][first_rows[:8]]
-    ]  # fmt: skip  (a few augmented trajectories)
+    ]
     rrd = viz.recording(args.out / "scale_data.rrd", metrics, src_starts, aug_starts, shown, bc.ANNULUS)
     written.append(rrd)
 rate = {name: arm["success"] for name, arm in arms.items()}
 opens = {".json": "JSON", ".png": "open as an image", ".rrd": "open with: rerun {}"}
+files_named = ", ".join(f"{f} ({opens[f.suffix].format(f)})" for f in written)
 summary = (
     f"headline: at equal steps ({budgets['full']} each), source {rate['source_full']:.2f} -> source+aug "
     f"{rate['augmented_full']:.2f} ({effects['data_full'] * 100:+.0f} points)\n"
     f"at the short budget ({budgets['short']} steps): {rate['source_short']:.2f} -> "
     f"{rate['augmented_short']:.2f} ({effects['data_short'] * 100:+.0f}); more steps alone: source "
     f"{effects['compute_source'] * 100:+.0f}, source+augmented {effects['compute_augmented'] * 100:+.0f}; "
-    f"coverage {len(c_src)} -> {len(c_src | c_aug)} of {bc.RINGS * bc.SECTORS} cells\n"
-    + "wrote " + ", ".join(f"{f} ({opens[f.suffix].format(f)})" for f in written) + "\n"
-)  # fmt: skip
+    f"coverage {len(c_src)} -> {len(c_src | c_aug)} of {bc.RINGS * bc.SECTORS} cells\nwrote {files_named}\n"
+)
 cache.store(written, summary)
 print(f"finished in {time.perf_counter() - t_start:.0f} s")
 print(summary, end="", flush=True)
