@@ -139,11 +139,6 @@ def stamp_for(emb: Embodiment, *, episodes: int, seed: int, noise: float, video:
     }
 
 
-def _usage_error(msg: str):
-    print(f"error: {msg} (see --help)", file=sys.stderr)
-    sys.exit(2)
-
-
 def check_gl() -> str | None:
     """None if headless rendering works here, else a one-line reason."""
     import av
@@ -161,31 +156,20 @@ def check_gl() -> str | None:
         )
 
 
-def main(emb: Embodiment, argv=None, default_out: str | None = None) -> int:
+def main(emb: Embodiment, argv=None) -> int:
     """The generators' command line; every problem a user can fix is one line and exit 2, Ctrl-C 130."""
-    return run_main(_main, emb, argv, default_out)
+    return run_main(_main, emb, argv)
 
 
-def _main(emb: Embodiment, argv=None, default_out: str | None = None) -> int:
+def _main(emb: Embodiment, argv=None) -> int:
+    from ch37.config import check, parser
     from ch37.outputs import check_out_path
 
-    p = argparse.ArgumentParser(
-        description=f"Generate {emb.name} expert demos as a local LeRobot v3 dataset."
-    )
+    p = parser(f"Generate {emb.name} expert demos as a local LeRobot v3 dataset.")
     p.add_argument("--episodes", type=int, default=50, help="number of episodes to roll out (default 50)")
     p.add_argument("--seed", type=int, default=0, help="dataset seed >= 0; seeds never share an episode")
-    p.add_argument(
-        "--out",
-        type=Path,
-        default=Path(default_out or f"outputs/demos/{emb.name}"),
-        help="directory for the dataset; must not already hold data",
-    )
-    p.add_argument(
-        "--noise",
-        type=float,
-        default=emb.default_noise,
-        help=f"std of Gaussian action noise, m/s (default {emb.default_noise})",
-    )
+    p.add_argument("--out", type=Path, default=Path(f"outputs/demos/{emb.name}"), help="a new dataset folder")
+    p.add_argument("--noise", type=float, default=emb.default_noise, help="std of Gaussian action noise, m/s")
     p.add_argument(
         "--video",
         action=argparse.BooleanOptionalAction,
@@ -193,22 +177,19 @@ def _main(emb: Embodiment, argv=None, default_out: str | None = None) -> int:
         help=f"also record a {IMAGE_SIZE}x{IMAGE_SIZE} top-down video (needs a headless GL backend)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.error = lambda msg: _usage_error(msg)
     a = p.parse_args(argv)
-    problem = None
     if not 0 < a.episodes <= SEED_BLOCK:
-        problem = f"--episodes must be in [1, {SEED_BLOCK}] (the demo seeds of one --seed), got {a.episodes}"
-    elif not 0 <= a.seed <= MAX_SEED:
-        problem = f"--seed must be in [0, {MAX_SEED}] (every env seed fits in 63 bits), got {a.seed}"
-    elif not np.isfinite(a.noise) or a.noise < 0:
-        problem = f"--noise must be a finite number >= 0, got {a.noise}"
-    elif holds_data(a.out):
-        problem = f"{a.out} already holds data; pick another --out (nothing was touched)"
-    else:
-        problem = check_out_path(a.out, "--out") or (check_gl() if a.video else None)
+        raise DataError(
+            f"--episodes must be in [1, {SEED_BLOCK}] (the demo seeds of one --seed), got {a.episodes}"
+        )
+    if not 0 <= a.seed <= MAX_SEED:
+        raise DataError(f"--seed must be in [0, {MAX_SEED}] (every env seed fits in 63 bits), got {a.seed}")
+    check(a, finite=("noise",))
+    if holds_data(a.out):
+        raise DataError(f"{a.out} already holds data; pick another --out (nothing was touched)")
+    problem = check_out_path(a.out, "--out") or (check_gl() if a.video else None)
     if problem:
-        print(f"error: {problem}", file=sys.stderr)
-        return 2
+        raise DataError(problem)
     s = generate(emb, a.out, episodes=a.episodes, seed=a.seed, noise=a.noise, video=a.video, quiet=a.quiet)
     print(
         f"wrote {s['episodes']} {emb.name} episodes, {s['frames']} frames to {a.out} "

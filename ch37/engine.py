@@ -326,10 +326,12 @@ def grow(sources: dict, per_demo: int, *, mode="resolve", cap=ATTEMPTS_PER_KEPT,
     attempted in `mode` with the perturbation `how` (seed, pos_sigma, yaw_sigma) on `workers` processes.
     Returns (kept episodes in (episode, k) order, attempts, {reason: count})."""
     return keep_first(
-        sorted(sources), per_demo,
+        sorted(sources),
+        per_demo,
         lambda jobs: run_attempts(sources, jobs, mode=mode, workers=workers, bar=bar, **how),
-        reasons=FAILURES[mode], cap=cap,
-    )  # fmt: skip
+        reasons=FAILURES[mode],
+        cap=cap,
+    )
 
 
 def save(root, kept: list[dict], *, repo_id: str, stamp: dict) -> None:
@@ -343,6 +345,12 @@ def save(root, kept: list[dict], *, repo_id: str, stamp: dict) -> None:
     if kept:
         feats = features(pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, PROVENANCE)
         write_dataset(
-            root, repo_id=repo_id, fps=pusht_env.FPS, robot_type=pusht_env.ROBOT_TYPE, task=pusht_env.TASK,
-            feats=feats, episodes=kept, stamp={"made_by": MADE_BY} | stamp,
-        )  # fmt: skip
+            root,
+            repo_id=repo_id,
+            fps=pusht_env.FPS,
+            robot_type=pusht_env.ROBOT_TYPE,
+            task=pusht_env.TASK,
+            feats=feats,
+            episodes=kept,
+            stamp={"made_by": MADE_BY} | stamp,
+        )

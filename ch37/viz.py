@@ -38,26 +38,54 @@ def figure(path: Path, src_starts, aug_starts, metrics: dict, annulus) -> Path:
     for r in np.linspace(r_min, r_max, rings + 1):
         ax0.add_patch(plt.Circle((0, 0), r, fill=False, color="0.7", lw=0.8))
     for th in np.linspace(0, 2 * math.pi, sectors, endpoint=False):
-        ax0.plot([r_min * math.cos(th), r_max * math.cos(th)], [r_min * math.sin(th), r_max * math.sin(th)],
-                 color="0.7", lw=0.8)  # fmt: skip
+        ax0.plot(
+            [r_min * math.cos(th), r_max * math.cos(th)],
+            [r_min * math.sin(th), r_max * math.sin(th)],
+            color="0.7",
+            lw=0.8,
+        )
     if len(aug_starts):
-        ax0.scatter(aug_starts[:, 0], aug_starts[:, 1], s=10, c=DATA_COLOURS["augmented"],
-                    label=f"augmented ({len(aug_starts)})")  # fmt: skip
-    ax0.scatter(src_starts[:, 0], src_starts[:, 1], s=30, c=DATA_COLOURS["source"], marker="s",
-                label=f"source ({len(src_starts)})")  # fmt: skip
+        ax0.scatter(
+            aug_starts[:, 0],
+            aug_starts[:, 1],
+            s=10,
+            c=DATA_COLOURS["augmented"],
+            label=f"augmented ({len(aug_starts)})",
+        )
+    ax0.scatter(
+        src_starts[:, 0],
+        src_starts[:, 1],
+        s=30,
+        c=DATA_COLOURS["source"],
+        marker="s",
+        label=f"source ({len(src_starts)})",
+    )
     ax0.plot(0, 0, "k+", ms=10)
     lim = r_max * 1.25
     title = f"block starts: cells {coverage['source']} -> {coverage['union']} of {coverage['cells']}"
-    ax0.set(aspect="equal", xlim=(-lim, lim), ylim=(-lim, lim), xlabel="block x (m)", ylabel="block y (m)",
-            title=title)  # fmt: skip
+    ax0.set(
+        aspect="equal",
+        xlim=(-lim, lim),
+        ylim=(-lim, lim),
+        xlabel="block x (m)",
+        ylabel="block y (m)",
+        title=title,
+    )
     ax0.legend(loc="lower left", fontsize=8)
     width = 0.38
     for j, data in enumerate(DATA_COLOURS):  # bars grouped by budget, one colour per data set
         for i, budget in enumerate(budgets):
             arm = arms[f"{data}_{budget}"]
             x, rate = i + (j - 0.5) * width, arm["success"]
-            ax1.bar(x, rate, width, color=DATA_COLOURS[data], label=data if i == 0 else None,
-                    yerr=[[rate - arm["ci95"][0]], [arm["ci95"][1] - rate]], capsize=5)  # fmt: skip
+            ax1.bar(
+                x,
+                rate,
+                width,
+                color=DATA_COLOURS[data],
+                label=data if i == 0 else None,
+                yerr=[[rate - arm["ci95"][0]], [arm["ci95"][1] - rate]],
+                capsize=5,
+            )
             ax1.text(x, arm["ci95"][1] + 0.02, f"{rate:.2f}", ha="center", va="bottom", fontsize=8)
     ax1.set_xticks(range(len(budgets)), [f"{b} budget\n{n} steps each" for b, n in budgets.items()])
     ax1.set(
@@ -153,8 +181,15 @@ def scale_lab_figure(path: Path, result: dict) -> Path:
     curve, n = LAB_DEFAULT
     if n in result["curves"][curve]:
         r = result["curves"][curve][n]
-        ax.plot([r["demos"]], [r["success"]], "*", color="k", ms=14, zorder=5,
-                label=f"the chapter's default point (N={n}, re-solve)")  # fmt: skip
+        ax.plot(
+            [r["demos"]],
+            [r["success"]],
+            "*",
+            color="k",
+            ms=14,
+            zorder=5,
+            label=f"the chapter's default point (N={n}, re-solve)",
+        )
     ceiling = result["expert"]["success"]
     ax.axhline(ceiling, color="0.3", ls="--", lw=1.5, label=f"expert's own success ({ceiling:.2f})")
     cfg = result["config"]
@@ -162,11 +197,14 @@ def scale_lab_figure(path: Path, result: dict) -> Path:
     ns = cfg["n"]
     ax.set_xticks(ns, [str(n) for n in ns])
     ax.minorticks_off()
-    ax.set(ylim=(0, 1.02), xlabel="PushT demos trained on (log scale)",
-           ylabel="success rate on held-out starts",
-           title=f"BC success vs demos: mean over seeds {cfg['seeds']}, band = Wilson 95% of "
-                 f"{cfg['eval_episodes'] * len(cfg['seeds'])} pooled episodes"
-                 + (" (smoke)" if result.get("smoke") else ""))  # fmt: skip
+    ax.set(
+        ylim=(0, 1.02),
+        xlabel="PushT demos trained on (log scale)",
+        ylabel="success rate on held-out starts",
+        title=f"BC success vs demos: mean over seeds {cfg['seeds']}, band = Wilson 95% of "
+        f"{cfg['eval_episodes'] * len(cfg['seeds'])} pooled episodes"
+        + (" (smoke)" if result.get("smoke") else ""),
+    )
     ax.title.set_fontsize(9)
     ax.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
