@@ -38,54 +38,26 @@ def figure(path: Path, src_starts, aug_starts, metrics: dict, annulus) -> Path:
     for r in np.linspace(r_min, r_max, rings + 1):
         ax0.add_patch(plt.Circle((0, 0), r, fill=False, color="0.7", lw=0.8))
     for th in np.linspace(0, 2 * math.pi, sectors, endpoint=False):
-        ax0.plot(
-            [r_min * math.cos(th), r_max * math.cos(th)],
-            [r_min * math.sin(th), r_max * math.sin(th)],
-            color="0.7",
-            lw=0.8,
-        )
+        c, s = math.cos(th), math.sin(th)
+        ax0.plot([r_min * c, r_max * c], [r_min * s, r_max * s], color="0.7", lw=0.8)
     if len(aug_starts):
-        ax0.scatter(
-            aug_starts[:, 0],
-            aug_starts[:, 1],
-            s=10,
-            c=DATA_COLOURS["augmented"],
-            label=f"augmented ({len(aug_starts)})",
-        )
-    ax0.scatter(
-        src_starts[:, 0],
-        src_starts[:, 1],
-        s=30,
-        c=DATA_COLOURS["source"],
-        marker="s",
-        label=f"source ({len(src_starts)})",
-    )
+        label = f"augmented ({len(aug_starts)})"
+        ax0.scatter(aug_starts[:, 0], aug_starts[:, 1], s=10, c=DATA_COLOURS["augmented"], label=label)
+    label = f"source ({len(src_starts)})"
+    ax0.scatter(src_starts[:, 0], src_starts[:, 1], s=30, c=DATA_COLOURS["source"], marker="s", label=label)
     ax0.plot(0, 0, "k+", ms=10)
-    lim = r_max * 1.25
+    lim = (-r_max * 1.25, r_max * 1.25)
     title = f"block starts: cells {coverage['source']} -> {coverage['union']} of {coverage['cells']}"
-    ax0.set(
-        aspect="equal",
-        xlim=(-lim, lim),
-        ylim=(-lim, lim),
-        xlabel="block x (m)",
-        ylabel="block y (m)",
-        title=title,
-    )
+    ax0.set(aspect="equal", xlim=lim, ylim=lim, xlabel="block x (m)", ylabel="block y (m)", title=title)
     ax0.legend(loc="lower left", fontsize=8)
     width = 0.38
     for j, data in enumerate(DATA_COLOURS):  # bars grouped by budget, one colour per data set
         for i, budget in enumerate(budgets):
             arm = arms[f"{data}_{budget}"]
             x, rate = i + (j - 0.5) * width, arm["success"]
-            ax1.bar(
-                x,
-                rate,
-                width,
-                color=DATA_COLOURS[data],
-                label=data if i == 0 else None,
-                yerr=[[rate - arm["ci95"][0]], [arm["ci95"][1] - rate]],
-                capsize=5,
-            )
+            err = [[rate - arm["ci95"][0]], [arm["ci95"][1] - rate]]
+            label = data if i == 0 else None
+            ax1.bar(x, rate, width, color=DATA_COLOURS[data], label=label, yerr=err, capsize=5)
             ax1.text(x, arm["ci95"][1] + 0.02, f"{rate:.2f}", ha="center", va="bottom", fontsize=8)
     ax1.set_xticks(range(len(budgets)), [f"{b} budget\n{n} steps each" for b, n in budgets.items()])
     ax1.set(
@@ -96,24 +68,35 @@ def figure(path: Path, src_starts, aug_starts, metrics: dict, annulus) -> Path:
     return save_png(fig, path, dpi=100)
 
 
-def recording(path: Path, metrics: dict, src_starts, aug_starts, trajectories, annulus) -> Path:
-    """A Rerun .rrd: the data-scale curve, block starts over the annulus, some augmented trajectories."""
+def save_rrd(path: Path, recording_id: str, log) -> Path:
+    """A Rerun recording to `path`, whole or not at all (ch37.files.place): log(rec) fills it."""
     import rerun as rr
 
-    rec = rr.RecordingStream(RERUN_APP_ID, recording_id=f"seed{metrics['seed']}")
+    rec = rr.RecordingStream(RERUN_APP_ID, recording_id=recording_id)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
-        _record(rec, tmp, metrics, src_starts, aug_starts, trajectories, annulus)
+        rec.save(tmp)
+        log(rec)
+        rec.flush()
+        rec.disconnect()
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
-    return place(tmp, path)  # whole or not at all, and only over a file of ours (ch37.files)
+    return place(tmp, path)
 
 
-def _record(rec, tmp: Path, metrics, src_starts, aug_starts, trajectories, annulus) -> None:
+def recording(path: Path, metrics: dict, src_starts, aug_starts, trajectories, annulus) -> Path:
+    """A Rerun .rrd: the data-scale curve, block starts over the annulus, some augmented trajectories."""
+    return save_rrd(
+        path,
+        f"seed{metrics['seed']}",
+        lambda rec: _record(rec, metrics, src_starts, aug_starts, trajectories, annulus),
+    )
+
+
+def _record(rec, metrics, src_starts, aug_starts, trajectories, annulus) -> None:
     import rerun as rr
 
-    rec.save(tmp)
     for arm in metrics["arms"].values():  # success vs frames of data, one curve per budget
         rec.set_time("frames", sequence=arm["frames"])
         rec.log(f"scale/{arm['budget']}/success", rr.Scalars(arm["success"]))
@@ -141,8 +124,6 @@ def _record(rec, tmp: Path, metrics, src_starts, aug_starts, trajectories, annul
         ),
         static=True,
     )
-    rec.flush()
-    rec.disconnect()
 
 
 # The Scale Lab (scale_lab.py): success against demos, one line per curve.
@@ -181,15 +162,8 @@ def scale_lab_figure(path: Path, result: dict) -> Path:
     curve, n = LAB_DEFAULT
     if n in result["curves"][curve]:
         r = result["curves"][curve][n]
-        ax.plot(
-            [r["demos"]],
-            [r["success"]],
-            "*",
-            color="k",
-            ms=14,
-            zorder=5,
-            label=f"the chapter's default point (N={n}, re-solve)",
-        )
+        label = f"the chapter's default point (N={n}, re-solve)"
+        ax.plot([r["demos"]], [r["success"]], "*", color="k", ms=14, zorder=5, label=label)
     ceiling = result["expert"]["success"]
     ax.axhline(ceiling, color="0.3", ls="--", lw=1.5, label=f"expert's own success ({ceiling:.2f})")
     cfg = result["config"]
@@ -215,10 +189,7 @@ def scale_lab_recording(path: Path, result: dict) -> Path:
     """The Scale Lab's curves as Rerun scalars on a "demos" timeline (scale_lab/CURVE/success, ci95_*)."""
     import rerun as rr
 
-    rec = rr.RecordingStream(RERUN_APP_ID, recording_id="scale_lab")
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        rec.save(tmp)
+    def log(rec):
         for curve in LAB_STYLE:
             for demos, rate, lo, hi in zip(*_lab_rows(result, curve)):
                 rec.set_time("demos", sequence=int(round(demos)))
@@ -228,9 +199,5 @@ def scale_lab_recording(path: Path, result: dict) -> Path:
                 rec.log("scale_lab/expert/success", rr.Scalars(result["expert"]["success"]))
         text = rr.TextDocument(f"{result['command']}\n{result['interval']}")
         rec.log("scale_lab/summary", text, static=True)
-        rec.flush()
-        rec.disconnect()
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return place(tmp, path)
+
+    return save_rrd(path, "scale_lab", log)
