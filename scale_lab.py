@@ -266,7 +266,7 @@ def pooled(successes: list[float], n_each: int, wilson) -> tuple[float, list[flo
 
 def run(a: argparse.Namespace) -> int:
     t_start = time.perf_counter()
-    from ch37.outputs import claim
+    from ch37.files import claim
 
     demos_dir = a.out / "demos"
     max_n = max(a.n)

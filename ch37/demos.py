@@ -167,7 +167,7 @@ def main(emb: Embodiment, argv=None, default_out: str | None = None) -> int:
 
 
 def _main(emb: Embodiment, argv=None, default_out: str | None = None) -> int:
-    from ch37.outputs import check_out_path
+    from ch37.files import check_out_path
 
     p = argparse.ArgumentParser(
         description=f"Generate {emb.name} expert demos as a local LeRobot v3 dataset."
