@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ch37 import DATA_CODE, ROOT
+from ch37 import DATA_CODE, ROOT, config
 from ch37.errors import DataError, run_main
 from ch37.lerobot_io import IMAGE_KEY, IMAGE_SIZE, features, schema_problem, write_dataset
 from ch37.parallel import progress
@@ -139,11 +139,6 @@ def stamp_for(emb: Embodiment, *, episodes: int, seed: int, noise: float, video:
     }
 
 
-def _usage_error(msg: str):
-    print(f"error: {msg} (see --help)", file=sys.stderr)
-    sys.exit(2)
-
-
 def check_gl() -> str | None:
     """None if headless rendering works here, else a one-line reason."""
     import av
@@ -169,9 +164,7 @@ def main(emb: Embodiment, argv=None, default_out: str | None = None) -> int:
 def _main(emb: Embodiment, argv=None, default_out: str | None = None) -> int:
     from ch37.files import check_out_path
 
-    p = argparse.ArgumentParser(
-        description=f"Generate {emb.name} expert demos as a local LeRobot v3 dataset."
-    )
+    p = config.parser(f"Generate {emb.name} expert demos as a local LeRobot v3 dataset.")
     p.add_argument("--episodes", type=int, default=50, help="number of episodes to roll out (default 50)")
     p.add_argument("--seed", type=int, default=0, help="dataset seed >= 0; seeds never share an episode")
     p.add_argument(
@@ -193,7 +186,6 @@ def _main(emb: Embodiment, argv=None, default_out: str | None = None) -> int:
         help=f"also record a {IMAGE_SIZE}x{IMAGE_SIZE} top-down video (needs a headless GL backend)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.error = lambda msg: _usage_error(msg)
     a = p.parse_args(argv)
     problem = None
     if not 0 < a.episodes <= SEED_BLOCK:
@@ -207,8 +199,7 @@ def _main(emb: Embodiment, argv=None, default_out: str | None = None) -> int:
     else:
         problem = check_out_path(a.out, "--out") or (check_gl() if a.video else None)
     if problem:
-        print(f"error: {problem}", file=sys.stderr)
-        return 2
+        raise DataError(problem)
     s = generate(emb, a.out, episodes=a.episodes, seed=a.seed, noise=a.noise, video=a.video, quiet=a.quiet)
     print(
         f"wrote {s['episodes']} {emb.name} episodes, {s['frames']} frames to {a.out} "

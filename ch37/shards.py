@@ -195,7 +195,7 @@ def merge(out: Path, n_shards: int) -> int:
         (tmp / "data").rename(out / "data")
         (tmp / "meta").rename(out / "meta")
         shutil.rmtree(tmp)
-    return sum(json.loads((r / "meta" / "info.json").read_text())["total_episodes"] for r in roots)
+    return sum(read_json(r / "meta" / "info.json")["total_episodes"] for r in roots)
 
 
 def remove_shards(out: Path) -> None:
@@ -249,7 +249,7 @@ def write_frame_stats(root: Path) -> None:
 
     root = Path(root)
     path = root / "meta" / "stats.json"
-    old = json.loads(path.read_text())
+    old = read_json(path)
     files = sorted((root / "data").rglob("*.parquet"))
     columns = set(pq.read_schema(files[0]).names)
     new = {
