@@ -39,10 +39,12 @@ from pathlib import Path
 
 import numpy as np
 
+import pusht_env
 from ch37 import DATA_CODE, engine, executors
 from ch37.demos import code_digest
 from ch37.errors import DataError
 from ch37.files import dump_json, lock, round_floats, unlock, write_atomic
+from ch37.lerobot_io import load_arrays, schema_problem
 from ch37.seeds import SEED_BLOCK
 from ch37.stamps import MADE_BY, STAMP_NAME, holds_data, read_json, read_stamp
 
@@ -265,9 +267,6 @@ def read_source(src: Path) -> dict:
     """The source set's columns, or DataError with one line saying what is wrong with it."""
     import datasets
     import pyarrow.parquet as pq
-
-    import pusht_env
-    from ch37.lerobot_io import load_arrays, schema_problem
 
     if not src.is_dir():
         raise DataError(f"--src {src} is not a folder; make a PushT set with gen_demos_pusht.py")
