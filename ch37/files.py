@@ -29,8 +29,8 @@ from ch37.stamps import (
     LOCK_NAME,
     MADE_BY,
     STAMP_NAME,
+    check_ours,
     check_replaceable,
-    holds_data,
     is_ours,
     read_stamp,
     sha256_file,
@@ -259,8 +259,7 @@ class Claim:
             if name not in mine:
                 self.refuse(out / name)
         for path in reuses:
-            if holds_data(path) and not is_ours(read_stamp(path)):
-                raise DataError(f"{path} holds data this program did not make; move it or pass another --out")
+            check_ours(path)
         for path in replaces:
             check_replaceable(path)
         return mine

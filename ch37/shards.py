@@ -46,7 +46,7 @@ from ch37.errors import DataError
 from ch37.files import dump_json, lock, round_floats, unlock, write_atomic
 from ch37.lerobot_io import load_arrays, schema_problem
 from ch37.seeds import SEED_BLOCK
-from ch37.stamps import MADE_BY, STAMP_NAME, holds_data, read_json, read_stamp
+from ch37.stamps import MADE_BY, STAMP_NAME, check_ours, read_json, read_stamp
 
 SHARDS_DIR = "shards"
 REPORT_NAME = "generation_report.json"
@@ -308,20 +308,16 @@ def check_out(out: Path, src: Path, config: dict | None = None) -> dict | None:
     o, s = out.resolve(), src.resolve()
     if o == s or s in o.parents or o in s.parents:
         raise DataError(f"--out {out} overlaps --src {src}; the source is never written: pick another --out")
-    if not holds_data(out):
-        return None
-    stamp = read_stamp(out)
-    if not out.is_dir() or stamp is None or stamp.get("made_by") != MADE_BY or stamp.get("kind") != "engine":
-        raise DataError(f"{out} holds data this program did not make; move it or pass another --out")
+    stamp = check_ours(out, "engine")
+    if stamp is None or config is None or stamp.get("config") == config:
+        return stamp
     old = stamp.get("config") or {}
-    if config is not None and old != config:
-        diff = ", ".join(
-            f"{k} differs" if isinstance(v, dict) else f"{k}={old.get(k)} (now {v})"
-            for k, v in config.items()
-            if old.get(k) != v
-        )
-        raise DataError(f"{out} holds a run with other settings ({diff}); pass another --out")
-    return stamp
+    diff = ", ".join(
+        f"{k} differs" if isinstance(v, dict) else f"{k}={old.get(k)} (now {v})"
+        for k, v in config.items()
+        if old.get(k) != v
+    )
+    raise DataError(f"{out} holds a run with other settings ({diff}); pass another --out")
 
 
 def length_stats(hist: dict) -> dict:

@@ -98,17 +98,22 @@ def _names(files: list[str], n: int = 3) -> str:
     return ", ".join(files[:n]) + (f" and {len(files) - n} more" if len(files) > n else "")
 
 
-def check_replaceable(path: Path) -> None:
-    """DataError unless `path` is absent, empty, or holds only files our stamp lists."""
+def check_ours(path: Path, kind: str | None = None) -> dict | None:
+    """None if `path` is absent or empty, else its stamp; DataError unless it is a folder under our
+    stamp (of `kind`, when given)."""
     path = Path(path)
     if not holds_data(path):
-        return
-    if not path.is_dir():
-        raise DataError(f"{path} is a file, not a folder this program made; move it or pass another --out")
-    stamp = read_stamp(path)
-    if not is_ours(stamp):
+        return None
+    stamp = read_stamp(path) if path.is_dir() else None
+    if not is_ours(stamp) or kind not in (None, stamp.get("kind")):
         raise DataError(f"{path} holds data this program did not make; move it or pass another --out")
-    foreign = foreign_files(path, stamp)
+    return stamp
+
+
+def check_replaceable(path: Path) -> None:
+    """DataError unless `path` is absent, empty, or holds only files our stamp lists."""
+    stamp = check_ours(path)
+    foreign = foreign_files(path, stamp) if stamp else []
     if foreign:
         raise DataError(
             f"{path} must be rebuilt but holds files this program did not write ({_names(foreign)}); "
