@@ -354,8 +354,8 @@ def emit(a, points, results, expert, generation, data, t_start, t_train) -> None
 def run(a) -> int:
     t_start = time.perf_counter()
     from ch37 import engine
+    from ch37.files import claim
     from ch37.lerobot_io import load_arrays
-    from ch37.outputs import claim
     from ch37.seeds import env_seed
 
     max_n = max(a.n)

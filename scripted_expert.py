@@ -29,7 +29,7 @@ import numpy as np
 #      T, else orbit the T at a safe clearance.
 #   4. Inside a tight goal zone (well within the success tolerances) back off from the block
 #      and let it rest, so the 5-step success hold is met.
-import pusht_env as _pt  # noqa: E402  (kept inside the PushT section on purpose)
+import pusht_env as _pt
 
 _PT_R = _pt.PUSHER_RADIUS  # m
 _PT_K = _pt.BLOCK_SLIDE_DAMPING / _pt.BLOCK_YAW_DAMPING  # 1/m^2: (N s/m) / (N m s/rad)

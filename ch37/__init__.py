@@ -1,13 +1,13 @@
 """The plumbing of chapter 3.7: what scale_data.py imports but does not teach, one concern per module.
 
-errors        DataError, fail(), guard() / run_main(): one line and an exit code (2, 130 on Ctrl-C)
-files         write_atomic, place, dump_json, round_floats: whole files or none, no leftovers
+errors        DataError, guard() / run_main() / main(): one line and an exit code (2, 130 on Ctrl-C)
+files         claim(): an output folder checked up front, locked, owned file by file; write_atomic,
+              dump_json: whole files or none, no leftovers
 config        the chapter's defaults and smoke settings, the one flag parser and checker
 cli           scale_data.py's flag limits, claim_out, device choice, the tier banner
-outputs       claim(): an output folder checked up front, locked, owned file by file
 lerobot_io    LeRobot v3 read/write: features, write_dataset, load_arrays, schema checks
 seeds         env_seed: demos, augmentation and evaluation never share a start
-stamps        ownership stamps: only files this project wrote are ever deleted or rewritten
+stamps        ownership stamps: only files this project wrote are ever deleted or rewritten; read_json
 demos         demo sets: rollout, generation, the private demo cache
 parallel      parallel_map over forked workers, LockstepEnvs for evaluation physics; workers die with the run
 engine        one augmentation attempt: perturb a source start, re-solve or replay it, keep it on success
@@ -18,7 +18,7 @@ result_cache  reuse a finished run whose flags and code match; entries verified 
 viz           the PNG figures and the Rerun recordings (the chapter's and the Scale Lab's)
 
 A command of its own (the data engine, a tool) gets the same guarantees from errors.run_main,
-outputs.claim (or outputs.check_out_path), stamps.replace_own_dir and parallel.worker_setup.
+files.claim (or files.check_out_path), stamps.replace_own_dir and parallel.worker_setup.
 """
 
 from pathlib import Path
@@ -46,7 +46,6 @@ CODE_FILES = DATA_CODE + (
     "gen_demos_aloha.py",
     "ch37/cli.py",
     "ch37/files.py",
-    "ch37/outputs.py",
     "ch37/parallel.py",
     "ch37/stamps.py",
     "ch37/viz.py",

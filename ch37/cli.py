@@ -103,9 +103,9 @@ def aug_dir_name(seed, n_sources, per_demo, mode: str) -> str:
 
 
 def claim_out(args: argparse.Namespace):
-    """--out taken for this run before any work (ch37.outputs.claim): usable, locked against a second
+    """--out taken for this run before any work (ch37.files.claim): usable, locked against a second
     run, nothing of yours where this run writes, this program's earlier results there cleared."""
-    from ch37.outputs import claim
+    from ch37.files import claim
 
     demos = Path(args.out) / "demos"
     reuses = [

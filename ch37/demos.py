@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ch37 import DATA_CODE, ROOT
+from ch37 import DATA_CODE, ROOT, config
 from ch37.errors import DataError, run_main
 from ch37.lerobot_io import IMAGE_KEY, IMAGE_SIZE, features, schema_problem, write_dataset
 from ch37.parallel import progress
@@ -162,10 +162,9 @@ def main(emb: Embodiment, argv=None) -> int:
 
 
 def _main(emb: Embodiment, argv=None) -> int:
-    from ch37.config import check, parser
-    from ch37.outputs import check_out_path
+    from ch37.files import check_out_path
 
-    p = parser(f"Generate {emb.name} expert demos as a local LeRobot v3 dataset.")
+    p = config.parser(f"Generate {emb.name} expert demos as a local LeRobot v3 dataset.")
     p.add_argument("--episodes", type=int, default=50, help="number of episodes to roll out (default 50)")
     p.add_argument("--seed", type=int, default=0, help="dataset seed >= 0; seeds never share an episode")
     p.add_argument("--out", type=Path, default=Path(f"outputs/demos/{emb.name}"), help="a new dataset folder")
@@ -184,7 +183,7 @@ def _main(emb: Embodiment, argv=None) -> int:
         )
     if not 0 <= a.seed <= MAX_SEED:
         raise DataError(f"--seed must be in [0, {MAX_SEED}] (every env seed fits in 63 bits), got {a.seed}")
-    check(a, finite=("noise",))
+    config.check(a, finite=("noise",))
     if holds_data(a.out):
         raise DataError(f"{a.out} already holds data; pick another --out (nothing was touched)")
     problem = check_out_path(a.out, "--out") or (check_gl() if a.video else None)

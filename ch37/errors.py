@@ -6,8 +6,9 @@
     OSError of the environment (disk full, read-only, permission denied): `error: ...`, exit 2
 
 Anything else is a genuine bug and keeps its traceback. CH37_DEBUG=1 shows the traceback for
-everything. Two ways in, one behaviour: `guard()` for a linear script (scale_data.py), `run_main(fn)`
-for a command with a main function (the generators, the tools, the data engine).
+everything. Two ways in, one behaviour (one formatter, _tell): `guard()` for a linear script
+(scale_data.py), `run_main(fn, ...)` for a command with a main function (the generators, the tools,
+the data engine), whose entry point is `main(fn)`.
 """
 
 from __future__ import annotations
@@ -43,12 +44,6 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM, raised in the main thread so that cleanup (finally blocks, worker shutdown) runs."""
 
 
-def fail(msg: str, code: int = 2):
-    """Print `error: msg` on stderr and exit with `code`."""
-    print(f"error: {msg}", file=sys.stderr)
-    sys.exit(code)
-
-
 def debug() -> bool:
     """CH37_DEBUG=1 (or any value but 0/false/no): let every exception show its traceback."""
     return os.environ.get("CH37_DEBUG", "").strip().lower() not in ("", "0", "false", "no")
@@ -69,6 +64,15 @@ def one_line(exc: BaseException) -> tuple[int, str] | None:
             f"error: {where}{exc.strerror}; {ENVIRONMENT_ERRNOS[exc.errno]}, then run the same command again",
         )
     return None
+
+
+def _tell(exc: BaseException) -> int | None:
+    """Print `exc`'s one line on stderr and return its exit code; None for a genuine bug (or CH37_DEBUG)."""
+    got = None if debug() else one_line(exc)
+    if got is None:
+        return None
+    print(got[1], file=sys.stderr)
+    return got[0]
 
 
 def _raise_terminated(signum, frame):
@@ -101,12 +105,11 @@ def guard() -> None:
     previous = sys.excepthook
 
     def hook(kind, exc, tb):
-        got = None if debug() else one_line(exc)
-        if got is None:
+        code = _tell(exc)
+        if code is None:
             previous(kind, exc, tb)
-            return
-        print(got[1], file=sys.stderr)
-        _exit_now(got[0])
+        else:
+            _exit_now(code)
 
     sys.excepthook = hook
     signal.signal(signal.SIGTERM, _raise_terminated)
@@ -120,11 +123,10 @@ def run_main(fn, *args, **kwargs) -> int:
     try:
         return fn(*args, **kwargs)
     except (KeyboardInterrupt, DataError, OSError) as e:
-        got = None if debug() else one_line(e)
-        if got is None:
+        code = _tell(e)
+        if code is None:
             raise
-        print(got[1], file=sys.stderr)
-        return got[0]
+        return code
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, saved)

@@ -1,12 +1,22 @@
-"""Writing results: whole files or nothing, stable JSON, and no leftovers.
+"""Files: output folders claimed, locked and owned file by file; whole files or none.
 
-write_atomic is the one way this project writes a file. In a folder claimed by ch37.outputs (a
-run's --out), it also refuses to overwrite a file the program did not write there and records
-every file it writes, so the next run knows which files are its own.
+write_atomic is the one way this project writes a file and dump_json its one JSON writer (stable:
+sorted keys, one-space indent, a final newline). A run's --out is taken first, with
+
+    claim(out, inputs=..., results=..., reuses=..., replaces=...)
+
+before any work: the folder must be usable (creatable, writable, not a file, not inside an input
+dataset, not a dataset itself); lock() makes a second run on the same folder wait until the first
+ends; nothing of the user's may sit where the run will write (a result name, a demo set to reuse
+or replace); what a killed run left is removed; and this program's results of an earlier run are
+cleared, so the folder never mixes two runs. From then on write_atomic into the folder refuses to
+overwrite a file the program did not write and records each file it writes, with its sha256, in
+the folder's stamp (ch37.stamps). The lock is released when the process ends.
 """
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
@@ -14,30 +24,53 @@ import re
 import shutil
 from pathlib import Path
 
-# folder (resolved) -> its owner (ch37.outputs.Claim): before(path, digest) checks and records the
-# write about to happen, after(path, digest) confirms it. Set by ch37.outputs.claim only.
-CLAIMED: dict[Path, object] = {}
+from ch37.errors import DataError
+from ch37.stamps import (
+    LOCK_NAME,
+    MADE_BY,
+    STAMP_NAME,
+    check_ours,
+    check_replaceable,
+    is_ours,
+    read_stamp,
+    sha256_file,
+)
+
+try:
+    import fcntl
+except ImportError:  # Windows: no advisory locks here; runs on one folder must then be kept apart by hand
+    fcntl = None
+
 # what a crashed run can leave beside its target: .NAME.tmp-PID, .NAME.partial-PID, .NAME.old-PID
 LEFTOVER = re.compile(r"^\..+\.(tmp|partial|old)-(\d+)$")
+_CLAIMED: dict[Path, Claim] = {}  # folder (resolved) -> this process's claim on it (write_atomic's check)
+_HELD: dict[Path, int] = {}  # folder (resolved) -> the descriptor of its lock file, held by this process
 
 
 def sha256_bytes(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+def dump_json(obj) -> str:
+    return json.dumps(obj, sort_keys=True, indent=1) + "\n"
+
+
+def round_floats(obj, digits: int = 4):
+    """Round every float in a nested structure so metrics.json is stable and readable."""
+    if isinstance(obj, float):
+        return round(obj, digits)
+    if isinstance(obj, dict):
+        return {k: round_floats(v, digits) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [round_floats(v, digits) for v in obj]
+    return obj
 
 
 def place(tmp: Path, path: Path) -> Path:
-    """Rename the finished file `tmp` onto `path` (same folder), with the ownership check and record of
-    a claimed folder. `tmp` is removed if anything goes wrong."""
+    """Rename the finished file `tmp` onto `path` (same folder); in a claimed folder, only over a file
+    of ours, and recorded in its stamp. `tmp` is removed if anything goes wrong."""
     path = Path(path)
-    owner = CLAIMED.get(path.parent.resolve())
+    owner = _CLAIMED.get(path.parent.resolve())
     try:
         digest = sha256_file(tmp) if owner else None
         if owner:
@@ -95,16 +128,196 @@ def sweep_leftovers(folder: Path) -> list[str]:
     return removed
 
 
-def dump_json(obj) -> str:
-    return json.dumps(obj, sort_keys=True, indent=1) + "\n"
+def check_out_path(path: Path, flag: str = "--out") -> str | None:
+    """None if `path` can hold this program's output, else one line saying why not. Creates nothing:
+    it writes and removes a probe file in `path`, or in its nearest existing parent folder."""
+    path = Path(path)
+    if str(path) == "":
+        return f"{flag} must not be empty"
+    if path.exists() and not path.is_dir():
+        return f"{flag} {path} is a file, not a folder; pass a folder path"
+    where = path
+    while not where.exists() and where != where.parent:
+        where = where.parent
+    if not where.is_dir():
+        return f"{flag} {path} cannot be created: {where} is a file, not a folder"
+    probe = where / f".{path.name or 'out'}.tmp-{os.getpid()}"
+    try:
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        return f"{flag} {path} cannot be written ({e.strerror} in {where}); choose a folder you can write to"
+    return None
 
 
-def round_floats(obj, digits: int = 4):
-    """Round every float in a nested structure so metrics.json is stable and readable."""
-    if isinstance(obj, float):
-        return round(obj, digits)
-    if isinstance(obj, dict):
-        return {k: round_floats(v, digits) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [round_floats(v, digits) for v in obj]
-    return obj
+def lock(folder: Path) -> None:
+    """Hold folder/LOCK_NAME (it names this process) until unlock(folder) or the process ends; a second
+    run on the folder waits here, saying so, until the first ends. A file system without locks: no-op."""
+    if fcntl is None:
+        return
+    unlock(folder)  # this process locked it before (a notebook re-running its setup cell)
+    fd = os.open(Path(folder) / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+        print(
+            f"waiting: another run (pid {holder}) is writing to {folder}; this one starts when it ends",
+            flush=True,
+        )
+        fcntl.flock(fd, fcntl.LOCK_EX)
+    except OSError as e:
+        os.close(fd)
+        if e.errno in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS):
+            return
+        raise
+    except BaseException:
+        os.close(fd)
+        raise
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+    _HELD[Path(folder).resolve()] = fd
+
+
+def unlock(folder: Path) -> None:
+    """Release lock(folder), leaving the lock file empty (nobody holds it)."""
+    fd = _HELD.pop(Path(folder).resolve(), None)
+    if fd is not None:
+        os.ftruncate(fd, 0)
+        os.close(fd)
+
+
+def _close_locks_in_child() -> None:  # a forked worker must never keep a run's lock alive
+    for fd in _HELD.values():
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+    _HELD.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_close_locks_in_child)
+
+
+class Claim:
+    """This process's hold on an output folder; see the module docstring."""
+
+    def __init__(self, out: Path) -> None:
+        self.out = Path(out)
+        self.written: set[str] = set()  # names written by this run
+        self.files: dict[str, str] = {}  # name -> sha256, every file of ours in the folder
+        self.pending: dict[str, str] = {}  # name -> sha256 of a write in flight (crash-safe record)
+
+    def _save(self) -> None:  # not through write_atomic: that would consult this claim
+        stamp = {"made_by": MADE_BY, "kind": "results", "files": self.files, "pending": self.pending}
+        tmp = self.out / f".{STAMP_NAME}.tmp-{os.getpid()}"
+        tmp.write_text(dump_json(stamp))
+        os.replace(tmp, self.out / STAMP_NAME)
+
+    def is_own(self, path: Path) -> bool:
+        """Whether the file at `path` is one this program wrote (its bytes as written)."""
+        name, path = Path(path).name, Path(path)
+        accepted = {self.files.get(name), self.pending.get(name)} - {None}
+        if not accepted or not path.is_file() or path.is_symlink():
+            return False
+        try:
+            return sha256_file(path) in accepted
+        except OSError:
+            return False
+
+    def refuse(self, path: Path) -> None:
+        """DataError if a file that is not ours sits at `path`."""
+        if (path.exists() or path.is_symlink()) and not self.is_own(path):
+            raise DataError(
+                f"{path} was not written by this program (or was changed since); move it or pass "
+                "another --out (nothing was changed)"
+            )
+
+    def before(self, path: Path, digest: str) -> None:
+        """A write of `path` is about to happen: refuse if a file not ours is there, else record it."""
+        self.refuse(Path(path))
+        self.pending[Path(path).name] = digest
+        self._save()
+
+    def after(self, path: Path, digest: str) -> None:
+        self.files[path.name] = digest
+        self.pending.pop(path.name, None)
+        self.written.add(path.name)
+        self._save()
+
+    def in_the_way(self, results, reuses, replaces) -> set[str]:
+        """Read the folder's stamp; DataError if a file or folder not ours sits where this run writes.
+        Returns the names of this program's files in the folder."""
+        out, stamp = self.out, read_stamp(self.out)
+        self.files, self.pending = {}, {}
+        if is_ours(stamp) and stamp.get("kind") == "results":
+            self.files = {k: v for k, v in (stamp.get("files") or {}).items() if isinstance(v, str)}
+            self.pending = {k: v for k, v in (stamp.get("pending") or {}).items() if isinstance(v, str)}
+        mine = {name for name in set(self.files) | set(self.pending) if self.is_own(out / name)}
+        for name in results:
+            if name not in mine:
+                self.refuse(out / name)
+        for path in reuses:
+            check_ours(path)
+        for path in replaces:
+            check_replaceable(path)
+        return mine
+
+    def release(self) -> None:
+        """Give the folder back (the lock too); the process ending does the same."""
+        _CLAIMED.pop(self.out.resolve(), None)
+        unlock(self.out)
+
+
+def claim(
+    out: Path,
+    *,
+    inputs: dict[str, Path | None] | None = None,
+    results: tuple[str, ...] = (),
+    reuses: list[Path] = (),
+    replaces: list[Path] = (),
+) -> Claim:
+    """Take `out` for this run; DataError (one line) if anything of the user's is in the way, in which
+    case nothing was created or changed.
+
+    inputs    {flag: path} of datasets the run reads: `out` may not be one of them or inside one
+    results   the file names the run will write directly in `out`
+    reuses    demo-set folders the run reuses when valid: each must be absent or made by this program
+    replaces  folders the run will rebuild: each must hold only files this program wrote
+    """
+    out = Path(out)
+    problem = check_out_path(out)
+    if problem:
+        raise DataError(problem)
+    for flag, given in (inputs or {}).items():
+        if given is not None and out.resolve().is_relative_to(Path(given).resolve()):
+            raise DataError(
+                f"--out {out} is inside {flag} {given}: results would be written into your dataset; "
+                "pass another --out"
+            )
+    stamp = read_stamp(out)
+    if (out / "meta" / "info.json").exists() or (is_ours(stamp) and stamp.get("kind") != "results"):
+        raise DataError(f"--out {out} is a dataset folder; results would mix into it: pass another --out")
+    c = Claim(out)
+    c.in_the_way(results, reuses, replaces)  # before anything is created
+    out.mkdir(parents=True, exist_ok=True)
+    lock(out)
+    try:
+        sweep_leftovers(out)
+        if (out / "demos").is_dir():
+            sweep_leftovers(out / "demos")
+        mine = c.in_the_way(results, reuses, replaces)  # again: a run we waited for may have changed it
+        for name in sorted(mine):  # this program's results of an earlier run: never mixed with this one's
+            (out / name).unlink()
+        c.files, c.pending = {}, {}
+        c._save()
+    except BaseException:
+        c.release()
+        raise
+    _CLAIMED[out.resolve()] = c
+    return c
+
+
+def claimed(out: Path) -> Claim | None:
+    return _CLAIMED.get(Path(out).resolve())

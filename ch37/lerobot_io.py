@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from ch37.errors import DataError
-from ch37.files import sweep_leftovers
-from ch37.stamps import STAMP_NAME, digests, holds_data, stamp_text
+from ch37.files import dump_json, sweep_leftovers
+from ch37.stamps import STAMP_NAME, digests, holds_data
 
 # torchcodec needs system FFmpeg libraries and prints long tracebacks when they are missing;
 # pyav ships its own FFmpeg, so every dataset here is read and written through pyav.
@@ -127,7 +127,7 @@ def write_dataset(
             stats.write_text(
                 json.dumps(json.loads(stats.read_text()), indent=4, sort_keys=True, ensure_ascii=False)
             )
-        (tmp / STAMP_NAME).write_text(stamp_text(dict(stamp, files=digests(tmp))))
+        (tmp / STAMP_NAME).write_text(dump_json(dict(stamp, files=digests(tmp))))
         try:
             if out.exists():
                 out.rmdir()  # empty directory (holds_data checked above)

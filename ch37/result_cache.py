@@ -20,8 +20,7 @@ from pathlib import Path
 from ch37 import CODE_FILES, ROOT
 from ch37.config import NOT_IN_KEY, RESULT_FILES
 from ch37.errors import DataError
-from ch37.files import sha256_bytes, sweep_leftovers, write_atomic
-from ch37.outputs import claimed
+from ch37.files import claimed, sha256_bytes, sweep_leftovers, write_atomic
 
 MANIFEST, SUMMARY = "manifest.json", "summary.txt"
 

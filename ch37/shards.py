@@ -1,12 +1,15 @@
-"""A generation run on disk: fixed shards of attempts, each a LeRobot v3 set with a stamp, merged by LeRobot.
+"""A data-engine run on disk: fixed shards of attempts, each a LeRobot v3 set with a stamp, merged by LeRobot.
+
+    run(src, out, settings, workers=, ray=, quiet=) -> the generation report   (augment_demos.py)
 
 The attempts (source episode e, k) are listed e-major and cut into shards of `shard_size`
 attempts, so a shard's contents depend on the run's settings alone, never on the worker count
-or the executor. A worker makes one shard (ch37.engine.attempt on each of its attempts, then
-ch37.lerobot_io.write_dataset) and returns its files as bytes; the caller saves them, so a
-worker on another machine needs no shared disk. Layout of a run's folder:
+or the executor. A worker makes one shard (ch37.engine.run_attempts on its attempts, then
+ch37.engine.save) and returns its files as bytes; the caller saves them, so a worker on another
+machine needs no shared disk. Layout of a run's folder:
 
     OUT/scale_data_stamp.json          the run's stamp: made_by, kind "engine", its settings, complete
+    OUT/.scale_data.lock               held while a run writes OUT (ch37.files.lock)
     OUT/shards/shard-00007/            a finished shard: a LeRobot v3 set and its stamp (counts)
     OUT/shards/.shard-00007.partial/   a shard being saved; discarded by the next run
     OUT/data, OUT/meta                 the merged LeRobot v3 set (LeRobot's aggregate_datasets)
@@ -14,7 +17,7 @@ worker on another machine needs no shared disk. Layout of a run's folder:
 
 A shard is saved into its .partial folder and renamed into place with its stamp inside, so a
 shard folder without the .partial suffix is always whole. The shards are removed once the run is
-stamped complete.
+stamped complete; the same command re-run after a kill makes only the missing shards.
 """
 
 from __future__ import annotations
@@ -23,33 +26,38 @@ import contextlib
 import hashlib
 import io
 import json
+import platform
 import re
+import shlex
 import shutil
+import sys
 import tempfile
+import time
+from collections import Counter
+from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
 
-from ch37 import DATA_CODE
+import pusht_env
+from ch37 import DATA_CODE, engine, executors
 from ch37.demos import code_digest
-from ch37.stamps import MADE_BY, STAMP_NAME, read_stamp, stamp_text
+from ch37.errors import DataError
+from ch37.files import dump_json, lock, round_floats, unlock, write_atomic
+from ch37.lerobot_io import load_arrays, schema_problem
+from ch37.seeds import SEED_BLOCK
+from ch37.stamps import MADE_BY, STAMP_NAME, check_ours, read_json, read_stamp
 
-SHARD_SIZE = 100  # attempts per shard: ~0.4 MB of parquet, a few seconds of one core
 SHARDS_DIR = "shards"
 REPORT_NAME = "generation_report.json"
-RUN_KIND = "engine"
+SETTINGS = ("mode", "per_demo", "seed", "pos_sigma", "yaw_sigma", "shard_size")  # a run's flags
 # The engine's own code: a shard made by other code is never mixed into a run.
 ENGINE_VERSION = code_digest(DATA_CODE + ("ch37/engine.py", "ch37/shards.py"))
 
 
 def versions() -> dict:
     """The packages whose versions can change a shard's bytes."""
-    import lerobot
-    import mujoco
-    import pyarrow
-
-    return {"lerobot": lerobot.__version__, "mujoco": mujoco.__version__, "numpy": np.__version__,
-            "pyarrow": pyarrow.__version__}  # fmt: skip
+    return {name: version(name) for name in ("lerobot", "mujoco", "numpy", "pyarrow")}
 
 
 def source_identity(arrays: dict) -> dict:
@@ -90,23 +98,13 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
 
     Returns {"files": {relative path: bytes}, "stamp": the shard's stamp}. The stamp holds the
     counts the report needs (attempts, kept, failures by reason, per source, episode lengths)."""
-    from ch37 import engine
-
-    kept, failures, per_source, lengths = [], {}, {}, {}
-    for e, k in jobs:
-        r = engine.attempt(
-            sources[e], k, seed=config["seed"], pos_sigma=config["pos_sigma"],
-            yaw_sigma=config["yaw_sigma"], mode=config["mode"],
-        )  # fmt: skip
-        tally = per_source.setdefault(str(e), [0, 0])  # [attempts, kept]
-        tally[0] += 1
-        if isinstance(r, str):
-            failures[r] = failures.get(r, 0) + 1
-            continue
-        tally[1] += 1
-        n = str(len(r["action"]))
-        lengths[n] = lengths.get(n, 0) + 1
-        kept.append(r)
+    how = {k: config[k] for k in ("seed", "pos_sigma", "yaw_sigma", "mode")}
+    results = engine.run_attempts(sources, jobs, workers=1, **how)
+    kept = [r for r in results if not isinstance(r, str)]
+    per_source = {}  # source episode -> [attempts, kept]
+    for (e, _), r in zip(jobs, results):
+        tally = per_source.setdefault(str(e), [0, 0])
+        tally[0], tally[1] = tally[0] + 1, tally[1] + (not isinstance(r, str))
     stamp = {
         "made_by": MADE_BY,
         "kind": "engine-shard",
@@ -115,16 +113,16 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
         "attempts": len(jobs),
         "kept": len(kept),
         "frames": sum(len(r["action"]) for r in kept),
-        "failures": failures,
+        "failures": dict(Counter(r for r in results if isinstance(r, str))),
         "per_source": per_source,
-        "lengths": lengths,
+        "lengths": dict(Counter(str(len(r["action"])) for r in kept)),
         "versions": versions(),
     }
     if not kept:
-        return {"files": {STAMP_NAME: stamp_text(stamp).encode()}, "stamp": stamp}
+        return {"files": {STAMP_NAME: dump_json(stamp).encode()}, "stamp": stamp}
     with tempfile.TemporaryDirectory(prefix=".scratch-", dir=scratch) as tmp:
         root = Path(tmp) / "set"
-        engine.write_kept(root, kept, repo_id="local/pusht_aug_shard", stamp=stamp)
+        engine.save(root, kept, repo_id="local/pusht_aug_shard", stamp=stamp)
         files = {
             p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
         }
@@ -199,7 +197,7 @@ def merge(out: Path, n_shards: int) -> int:
         (tmp / "data").rename(out / "data")
         (tmp / "meta").rename(out / "meta")
         shutil.rmtree(tmp)
-    return sum(json.loads((r / "meta" / "info.json").read_text())["total_episodes"] for r in roots)
+    return sum(read_json(r / "meta" / "info.json")["total_episodes"] for r in roots)
 
 
 def remove_shards(out: Path) -> None:
@@ -253,7 +251,7 @@ def write_frame_stats(root: Path) -> None:
 
     root = Path(root)
     path = root / "meta" / "stats.json"
-    old = json.loads(path.read_text())
+    old = read_json(path)
     files = sorted((root / "data").rglob("*.parquet"))
     columns = set(pq.read_schema(files[0]).names)
     new = {
@@ -262,8 +260,206 @@ def write_frame_stats(root: Path) -> None:
     path.write_text(json.dumps(new, indent=4, sort_keys=True, ensure_ascii=False))
 
 
-def read_json(path: Path):
+# ----------------------------------------------------------------------------------------------
+# The run: its checks, its plan (resumed where a run stopped), its report
+# ----------------------------------------------------------------------------------------------
+def read_source(src: Path) -> dict:
+    """The source set's columns, or DataError with one line saying what is wrong with it."""
+    import datasets
+    import pyarrow.parquet as pq
+
+    if not src.is_dir():
+        raise DataError(f"--src {src} is not a folder; make a PushT set with gen_demos_pusht.py")
+    problem = schema_problem(src, pusht_env.OBS_DIM, pusht_env.ACT_DIM)
+    if problem:
+        raise DataError(f"--src {problem} (a PushT set has state [10] and action [2])")
+    feats = read_json(src / "meta" / "info.json")["features"]
+    for key, want in (("observation.state", pusht_env.STATE_NAMES), ("action", pusht_env.ACTION_NAMES)):
+        names = feats[key].get("names")
+        if names is not None and list(names) != list(want):
+            raise DataError(f"--src {src}: {key} names {names} are not PushT's {list(want)}")
+    for f in sorted(src.glob("data/*/*.parquet")) + sorted(src.glob("meta/episodes/*/*.parquet")):
+        try:
+            pq.read_metadata(f)
+        except Exception as e:  # pyarrow's errors for a broken file vary by what is broken
+            raise DataError(
+                f"--src {src}: {f.relative_to(src)} is not a readable parquet file ({e})"
+            ) from None
+    datasets.logging.set_verbosity(datasets.logging.CRITICAL)  # a failure below is our one line, not a log
     try:
-        return json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError):
-        return None
+        arrays = load_arrays(src, keys=("observation.state", "action", "episode_index"))
+    except Exception as e:  # pyarrow, datasets and lerobot each raise their own kinds for a broken set
+        first = (str(e).strip().splitlines() or [""])[0][:160]
+        raise DataError(
+            f"--src {src} could not be read as a LeRobot dataset ({type(e).__name__}: {first})"
+        ) from None
+    if len(arrays["action"]) == 0:
+        raise DataError(f"--src {src} holds no frames")
+    if not (np.isfinite(arrays["observation.state"]).all() and np.isfinite(arrays["action"]).all()):
+        raise DataError(f"--src {src} holds non-finite states or actions")
+    if arrays["episode_index"].max() >= SEED_BLOCK:
+        raise DataError(f"--src {src}: episode indices must be below {SEED_BLOCK:,} (the seed block)")
+    return arrays
+
+
+def check_out(out: Path, src: Path, config: dict | None = None) -> dict | None:
+    """None for a new run; the run's stamp for a run of this command (with `config`, when given);
+    DataError for anything else: --out overlapping --src, data this program did not make, other settings."""
+    o, s = out.resolve(), src.resolve()
+    if o == s or s in o.parents or o in s.parents:
+        raise DataError(f"--out {out} overlaps --src {src}; the source is never written: pick another --out")
+    stamp = check_ours(out, "engine")
+    if stamp is None or config is None or stamp.get("config") == config:
+        return stamp
+    old = stamp.get("config") or {}
+    diff = ", ".join(
+        f"{k} differs" if isinstance(v, dict) else f"{k}={old.get(k)} (now {v})"
+        for k, v in config.items()
+        if old.get(k) != v
+    )
+    raise DataError(f"{out} holds a run with other settings ({diff}); pass another --out")
+
+
+def length_stats(hist: dict) -> dict:
+    """min, max, mean, median and p90 of episode lengths from {length: count}."""
+    if not hist:
+        return {}
+    x = np.repeat([int(n) for n in hist], list(hist.values()))
+    return {
+        "min": int(x.min()),
+        "max": int(x.max()),
+        "mean": float(x.mean()),
+        "median": float(np.median(x)),
+        "p90": float(np.quantile(x, 0.9)),
+    }
+
+
+def report_of(stamps: list[dict], failures_known, base: dict) -> dict:
+    """The generation report from the shard stamps (so a resumed run reports the whole run)."""
+    failures, lengths = Counter(dict.fromkeys(failures_known, 0)), Counter()
+    per_source = {}  # source episode -> [attempts, kept]
+    for st in stamps:
+        failures.update(st["failures"])
+        lengths.update(st["lengths"])
+        for e, (att, kept) in st["per_source"].items():
+            t = per_source.setdefault(e, [0, 0])
+            t[0], t[1] = t[0] + att, t[1] + kept
+    attempts, kept = sum(st["attempts"] for st in stamps), sum(st["kept"] for st in stamps)
+    return base | {
+        "attempts": attempts,
+        "kept": kept,
+        "yield": kept / attempts if attempts else 0.0,
+        "failures": dict(failures),
+        "frames": sum(st["frames"] for st in stamps),
+        "episode_length": length_stats(lengths),
+        "per_source": {
+            e: {"attempts": a, "kept": k, "yield": k / a}
+            for e, (a, k) in sorted(per_source.items(), key=lambda kv: int(kv[0]))
+        },
+    }
+
+
+def run(src: Path, out: Path, settings: dict, *, workers: int, ray: str | None = None, quiet=False) -> dict:
+    """Grow `out` from the PushT set `src` with `settings` (SETTINGS) on `workers` local processes or
+    on Ray (ch37.executors.run): a run cut off earlier is finished, its whole shards kept; a complete
+    run is left as it is. A second run on `out` waits for the first. Returns the generation report."""
+    t0 = time.perf_counter()
+    check_out(out, src)  # before reading the source: a folder that is not ours is refused at once
+    arrays = read_source(src)
+    config = settings | {"source": source_identity(arrays), "engine": ENGINE_VERSION, "versions": versions()}
+    check_out(out, src, config)  # every refusal comes before anything is created
+    out.mkdir(parents=True, exist_ok=True)
+    lock(out)
+    try:
+        stamp = check_out(out, src, config)  # again: a run waited for may have changed the folder
+        old = read_json(out / REPORT_NAME) if stamp and stamp.get("complete") else None
+        if old:
+            remove_shards(out)  # left over if a run was stopped right after its stamp
+            print("already complete (same command, same settings); nothing to do")
+            return old
+        return _generate(
+            src, out, engine.sources(arrays), config, workers=workers, ray=ray, quiet=quiet, t0=t0
+        )
+    finally:
+        unlock(out)  # the lock file left empty: a finished run's folder is the same bytes every time
+
+
+def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
+    run_stamp = {"made_by": MADE_BY, "kind": "engine", "config": config, "complete": False}
+    write_atomic(out / STAMP_NAME, dump_json(run_stamp))  # the folder is ours from here on
+    shards = plan(sources, config["per_demo"], config["shard_size"])
+    done = finished(out, config, len(shards))
+    todo = [i for i in range(len(shards)) if i not in done]
+    scratch = None if ray not in (None, "local") else str(out / SHARDS_DIR)  # this machine's disk
+    (out / SHARDS_DIR).mkdir(exist_ok=True)
+    tasks = [
+        (i, shards[i], {e: sources[e] for e in sorted({e for e, _ in shards[i]})}, config, scratch)
+        for i in todo
+    ]
+    timing = {"start_s": 0.0}  # of seconds_generate: starting or joining Ray
+    if not tasks:
+        executor = "none (every shard was already made)"
+    elif ray is None:
+        executor = f"local processes ({min(workers, len(tasks))})"
+    else:
+        executor = f"ray {f'local, {workers} CPUs' if ray == 'local' else ray}"
+    results = executors.run(make_shard, tasks, workers=workers, ray=ray, timing=timing) if tasks else []
+    t_gen = time.perf_counter()
+    made = _collect(out, results, done, config["versions"], total=sum(map(len, shards)), quiet=quiet)
+    t_merge = time.perf_counter()
+    merged = merge(out, len(shards))
+    seconds = time.perf_counter() - t0
+    vers = {"python": platform.python_version(), **config["versions"]}
+    if ray is not None:
+        vers["ray"] = version("ray")
+    report = report_of(
+        [done[i] for i in range(len(shards))],
+        engine.FAILURES[config["mode"]],
+        {
+            "source": {"path": str(src.resolve()), **config["source"]},
+            "settings": {k: config[k] for k in SETTINGS},
+            "shards": {"total": len(shards), "made_this_run": len(todo), "reused": len(shards) - len(todo)},
+            "executor": executor,
+            "seconds": seconds,
+            "seconds_generate": t_merge - t_gen,
+            "seconds_start_executor": timing["start_s"],
+            "seconds_merge": time.perf_counter() - t_merge,
+            "demos_per_s": made / seconds,
+            "command": " ".join(shlex.quote(x) for x in [Path(sys.executable).name, *sys.argv]),
+            "versions": vers,
+            "dataset": {"episodes": merged, "load": f"LeRobotDataset('local/pusht_aug', root='{out}')"},
+        },
+    )
+    assert report["kept"] == merged, (report["kept"], merged)
+    write_atomic(out / REPORT_NAME, dump_json(round_floats(report, 4)))
+    write_atomic(out / STAMP_NAME, dump_json(run_stamp | {"complete": True}))
+    remove_shards(out)
+    if merged == 0:
+        print(f"no attempt succeeded: no dataset written, only {out / REPORT_NAME}")
+    return report
+
+
+def _collect(out: Path, results, done: dict, versions: dict, *, total: int, quiet: bool) -> int:
+    """Save each shard as it arrives (into `done`: shard index -> stamp), with a progress bar of
+    attempts. Returns the demos kept by this run."""
+    from tqdm import tqdm
+
+    initial = sum(st["attempts"] for st in done.values())
+    hide = quiet or not sys.stderr.isatty()
+    bar = tqdm(total=total, initial=initial, desc="augment", unit="attempt", leave=False, disable=hide)
+    attempts = kept = 0
+    t0 = time.perf_counter()
+    for r in results:
+        st = r["stamp"]
+        if st["versions"] != versions:
+            raise DataError(
+                f"a worker has {st['versions']}, this machine {versions}: install the same versions"
+            )
+        save_shard(out, st["shard"], r)
+        done[st["shard"]] = st
+        attempts, kept = attempts + st["attempts"], kept + st["kept"]
+        bar.update(st["attempts"])
+        rate = kept / max(time.perf_counter() - t0, 1e-9)
+        bar.set_postfix_str(f"{rate:.1f} demos/s, yield {kept / attempts:.3f}")
+    bar.close()
+    return kept

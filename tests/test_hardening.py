@@ -451,11 +451,9 @@ def test_damaged_cache_entries_are_refused_before_anything_is_copied(
 
 def test_cache_stores_only_what_this_run_wrote(tmp_path, monkeypatch):
     """A stray scale_data.rrd in --out (another seed's) never enters the cache."""
-    from ch37 import outputs
-
     monkeypatch.setenv("CH37_CACHE_DIR", str(tmp_path / "cache"))
     out = tmp_path / "out"
-    claim = outputs.claim(out, results=result_cache.RESULT_FILES)
+    claim = files.claim(out, results=result_cache.RESULT_FILES)
     try:
         files.write_atomic(out / "metrics.json", "{}\n")
         (out / "scale_data.rrd").write_bytes(b"another seed's recording")
@@ -474,11 +472,10 @@ def test_cache_stores_only_what_this_run_wrote(tmp_path, monkeypatch):
 # Ownership, file by file
 # ---------------------------------------------------------------------------------------------
 def test_claimed_out_refuses_a_foreign_file_and_clears_only_its_own(tmp_path):
-    from ch37 import outputs
     from ch37.errors import DataError
 
     out = tmp_path / "out"
-    claim = outputs.claim(out, results=("metrics.json", "b.json"))
+    claim = files.claim(out, results=("metrics.json", "b.json"))
     files.write_atomic(out / "metrics.json", "1\n")
     (out / "b.json").write_text("user's\n")
     with pytest.raises(DataError, match="b.json was not written by this program"):
@@ -487,14 +484,14 @@ def test_claimed_out_refuses_a_foreign_file_and_clears_only_its_own(tmp_path):
     claim.release()
     (out / "metrics.json").write_text("edited by the user\n")  # ours once, changed since: theirs now
     with pytest.raises(DataError, match="metrics.json was not written by this program"):
-        outputs.claim(out, results=("metrics.json",))
+        files.claim(out, results=("metrics.json",))
     (out / "metrics.json").unlink()
     (out / "b.json").unlink()
-    claim = outputs.claim(out, results=("metrics.json",))
+    claim = files.claim(out, results=("metrics.json",))
     files.write_atomic(out / "metrics.json", "3\n")
     (out / "notes.txt").write_text("kept\n")
     claim.release()
-    claim = outputs.claim(out, results=("metrics.json",))  # the next run clears its own old result only
+    claim = files.claim(out, results=("metrics.json",))  # the next run clears its own old result only
     assert not (out / "metrics.json").exists() and (out / "notes.txt").read_text() == "kept\n"
     claim.release()
 
