@@ -20,11 +20,13 @@ import json
 import sys
 from pathlib import Path
 
-from ch37 import CHAPTER_ID, ROOT
+import yaml
+
+from ch37 import CHAPTER_ID, ROOT, errors
+from ch37.errors import DataError
 from ch37.files import write_atomic
 from exercises.rules import RULES, derive_checks
-from tools.common import META, ToolError, _rel, parser, run_cli
-from tools.regions import drifted, region_hashes
+from tools.common import META, drifted, parser, region_hashes, rel
 
 META_HEADER = """\
 # Chapter 3.7 metadata. Written by `python -m tools.meta` (reference_run, exercise_checks,
@@ -70,16 +72,7 @@ META_STATIC = {
     },
 }
 META_ORDER = (
-    "id",
-    "title",
-    "track",
-    "objectives",
-    "mimicgen",
-    "reference_run",
-    "replay",
-    "scale_lab",
-    "exercise_checks",
-    "region_hashes",
+    "id title track objectives mimicgen reference_run replay scale_lab exercise_checks region_hashes".split()
 )
 # What each sweep file must hold for reference_run and derive_checks: top-level keys, then keys of every row.
 SWEEP_KEYS = {
@@ -89,68 +82,52 @@ SWEEP_KEYS = {
     ),
     "aug": (("rows",), ("aug_per_demo", "augmented_full", "ci95")),
 }
-PROVENANCE_KEYS = (
-    "command",
-    "date_utc",
-    "git",
-    "platform",
-    "packages",
-    "device",
-    "config",
-    "script_region_hashes",
-)
+PROVENANCE_KEYS = "command date_utc git platform packages device config script_region_hashes".split()
+SIGMA_ROW_KEYS = "multiplier mode attempts kept yield ci95 failures kept_block_shift_m".split()
+SCALE_LAB_KEYS = ("command", "config", "expert", "generation", "curves", "points", "seconds")
 
 
 def load_yaml(path: Path) -> dict:
-    """A YAML mapping ({} when the file does not exist); anything else is a ToolError."""
-    import yaml
-
+    """A YAML mapping ({} when the file does not exist); anything else is a DataError."""
     path = Path(path)
     if not path.exists():
         return {}
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
-        raise ToolError(f"{_rel(path)} is not readable YAML ({' '.join(str(e).split())})") from None
+        raise DataError(f"{rel(path)} is not readable YAML ({' '.join(str(e).split())})") from None
     if data is not None and not isinstance(data, dict):
-        raise ToolError(f"{_rel(path)} is not a YAML mapping")
+        raise DataError(f"{rel(path)} is not a YAML mapping")
     return data or {}
 
 
-def _yaml_dumper():
-    import yaml
+class _Dumper(yaml.SafeDumper):
+    """Short all-scalar lists and mappings on one line ({n: 3, wins: 3}), the rest in block style."""
 
-    class Dumper(yaml.SafeDumper):
-        """Short all-scalar lists and mappings on one line ({n: 3, wins: 3}), the rest in block style."""
 
-    def flow(value) -> bool:
-        items = value.values() if isinstance(value, dict) else value
-        scalar = all(
-            isinstance(v, (int, float, bool, type(None))) or (isinstance(v, str) and len(v) < 40)
-            for v in items
-        )
-        return scalar and len(json.dumps(value)) <= 100
+def _flow(value) -> bool:
+    items = value.values() if isinstance(value, dict) else value
+    short = (int, float, bool, type(None))
+    scalar = all(isinstance(v, short) or (isinstance(v, str) and len(v) < 40) for v in items)
+    return scalar and len(json.dumps(value)) <= 100
 
-    def mapping(d, v):
-        return d.represent_mapping("tag:yaml.org,2002:map", v.items(), flow_style=flow(v))
 
-    Dumper.add_representer(dict, mapping)
-    Dumper.add_representer(
-        list, lambda d, v: d.represent_sequence("tag:yaml.org,2002:seq", v, flow_style=flow(v))
-    )
-    return Dumper
+_Dumper.add_representer(dict, lambda d, v: d.represent_mapping("tag:yaml.org,2002:map", v.items(), _flow(v)))
+_Dumper.add_representer(list, lambda d, v: d.represent_sequence("tag:yaml.org,2002:seq", v, _flow(v)))
 
 
 def write_meta(path: Path, meta: dict) -> None:
     """meta.yaml in META_ORDER (unknown keys after), under META_HEADER, written atomically."""
-    import yaml
+    ordered = {k: meta[k] for k in META_ORDER if k in meta} | meta
+    text = yaml.dump(ordered, Dumper=_Dumper, sort_keys=False, allow_unicode=True, width=110)
+    write_atomic(Path(path), META_HEADER + text)
 
-    ordered = {k: meta[k] for k in META_ORDER if k in meta}
-    ordered.update({k: v for k, v in meta.items() if k not in ordered})
-    text = META_HEADER + yaml.dump(
-        ordered, Dumper=_yaml_dumper(), sort_keys=False, allow_unicode=True, width=110
-    )
-    write_atomic(Path(path), text)
+
+def _read_json(path: Path, what: str, again: str):
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise DataError(f"{rel(path)} is not a readable {what} ({e}); {again}") from None
 
 
 def _public(row: dict) -> dict:
@@ -184,22 +161,19 @@ def reference_run(seeds: dict, aug: dict) -> dict:
 
 
 def read_sweep(path: Path, kind: str, flag: str) -> dict:
-    """A sweep file of `kind` ("seeds" or "aug") with every key meta needs; else a one-line ToolError."""
+    """A sweep file of `kind` ("seeds" or "aug") with every key meta needs; else a one-line DataError."""
     path = Path(path)
     if not path.exists():
-        raise ToolError(
-            f"{_rel(path)} not found; run the sweeps first: python -m tools.sweep --seeds 3 "
+        raise DataError(
+            f"{rel(path)} not found; run the sweeps first: python -m tools.sweep --seeds 3 "
             "and python -m tools.sweep --aug 0 4 8"
         )
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as e:
-        raise ToolError(f"{_rel(path)} is not a readable JSON sweep file ({e}); re-run the sweep") from None
+    data = _read_json(path, "JSON sweep file", "re-run the sweep")
     got = data.get("kind") if isinstance(data, dict) else type(data).__name__
     if got != kind:
-        raise ToolError(
+        raise DataError(
             "--sweep takes the sweep_seeds.json file and --aug-sweep the sweep_aug.json file; "
-            f"{flag} {_rel(path)} holds {got!r}, not a {kind!r} sweep"
+            f"{flag} {rel(path)} holds {got!r}, not a {kind!r} sweep"
         )
     top, per_row = SWEEP_KEYS[kind]
     missing = [k for k in top if k not in data]
@@ -215,11 +189,23 @@ def read_sweep(path: Path, kind: str, flag: str) -> dict:
             if "ci95" in r and not (isinstance(r["ci95"], dict) and "augmented_full" in r["ci95"]):
                 missing.append(f"rows[{i}].ci95.augmented_full")
     if missing:
-        raise ToolError(f"{_rel(path)} is incomplete: it lacks {', '.join(missing[:5])}; re-run the sweep")
+        raise DataError(f"{rel(path)} is incomplete: it lacks {', '.join(missing[:5])}; re-run the sweep")
     return data
 
 
-SIGMA_ROW_KEYS = ("multiplier", "mode", "attempts", "kept", "yield", "ci95", "failures", "kept_block_shift_m")
+def _compare(d: dict) -> dict:
+    """replay_compare.json for meta.yaml: the pooled results and each seed's arms and replay yield."""
+    rows = d["rows"]
+    per_seed = [
+        {"seed": r["seed"], **{a: v["success"] for a, v in r["arms"].items()}}
+        | {f"replay_{k}": r["modes"]["replay"][k] for k in ("kept", "attempts")}
+        for r in rows
+    ]
+    return (
+        {"command": d["command"], "seeds": [r["seed"] for r in rows], "steps": [r["steps"] for r in rows]}
+        | {k: d[k] for k in ("modes", "pooled", "differences")}
+        | {"per_seed": per_seed}
+    )
 
 
 def replay_section(folder: Path) -> dict | None:
@@ -232,23 +218,7 @@ def replay_section(folder: Path) -> dict | None:
         try:
             d = json.loads(f.read_text(encoding="utf-8"))
             if kind == "compare":
-                out[kind] = {
-                    "command": d["command"],
-                    "seeds": [r["seed"] for r in d["rows"]],
-                    "steps": [r["steps"] for r in d["rows"]],
-                    "modes": d["modes"],
-                    "pooled": d["pooled"],
-                    "differences": d["differences"],
-                    "per_seed": [
-                        {
-                            "seed": r["seed"],
-                            **{a: v["success"] for a, v in r["arms"].items()},
-                            "replay_kept": r["modes"]["replay"]["kept"],
-                            "replay_attempts": r["modes"]["replay"]["attempts"],
-                        }
-                        for r in d["rows"]
-                    ],
-                }
+                out[kind] = _compare(d)
             else:
                 out[kind] = {
                     "command": d["command"],
@@ -256,13 +226,10 @@ def replay_section(folder: Path) -> dict | None:
                 }
             out["provisional"] = bool(out.get("provisional") or d.get("smoke"))
         except (OSError, ValueError, KeyError, TypeError) as e:
-            raise ToolError(
-                f"{_rel(f)} is not a complete tools.replay file ({e}); re-run python -m tools.replay"
+            raise DataError(
+                f"{rel(f)} is not a complete tools.replay file ({e}); re-run python -m tools.replay"
             ) from None
     return out or None
-
-
-SCALE_LAB_KEYS = ("command", "config", "expert", "generation", "curves", "points", "seconds")
 
 
 def read_scale_lab(path: Path) -> dict | None:
@@ -270,15 +237,12 @@ def read_scale_lab(path: Path) -> dict | None:
     path = Path(path)
     if not path.exists():
         return None
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as e:
-        raise ToolError(f"{_rel(path)} is not a readable scale_lab.json ({e}); re-run scale_lab.py") from None
+    data = _read_json(path, "scale_lab.json", "re-run scale_lab.py")
     if not isinstance(data, dict) or data.get("kind") != "scale_lab":
-        raise ToolError(f"--scale-lab {_rel(path)} is not a scale_lab.json written by scale_lab.py")
+        raise DataError(f"--scale-lab {rel(path)} is not a scale_lab.json written by scale_lab.py")
     missing = [k for k in SCALE_LAB_KEYS if k not in data]
     if missing:
-        raise ToolError(f"{_rel(path)} is incomplete: it lacks {', '.join(missing)}; re-run scale_lab.py")
+        raise DataError(f"{rel(path)} is incomplete: it lacks {', '.join(missing)}; re-run scale_lab.py")
     return data
 
 
@@ -289,28 +253,27 @@ def scale_lab_section(lab: dict) -> dict:
     provisional = bool(cfg.get("smoke"))
     curves = {
         curve: {
-            int(n): {"success": r["success"], "ci95": r["ci95"], "demos": r["demos"], "steps": r["steps"]}
+            int(n): {k: r[k] for k in ("success", "ci95", "demos", "steps")}
             for n, r in sorted(rows.items(), key=lambda kv: int(kv[0]))
         }
         for curve, rows in lab["curves"].items()
     }
     generation = {}
     for mode, by_seed in lab["generation"].items():
-        attempts = sum(g["attempts"] for g in by_seed.values())
-        kept = sum(g["kept"] for g in by_seed.values())
+        attempts, kept = (sum(g[k] for g in by_seed.values()) for k in ("attempts", "kept"))
         generation[mode] = {
             "attempts": attempts,
             "kept": kept,
             "yield": round(kept / attempts, 4) if attempts else 0,
         }
+    if provisional:
+        note = "smoke-sized lab: exercises the pipeline only; refresh with python scale_lab.py"
+    else:
+        note = "success vs total PushT demos; every number below was written by python -m tools.meta from "
+        note += "scale_lab.json"
     return {
         "provisional": provisional,
-        "note": (
-            "smoke-sized lab: exercises the pipeline only; refresh with python scale_lab.py"
-            if provisional
-            else "success vs total PushT demos; every number below was written by python -m tools.meta "
-            "from scale_lab.json"
-        ),
+        "note": note,
         "command": lab["command"],
         "seeds": cfg["seeds"],
         "eval_episodes": cfg["eval_episodes"],
@@ -323,25 +286,16 @@ def scale_lab_section(lab: dict) -> dict:
     }
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str]) -> int:
     p = parser("meta", __doc__)
+    out = ROOT / "outputs"
+    p.add_argument("--sweep", type=Path, default=out / "sweep/sweep_seeds.json", help="the seed sweep")
+    p.add_argument("--aug-sweep", type=Path, default=out / "sweep/sweep_aug.json", help="the aug sweep")
     p.add_argument(
-        "--sweep", type=Path, default=ROOT / "outputs/sweep/sweep_seeds.json", help="the seed sweep"
+        "--replay", type=Path, default=out / "replay", help="folder of python -m tools.replay's files"
     )
     p.add_argument(
-        "--aug-sweep", type=Path, default=ROOT / "outputs/sweep/sweep_aug.json", help="the aug sweep"
-    )
-    p.add_argument(
-        "--replay",
-        type=Path,
-        default=ROOT / "outputs/replay",
-        help="folder of python -m tools.replay's files",
-    )
-    p.add_argument(
-        "--scale-lab",
-        type=Path,
-        default=ROOT / "outputs/scale_lab/scale_lab.json",
-        help="the Scale Lab's results (section left as found when the file does not exist)",
+        "--scale-lab", type=Path, default=out / "scale_lab/scale_lab.json", help="the Scale Lab's results"
     )
     p.add_argument("--meta", type=Path, default=META, help="default meta.yaml")
     a = p.parse_args(argv)
@@ -358,17 +312,16 @@ def main(argv: list[str] | None = None) -> int:
                 file=sys.stderr,
             )
     old = load_yaml(a.meta)
-    meta = {k: old.get(k, v) for k, v in META_STATIC.items()}
-    meta.update({k: v for k, v in old.items() if k not in META_STATIC})
+    meta = {k: old.get(k, v) for k, v in META_STATIC.items()} | old
     try:
         meta["reference_run"] = reference_run(seeds, aug)
         meta["exercise_checks"] = derive_checks(seeds, aug)
         if lab is not None:
             meta["scale_lab"] = scale_lab_section(lab)
     except ValueError as e:
-        raise ToolError(str(e)) from None
+        raise DataError(str(e)) from None
     except (KeyError, TypeError, IndexError) as e:
-        raise ToolError(
+        raise DataError(
             f"a sweep file or scale_lab.json is malformed ({type(e).__name__}: {e}); re-run it"
         ) from None
     replay = replay_section(a.replay)
@@ -378,7 +331,7 @@ def main(argv: list[str] | None = None) -> int:
     write_meta(a.meta, meta)
     ex = meta["exercise_checks"]
     print(
-        f"wrote {_rel(a.meta)}: ex1 answer {ex['ex1']['answer']} band {ex['ex1']['band']}, "
+        f"wrote {rel(a.meta)}: ex1 answer {ex['ex1']['answer']} band {ex['ex1']['band']}, "
         f"ex3 answer {ex['ex3']['answer']} bands {ex['ex3']['band']}"
         + (" (provisional: smoke sweep)" if meta["reference_run"]["provisional"] else "")
     )
@@ -386,4 +339,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    run_cli(main)
+    errors.main(main)
