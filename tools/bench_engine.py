@@ -34,7 +34,7 @@ from ch37.lerobot_io import features, load_arrays, write_dataset
 from ch37.stamps import replace_own_dir
 from tools.common import parser, provenance
 
-SOURCE_EPISODES = 12
+SOURCE_EPISODES = DEFAULTS["source_episodes"]
 
 
 def tree_digest(root: Path) -> str:
@@ -72,9 +72,8 @@ def run_sampled(cmd: list[str]) -> dict:
     out, err = proc.communicate()
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
-        raise DataError(
-            f"{' '.join(cmd[1:])} exited {proc.returncode}: {(err.strip().splitlines() or [''])[-1]}"
-        )
+        last = (err.strip().splitlines() or [""])[-1]
+        raise DataError(f"{' '.join(cmd[1:])} exited {proc.returncode}: {last}")
     return {"wall_s": wall, **{f"peak_rss_{k}_mb": v / 2**20 for k, v in peak.items()}, "stdout": out}
 
 
@@ -88,32 +87,19 @@ def point(src: Path, out: Path, n: int, executor: str, workers: int, shard_size:
     cmd += ["--shard_size", str(shard_size)] if shard_size else []
     m = run_sampled(cmd)
     rep = json.loads((run_dir / "generation_report.json").read_text())
-    row = {
-        "demos_requested": n,
-        "executor": executor,
-        "workers": workers,
-        "attempts": rep["attempts"],
-        "kept": rep["kept"],
-        "yield": rep["yield"],
-        "frames": rep["frames"],
-        "shards": rep["shards"]["total"],
-        "shard_size": rep["settings"]["shard_size"],
-        "wall_s": m["wall_s"],
-        "generate_s": rep["seconds_generate"],
-        "start_executor_s": rep["seconds_start_executor"],  # of generate_s
-        "merge_s": rep["seconds_merge"],
-        "other_s": m["wall_s"] - rep["seconds_generate"] - rep["seconds_merge"],
-        "demos_per_s": rep["kept"] / m["wall_s"],
-        "generate_demos_per_s_per_worker": rep["kept"]
-        / (rep["seconds_generate"] - rep["seconds_start_executor"])
-        / workers,
-        "merge_s_per_shard": rep["seconds_merge"] / rep["shards"]["total"],
-        "peak_rss_driver_mb": m["peak_rss_driver_mb"],
-        "peak_rss_largest_mb": m["peak_rss_largest_mb"],
-        "peak_rss_tree_mb": m["peak_rss_tree_mb"],
-        "sha256": tree_digest(run_dir),
-        "summary": m["stdout"].strip().splitlines()[-1],
+    gen, start, merge = rep["seconds_generate"], rep["seconds_start_executor"], rep["seconds_merge"]
+    shards, wall = rep["shards"]["total"], m.pop("wall_s")
+    row = {"demos_requested": n, "executor": executor, "workers": workers, "shards": shards}
+    row |= {k: rep[k] for k in ("attempts", "kept", "yield", "frames")} | {"wall_s": wall}
+    row |= {"generate_s": gen, "start_executor_s": start, "merge_s": merge}  # start_executor_s: of generate_s
+    row |= {
+        "other_s": wall - gen - merge,
+        "demos_per_s": rep["kept"] / wall,
+        "merge_s_per_shard": merge / shards,
     }
+    row |= {"generate_demos_per_s_per_worker": rep["kept"] / (gen - start) / workers}
+    row |= {"shard_size": rep["settings"]["shard_size"], "sha256": tree_digest(run_dir)}
+    row |= {"summary": m.pop("stdout").strip().splitlines()[-1], **m}  # m: the peak RSS
     replace_own_dir(run_dir)
     return row
 
@@ -193,12 +179,10 @@ def main(argv: list[str]) -> int:
     check(a, positive=("workers", "cluster_cores"))
     if min(a.sizes) < 1:
         raise DataError("--sizes must be positive")
-    src = a.src
-    if src is None:
-        src = a.out / f"src_pusht_seed0_ep{SOURCE_EPISODES}"
-        if not (src / "meta" / "info.json").exists():
-            if gen_demos_pusht.main(["--episodes", str(SOURCE_EPISODES), "--out", str(src), "--quiet"]) != 0:
-                raise DataError(f"could not make the source set at {src}")
+    src = a.src or a.out / f"src_pusht_seed0_ep{SOURCE_EPISODES}"
+    if a.src is None and not (src / "meta" / "info.json").exists():
+        if gen_demos_pusht.main(["--episodes", str(SOURCE_EPISODES), "--out", str(src), "--quiet"]) != 0:
+            raise DataError(f"could not make the source set at {src}")
     costs = per_demo_costs(src)
     print(
         f"one core, in process: re-solve {costs['resolve_ms_per_attempt']:.1f} ms per attempt, "
@@ -227,16 +211,9 @@ def main(argv: list[str]) -> int:
             f"merge {e['merge_s'] / 60:.1f} min)"
         )
     print("assumptions: " + "; ".join(est["assumptions"]))
-    result = {
-        "per_demo_costs": costs,
-        "runs": rows,
-        "estimate": est,
-        "cluster_cores": a.cluster_cores,
-        "provenance": provenance(a.script),
-    }
-    result["identical_across_executors"] = {
-        str(n): len({r["sha256"] for r in rows if r["demos_requested"] == n}) == 1 for n in a.sizes
-    }
+    same = {str(n): len({r["sha256"] for r in rows if r["demos_requested"] == n}) == 1 for n in a.sizes}
+    result = {"per_demo_costs": costs, "runs": rows, "estimate": est, "cluster_cores": a.cluster_cores}
+    result |= {"provenance": provenance(a.script), "identical_across_executors": same}
     path = write_atomic(a.out / "bench_engine.json", dump_json(round_floats(result, 4)))
     print(f"wrote {path}")
     return 0

@@ -51,9 +51,8 @@ def supports_flag(script: Path, flag: str) -> bool:
 REGION_ORDER = ("setup", "wrangle", "augment", "measure", "emit")
 OPEN_RE = re.compile(r"# --- region: (\S+) ---")
 CLOSE = "# --- endregion ---"
-MARKERISH = re.compile(
-    r"^\s*#\s*-{2,}\s*(end\s*)?region\b", re.IGNORECASE
-)  # anything that tries to be a marker
+# anything that tries to be a marker
+MARKERISH = re.compile(r"^\s*#\s*-{2,}\s*(end\s*)?region\b", re.IGNORECASE)
 
 
 class RegionError(DataError):
@@ -74,12 +73,9 @@ class Region:
     @property
     def intent(self) -> list[str]:
         """The comment block that opens the region (its statement of intent), without '# '."""
-        out = []
-        for line in self.body.splitlines():
-            if not line.startswith("#"):
-                break
-            out.append(line[1:].strip())
-        return out
+        lines = self.body.splitlines()
+        n = next((i for i, line in enumerate(lines) if not line.startswith("#")), len(lines))
+        return [line[1:].strip() for line in lines[:n]]
 
     @property
     def code(self) -> str:
@@ -96,61 +92,62 @@ def _read(path: Path) -> str:
         raise RegionError(f"{rel(path)}: cannot be read ({e})") from None
 
 
-def parse_regions(path: Path = SCRIPT, text: str | None = None) -> list[Region]:
+def parse_regions(path: Path = SCRIPT) -> list[Region]:
     """The five regions of the chapter script, in order; RegionError on any malformed marker layout."""
     path = Path(path)
-    text = _read(path) if text is None else text
-    where, order = path.name, ", ".join(REGION_ORDER)
+    text, order = _read(path), ", ".join(REGION_ORDER)
+
+    def bad(n, msg) -> RegionError:  # names the file and the line
+        return RegionError(f"{path.name}{f':{n}' if n else ''}: {msg}")
+
     try:
         tree = ast.parse(text)
     except SyntaxError as e:
-        raise RegionError(f"{where}:{e.lineno}: not valid Python ({e.msg})") from None
+        raise bad(e.lineno, f"not valid Python ({e.msg})") from None
     doc = tree.body[0] if tree.body and ast.get_docstring(tree) is not None else None
     doc_lines = range(doc.lineno, doc.end_lineno + 1) if doc else range(0)
     regions: list[Region] = []
     open_name, open_line, body = None, 0, []
     for n, raw in enumerate(text.splitlines(), 1):
         line = raw.rstrip()
-        m = OPEN_RE.fullmatch(line)
-        if m:
-            name, done = m.group(1), [r.name for r in regions]
+        if m := OPEN_RE.fullmatch(line):
+            name = m.group(1)
             if open_name is not None:
-                raise RegionError(
-                    f"{where}:{n}: region {name!r} opens inside region {open_name!r} (opened at line "
-                    f"{open_line}); regions do not nest, close it with '{CLOSE}' first"
+                raise bad(
+                    n,
+                    f"region {name!r} opens inside region {open_name!r} (opened at line {open_line}); "
+                    f"regions do not nest, close it with '{CLOSE}' first",
                 )
             if name not in REGION_ORDER:
-                raise RegionError(f"{where}:{n}: unknown region name {name!r}; the regions are {order}")
-            if name in done:
-                raise RegionError(f"{where}:{n}: duplicate region {name!r}")
-            if name != REGION_ORDER[len(done)]:
-                raise RegionError(
-                    f"{where}:{n}: region {name!r} is out of order: expected {REGION_ORDER[len(done)]!r} "
-                    f"here (order: {order})"
-                )
+                raise bad(n, f"unknown region name {name!r}; the regions are {order}")
+            if name in [r.name for r in regions]:
+                raise bad(n, f"duplicate region {name!r}")
+            if name != (expected := REGION_ORDER[len(regions)]):
+                raise bad(n, f"region {name!r} is out of order: expected {expected!r} here (order: {order})")
             open_name, open_line, body = name, n, []
         elif line == CLOSE:
             if open_name is None:
-                raise RegionError(f"{where}:{n}: '{CLOSE}' without an open region")
+                raise bad(n, f"'{CLOSE}' without an open region")
             regions.append(Region(open_name, open_line, n, "".join(b + "\n" for b in body)))
             open_name = None
         elif MARKERISH.match(raw):
-            raise RegionError(
-                f"{where}:{n}: malformed region marker {raw.strip()!r}; markers are exactly "
-                f"'# --- region: NAME ---' and '{CLOSE}' at column 0"
+            raise bad(
+                n,
+                f"malformed region marker {raw.strip()!r}; markers are exactly "
+                f"'# --- region: NAME ---' and '{CLOSE}' at column 0",
             )
         elif open_name is not None:
             body.append(raw)
         elif line.strip() and n not in doc_lines and not (n == 1 and line.startswith("#!")):
-            raise RegionError(
-                f"{where}:{n}: code outside any region: {line.strip()[:60]!r} "
-                "(only the module docstring may live outside the regions)"
+            raise bad(
+                n,
+                f"code outside any region: {line.strip()[:60]!r} "
+                "(only the module docstring may live outside the regions)",
             )
     if open_name is not None:
-        raise RegionError(f"{where}:{open_line}: region {open_name!r} has no '{CLOSE}'")
-    missing = REGION_ORDER[len(regions) :]
-    if missing:
-        raise RegionError(f"{where}: missing region(s) {', '.join(missing)}; the regions are {order}")
+        raise bad(open_line, f"region {open_name!r} has no '{CLOSE}'")
+    if missing := REGION_ORDER[len(regions) :]:
+        raise bad(None, f"missing region(s) {', '.join(missing)}; the regions are {order}")
     return regions
 
 
@@ -168,33 +165,33 @@ def module_docstring(path: Path = SCRIPT) -> str:
     return ast.get_docstring(ast.parse(_read(Path(path)))) or ""
 
 
-def _cpu_model() -> str:
+def _run(*cmd: str) -> subprocess.CompletedProcess | None:
     try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    if sys.platform == "darwin" and not platform.processor():
-        try:
-            cmd = ["sysctl", "-n", "machdep.cpu.brand_string"]
-            return subprocess.run(cmd, capture_output=True, text=True).stdout.strip()
-        except OSError:
-            pass
-    return platform.processor() or ""
+        return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+    except OSError:  # no such program here
+        return None
+
+
+def _cpu_model() -> str:
+    info = Path("/proc/cpuinfo")
+    models = (
+        [ln for ln in info.read_text().splitlines() if ln.startswith("model name")] if info.exists() else []
+    )
+    cpu = models[0].split(":", 1)[1].strip() if models else platform.processor()
+    if not cpu and sys.platform == "darwin":
+        mac = _run("sysctl", "-n", "machdep.cpu.brand_string")
+        cpu = mac.stdout.strip() if mac else ""
+    return cpu or ""
 
 
 def _git() -> dict | None:
-    def git(*args):
-        return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True)
-
-    try:
-        head, dirty = git("rev-parse", "HEAD"), git("status", "--porcelain", "--untracked-files=no")
-    except OSError:
-        return None
-    return (
-        {"commit": head.stdout.strip(), "dirty": bool(dirty.stdout.strip())} if head.returncode == 0 else None
+    head, dirty = (
+        _run("git", "rev-parse", "HEAD"),
+        _run("git", "status", "--porcelain", "--untracked-files=no"),
     )
+    if head is None or head.returncode != 0:
+        return None
+    return {"commit": head.stdout.strip(), "dirty": bool(dirty.stdout.strip())}
 
 
 def _version(pkg: str) -> str | None:

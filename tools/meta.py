@@ -1,15 +1,13 @@
-"""meta.yaml from the sweep files: reference_run, exercise_checks and region_hashes, never typed by hand.
+"""meta.yaml from the result files: reference_run, exercise_checks and region_hashes, never typed by hand.
 
     python -m tools.meta [--sweep F] [--aug-sweep F] [--replay DIR] [--scale-lab F] [--meta F]
 
---sweep takes the seed sweep (default outputs/sweep/sweep_seeds.json, from `python -m tools.sweep
---seeds 3`), --aug-sweep the aug sweep (default outputs/sweep/sweep_aug.json, from `python -m
-tools.sweep --aug 0 4 8`). The exercise answers and bands come from exercises/rules.py. What a
-smoke sweep gives is marked `provisional: true`. id, title, track, objectives and mimicgen are kept
-as found in meta.yaml. The `replay` section comes from --replay DIR's replay_compare.json and
-replay_sigma.json (`python -m tools.replay --seeds 5` and `--sigma ...`), the `scale_lab` section
-from --scale-lab (default outputs/scale_lab/scale_lab.json, from `python scale_lab.py`), each when
-its files exist, and left as found otherwise; smoke-sized ones are marked `provisional: true` too.
+reference_run comes from the seed sweep (--sweep, from `python -m tools.sweep --seeds 3`) and the aug
+sweep (--aug-sweep, from `python -m tools.sweep --aug 0 4 8`), exercise_checks from them through
+exercises/rules.py; `replay` from --replay DIR (`python -m tools.replay --seeds 5` and `--sigma ...`)
+and `scale_lab` from --scale-lab (`python scale_lab.py`) when their files exist, left as found
+otherwise. What smoke-sized runs give is marked `provisional: true`. id, title, track, objectives and
+mimicgen are kept as found in meta.yaml.
 
 Exit codes: 0 ok, 2 bad input (a missing, corrupt or incomplete sweep file, bad flags).
 """
@@ -71,20 +69,15 @@ META_STATIC = {
         ],
     },
 }
-META_ORDER = (
-    "id title track objectives mimicgen reference_run replay scale_lab exercise_checks region_hashes".split()
-)
+META_ORDER = "id title track objectives mimicgen reference_run replay scale_lab exercise_checks region_hashes"
 # What each sweep file must hold for reference_run and derive_checks: top-level keys, then keys of every row.
 SWEEP_KEYS = {
-    "seeds": (
-        ("rows", "mean", "paired", "pooled", "action_dims", "padded_action_dim"),
-        ("seed", "delta", "ci95"),
-    ),
-    "aug": (("rows",), ("aug_per_demo", "augmented_full", "ci95")),
+    "seeds": ("rows mean paired pooled action_dims padded_action_dim", "seed delta ci95"),
+    "aug": ("rows", "aug_per_demo augmented_full ci95"),
 }
 PROVENANCE_KEYS = "command date_utc git platform packages device config script_region_hashes".split()
 SIGMA_ROW_KEYS = "multiplier mode attempts kept yield ci95 failures kept_block_shift_m".split()
-SCALE_LAB_KEYS = ("command", "config", "expert", "generation", "curves", "points", "seconds")
+SCALE_LAB_KEYS = "command config expert generation curves points seconds".split()
 
 
 def load_yaml(path: Path) -> dict:
@@ -118,7 +111,7 @@ _Dumper.add_representer(list, lambda d, v: d.represent_sequence("tag:yaml.org,20
 
 def write_meta(path: Path, meta: dict) -> None:
     """meta.yaml in META_ORDER (unknown keys after), under META_HEADER, written atomically."""
-    ordered = {k: meta[k] for k in META_ORDER if k in meta} | meta
+    ordered = {k: meta[k] for k in META_ORDER.split() if k in meta} | meta
     text = yaml.dump(ordered, Dumper=_Dumper, sort_keys=False, allow_unicode=True, width=110)
     write_atomic(Path(path), META_HEADER + text)
 
@@ -130,32 +123,28 @@ def _read_json(path: Path, what: str, again: str):
         raise DataError(f"{rel(path)} is not a readable {what} ({e}); {again}") from None
 
 
-def _public(row: dict) -> dict:
-    """A sweep row for meta.yaml: per-run wall time left out (wallclock.csv is the timing of record)."""
-    return {k: v for k, v in row.items() if k != "wall_s"}
-
-
 def reference_run(seeds: dict, aug: dict) -> dict:
+    """The sweeps' rows and statistics with their provenance; per-run wall time left out (wallclock.csv
+    is the timing of record)."""
     provisional = bool(seeds.get("smoke") or aug.get("smoke"))
     if provisional:
         note = "smoke-sized sweep: exercises the pipeline only; refresh with a full sweep"
     else:
         note = "default configuration; every number below was written by python -m tools.meta from the sweeps"
+
+    def rows(sweep):
+        return [{k: v for k, v in r.items() if k != "wall_s"} for r in sweep["rows"]]
+
+    def prov(sweep):
+        return {"provenance": {k: sweep[k] for k in PROVENANCE_KEYS if k in sweep}}
+
+    seed_part = {"rows": rows(seeds)} | {k: seeds[k] for k in ("mean", "paired", "pooled")} | prov(seeds)
+    aug_part = {"seed": aug.get("seed", 0), "rows": rows(aug)} | prov(aug)
     return {
         "provisional": provisional,
         "note": note,
-        "seeds": {
-            "rows": [_public(r) for r in seeds["rows"]],
-            "mean": seeds["mean"],
-            "paired": seeds["paired"],
-            "pooled": seeds["pooled"],
-            "provenance": {k: seeds[k] for k in PROVENANCE_KEYS if k in seeds},
-        },
-        "aug_curve": {
-            "seed": aug.get("seed", 0),
-            "rows": [_public(r) for r in aug["rows"]],
-            "provenance": {k: aug[k] for k in PROVENANCE_KEYS if k in aug},
-        },
+        "seeds": seed_part,
+        "aug_curve": aug_part,
         "rules": RULES,
     }
 
@@ -175,7 +164,7 @@ def read_sweep(path: Path, kind: str, flag: str) -> dict:
             "--sweep takes the sweep_seeds.json file and --aug-sweep the sweep_aug.json file; "
             f"{flag} {rel(path)} holds {got!r}, not a {kind!r} sweep"
         )
-    top, per_row = SWEEP_KEYS[kind]
+    top, per_row = (keys.split() for keys in SWEEP_KEYS[kind])
     missing = [k for k in top if k not in data]
     rows = data.get("rows")
     if "rows" not in missing and (not isinstance(rows, list) or not rows):
@@ -249,23 +238,16 @@ def read_scale_lab(path: Path) -> dict | None:
 def scale_lab_section(lab: dict) -> dict:
     """meta.yaml's scale_lab: per curve per N the mean success over seeds, its pooled Wilson interval,
     the demos actually trained on (mean over seeds) and the steps per seed; engine yields; wall time."""
-    cfg = lab["config"]
-    provisional = bool(cfg.get("smoke"))
+    cfg, provisional = lab["config"], bool(lab["config"].get("smoke"))
     curves = {
-        curve: {
-            int(n): {k: r[k] for k in ("success", "ci95", "demos", "steps")}
-            for n, r in sorted(rows.items(), key=lambda kv: int(kv[0]))
-        }
+        curve: {int(n): {k: r[k] for k in ("success", "ci95", "demos", "steps")} for n, r in rows.items()}
         for curve, rows in lab["curves"].items()
     }
     generation = {}
     for mode, by_seed in lab["generation"].items():
         attempts, kept = (sum(g[k] for g in by_seed.values()) for k in ("attempts", "kept"))
-        generation[mode] = {
-            "attempts": attempts,
-            "kept": kept,
-            "yield": round(kept / attempts, 4) if attempts else 0,
-        }
+        generation[mode] = {"attempts": attempts, "kept": kept}
+        generation[mode]["yield"] = round(kept / attempts, 4) if attempts else 0
     if provisional:
         note = "smoke-sized lab: exercises the pipeline only; refresh with python scale_lab.py"
     else:
@@ -281,7 +263,7 @@ def scale_lab_section(lab: dict) -> dict:
         "expert": {"success": lab["expert"]["success"], "ci95": lab["expert"]["ci95"]},
         "fixed_steps": lab.get("fixed_steps"),
         "generation": generation,
-        "curves": curves,
+        "curves": {c: dict(sorted(by_n.items())) for c, by_n in curves.items()},  # N in numeric order
         "wall_s": round(lab["seconds"]["total"]),
     }
 
@@ -291,24 +273,17 @@ def main(argv: list[str]) -> int:
     out = ROOT / "outputs"
     p.add_argument("--sweep", type=Path, default=out / "sweep/sweep_seeds.json", help="the seed sweep")
     p.add_argument("--aug-sweep", type=Path, default=out / "sweep/sweep_aug.json", help="the aug sweep")
-    p.add_argument(
-        "--replay", type=Path, default=out / "replay", help="folder of python -m tools.replay's files"
-    )
-    p.add_argument(
-        "--scale-lab", type=Path, default=out / "scale_lab/scale_lab.json", help="the Scale Lab's results"
-    )
+    p.add_argument("--replay", type=Path, default=out / "replay", help="python -m tools.replay's folder")
+    p.add_argument("--scale-lab", type=Path, default=out / "scale_lab/scale_lab.json", help="the lab's")
     p.add_argument("--meta", type=Path, default=META, help="default meta.yaml")
     a = p.parse_args(argv)
-    seeds = read_sweep(a.sweep, "seeds", "--sweep")
-    aug = read_sweep(a.aug_sweep, "aug", "--aug-sweep")
-    lab = read_scale_lab(a.scale_lab)
-    current = region_hashes(a.script)
+    seeds, aug = read_sweep(a.sweep, "seeds", "--sweep"), read_sweep(a.aug_sweep, "aug", "--aug-sweep")
+    lab, current = read_scale_lab(a.scale_lab), region_hashes(a.script)
     for name, s in (("seed", seeds), ("aug", aug)):
-        stale = drifted(current, s.get("script_region_hashes"))
-        if stale:
+        if stale := ", ".join(drifted(current, s.get("script_region_hashes"))):
             print(
-                f"warning: the {name} sweep ran a different scale_data.py (regions {', '.join(stale)} "
-                "changed since); re-run it if those changes can move the numbers",
+                f"warning: the {name} sweep ran a different scale_data.py (regions {stale} changed since); "
+                "re-run it if those changes can move the numbers",
                 file=sys.stderr,
             )
     old = load_yaml(a.meta)
@@ -321,19 +296,16 @@ def main(argv: list[str]) -> int:
     except ValueError as e:
         raise DataError(str(e)) from None
     except (KeyError, TypeError, IndexError) as e:
-        raise DataError(
-            f"a sweep file or scale_lab.json is malformed ({type(e).__name__}: {e}); re-run it"
-        ) from None
-    replay = replay_section(a.replay)
-    if replay is not None:
+        raise DataError(f"a sweep file or scale_lab.json is malformed ({type(e).__name__}: {e}); re-run it")
+    if (replay := replay_section(a.replay)) is not None:
         meta["replay"] = replay
     meta["region_hashes"] = current
     write_meta(a.meta, meta)
     ex = meta["exercise_checks"]
+    smoke = " (provisional: smoke sweep)" if meta["reference_run"]["provisional"] else ""
     print(
         f"wrote {rel(a.meta)}: ex1 answer {ex['ex1']['answer']} band {ex['ex1']['band']}, "
-        f"ex3 answer {ex['ex3']['answer']} bands {ex['ex3']['band']}"
-        + (" (provisional: smoke sweep)" if meta["reference_run"]["provisional"] else "")
+        f"ex3 answer {ex['ex3']['answer']} bands {ex['ex3']['band']}{smoke}"
     )
     return 0
 

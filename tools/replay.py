@@ -41,7 +41,8 @@ from ch37.viz import save_png
 from gen_demos_pusht import PUSHT
 from tools.common import parser, provenance, rel
 
-POS_SIGMA, YAW_SIGMA = DEFAULTS["aug_pos_sigma"], DEFAULTS["aug_yaw_sigma"]
+POS_SIGMA, YAW_SIGMA = DEFAULTS["aug_pos_sigma"], DEFAULTS["aug_yaw_sigma"]  # m, rad
+SIGMAS = dict(pos_sigma=POS_SIGMA, yaw_sigma=YAW_SIGMA)
 MODES = ("resolve", "replay")
 ARMS = ("source", "replay", "resolve_matched", "resolve_all")
 DIFFS = (("replay", "source"), ("resolve_matched", "source"), ("resolve_matched", "replay"))
@@ -67,9 +68,7 @@ def grow(out: Path, mode: str, sources: dict, seed: int, c: dict, workers: int) 
     """The kept set of `mode` written under OUT/demos and read back (training reads what is on disk),
     and its row: attempts, yield, failures by reason, start coverage."""
     t = time.perf_counter()
-    how = dict(
-        mode=mode, cap=c["tries"], workers=workers, seed=seed, pos_sigma=POS_SIGMA, yaw_sigma=YAW_SIGMA
-    )
+    how = dict(mode=mode, cap=c["tries"], workers=workers, seed=seed, **SIGMAS)
     kept, attempts, failures = engine.grow(sources, c["per_demo"], **how)
     name = f"pusht_seed{seed}_{mode}_k{c['per_demo']}"
     path = out / "demos" / name
@@ -77,17 +76,10 @@ def grow(out: Path, mode: str, sources: dict, seed: int, c: dict, workers: int) 
     d = load_arrays(path, keys=engine.KEPT_KEYS) if kept else engine.empty_kept()
     _, first = np.unique(d["episode_index"], return_index=True)
     cells, outside = bc.cells(d["aug.start"][first, :2])
-    row = {
-        "attempts": attempts,
-        "kept": len(kept),
-        "wanted": len(sources) * c["per_demo"],
-        "yield": len(kept) / attempts if attempts else 0.0,
-        "failures": failures,
-        "coverage_cells": len(cells),
-        "outside_annulus": outside,
-        "seconds": round(time.perf_counter() - t, 1),
-    }
-    return row, d
+    row = {"attempts": attempts, "kept": len(kept), "wanted": len(sources) * c["per_demo"]}
+    row |= {"yield": len(kept) / attempts if attempts else 0.0, "failures": failures}
+    row |= {"coverage_cells": len(cells), "outside_annulus": outside}
+    return row | {"seconds": round(time.perf_counter() - t, 1)}, d
 
 
 def per_source(d: dict) -> dict[int, int]:
@@ -150,29 +142,20 @@ def compare_seed(out: Path, seed: int, c: dict, workers: int, quiet: bool) -> di
 def summarize(rows: list[dict], eval_episodes: int) -> dict:
     """Each arm's successes pooled over seeds (Wilson 95%), the paired differences, each mode's totals."""
     n = eval_episodes * len(rows)
-    pooled = {}
+    pooled, diffs, modes = {}, {}, {}
     for a in ARMS:
         k = sum(round(r["arms"][a]["success"] * eval_episodes) for r in rows)
         pooled[a] = {"successes": k, "episodes": n, "rate": k / n, "ci95": bc.wilson(k / n, n)}
-    diffs = {}
     for hi, lo in DIFFS:
         d = [r["arms"][hi]["success"] - r["arms"][lo]["success"] for r in rows]
-        diffs[f"{hi}_vs_{lo}"] = {
-            "per_seed": d,
-            "mean": float(np.mean(d)),
-            "positive": sum(v > 0 for v in d),
-            "negative": sum(v < 0 for v in d),
-        }
-    modes = {}
+        diffs[f"{hi}_vs_{lo}"] = {"per_seed": d, "mean": float(np.mean(d))}
+        diffs[f"{hi}_vs_{lo}"] |= {"positive": sum(v > 0 for v in d), "negative": sum(v < 0 for v in d)}
     for mode in MODES:
-        att, kept = (sum(r["modes"][mode][k] for r in rows) for k in ("attempts", "kept"))
-        fails: dict[str, int] = {}
-        for r in rows:
-            for why, v in r["modes"][mode]["failures"].items():
-                fails[why] = fails.get(why, 0) + v
-        cells = float(np.mean([r["modes"][mode]["coverage_cells"] for r in rows]))
+        got = [r["modes"][mode] for r in rows]
+        att, kept = sum(g["attempts"] for g in got), sum(g["kept"] for g in got)
+        fails = {why: sum(g["failures"][why] for g in got) for why in got[0]["failures"]}
         modes[mode] = {"attempts": att, "kept": kept, "yield": kept / att if att else 0.0, "failures": fails}
-        modes[mode]["coverage_cells_mean"] = cells
+        modes[mode]["coverage_cells_mean"] = float(np.mean([g["coverage_cells"] for g in got]))
     return {"pooled": pooled, "differences": diffs, "modes": modes}
 
 
@@ -188,22 +171,12 @@ def sigma_row(srcs: dict, m: float, mode: str, attempts: int, workers: int) -> d
             if not isinstance(r, str):
                 shift.append(math.hypot(*(r["aug.start"][0][:2] - sources[e].states[0][2:4])))
     n, kept = len(results), len(shift)
-    return {
-        "multiplier": m,
-        "pos_sigma": m * POS_SIGMA,
-        "yaw_sigma": m * YAW_SIGMA,
-        "mode": mode,
-        "attempts": n,
-        "kept": kept,
-        "yield": kept / n,
-        "ci95": bc.wilson(kept / n, n),
-        "failures": {why: results.count(why) for why in engine.FAILURES[mode]},
-        "kept_block_shift_m": {
-            "median": float(np.median(shift)) if shift else None,
-            "max": float(np.max(shift)) if shift else None,
-        },
-        "seconds": round(time.perf_counter() - t, 1),
-    }
+    row = {"multiplier": m, "pos_sigma": m * POS_SIGMA, "yaw_sigma": m * YAW_SIGMA, "mode": mode}
+    row |= {"attempts": n, "kept": kept, "yield": kept / n, "ci95": bc.wilson(kept / n, n)}
+    row["failures"] = {why: results.count(why) for why in engine.FAILURES[mode]}
+    stats = {"median": np.median, "max": np.max}
+    row["kept_block_shift_m"] = {k: float(f(shift)) if shift else None for k, f in stats.items()}
+    return row | {"seconds": round(time.perf_counter() - t, 1)}
 
 
 def sigma_plot(path: Path, table: dict) -> Path:
@@ -275,9 +248,7 @@ def main(argv: list[str]) -> int:
     a = p.parse_args(argv)
     if not a.seeds and not a.sigma:
         raise DataError("nothing to do: give --seeds N and/or --sigma M [M ...]")
-    check(
-        a, positive=[k for k in ("seeds", "attempts", "sigma_seeds", "workers") if getattr(a, k) is not None]
-    )
+    check(a, positive=["attempts", "sigma_seeds", "workers"] + ["seeds"] * (a.seeds is not None))
     if a.sigma and any(not (0 < m < 100) for m in a.sigma):
         raise DataError("--sigma multipliers must be in (0, 100)")
     c = config(a.smoke)
