@@ -89,16 +89,13 @@ def build_notebook(script: Path = SCRIPT) -> str:
     for i, r in enumerate(regions, 1):
         cells.append(_cell("markdown", f"{r.name}-md", f"## {i}. {r.name}\n\n{' '.join(r.intent)}"))
         cells.append(_cell("code", f"{r.name}-code", r.code, [f"region-{r.name}"]))
-    nb = {
-        "cells": cells,
-        "metadata": {
-            "colab": {"provenance": [], "toc_visible": True},
-            "kernelspec": {"display_name": "Python 3 (ipykernel)", "language": "python", "name": "python3"},
-            "language_info": {"name": "python"},
-        },
-        "nbformat": 4,
-        "nbformat_minor": 5,
+    kernel = {"display_name": "Python 3 (ipykernel)", "language": "python", "name": "python3"}
+    meta = {
+        "colab": {"provenance": [], "toc_visible": True},
+        "kernelspec": kernel,
+        "language_info": {"name": "python"},
     }
+    nb = {"cells": cells, "metadata": meta, "nbformat": 4, "nbformat_minor": 5}
     return json.dumps(nb, indent=1, sort_keys=True, ensure_ascii=False) + "\n"
 
 

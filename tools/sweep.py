@@ -56,32 +56,24 @@ def run_one(script: Path, out: Path, seed: int, flags: list[str], root: Path) ->
     if p.returncode != 0:
         tail = "\n".join((p.stdout + p.stderr).strip().splitlines()[-15:])
         raise DataError(
-            f"{shlex.join(cmd)} exited {p.returncode}; last lines:\n{tail}\n(full log: {out / 'run.log'})"
+            f"{shlex.join(cmd)} exited {p.returncode}; last lines:\n{tail}\n(full log: {out}/run.log)"
         )
-    metrics = json.loads((out / "metrics.json").read_text())
-    metrics["_wall_s"] = round(time.perf_counter() - t0, 1)
-    return metrics
+    return json.loads((out / "metrics.json").read_text()) | {"_wall_s": round(time.perf_counter() - t0, 1)}
 
 
 def row_of(m: dict, **extra) -> dict:
     """One run's 2x2 as a sweep row: each arm's success, the effects, steps per budget, episodes."""
     a, n = m["arms"], m["config"]["eval_episodes"]
-    return {
-        **extra,
-        **{arm: a[arm]["success"] for arm in ARMS},
-        **{e: round(m["effects"][e], 6) for e in EFFECTS},
-        "delta": round(m["scale_effect"], 6),  # the headline: data effect at the full budget
+    row = extra | {arm: a[arm]["success"] for arm in ARMS} | {e: round(m["effects"][e], 6) for e in EFFECTS}
+    row["delta"] = round(m["scale_effect"], 6)  # the headline: data effect at the full budget
+    row |= {
         "steps": m["budgets"],
         "eval_episodes": n,
-        "successes": {arm: round(a[arm]["success"] * n) for arm in ARMS},
-        "yield": m["yield"],
-        "kept": m["kept"],
-        "attempts": m["attempts"],
-        "coverage_source": m["coverage"]["source"],
-        "coverage_union": m["coverage"]["union"],
-        "ci95": {arm: a[arm]["ci95"] for arm in ARMS},
-        "wall_s": m["_wall_s"],
+        "successes": {k: round(a[k]["success"] * n) for k in ARMS},
     }
+    row |= {k: m[k] for k in ("yield", "kept", "attempts")}
+    row |= {"coverage_source": m["coverage"]["source"], "coverage_union": m["coverage"]["union"]}
+    return row | {"ci95": {arm: a[arm]["ci95"] for arm in ARMS}, "wall_s": m["_wall_s"]}
 
 
 def mean_row(rows: list[dict]) -> dict:
@@ -105,15 +97,10 @@ def paired(rows: list[dict]) -> dict:
         mean = sum(d) / n
         std = math.sqrt(sum((x - mean) ** 2 for x in d) / (n - 1)) if n > 1 else None
         half = None if std is None else T975.get(n - 1, 1.96) * std / math.sqrt(n)
-        out[key] = {
-            "n": n,
-            "wins": sum(x > 0 for x in d),
-            "ties": sum(x == 0 for x in d),
-            "losses": sum(x < 0 for x in d),
-            "mean": round(mean, 6),
-            "std": None if std is None else round(std, 6),
-            "ci95": None if half is None else [round(mean - half, 6), round(mean + half, 6)],
-        }
+        out[key] = {"n": n, "wins": sum(x > 0 for x in d), "ties": sum(x == 0 for x in d)}
+        out[key] |= {"losses": sum(x < 0 for x in d), "mean": round(mean, 6)}
+        out[key]["std"] = None if std is None else round(std, 6)
+        out[key]["ci95"] = None if half is None else [round(mean - half, 6), round(mean + half, 6)]
     return out
 
 
@@ -180,14 +167,11 @@ def run_all(kind: str, runs: list, script: Path, out_root: Path, flags: list[str
         got = f"source {a['source_full']['success']:.2f} augmented {a['augmented_full']['success']:.2f}"
         print(f" done ({m['_wall_s']:.0f} s): at {steps} steps {got}", flush=True)
         if kind == "aug":
-            k = m["config"]["aug_per_demo"]
+            k, wanted = m["config"]["aug_per_demo"], label["aug_per_demo"]
             label = label | {"effective_aug_per_demo": k}
-            if k != label["aug_per_demo"]:
-                wanted = label["aug_per_demo"]
-                print(
-                    f"  warning: the run used aug_per_demo {k} (--smoke pins it), not {wanted}",
-                    file=sys.stderr,
-                )
+            if k != wanted:
+                warning = f"  warning: the run used aug_per_demo {k} (--smoke pins it), not {wanted}"
+                print(warning, file=sys.stderr)
         rows.append(row_of(m, **label))
         metrics.append(m)
     if kind == "aug":
@@ -207,24 +191,16 @@ def sweep(a, flags: list[str], argv: list[str]) -> Path:
     kind, runs = plan(a.seeds, a.aug)
     rows, metrics = run_all(kind, runs, a.script, out_root, flags)
     varied = {"seed", "aug_per_demo", "full_steps"} if kind == "aug" else {"seed"}  # from run to run
-    runs_command = [
-        *"python scale_data.py --seed {seed} --no-rerun --out".split(),
-        str(out_root / kind / "{run}"),
+    each = ["--aug_per_demo", "{k}", "[--full_steps {full}]"] if kind == "aug" else []
+    runs_command = "python scale_data.py --seed {seed} --no-rerun --out".split() + [
+        str(out_root / kind / "{run}")
     ]
-    runs_command += [*flags] + (["--aug_per_demo", "{k}", "[--full_steps {full}]"] if kind == "aug" else [])
+    runs_command += flags + each
     first = metrics[0]
-    result = {
-        "kind": kind,
-        "smoke": smoke,
-        "command": shlex.join(["python", "-m", "tools.sweep", *argv]),
-        "runs_command": shlex.join(runs_command),
-        **prov,
-        "device": first["config"].get("device"),
-        "config": {k: v for k, v in first["config"].items() if k not in varied},
-        "action_dims": first["action_dims"],
-        "padded_action_dim": first["padded_action_dim"],
-        "rows": rows,
-    }
+    result = {"kind": kind, "smoke": smoke, "command": shlex.join(["python", "-m", "tools.sweep", *argv])}
+    result |= {"runs_command": shlex.join(runs_command), **prov, "device": first["config"].get("device")}
+    result["config"] = {k: v for k, v in first["config"].items() if k not in varied}
+    result |= {k: first[k] for k in ("action_dims", "padded_action_dim")} | {"rows": rows}
     if kind == "seeds":
         result |= {"mean": mean_row(rows), "paired": paired(rows), "pooled": pooled(rows)}
     else:

@@ -91,14 +91,9 @@ def measure_wallclock(script: Path, smoke: bool, tier: str | None) -> dict:
             tail = "\n".join((p.stdout + p.stderr).strip().splitlines()[-15:])
             raise DataError(f"the timed run exited {p.returncode}:\n{tail}")
         config = json.loads((Path(tmp) / "metrics.json").read_text())["config"]
-    return {
-        "chapter": CHAPTER_ID,
-        "tier": tier or device_tier(config["device"]),
-        "minutes": f"{wall / 60:.2f}",
-        "config_hash": config_hash(config),
-        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d"),
-        "status": "measured",
-    }
+    date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d")
+    row = _pending(tier or device_tier(config["device"])) | {"minutes": f"{wall / 60:.2f}", "date": date}
+    return row | {"config_hash": config_hash(config), "status": "measured"}
 
 
 def main(argv: list[str]) -> int:
