@@ -173,11 +173,10 @@ def _run(*cmd: str) -> subprocess.CompletedProcess | None:
 
 
 def _cpu_model() -> str:
-    info = Path("/proc/cpuinfo")
-    models = (
-        [ln for ln in info.read_text().splitlines() if ln.startswith("model name")] if info.exists() else []
-    )
-    cpu = models[0].split(":", 1)[1].strip() if models else platform.processor()
+    info = Path("/proc/cpuinfo")  # Linux
+    lines = info.read_text().splitlines() if info.exists() else []
+    models = [ln.split(":", 1)[1].strip() for ln in lines if ln.startswith("model name")]
+    cpu = models[0] if models else platform.processor()
     if not cpu and sys.platform == "darwin":
         mac = _run("sysctl", "-n", "machdep.cpu.brand_string")
         cpu = mac.stdout.strip() if mac else ""
@@ -185,10 +184,8 @@ def _cpu_model() -> str:
 
 
 def _git() -> dict | None:
-    head, dirty = (
-        _run("git", "rev-parse", "HEAD"),
-        _run("git", "status", "--porcelain", "--untracked-files=no"),
-    )
+    head = _run("git", "rev-parse", "HEAD")
+    dirty = _run("git", "status", "--porcelain", "--untracked-files=no")
     if head is None or head.returncode != 0:
         return None
     return {"commit": head.stdout.strip(), "dirty": bool(dirty.stdout.strip())}

@@ -96,6 +96,7 @@ def build_notebook(script: Path = SCRIPT) -> str:
         "language_info": {"name": "python"},
     }
     nb = {"cells": cells, "metadata": meta, "nbformat": 4, "nbformat_minor": 5}
+    # not ch37.files.dump_json: a notebook keeps its text UTF-8 as is, as nbformat writes it
     return json.dumps(nb, indent=1, sort_keys=True, ensure_ascii=False) + "\n"
 
 

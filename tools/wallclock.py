@@ -34,11 +34,8 @@ from ch37.files import write_atomic
 from tools.common import WALLCLOCK, parser, rel, supports_flag
 
 WALLCLOCK_FIELDS = ("chapter", "tier", "minutes", "config_hash", "date", "status")
-HASH_EXCLUDE = (
-    "device",
-    "workers",
-    "cache",
-)  # the tier names the device; workers and cache change speed only
+# not in config_hash: the tier names the device; workers and cache change speed only
+HASH_EXCLUDE = ("device", "workers", "cache")
 
 
 def config_hash(config: dict) -> str:
