@@ -16,7 +16,7 @@ from conftest import ROOT, run_script
 import ch37.cli
 from ch37 import CHAPTER_ID
 from exercises import rules
-from tools import common, notebook, regions, wallclock
+from tools import common, notebook, wallclock
 from tools import meta as meta_tool
 from tools import sweep as sweep_tool
 
@@ -32,18 +32,18 @@ def script(*regions, head=DOC, between="\n"):
     return head + between.join(parts)
 
 
-GOOD = [(n, f"# intent of {n}\nx_{n} = 1\n") for n in regions.REGION_ORDER]
+GOOD = [(n, f"# intent of {n}\nx_{n} = 1\n") for n in common.REGION_ORDER]
 
 
 def parse(tmp_path, text):
     p = tmp_path / "scale_data.py"
     p.write_text(text)
-    return regions.parse_regions(p)
+    return common.parse_regions(p)
 
 
 def test_parser_accepts_a_well_formed_script(tmp_path):
     found = parse(tmp_path, script(*GOOD))
-    assert [r.name for r in found] == list(regions.REGION_ORDER)
+    assert [r.name for r in found] == list(common.REGION_ORDER)
     r = found[0]
     assert (r.start, r.end) == (5, 8)
     assert (
@@ -90,7 +90,7 @@ def test_parser_accepts_a_well_formed_script(tmp_path):
     ],
 )
 def test_parser_rejects_malformed_markers(tmp_path, text, message):
-    with pytest.raises(regions.RegionError) as e:
+    with pytest.raises(common.RegionError) as e:
         parse(tmp_path, text)
     assert message in str(e.value)
     assert str(e.value).startswith("scale_data.py")  # names the file (and the line where there is one)
@@ -99,9 +99,9 @@ def test_parser_rejects_malformed_markers(tmp_path, text, message):
 def test_regions_cli_prints_every_region():
     p = run_script("-m", "tools.regions")
     lines = [
-        ln.split() for ln in p.stdout.splitlines() if ln.split() and ln.split()[0] in regions.REGION_ORDER
+        ln.split() for ln in p.stdout.splitlines() if ln.split() and ln.split()[0] in common.REGION_ORDER
     ]
-    assert [ln[0] for ln in lines] == list(regions.REGION_ORDER)
+    assert [ln[0] for ln in lines] == list(common.REGION_ORDER)
     assert all(len(ln[-1]) == 64 for ln in lines)
 
 
@@ -151,7 +151,7 @@ def test_meta_region_hashes_match_scale_data():
     """THE drift test: every region of scale_data.py must match meta.yaml (refresh on purpose with
     `python -m tools.regions --write`, and re-run the sweeps + meta if numbers may move)."""
     recorded = meta_tool.load_yaml(common.META).get("region_hashes")
-    bad = regions.drifted(regions.region_hashes(common.SCRIPT), recorded)
+    bad = common.drifted(common.region_hashes(common.SCRIPT), recorded)
     assert not bad, (
         f"scale_data.py region(s) {', '.join(bad)} changed but meta.yaml was not refreshed: "
         "run python -m tools.regions --write"
@@ -166,7 +166,7 @@ def test_drift_check_catches_a_one_character_change(tmp_path):
     assert ok.returncode == 0
     assert run_script("-m", "tools.regions", "--check", "--script", copy, "--meta", meta).returncode == 0
     text = copy.read_text()
-    r = regions.parse_regions(copy)[2]  # augment
+    r = common.parse_regions(copy)[2]  # augment
     lines = text.splitlines(keepends=True)
     i = r.start  # 0-based index of the region's first body line: its intent comment
     assert lines[i].startswith("#")
@@ -186,7 +186,7 @@ def test_hashes_write_keeps_the_rest_of_meta(tmp_path):
     meta.write_text(yaml.safe_dump(changed, sort_keys=False))
     run_script("-m", "tools.regions", "--write", "--meta", meta)
     after = yaml.safe_load(meta.read_text())
-    assert after["region_hashes"] == regions.region_hashes(common.SCRIPT)
+    assert after["region_hashes"] == common.region_hashes(common.SCRIPT)
     assert {k: v for k, v in after.items() if k != "region_hashes"} == {
         k: v for k, v in before.items() if k != "region_hashes"
     }
@@ -267,7 +267,7 @@ def sweep_files(tmp_path, deltas, aug_success, smoke=False):
         "mean": sweep_tool.mean_row(rows),
         "paired": sweep_tool.paired(rows),
         "pooled": sweep_tool.pooled(rows),
-        "script_region_hashes": regions.region_hashes(),
+        "script_region_hashes": common.region_hashes(),
     }
     aug = {
         "kind": "aug",
@@ -275,7 +275,7 @@ def sweep_files(tmp_path, deltas, aug_success, smoke=False):
         "seed": 0,
         "command": "python -m tools.sweep --aug 0 4 8",
         "rows": [row({"aug_per_demo": k}, aug_success[0], s) for k, s in zip((0, 4, 8), aug_success)],
-        "script_region_hashes": regions.region_hashes(),
+        "script_region_hashes": common.region_hashes(),
     }
     a, b = tmp_path / "sweep_seeds.json", tmp_path / "sweep_aug.json"
     a.write_text(json.dumps(seeds))
@@ -313,7 +313,7 @@ def test_meta_command_derives_checks_from_sweep_files(tmp_path, deltas, aug, ex1
     assert m["reference_run"]["provisional"] is smoke
     assert m["reference_run"]["seeds"]["paired"]["data_full"]["wins"] == sum(d > 0 for d in deltas)
     assert m["reference_run"]["seeds"]["pooled"]["source_full"]["episodes"] == 50 * len(deltas)
-    assert m["region_hashes"] == regions.region_hashes()
+    assert m["region_hashes"] == common.region_hashes()
     assert m["reference_run"]["rules"] == rules.RULES
 
 
@@ -501,7 +501,7 @@ def test_sweep_seeds_on_smoke_writes_the_table_and_paired_stats(smoke_sweep):
         and s["packages"]["numpy"]
     )
     assert s["config"]["smoke"] is True and "seed" not in s["config"]
-    assert s["script_region_hashes"] == regions.region_hashes()
+    assert s["script_region_hashes"] == common.region_hashes()
     assert (
         "paired data_full: > 0 on" in p.stdout
         and "pooled augmented_full:" in p.stdout
@@ -521,7 +521,7 @@ def test_notebook_is_fresh_and_deterministic():
     nb = nbformat.reads(text, as_version=4)
     nbformat.validate(nb)
     code = [c for c in nb.cells if c.cell_type == "code"]
-    assert [c.source for c in code[2:]] == [r.code for r in regions.parse_regions()]
+    assert [c.source for c in code[2:]] == [r.code for r in common.parse_regions()]
     assert (
         nb.cells[0].source.startswith("# Chapter 3.7")
         and "by `python -m tools.notebook`" in nb.cells[0].source

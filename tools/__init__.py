@@ -4,6 +4,7 @@
     python -m tools.sweep --seeds 3 [FLAGS]      scale_data.py over seeds 0..2 -> sweep_seeds.json
     python -m tools.sweep --aug 0 4 8 [FLAGS]    seed 0 over aug_per_demo 0, 4, 8 -> sweep_aug.json
     python -m tools.meta                         meta.yaml: reference_run, exercise_checks, region_hashes
+    python -m tools.replay --seeds 5 [--sigma M] replay vs re-solve on the chapter's recipe -> replay_*.json
     python -m tools.wallclock [--dry-run]        time the default run here, write its wallclock.csv row
     python -m tools.notebook [--check]           scale_data.ipynb from the regions
     python -m tools.bench [--smoke]              where the time of one run goes

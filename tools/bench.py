@@ -5,23 +5,29 @@
     python -m tools.bench --repeat 3      # median of 3 runs per phase
     python -m tools.bench --epochs 100    # other flags go to scale_data.py
 
-It executes scale_data.py statement by statement in one process (the same code, not a copy),
-times each phase, and wraps the chapter's own functions (demo generation, dataset loading,
-training, rollouts) to attribute their time. For training it reports achieved GFLOP/s next to a
-dense fp32 matmul measured in the same process, i.e. how close training runs to the machine's limit.
+It runs scale_data.py in this process as `python scale_data.py` would (runpy), charges the time
+between two lines of the script's own top level to the region of the first (sys.monitoring line events
+on that code only, so nothing else slows down), and wraps the shared functions the script calls (demo
+generation, dataset loading and writing, the engine's attempts, bc_recipe's training and rollouts) to
+attribute their time. For training it reports achieved GFLOP/s next to a dense fp32 matmul measured in
+the same process, i.e. how close training runs to the machine's limit.
 """
 
 from __future__ import annotations
 
-import argparse
-import ast
+import importlib
 import resource
+import runpy
 import statistics
 import sys
 import tempfile
 import time
+from pathlib import Path
 
-from ch37 import ROOT
+from ch37 import errors
+from tools.common import parse_regions, parser
+
+MON = sys.monitoring
 
 
 def matmul_gflops(batch: int, hidden: int, seconds: float = 1.5) -> float:
@@ -47,109 +53,109 @@ def step_flops(batch: int, hidden: int, obs: int, act: int) -> int:
     return fwd + bwd
 
 
-def run_once(argv: list[str]) -> dict:
-    """Execute scale_data.py with `argv` in this process; return {phase: seconds} and facts."""
-    from ch37 import demos, lerobot_io, parallel
+class RegionClock:
+    """Wall time per phase of `script`: each top-level line's region, or "import" for an import line."""
 
-    src = (ROOT / "scale_data.py").read_text()
-    tree = ast.parse(src)
-    times: dict[str, float] = {}  # regions (and imports)
-    inner: dict[str, float] = {}  # calls inside them: "of which" lines
+    def __init__(self, script: Path):
+        lines = script.read_text(encoding="utf-8").splitlines()
+        self.phase = {}  # line number -> phase
+        for r in parse_regions(script):
+            for n in range(r.start, r.end + 1):
+                self.phase[n] = "import" if lines[n - 1].startswith(("import ", "from ")) else r.name
+        self.path, self.times, self.last = str(script.resolve()), {}, ("docstring", time.perf_counter())
+
+    def _start(self, code, offset):
+        if code.co_filename == self.path and code.co_name == "<module>":
+            MON.set_local_events(MON.PROFILER_ID, code, MON.events.LINE)
+        return MON.DISABLE  # every other function: never asked about again
+
+    def _line(self, code, n):
+        phase, t = self.last
+        now = time.perf_counter()
+        self.times[phase] = self.times.get(phase, 0.0) + now - t
+        self.last = (self.phase.get(n, phase), now)
+
+    def __enter__(self):
+        MON.use_tool_id(MON.PROFILER_ID, "tools.bench")
+        MON.register_callback(MON.PROFILER_ID, MON.events.PY_START, self._start)
+        MON.register_callback(MON.PROFILER_ID, MON.events.LINE, self._line)
+        MON.set_events(MON.PROFILER_ID, MON.events.PY_START)
+        return self
+
+    def __exit__(self, *exc):
+        self._line(None, None)  # the last line's time
+        MON.set_events(MON.PROFILER_ID, 0)
+        MON.free_tool_id(MON.PROFILER_ID)
+        MON.restart_events()
+
+
+def run_once(script: Path, argv: list[str]) -> dict:
+    """Run `script` with `argv` in this process; {phase: seconds}, the calls inside them, and facts."""
+    import bc_recipe
+    from ch37 import demos, engine, lerobot_io
+
+    inner: dict[str, float] = {}  # calls inside the regions: "of which" lines
     facts: dict = {"train_steps": {}, "train_rows": {}}
+    busy = []  # a wrapped call is running: the calls it makes are its own time
 
-    def add(phase, dt, into=None):
-        into = inner if into is None else into
-        into[phase] = into.get(phase, 0.0) + dt
-
-    def timed(phase, fn):
+    def timed(phase, fn, note=None):
         def wrapper(*a, **k):
-            if facts.get("generating") and phase.startswith("write"):
-                return fn(*a, **k)  # already inside "demo generation"
-            facts["generating"] = phase.startswith("demo generation")
+            if busy:
+                return fn(*a, **k)
+            busy.append(phase)
             t0 = time.perf_counter()
             try:
                 return fn(*a, **k)
             finally:
-                facts["generating"] = False
-                add(phase, time.perf_counter() - t0)
+                busy.pop()
+                name = phase if note is None else note(*a, **k)
+                inner[name] = inner.get(name, 0.0) + time.perf_counter() - t0
 
         return wrapper
 
-    # Patched before scale_data.py's own `from ch37... import` lines run, so the script calls the wrappers.
-    orig = {
-        "ensure": demos.ensure_demos,
-        "load": lerobot_io.load_arrays,
-        "write": lerobot_io.write_dataset,
-        "pmap": parallel.parallel_map,
-    }
-    demos.ensure_demos = timed("demo generation (or cache check)", orig["ensure"])
-    lerobot_io.load_arrays = timed("load LeRobot sets (all three)", orig["load"])
-    lerobot_io.write_dataset = timed("write augmented LeRobot set", orig["write"])
-    parallel.parallel_map = timed("augmentation re-solves", orig["pmap"])
-    sys.argv = ["scale_data.py", *argv]
-    ns = {"__name__": "__main__", "__file__": str(ROOT / "scale_data.py")}
-    region = "docstring"
-    lines = src.splitlines()
+    def train_note(datasets, steps, init, *, batch_size, **_):
+        arm = f"train budget {len(facts['train_steps']) + 1} ({len(datasets)} arms side by side)"
+        facts["train_steps"][arm] = steps * len(datasets)  # arm-steps
+        facts["train_rows"][arm] = steps * len(datasets) * batch_size  # full batches
+        return arm
+
+    patches = [  # (module, name, phase): the script looks these up on their module when it calls them
+        (demos, "ensure_demos", "demo generation (or cache check)"),
+        (lerobot_io, "load_arrays", "load LeRobot sets (all three)"),
+        (lerobot_io, "write_dataset", "write augmented LeRobot set"),
+        (engine, "run_attempts", "augmentation attempts"),
+        (bc_recipe, "evaluate", "rollouts (all arms)"),
+        (bc_recipe, "train", "train"),
+    ]
+    orig = [getattr(m, name) for m, name, _ in patches]
+    for (m, name, phase), fn in zip(patches, orig):
+        setattr(m, name, timed(phase, fn, train_note if name == "train" else None))
+    sys.argv = [str(script), *argv]
     try:
-        for node in tree.body:
-            for ln in range(node.lineno - 1, 0, -1):  # the region marker above this statement
-                if lines[ln - 1].startswith("# --- region:"):
-                    region = lines[ln - 1].split(":", 1)[1].strip(" -")
-                    break
-            code = compile(ast.Module([node], []), "scale_data.py", "exec")
-            phase = "import" if isinstance(node, (ast.Import, ast.ImportFrom)) else region
-            t0 = time.perf_counter()
-            exec(code, ns)
-            add(phase, time.perf_counter() - t0, times)
-            if isinstance(node, ast.FunctionDef) and node.name == "train":
-
-                def train(datasets, steps, _f=ns["train"]):
-                    t0 = time.perf_counter()
-                    out = _f(datasets, steps)
-                    arm = f"train budget {len(facts['train_steps']) + 1} ({len(datasets)} arms side by side)"
-                    add(arm, time.perf_counter() - t0)
-                    facts["train_steps"][arm] = steps * len(datasets)  # arm-steps
-                    facts["train_rows"][arm] = steps * len(datasets) * ns["args"].batch_size  # full batches
-                    return out
-
-                ns["train"] = train
-            if isinstance(node, ast.FunctionDef) and node.name == "evaluate":
-                ns["evaluate"] = timed("rollouts (all arms)", ns["evaluate"])
+        with RegionClock(script) as clock:
+            ns = runpy.run_path(str(script), run_name="__main__")
     finally:
-        demos.ensure_demos, lerobot_io.load_arrays = orig["ensure"], orig["load"]
-        lerobot_io.write_dataset, parallel.parallel_map = orig["write"], orig["pmap"]
+        for (m, name, _), fn in zip(patches, orig):
+            setattr(m, name, fn)
     args = ns["args"]
     facts.update(batch=args.batch_size, hidden=args.hidden_dim, device=args.device)
-    return {"times": times, "inner": inner, "facts": facts}
+    return {"times": clock.times, "inner": inner, "facts": facts}
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(prog="python -m tools.bench", description=__doc__.splitlines()[0])
-    ap.add_argument("--smoke", action="store_true", help="benchmark the smoke run")
-    ap.add_argument("--repeat", type=int, default=1, help="runs per phase; the median is printed")
-    ap.add_argument("--seed", type=int, default=0)
-    a, extra = ap.parse_known_args()  # anything else goes to scale_data.py, e.g. --epochs 100
-    t_imp = time.perf_counter()
-    import torch  # noqa: F401  (counted as the import phase of the first run below)
+OWNER = {"wrangle": ("demo generation", "load"), "augment": ("augmentation", "write")}
+OWNER["measure"] = ("train", "rollouts")  # the regions whose calls are broken down
 
-    import_s = time.perf_counter() - t_imp
-    runs, walls = [], []
-    with tempfile.TemporaryDirectory(prefix="ch37-bench-") as tmp:
-        for i in range(a.repeat):
-            argv = ["--seed", str(a.seed), "--no-rerun", "--no-cache", "--out", f"{tmp}/run{i}"]
-            argv += (["--smoke"] if a.smoke else []) + extra
-            t0 = time.perf_counter()
-            runs.append(run_once(argv))
-            walls.append(time.perf_counter() - t0)
+
+def report(runs: list[dict], walls: list[float], import_s: float, title: str) -> None:
+    import torch
+
+    import pusht_env
+
     f = runs[0]["facts"]
     gflops = matmul_gflops(f["batch"], f["hidden"]) if f["device"] == "cpu" else float("nan")
-    import pusht_env  # already loaded by the runs; the policy maps a PushT state to a PushT action
-
     per_row = step_flops(1, f["hidden"], pusht_env.OBS_DIM, pusht_env.ACT_DIM)  # FLOPs per row trained
-    print(
-        f"\nscale_data.py {'--smoke' if a.smoke else '(default)'} seed {a.seed}, "
-        f"median of {a.repeat} run(s), device {f['device']}, torch threads {torch.get_num_threads()}"
-    )
+    threads = torch.get_num_threads()
+    print(f"\n{title}, median of {len(runs)} run(s), device {f['device']}, torch threads {threads}")
     print(f"{'phase':44s} {'seconds':>8s}")
     print(f"{'import torch (before the first run)':44s} {import_s:8.2f}")
 
@@ -159,29 +165,22 @@ def main() -> None:
     for ph in dict.fromkeys(k for r in runs for k in r["times"]):
         print(f"{ph:44s} {med('times', ph):8.2f}")
         for sub in dict.fromkeys(k for r in runs for k in r["inner"]):
-            owner = {
-                "wrangle": ("demo generation", "load"),
-                "augment": ("augmentation", "write"),
-                "measure": ("train", "rollouts"),
-            }.get(ph, ())
-            if not sub.startswith(owner):
+            if not sub.startswith(OWNER.get(ph, ())):
                 continue
             extra = ""
             if sub in f["train_steps"]:
                 steps, sec = f["train_steps"][sub], med("inner", sub)
                 rate = f["train_rows"][sub] * per_row / sec / 1e9
-                extra = (
-                    f"  {steps} steps, {sec / steps * 1e3:.2f} ms/step, {rate:.0f} GFLOP/s "
-                    f"= {rate / gflops:.0%} of matmul"
-                )
+                extra = f"  {steps} steps, {sec / steps * 1e3:.2f} ms/step, {rate:.0f} GFLOP/s"
+                extra += f" = {rate / gflops:.0%} of matmul"
             print(f"  of which {sub:44s} {med('inner', sub):8.2f}{extra}")
-    total_steps, flops = sum(f["train_steps"].values()), sum(f["train_rows"].values()) * per_row
+    total_steps, rows = sum(f["train_steps"].values()), sum(f["train_rows"].values())
     train_s = statistics.median(
         sum(v for k, v in r["inner"].items() if k.startswith("train budget")) for r in runs
     )
-    rate = flops / train_s / 1e9
+    flops = rows * per_row
+    rate, b, h = flops / train_s / 1e9, f["batch"], f["hidden"]
     print(f"{'wall (one run, in process)':40s} {statistics.median(walls):8.2f}")
-    rows, b, h = sum(f["train_rows"].values()), f["batch"], f["hidden"]
     print(
         f"training: {total_steps} steps, {rows} rows x {per_row / 1e6:.2f} MFLOP = {flops / 1e12:.2f} TFLOP "
         f"in {train_s:.1f} s -> {rate:.0f} GFLOP/s; dense matmul ({b}x{h} @ {h}x{h}) in this process: "
@@ -191,5 +190,26 @@ def main() -> None:
     print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
 
 
+def main(argv: list[str]) -> int:
+    p = parser("bench", __doc__)
+    p.add_argument("--smoke", action="store_true", help="benchmark the smoke run")
+    p.add_argument("--repeat", type=int, default=1, help="runs per phase; the median is printed")
+    p.add_argument("--seed", type=int, default=0)
+    a, extra = p.parse_known_args(argv)  # anything else goes to scale_data.py, e.g. --epochs 100
+    t0 = time.perf_counter()
+    importlib.import_module("torch")  # here, after the flags: its import time is a phase of the report
+
+    import_s = time.perf_counter() - t0
+    runs, walls = [], []
+    with tempfile.TemporaryDirectory(prefix="ch37-bench-") as tmp:
+        for i in range(a.repeat):
+            args = ["--seed", str(a.seed), "--no-rerun", "--no-cache", "--out", f"{tmp}/run{i}"]
+            t0 = time.perf_counter()
+            runs.append(run_once(a.script, args + ["--smoke"] * a.smoke + extra))
+            walls.append(time.perf_counter() - t0)
+    report(runs, walls, import_s, f"{a.script.name} {'--smoke' if a.smoke else '(default)'} seed {a.seed}")
+    return 0
+
+
 if __name__ == "__main__":
-    main()
+    errors.main(main)

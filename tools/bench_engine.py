@@ -20,14 +20,21 @@ import math
 import os
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
-from ch37 import ROOT
+import gen_demos_pusht
+import pusht_env
+from ch37 import ROOT, engine, errors
+from ch37.config import DEFAULTS, check
+from ch37.errors import DataError
 from ch37.files import dump_json, round_floats, write_atomic
-from tools.common import ToolError, parser, provenance, run_cli
+from ch37.lerobot_io import features, load_arrays, write_dataset
+from ch37.stamps import replace_own_dir
+from tools.common import parser, provenance
 
-SOURCE_EPISODES = 12
+SOURCE_EPISODES = DEFAULTS["source_episodes"]
 
 
 def tree_digest(root: Path) -> str:
@@ -65,15 +72,12 @@ def run_sampled(cmd: list[str]) -> dict:
     out, err = proc.communicate()
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
-        raise ToolError(
-            f"{' '.join(cmd[1:])} exited {proc.returncode}: {(err.strip().splitlines() or [''])[-1]}"
-        )
+        last = (err.strip().splitlines() or [""])[-1]
+        raise DataError(f"{' '.join(cmd[1:])} exited {proc.returncode}: {last}")
     return {"wall_s": wall, **{f"peak_rss_{k}_mb": v / 2**20 for k, v in peak.items()}, "stdout": out}
 
 
 def point(src: Path, out: Path, n: int, executor: str, workers: int, shard_size: int | None) -> dict:
-    from ch37.stamps import replace_own_dir
-
     per_demo = math.ceil(n / SOURCE_EPISODES)
     run_dir = out / "runs" / f"n{n}-{executor}"
     replace_own_dir(run_dir)  # an earlier run of this tool; anything else is refused
@@ -83,47 +87,28 @@ def point(src: Path, out: Path, n: int, executor: str, workers: int, shard_size:
     cmd += ["--shard_size", str(shard_size)] if shard_size else []
     m = run_sampled(cmd)
     rep = json.loads((run_dir / "generation_report.json").read_text())
-    row = {
-        "demos_requested": n,
-        "executor": executor,
-        "workers": workers,
-        "attempts": rep["attempts"],
-        "kept": rep["kept"],
-        "yield": rep["yield"],
-        "frames": rep["frames"],
-        "shards": rep["shards"]["total"],
-        "shard_size": rep["settings"]["shard_size"],
-        "wall_s": m["wall_s"],
-        "generate_s": rep["seconds_generate"],
-        "start_executor_s": rep["seconds_start_executor"],  # of generate_s
-        "merge_s": rep["seconds_merge"],
-        "other_s": m["wall_s"] - rep["seconds_generate"] - rep["seconds_merge"],
-        "demos_per_s": rep["kept"] / m["wall_s"],
-        "generate_demos_per_s_per_worker": rep["kept"]
-        / (rep["seconds_generate"] - rep["seconds_start_executor"])
-        / workers,
-        "merge_s_per_shard": rep["seconds_merge"] / rep["shards"]["total"],
-        "peak_rss_driver_mb": m["peak_rss_driver_mb"],
-        "peak_rss_largest_mb": m["peak_rss_largest_mb"],
-        "peak_rss_tree_mb": m["peak_rss_tree_mb"],
-        "sha256": tree_digest(run_dir),
-        "summary": m["stdout"].strip().splitlines()[-1],
+    gen, start, merge = rep["seconds_generate"], rep["seconds_start_executor"], rep["seconds_merge"]
+    shards, wall = rep["shards"]["total"], m.pop("wall_s")
+    row = {"demos_requested": n, "executor": executor, "workers": workers, "shards": shards}
+    row |= {k: rep[k] for k in ("attempts", "kept", "yield", "frames")} | {"wall_s": wall}
+    row |= {"generate_s": gen, "start_executor_s": start, "merge_s": merge}  # start_executor_s: of generate_s
+    row |= {
+        "other_s": wall - gen - merge,
+        "demos_per_s": rep["kept"] / wall,
+        "merge_s_per_shard": merge / shards,
     }
+    row |= {"generate_demos_per_s_per_worker": rep["kept"] / (gen - start) / workers}
+    row |= {"shard_size": rep["settings"]["shard_size"], "sha256": tree_digest(run_dir)}
+    row |= {"summary": m.pop("stdout").strip().splitlines()[-1], **m}  # m: the peak RSS
     replace_own_dir(run_dir)
     return row
 
 
 def per_demo_costs(src: Path, n: int = 100) -> dict:
     """Where one core's time per kept demo goes, in this process: the re-solve vs LeRobot's write."""
-    import tempfile
-
-    import pusht_env
-    from ch37 import engine
-    from ch37.lerobot_io import features, load_arrays, write_dataset
-
     sources = engine.sources(load_arrays(src))
     jobs = [(e, k) for k in range(n) for e in sources][:n]
-    kw = dict(seed=0, pos_sigma=0.08, yaw_sigma=0.5)
+    kw = dict(seed=0, pos_sigma=DEFAULTS["aug_pos_sigma"], yaw_sigma=DEFAULTS["aug_yaw_sigma"])
     engine.attempt(sources[jobs[0][0]], 10**6, **kw)  # warm up
     t0 = time.perf_counter()
     eps = [engine.attempt(sources[e], k, **kw) for e, k in jobs]
@@ -181,7 +166,7 @@ def estimate(rows: list[dict], cores: int) -> dict:
     return out
 
 
-def main(argv=None) -> int:
+def main(argv: list[str]) -> int:
     p = parser("bench_engine", __doc__)
     p.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000], help="demos per run")
     p.add_argument("--executors", nargs="+", choices=("local", "ray"), default=["local", "ray"])
@@ -191,24 +176,21 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_engine")
     p.add_argument("--cluster_cores", type=int, default=64, help="cores of the cluster the estimate is for")
     a = p.parse_args(argv)
-    if min(a.sizes) < 1 or a.workers < 1 or a.cluster_cores < 1:
-        raise ToolError("--sizes, --workers and --cluster_cores must be positive")
-    src = a.src
-    if src is None:
-        src = a.out / f"src_pusht_seed0_ep{SOURCE_EPISODES}"
-        if not (src / "meta" / "info.json").exists():
-            import gen_demos_pusht
-
-            if gen_demos_pusht.main(["--episodes", str(SOURCE_EPISODES), "--out", str(src), "--quiet"]) != 0:
-                raise ToolError(f"could not make the source set at {src}")
+    check(a, positive=("workers", "cluster_cores"))
+    if min(a.sizes) < 1:
+        raise DataError("--sizes must be positive")
+    src = a.src or a.out / f"src_pusht_seed0_ep{SOURCE_EPISODES}"
+    if a.src is None and not (src / "meta" / "info.json").exists():
+        if gen_demos_pusht.main(["--episodes", str(SOURCE_EPISODES), "--out", str(src), "--quiet"]) != 0:
+            raise DataError(f"could not make the source set at {src}")
     costs = per_demo_costs(src)
     print(
         f"one core, in process: re-solve {costs['resolve_ms_per_attempt']:.1f} ms per attempt, "
         f"LeRobot write (write_dataset) {costs['write_ms_per_demo']:.1f} ms per demo"
     )
     rows = []
-    print(f"{'demos':>6s} {'executor':8s} {'kept':>6s} {'wall s':>7s} {'gen s':>7s} {'merge s':>7s} "
-          f"{'demos/s':>8s} {'/worker':>7s} {'RSS MB driver/largest/tree':>27s}")  # fmt: skip
+    head = f"{'wall s':>7s} {'gen s':>7s} {'merge s':>7s} {'demos/s':>8s} {'/worker':>7s}"
+    print(f"{'demos':>6s} {'executor':8s} {'kept':>6s} {head} {'RSS MB driver/largest/tree':>27s}")
     for n in a.sizes:
         for ex in a.executors:
             r = point(src, a.out, n, ex, a.workers, a.shard_size)
@@ -229,20 +211,13 @@ def main(argv=None) -> int:
             f"merge {e['merge_s'] / 60:.1f} min)"
         )
     print("assumptions: " + "; ".join(est["assumptions"]))
-    result = {
-        "per_demo_costs": costs,
-        "runs": rows,
-        "estimate": est,
-        "cluster_cores": a.cluster_cores,
-        "provenance": provenance(ROOT / "scale_data.py"),
-    }
-    result["identical_across_executors"] = {
-        str(n): len({r["sha256"] for r in rows if r["demos_requested"] == n}) == 1 for n in a.sizes
-    }
+    same = {str(n): len({r["sha256"] for r in rows if r["demos_requested"] == n}) == 1 for n in a.sizes}
+    result = {"per_demo_costs": costs, "runs": rows, "estimate": est, "cluster_cores": a.cluster_cores}
+    result |= {"provenance": provenance(a.script), "identical_across_executors": same}
     path = write_atomic(a.out / "bench_engine.json", dump_json(round_floats(result, 4)))
     print(f"wrote {path}")
     return 0
 
 
 if __name__ == "__main__":
-    run_cli(main)
+    errors.main(main)

@@ -10,7 +10,6 @@ median episode length with and without action noise, and demo generation frames 
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import tempfile
 import time
@@ -20,7 +19,8 @@ import numpy as np
 
 import gen_demos_aloha
 import gen_demos_pusht
-from ch37 import demos
+from ch37 import demos, errors
+from ch37.config import check, parser
 
 NOISE = {"pusht": 0.08, "aloha": 0.05}  # the noisy-expert levels the success targets are stated at
 
@@ -54,10 +54,11 @@ def generation_fps(emb, episodes: int = 12) -> float:
         return s["frames"] / (time.perf_counter() - t0)
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(prog="python -m tools.bench_envs", description=__doc__.splitlines()[0])
-    ap.add_argument("--starts", type=int, default=50, help="seeded starts per expert and noise level")
-    a = ap.parse_args()
+def main(argv: list[str]) -> int:
+    p = parser(__doc__, prog="python -m tools.bench_envs")
+    p.add_argument("--starts", type=int, default=50, help="seeded starts per expert and noise level")
+    a = p.parse_args(argv)
+    check(a, positive=["starts"])
     demos.generate(
         gen_demos_pusht.PUSHT, Path(tempfile.mkdtemp()) / "warm", episodes=1, seed=0, noise=0.0, quiet=True
     )
@@ -72,7 +73,8 @@ def main() -> None:
             f"{emb.name:6s} {sps:9.0f} {f'{w0}/{a.starts}, median {m0:g} steps':>22s} "
             f"{f'{wn}/{a.starts} at {NOISE[emb.name]}, median {mn:g}':>26s} {fps:18.0f}"
         )
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    errors.main(main)

@@ -1,18 +1,28 @@
-"""What every tool shares: the paths it works on, ToolError and the CLI wrapper, run provenance."""
+"""What every tool shares: the paths it works on, its flag parser, the regions of scale_data.py
+(parsed and hashed), and the provenance a result records.
+
+Region hash: sha256 (hex) of the region's body, that is the lines strictly between its
+`# --- region: NAME ---` and `# --- endregion ---` markers, each line ending in "\\n", UTF-8.
+Markers are excluded (the name is the key; the parser enforces the order).
+"""
 
 from __future__ import annotations
 
 import argparse
+import ast
 import datetime
+import hashlib
 import importlib.metadata
 import os
 import platform
+import re
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
-from ch37 import ROOT
-from ch37.errors import run_main
+from ch37 import ROOT, config
+from ch37.errors import DataError
 
 SCRIPT = ROOT / "scale_data.py"
 META = ROOT / "meta.yaml"
@@ -20,39 +30,14 @@ WALLCLOCK = ROOT / "wallclock.csv"
 NOTEBOOK = ROOT / "scale_data.ipynb"
 
 
-class ToolError(Exception):
-    """Bad input: reported as one `error:` line and exit code 2."""
-
-
-def parser(prog: str, doc: str) -> argparse.ArgumentParser:
-    """An argument parser whose errors are ToolErrors (one line, exit 2), with the usual --script."""
-    p = argparse.ArgumentParser(
-        prog=f"python -m tools.{prog}",
-        description=doc,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        allow_abbrev=False,
-    )
-
-    def error(msg):
-        raise ToolError(f"{msg} (see --help)")
-
-    p.error = error
+def parser(name: str, doc: str) -> argparse.ArgumentParser:
+    """ch37.config.parser for `python -m tools.NAME`, with the --script every tool reads the chapter from."""
+    p = config.parser(doc, prog=f"python -m tools.{name}")
     p.add_argument("--script", type=Path, default=SCRIPT, help="chapter script (default scale_data.py)")
     return p
 
 
-def run_cli(main) -> None:
-    """sys.exit(main(argv)); a ToolError becomes one `error:` line on stderr and exit code 2, and so do
-    the problems ch37.errors.run_main handles (Ctrl-C: exit 130)."""
-    try:
-        code = run_main(main, sys.argv[1:])
-    except ToolError as e:
-        print(f"error: {e}", file=sys.stderr)
-        code = 2
-    sys.exit(code)
-
-
-def _rel(p: Path) -> str:
+def rel(p: Path) -> str:
     """`p` relative to the repository root when it lies inside it, else as given (absolute)."""
     p = Path(p).resolve()
     return str(p.relative_to(ROOT)) if p.is_relative_to(ROOT) else str(p)
@@ -63,46 +48,158 @@ def supports_flag(script: Path, flag: str) -> bool:
     return f'"{flag}"' in Path(script).read_text(encoding="utf-8")
 
 
-def _cpu_model() -> str:
-    cpu = platform.processor() or ""
+REGION_ORDER = ("setup", "wrangle", "augment", "measure", "emit")
+OPEN_RE = re.compile(r"# --- region: (\S+) ---")
+CLOSE = "# --- endregion ---"
+# anything that tries to be a marker
+MARKERISH = re.compile(r"^\s*#\s*-{2,}\s*(end\s*)?region\b", re.IGNORECASE)
+
+
+class RegionError(DataError):
+    """The script's region markers are malformed (or the script cannot be read)."""
+
+
+@dataclass(frozen=True)
+class Region:
+    name: str
+    start: int  # 1-based line of the opening marker
+    end: int  # 1-based line of the endregion marker
+    body: str  # lines strictly between the markers, each ending in "\n"
+
+    @property
+    def sha256(self) -> str:
+        return hashlib.sha256(self.body.encode("utf-8")).hexdigest()
+
+    @property
+    def intent(self) -> list[str]:
+        """The comment block that opens the region (its statement of intent), without '# '."""
+        lines = self.body.splitlines()
+        n = next((i for i, line in enumerate(lines) if not line.startswith("#")), len(lines))
+        return [line[1:].strip() for line in lines[:n]]
+
+    @property
+    def code(self) -> str:
+        """The body after the intent comment, blank lines at both ends removed."""
+        return "\n".join(self.body.splitlines()[len(self.intent) :]).strip("\n")
+
+
+def _read(path: Path) -> str:
     try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise RegionError(f"{rel(path)}: no such file") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise RegionError(f"{rel(path)}: cannot be read ({e})") from None
+
+
+def parse_regions(path: Path = SCRIPT) -> list[Region]:
+    """The five regions of the chapter script, in order; RegionError on any malformed marker layout."""
+    path = Path(path)
+    text, order = _read(path), ", ".join(REGION_ORDER)
+
+    def bad(n, msg) -> RegionError:  # names the file and the line
+        return RegionError(f"{path.name}{f':{n}' if n else ''}: {msg}")
+
+    try:
+        tree = ast.parse(text)
+    except SyntaxError as e:
+        raise bad(e.lineno, f"not valid Python ({e.msg})") from None
+    doc = tree.body[0] if tree.body and ast.get_docstring(tree) is not None else None
+    doc_lines = range(doc.lineno, doc.end_lineno + 1) if doc else range(0)
+    regions: list[Region] = []
+    open_name, open_line, body = None, 0, []
+    for n, raw in enumerate(text.splitlines(), 1):
+        line = raw.rstrip()
+        if m := OPEN_RE.fullmatch(line):
+            name = m.group(1)
+            if open_name is not None:
+                raise bad(
+                    n,
+                    f"region {name!r} opens inside region {open_name!r} (opened at line {open_line}); "
+                    f"regions do not nest, close it with '{CLOSE}' first",
+                )
+            if name not in REGION_ORDER:
+                raise bad(n, f"unknown region name {name!r}; the regions are {order}")
+            if name in [r.name for r in regions]:
+                raise bad(n, f"duplicate region {name!r}")
+            if name != (expected := REGION_ORDER[len(regions)]):
+                raise bad(n, f"region {name!r} is out of order: expected {expected!r} here (order: {order})")
+            open_name, open_line, body = name, n, []
+        elif line == CLOSE:
+            if open_name is None:
+                raise bad(n, f"'{CLOSE}' without an open region")
+            regions.append(Region(open_name, open_line, n, "".join(b + "\n" for b in body)))
+            open_name = None
+        elif MARKERISH.match(raw):
+            raise bad(
+                n,
+                f"malformed region marker {raw.strip()!r}; markers are exactly "
+                f"'# --- region: NAME ---' and '{CLOSE}' at column 0",
+            )
+        elif open_name is not None:
+            body.append(raw)
+        elif line.strip() and n not in doc_lines and not (n == 1 and line.startswith("#!")):
+            raise bad(
+                n,
+                f"code outside any region: {line.strip()[:60]!r} "
+                "(only the module docstring may live outside the regions)",
+            )
+    if open_name is not None:
+        raise bad(open_line, f"region {open_name!r} has no '{CLOSE}'")
+    if missing := REGION_ORDER[len(regions) :]:
+        raise bad(None, f"missing region(s) {', '.join(missing)}; the regions are {order}")
+    return regions
+
+
+def region_hashes(path: Path = SCRIPT) -> dict[str, str]:
+    return {r.name: r.sha256 for r in parse_regions(path)}
+
+
+def drifted(current: dict[str, str], recorded: dict | None) -> list[str]:
+    """Region names whose hash differs from (or is missing in) meta.yaml's region_hashes."""
+    recorded = recorded or {}
+    return [k for k in dict.fromkeys([*current, *recorded]) if current.get(k) != recorded.get(k)]
+
+
+def module_docstring(path: Path = SCRIPT) -> str:
+    return ast.get_docstring(ast.parse(_read(Path(path)))) or ""
+
+
+def _run(*cmd: str) -> subprocess.CompletedProcess | None:
+    try:
+        return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+    except OSError:  # no such program here
+        return None
+
+
+def _cpu_model() -> str:
+    info = Path("/proc/cpuinfo")  # Linux
+    lines = info.read_text().splitlines() if info.exists() else []
+    models = [ln.split(":", 1)[1].strip() for ln in lines if ln.startswith("model name")]
+    cpu = models[0] if models else platform.processor()
     if not cpu and sys.platform == "darwin":
-        try:
-            cmd = ["sysctl", "-n", "machdep.cpu.brand_string"]
-            cpu = subprocess.run(cmd, capture_output=True, text=True).stdout.strip()
-        except OSError:
-            pass
-    return cpu
+        mac = _run("sysctl", "-n", "machdep.cpu.brand_string")
+        cpu = mac.stdout.strip() if mac else ""
+    return cpu or ""
 
 
 def _git() -> dict | None:
-    try:
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True)
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT, capture_output=True, text=True
-        )
-    except OSError:
+    head = _run("git", "rev-parse", "HEAD")
+    dirty = _run("git", "status", "--porcelain", "--untracked-files=no")
+    if head is None or head.returncode != 0:
         return None
-    return (
-        {"commit": head.stdout.strip(), "dirty": bool(dirty.stdout.strip())} if head.returncode == 0 else None
-    )
+    return {"commit": head.stdout.strip(), "dirty": bool(dirty.stdout.strip())}
+
+
+def _version(pkg: str) -> str | None:
+    try:
+        return importlib.metadata.version(pkg)
+    except importlib.metadata.PackageNotFoundError:
+        return None
 
 
 def provenance(script: Path) -> dict:
     """Where and with what a run happened: date, git commit, platform, package versions, region hashes."""
-    from tools.regions import RegionError, region_hashes
-
-    def version(pkg):
-        try:
-            return importlib.metadata.version(pkg)
-        except importlib.metadata.PackageNotFoundError:
-            return None
-
     try:
         hashes = region_hashes(script)
     except RegionError:
@@ -117,6 +214,6 @@ def provenance(script: Path) -> dict:
             "cpu_count": os.cpu_count(),
             "cpu_model": _cpu_model(),
         },
-        "packages": {p: version(p) for p in ("torch", "lerobot", "mujoco", "numpy")},
+        "packages": {p: _version(p) for p in ("torch", "lerobot", "mujoco", "numpy")},
         "script_region_hashes": hashes,
     }

@@ -1,15 +1,13 @@
-"""meta.yaml from the sweep files: reference_run, exercise_checks and region_hashes, never typed by hand.
+"""meta.yaml from the result files: reference_run, exercise_checks and region_hashes, never typed by hand.
 
     python -m tools.meta [--sweep F] [--aug-sweep F] [--replay DIR] [--scale-lab F] [--meta F]
 
---sweep takes the seed sweep (default outputs/sweep/sweep_seeds.json, from `python -m tools.sweep
---seeds 3`), --aug-sweep the aug sweep (default outputs/sweep/sweep_aug.json, from `python -m
-tools.sweep --aug 0 4 8`). The exercise answers and bands come from exercises/rules.py. What a
-smoke sweep gives is marked `provisional: true`. id, title, track, objectives and mimicgen are kept
-as found in meta.yaml. The `replay` section comes from --replay DIR's replay_compare.json and
-replay_sigma.json (`python -m tools.replay --seeds 5` and `--sigma ...`), the `scale_lab` section
-from --scale-lab (default outputs/scale_lab/scale_lab.json, from `python scale_lab.py`), each when
-its files exist, and left as found otherwise; smoke-sized ones are marked `provisional: true` too.
+reference_run comes from the seed sweep (--sweep, from `python -m tools.sweep --seeds 3`) and the aug
+sweep (--aug-sweep, from `python -m tools.sweep --aug 0 4 8`), exercise_checks from them through
+exercises/rules.py; `replay` from --replay DIR (`python -m tools.replay --seeds 5` and `--sigma ...`)
+and `scale_lab` from --scale-lab (`python scale_lab.py`) when their files exist, left as found
+otherwise. What smoke-sized runs give is marked `provisional: true`. id, title, track, objectives and
+mimicgen are kept as found in meta.yaml.
 
 Exit codes: 0 ok, 2 bad input (a missing, corrupt or incomplete sweep file, bad flags).
 """
@@ -20,11 +18,13 @@ import json
 import sys
 from pathlib import Path
 
-from ch37 import CHAPTER_ID, ROOT
+import yaml
+
+from ch37 import CHAPTER_ID, ROOT, errors
+from ch37.errors import DataError
 from ch37.files import write_atomic
 from exercises.rules import RULES, derive_checks
-from tools.common import META, ToolError, _rel, parser, run_cli
-from tools.regions import drifted, region_hashes
+from tools.common import META, drifted, parser, region_hashes, rel
 
 META_HEADER = """\
 # Chapter 3.7 metadata. Written by `python -m tools.meta` (reference_run, exercise_checks,
@@ -69,139 +69,102 @@ META_STATIC = {
         ],
     },
 }
-META_ORDER = (
-    "id",
-    "title",
-    "track",
-    "objectives",
-    "mimicgen",
-    "reference_run",
-    "replay",
-    "scale_lab",
-    "exercise_checks",
-    "region_hashes",
-)
+META_ORDER = "id title track objectives mimicgen reference_run replay scale_lab exercise_checks region_hashes"
 # What each sweep file must hold for reference_run and derive_checks: top-level keys, then keys of every row.
 SWEEP_KEYS = {
-    "seeds": (
-        ("rows", "mean", "paired", "pooled", "action_dims", "padded_action_dim"),
-        ("seed", "delta", "ci95"),
-    ),
-    "aug": (("rows",), ("aug_per_demo", "augmented_full", "ci95")),
+    "seeds": ("rows mean paired pooled action_dims padded_action_dim", "seed delta ci95"),
+    "aug": ("rows", "aug_per_demo augmented_full ci95"),
 }
-PROVENANCE_KEYS = (
-    "command",
-    "date_utc",
-    "git",
-    "platform",
-    "packages",
-    "device",
-    "config",
-    "script_region_hashes",
-)
+PROVENANCE_KEYS = "command date_utc git platform packages device config script_region_hashes".split()
+SIGMA_ROW_KEYS = "multiplier mode attempts kept yield ci95 failures kept_block_shift_m".split()
+SCALE_LAB_KEYS = "command config expert generation curves points seconds".split()
 
 
 def load_yaml(path: Path) -> dict:
-    """A YAML mapping ({} when the file does not exist); anything else is a ToolError."""
-    import yaml
-
+    """A YAML mapping ({} when the file does not exist); anything else is a DataError."""
     path = Path(path)
     if not path.exists():
         return {}
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
-        raise ToolError(f"{_rel(path)} is not readable YAML ({' '.join(str(e).split())})") from None
+        raise DataError(f"{rel(path)} is not readable YAML ({' '.join(str(e).split())})") from None
     if data is not None and not isinstance(data, dict):
-        raise ToolError(f"{_rel(path)} is not a YAML mapping")
+        raise DataError(f"{rel(path)} is not a YAML mapping")
     return data or {}
 
 
-def _yaml_dumper():
-    import yaml
+class _Dumper(yaml.SafeDumper):
+    """Short all-scalar lists and mappings on one line ({n: 3, wins: 3}), the rest in block style."""
 
-    class Dumper(yaml.SafeDumper):
-        """Short all-scalar lists and mappings on one line ({n: 3, wins: 3}), the rest in block style."""
 
-    def flow(value) -> bool:
-        items = value.values() if isinstance(value, dict) else value
-        scalar = all(
-            isinstance(v, (int, float, bool, type(None))) or (isinstance(v, str) and len(v) < 40)
-            for v in items
-        )
-        return scalar and len(json.dumps(value)) <= 100
+def _flow(value) -> bool:
+    items = value.values() if isinstance(value, dict) else value
+    short = (int, float, bool, type(None))
+    scalar = all(isinstance(v, short) or (isinstance(v, str) and len(v) < 40) for v in items)
+    return scalar and len(json.dumps(value)) <= 100
 
-    def mapping(d, v):
-        return d.represent_mapping("tag:yaml.org,2002:map", v.items(), flow_style=flow(v))
 
-    Dumper.add_representer(dict, mapping)
-    Dumper.add_representer(
-        list, lambda d, v: d.represent_sequence("tag:yaml.org,2002:seq", v, flow_style=flow(v))
-    )
-    return Dumper
+_Dumper.add_representer(dict, lambda d, v: d.represent_mapping("tag:yaml.org,2002:map", v.items(), _flow(v)))
+_Dumper.add_representer(list, lambda d, v: d.represent_sequence("tag:yaml.org,2002:seq", v, _flow(v)))
 
 
 def write_meta(path: Path, meta: dict) -> None:
     """meta.yaml in META_ORDER (unknown keys after), under META_HEADER, written atomically."""
-    import yaml
-
-    ordered = {k: meta[k] for k in META_ORDER if k in meta}
-    ordered.update({k: v for k, v in meta.items() if k not in ordered})
-    text = META_HEADER + yaml.dump(
-        ordered, Dumper=_yaml_dumper(), sort_keys=False, allow_unicode=True, width=110
-    )
-    write_atomic(Path(path), text)
+    ordered = {k: meta[k] for k in META_ORDER.split() if k in meta} | meta
+    text = yaml.dump(ordered, Dumper=_Dumper, sort_keys=False, allow_unicode=True, width=110)
+    write_atomic(Path(path), META_HEADER + text)
 
 
-def _public(row: dict) -> dict:
-    """A sweep row for meta.yaml: per-run wall time left out (wallclock.csv is the timing of record)."""
-    return {k: v for k, v in row.items() if k != "wall_s"}
+def _read_json(path: Path, what: str, again: str):
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise DataError(f"{rel(path)} is not a readable {what} ({e}); {again}") from None
 
 
 def reference_run(seeds: dict, aug: dict) -> dict:
+    """The sweeps' rows and statistics with their provenance; per-run wall time left out (wallclock.csv
+    is the timing of record)."""
     provisional = bool(seeds.get("smoke") or aug.get("smoke"))
     if provisional:
         note = "smoke-sized sweep: exercises the pipeline only; refresh with a full sweep"
     else:
         note = "default configuration; every number below was written by python -m tools.meta from the sweeps"
+
+    def rows(sweep):
+        return [{k: v for k, v in r.items() if k != "wall_s"} for r in sweep["rows"]]
+
+    def prov(sweep):
+        return {"provenance": {k: sweep[k] for k in PROVENANCE_KEYS if k in sweep}}
+
+    seed_part = {"rows": rows(seeds)} | {k: seeds[k] for k in ("mean", "paired", "pooled")} | prov(seeds)
+    aug_part = {"seed": aug.get("seed", 0), "rows": rows(aug)} | prov(aug)
     return {
         "provisional": provisional,
         "note": note,
-        "seeds": {
-            "rows": [_public(r) for r in seeds["rows"]],
-            "mean": seeds["mean"],
-            "paired": seeds["paired"],
-            "pooled": seeds["pooled"],
-            "provenance": {k: seeds[k] for k in PROVENANCE_KEYS if k in seeds},
-        },
-        "aug_curve": {
-            "seed": aug.get("seed", 0),
-            "rows": [_public(r) for r in aug["rows"]],
-            "provenance": {k: aug[k] for k in PROVENANCE_KEYS if k in aug},
-        },
+        "seeds": seed_part,
+        "aug_curve": aug_part,
         "rules": RULES,
     }
 
 
 def read_sweep(path: Path, kind: str, flag: str) -> dict:
-    """A sweep file of `kind` ("seeds" or "aug") with every key meta needs; else a one-line ToolError."""
+    """A sweep file of `kind` ("seeds" or "aug") with every key meta needs; else a one-line DataError."""
     path = Path(path)
     if not path.exists():
-        raise ToolError(
-            f"{_rel(path)} not found; run the sweeps first: python -m tools.sweep --seeds 3 "
+        raise DataError(
+            f"{rel(path)} not found; run the sweeps first: python -m tools.sweep --seeds 3 "
             "and python -m tools.sweep --aug 0 4 8"
         )
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as e:
-        raise ToolError(f"{_rel(path)} is not a readable JSON sweep file ({e}); re-run the sweep") from None
+    data = _read_json(path, "JSON sweep file", "re-run the sweep")
     got = data.get("kind") if isinstance(data, dict) else type(data).__name__
     if got != kind:
-        raise ToolError(
+        raise DataError(
             "--sweep takes the sweep_seeds.json file and --aug-sweep the sweep_aug.json file; "
-            f"{flag} {_rel(path)} holds {got!r}, not a {kind!r} sweep"
+            f"{flag} {rel(path)} holds {got!r}, not a {kind!r} sweep"
         )
-    top, per_row = SWEEP_KEYS[kind]
+    top, per_row = (keys.split() for keys in SWEEP_KEYS[kind])
     missing = [k for k in top if k not in data]
     rows = data.get("rows")
     if "rows" not in missing and (not isinstance(rows, list) or not rows):
@@ -215,11 +178,23 @@ def read_sweep(path: Path, kind: str, flag: str) -> dict:
             if "ci95" in r and not (isinstance(r["ci95"], dict) and "augmented_full" in r["ci95"]):
                 missing.append(f"rows[{i}].ci95.augmented_full")
     if missing:
-        raise ToolError(f"{_rel(path)} is incomplete: it lacks {', '.join(missing[:5])}; re-run the sweep")
+        raise DataError(f"{rel(path)} is incomplete: it lacks {', '.join(missing[:5])}; re-run the sweep")
     return data
 
 
-SIGMA_ROW_KEYS = ("multiplier", "mode", "attempts", "kept", "yield", "ci95", "failures", "kept_block_shift_m")
+def _compare(d: dict) -> dict:
+    """replay_compare.json for meta.yaml: the pooled results and each seed's arms and replay yield."""
+    rows = d["rows"]
+    per_seed = [
+        {"seed": r["seed"], **{a: v["success"] for a, v in r["arms"].items()}}
+        | {f"replay_{k}": r["modes"]["replay"][k] for k in ("kept", "attempts")}
+        for r in rows
+    ]
+    return (
+        {"command": d["command"], "seeds": [r["seed"] for r in rows], "steps": [r["steps"] for r in rows]}
+        | {k: d[k] for k in ("modes", "pooled", "differences")}
+        | {"per_seed": per_seed}
+    )
 
 
 def replay_section(folder: Path) -> dict | None:
@@ -232,23 +207,7 @@ def replay_section(folder: Path) -> dict | None:
         try:
             d = json.loads(f.read_text(encoding="utf-8"))
             if kind == "compare":
-                out[kind] = {
-                    "command": d["command"],
-                    "seeds": [r["seed"] for r in d["rows"]],
-                    "steps": [r["steps"] for r in d["rows"]],
-                    "modes": d["modes"],
-                    "pooled": d["pooled"],
-                    "differences": d["differences"],
-                    "per_seed": [
-                        {
-                            "seed": r["seed"],
-                            **{a: v["success"] for a, v in r["arms"].items()},
-                            "replay_kept": r["modes"]["replay"]["kept"],
-                            "replay_attempts": r["modes"]["replay"]["attempts"],
-                        }
-                        for r in d["rows"]
-                    ],
-                }
+                out[kind] = _compare(d)
             else:
                 out[kind] = {
                     "command": d["command"],
@@ -256,13 +215,10 @@ def replay_section(folder: Path) -> dict | None:
                 }
             out["provisional"] = bool(out.get("provisional") or d.get("smoke"))
         except (OSError, ValueError, KeyError, TypeError) as e:
-            raise ToolError(
-                f"{_rel(f)} is not a complete tools.replay file ({e}); re-run python -m tools.replay"
+            raise DataError(
+                f"{rel(f)} is not a complete tools.replay file ({e}); re-run python -m tools.replay"
             ) from None
     return out or None
-
-
-SCALE_LAB_KEYS = ("command", "config", "expert", "generation", "curves", "points", "seconds")
 
 
 def read_scale_lab(path: Path) -> dict | None:
@@ -270,47 +226,36 @@ def read_scale_lab(path: Path) -> dict | None:
     path = Path(path)
     if not path.exists():
         return None
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as e:
-        raise ToolError(f"{_rel(path)} is not a readable scale_lab.json ({e}); re-run scale_lab.py") from None
+    data = _read_json(path, "scale_lab.json", "re-run scale_lab.py")
     if not isinstance(data, dict) or data.get("kind") != "scale_lab":
-        raise ToolError(f"--scale-lab {_rel(path)} is not a scale_lab.json written by scale_lab.py")
+        raise DataError(f"--scale-lab {rel(path)} is not a scale_lab.json written by scale_lab.py")
     missing = [k for k in SCALE_LAB_KEYS if k not in data]
     if missing:
-        raise ToolError(f"{_rel(path)} is incomplete: it lacks {', '.join(missing)}; re-run scale_lab.py")
+        raise DataError(f"{rel(path)} is incomplete: it lacks {', '.join(missing)}; re-run scale_lab.py")
     return data
 
 
 def scale_lab_section(lab: dict) -> dict:
     """meta.yaml's scale_lab: per curve per N the mean success over seeds, its pooled Wilson interval,
     the demos actually trained on (mean over seeds) and the steps per seed; engine yields; wall time."""
-    cfg = lab["config"]
-    provisional = bool(cfg.get("smoke"))
+    cfg, provisional = lab["config"], bool(lab["config"].get("smoke"))
     curves = {
-        curve: {
-            int(n): {"success": r["success"], "ci95": r["ci95"], "demos": r["demos"], "steps": r["steps"]}
-            for n, r in sorted(rows.items(), key=lambda kv: int(kv[0]))
-        }
+        curve: {int(n): {k: r[k] for k in ("success", "ci95", "demos", "steps")} for n, r in rows.items()}
         for curve, rows in lab["curves"].items()
     }
     generation = {}
     for mode, by_seed in lab["generation"].items():
-        attempts = sum(g["attempts"] for g in by_seed.values())
-        kept = sum(g["kept"] for g in by_seed.values())
-        generation[mode] = {
-            "attempts": attempts,
-            "kept": kept,
-            "yield": round(kept / attempts, 4) if attempts else 0,
-        }
+        attempts, kept = (sum(g[k] for g in by_seed.values()) for k in ("attempts", "kept"))
+        generation[mode] = {"attempts": attempts, "kept": kept}
+        generation[mode]["yield"] = round(kept / attempts, 4) if attempts else 0
+    if provisional:
+        note = "smoke-sized lab: exercises the pipeline only; refresh with python scale_lab.py"
+    else:
+        note = "success vs total PushT demos; every number below was written by python -m tools.meta from "
+        note += "scale_lab.json"
     return {
         "provisional": provisional,
-        "note": (
-            "smoke-sized lab: exercises the pipeline only; refresh with python scale_lab.py"
-            if provisional
-            else "success vs total PushT demos; every number below was written by python -m tools.meta "
-            "from scale_lab.json"
-        ),
+        "note": note,
         "command": lab["command"],
         "seeds": cfg["seeds"],
         "eval_episodes": cfg["eval_episodes"],
@@ -318,72 +263,52 @@ def scale_lab_section(lab: dict) -> dict:
         "expert": {"success": lab["expert"]["success"], "ci95": lab["expert"]["ci95"]},
         "fixed_steps": lab.get("fixed_steps"),
         "generation": generation,
-        "curves": curves,
+        "curves": {c: dict(sorted(by_n.items())) for c, by_n in curves.items()},  # N in numeric order
         "wall_s": round(lab["seconds"]["total"]),
     }
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str]) -> int:
     p = parser("meta", __doc__)
-    p.add_argument(
-        "--sweep", type=Path, default=ROOT / "outputs/sweep/sweep_seeds.json", help="the seed sweep"
-    )
-    p.add_argument(
-        "--aug-sweep", type=Path, default=ROOT / "outputs/sweep/sweep_aug.json", help="the aug sweep"
-    )
-    p.add_argument(
-        "--replay",
-        type=Path,
-        default=ROOT / "outputs/replay",
-        help="folder of python -m tools.replay's files",
-    )
-    p.add_argument(
-        "--scale-lab",
-        type=Path,
-        default=ROOT / "outputs/scale_lab/scale_lab.json",
-        help="the Scale Lab's results (section left as found when the file does not exist)",
-    )
+    out = ROOT / "outputs"
+    p.add_argument("--sweep", type=Path, default=out / "sweep/sweep_seeds.json", help="the seed sweep")
+    p.add_argument("--aug-sweep", type=Path, default=out / "sweep/sweep_aug.json", help="the aug sweep")
+    p.add_argument("--replay", type=Path, default=out / "replay", help="python -m tools.replay's folder")
+    p.add_argument("--scale-lab", type=Path, default=out / "scale_lab/scale_lab.json", help="the lab's")
     p.add_argument("--meta", type=Path, default=META, help="default meta.yaml")
     a = p.parse_args(argv)
-    seeds = read_sweep(a.sweep, "seeds", "--sweep")
-    aug = read_sweep(a.aug_sweep, "aug", "--aug-sweep")
-    lab = read_scale_lab(a.scale_lab)
-    current = region_hashes(a.script)
+    seeds, aug = read_sweep(a.sweep, "seeds", "--sweep"), read_sweep(a.aug_sweep, "aug", "--aug-sweep")
+    lab, current = read_scale_lab(a.scale_lab), region_hashes(a.script)
     for name, s in (("seed", seeds), ("aug", aug)):
-        stale = drifted(current, s.get("script_region_hashes"))
-        if stale:
+        if stale := ", ".join(drifted(current, s.get("script_region_hashes"))):
             print(
-                f"warning: the {name} sweep ran a different scale_data.py (regions {', '.join(stale)} "
-                "changed since); re-run it if those changes can move the numbers",
+                f"warning: the {name} sweep ran a different scale_data.py (regions {stale} changed since); "
+                "re-run it if those changes can move the numbers",
                 file=sys.stderr,
             )
     old = load_yaml(a.meta)
-    meta = {k: old.get(k, v) for k, v in META_STATIC.items()}
-    meta.update({k: v for k, v in old.items() if k not in META_STATIC})
+    meta = {k: old.get(k, v) for k, v in META_STATIC.items()} | old
     try:
         meta["reference_run"] = reference_run(seeds, aug)
         meta["exercise_checks"] = derive_checks(seeds, aug)
         if lab is not None:
             meta["scale_lab"] = scale_lab_section(lab)
     except ValueError as e:
-        raise ToolError(str(e)) from None
+        raise DataError(str(e)) from None
     except (KeyError, TypeError, IndexError) as e:
-        raise ToolError(
-            f"a sweep file or scale_lab.json is malformed ({type(e).__name__}: {e}); re-run it"
-        ) from None
-    replay = replay_section(a.replay)
-    if replay is not None:
+        raise DataError(f"a sweep file or scale_lab.json is malformed ({type(e).__name__}: {e}); re-run it")
+    if (replay := replay_section(a.replay)) is not None:
         meta["replay"] = replay
     meta["region_hashes"] = current
     write_meta(a.meta, meta)
     ex = meta["exercise_checks"]
+    smoke = " (provisional: smoke sweep)" if meta["reference_run"]["provisional"] else ""
     print(
-        f"wrote {_rel(a.meta)}: ex1 answer {ex['ex1']['answer']} band {ex['ex1']['band']}, "
-        f"ex3 answer {ex['ex3']['answer']} bands {ex['ex3']['band']}"
-        + (" (provisional: smoke sweep)" if meta["reference_run"]["provisional"] else "")
+        f"wrote {rel(a.meta)}: ex1 answer {ex['ex1']['answer']} band {ex['ex1']['band']}, "
+        f"ex3 answer {ex['ex3']['answer']} bands {ex['ex3']['band']}{smoke}"
     )
     return 0
 
 
 if __name__ == "__main__":
-    run_cli(main)
+    errors.main(main)

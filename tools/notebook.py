@@ -15,9 +15,9 @@ import json
 import re
 from pathlib import Path
 
+from ch37 import errors
 from ch37.files import write_atomic
-from tools.common import NOTEBOOK, SCRIPT, _rel, parser, run_cli, supports_flag
-from tools.regions import module_docstring, parse_regions
+from tools.common import NOTEBOOK, SCRIPT, module_docstring, parse_regions, parser, rel, supports_flag
 
 INSTALL_CELL = """\
 # Install (idempotent). Open this notebook from a clone of the course repository, or on Colab first
@@ -68,9 +68,7 @@ def _prose(text: str) -> str:
 def _cell(kind: str, cid: str, source: str, tags: list[str] | None = None) -> dict:
     lines = source.splitlines(keepends=True)
     cell = {"cell_type": kind, "id": cid, "metadata": {"tags": tags} if tags else {}, "source": lines}
-    if kind == "code":
-        cell.update(execution_count=None, outputs=[])
-    return cell
+    return cell | (dict(execution_count=None, outputs=[]) if kind == "code" else {})
 
 
 def build_notebook(script: Path = SCRIPT) -> str:
@@ -91,20 +89,18 @@ def build_notebook(script: Path = SCRIPT) -> str:
     for i, r in enumerate(regions, 1):
         cells.append(_cell("markdown", f"{r.name}-md", f"## {i}. {r.name}\n\n{' '.join(r.intent)}"))
         cells.append(_cell("code", f"{r.name}-code", r.code, [f"region-{r.name}"]))
-    nb = {
-        "cells": cells,
-        "metadata": {
-            "colab": {"provenance": [], "toc_visible": True},
-            "kernelspec": {"display_name": "Python 3 (ipykernel)", "language": "python", "name": "python3"},
-            "language_info": {"name": "python"},
-        },
-        "nbformat": 4,
-        "nbformat_minor": 5,
+    kernel = {"display_name": "Python 3 (ipykernel)", "language": "python", "name": "python3"}
+    meta = {
+        "colab": {"provenance": [], "toc_visible": True},
+        "kernelspec": kernel,
+        "language_info": {"name": "python"},
     }
+    nb = {"cells": cells, "metadata": meta, "nbformat": 4, "nbformat_minor": 5}
+    # not ch37.files.dump_json: a notebook keeps its text UTF-8 as is, as nbformat writes it
     return json.dumps(nb, indent=1, sort_keys=True, ensure_ascii=False) + "\n"
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str]) -> int:
     p = parser("notebook", __doc__)
     p.add_argument("--check", action="store_true", help="exit 1 if the notebook does not match the script")
     p.add_argument("--out", type=Path, default=NOTEBOOK, help="default scale_data.ipynb")
@@ -112,14 +108,14 @@ def main(argv: list[str] | None = None) -> int:
     text = build_notebook(a.script)
     if a.check:
         if not a.out.exists() or a.out.read_text(encoding="utf-8") != text:
-            print(f"stale: {_rel(a.out)} does not match {_rel(a.script)}; run: python -m tools.notebook")
+            print(f"stale: {rel(a.out)} does not match {rel(a.script)}; run: python -m tools.notebook")
             return 1
-        print(f"ok: {_rel(a.out)} matches {_rel(a.script)}")
+        print(f"ok: {rel(a.out)} matches {rel(a.script)}")
         return 0
     write_atomic(a.out, text)
-    print(f"wrote {_rel(a.out)}")
+    print(f"wrote {rel(a.out)}")
     return 0
 
 
 if __name__ == "__main__":
-    run_cli(main)
+    errors.main(main)

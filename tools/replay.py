@@ -4,20 +4,19 @@
     python -m tools.replay --sigma 0.5 1 2     yields as the perturbation grows -> OUT/replay_sigma.json, .png
     python -m tools.replay --smoke --seeds 2   seconds; numbers not meaningful (OUT = outputs/replay-smoke)
 
---seeds: for each seed, the chapter's 12 source demos are grown both ways with engine.keep_first
-(--per_demo kept demos wanted per source demo, at most --tries attempts per wanted demo; re-solve
-keeps every attempt, replay what its success filter passes). Where the yields differ the re-solved
-set is cut to the replayed set's count per source demo (its first kept ones in attempt order), so the
-two "matched" arms hold the same number of generated demos from the same source demos. Four arms
-train side by side with the chapter's recipe (ch37.recipe: the measure region's own code) for the
-chapter's full budget (--epochs passes over source + all re-solved demos), so every arm takes the
-same steps: source alone, source + replayed, source + re-solved (matched), source + re-solved (all).
-Each is evaluated on the chapter's held-out starts of that seed. Also: attempts, yield, failures by
-reason and start coverage (the emit region's cells) per mode.
+--seeds: for each seed, the chapter's source demos are grown both ways with engine.grow (the chapter's
+kept demos per source demo and attempts per wanted demo; re-solve keeps every attempt, replay what its
+success filter passes). Where the yields differ the re-solved set is cut to the replayed set's count
+per source demo (its first kept ones in attempt order), so the two "matched" arms hold the same number
+of generated demos from the same source demos. Four arms train side by side with the chapter's recipe
+(bc_recipe) for the chapter's full budget (epochs passes over source + all re-solved demos), so every
+arm takes the same steps: source alone, source + replayed, source + re-solved (matched), source +
+re-solved (all). Each is evaluated on the chapter's held-out starts of that seed. Also: attempts,
+yield, failures by reason and start coverage (bc_recipe.cells) per mode.
 
---sigma: for each multiplier m, attempts at (m x 0.08 m, m x 0.5 rad) for both modes, --attempts per
-source demo over the seeds' source demos; yield, failures by reason, and how far the kept starts lie
-from their source start (block position, m).
+--sigma: for each multiplier m, attempts at m x the chapter's sigmas (0.08 m, 0.5 rad) for both modes,
+--attempts per source demo over the seeds' source demos; yield, failures by reason, and how far the
+kept starts lie from their source start (block position, m).
 
 Exit codes: 0 ok, 2 bad input.
 """
@@ -30,253 +29,154 @@ from pathlib import Path
 
 import numpy as np
 
-from ch37 import ROOT
+import bc_recipe as bc
+from ch37 import ROOT, engine, errors
+from ch37.config import DEFAULTS, SMOKE, check
+from ch37.demos import ensure_demos
+from ch37.errors import DataError
 from ch37.files import dump_json, round_floats, write_atomic
-from tools.common import ToolError, _rel, parser, provenance, run_cli
+from ch37.lerobot_io import load_arrays
+from ch37.seeds import env_seed
+from ch37.viz import save_png
+from gen_demos_pusht import PUSHT
+from tools.common import parser, provenance, rel
 
-POS_SIGMA, YAW_SIGMA = 0.08, 0.5  # the chapter's defaults (scale_data.py --aug_pos_sigma, --aug_yaw_sigma)
+POS_SIGMA, YAW_SIGMA = DEFAULTS["aug_pos_sigma"], DEFAULTS["aug_yaw_sigma"]  # m, rad
+SIGMAS = dict(pos_sigma=POS_SIGMA, yaw_sigma=YAW_SIGMA)
+MODES = ("resolve", "replay")
 ARMS = ("source", "replay", "resolve_matched", "resolve_all")
-SMOKE = dict(
-    source_episodes=4, per_demo=2, tries=10, epochs=30, hidden_dim=64, batch_size=64, eval_episodes=8
-)
-DEFAULTS = dict(
-    source_episodes=12, per_demo=8, tries=100, epochs=500, hidden_dim=512, batch_size=128, eval_episodes=50
-)
+DIFFS = (("replay", "source"), ("resolve_matched", "source"), ("resolve_matched", "replay"))
+DIFFS += (("resolve_all", "source"),)
+KEYS = ("source_episodes", "per_demo", "tries", "epochs", "hidden_dim", "batch_size", "eval_episodes")
+
+
+def config(smoke: bool) -> dict:
+    """KEYS from the chapter's settings (SMOKE's with --smoke, at most 10 attempts per wanted demo)."""
+    c = DEFAULTS | (SMOKE | {"aug_tries": 10} if smoke else {})
+    return {k: c[{"per_demo": "aug_per_demo", "tries": "aug_tries"}.get(k, k)] for k in KEYS}
 
 
 def source_set(out: Path, seed: int, episodes: int, quiet: bool) -> dict:
     """The chapter's PushT source demos of `seed` (generated once under OUT/demos, then read back)."""
-    from ch37.demos import ensure_demos
-    from ch37.lerobot_io import load_arrays
-    from gen_demos_pusht import PUSHT
-
     path = out / "demos" / f"pusht_seed{seed}_ep{episodes}"
-    ensure_demos(
-        PUSHT, path, user_given=False, episodes=episodes, seed=seed, noise=PUSHT.default_noise, quiet=quiet
-    )
+    noise = PUSHT.default_noise
+    ensure_demos(PUSHT, path, user_given=False, episodes=episodes, seed=seed, noise=noise, quiet=quiet)
     return load_arrays(path)
 
 
-def grow(
-    sources: dict, mode: str, *, seed: int, per_demo: int, tries: int, pos: float, yaw: float, workers: int
-):
-    """engine.keep_first over `sources` in `mode`: (kept, attempts, failures)."""
-    from ch37 import engine
-    from ch37.parallel import parallel_map
-
-    def one(job):
-        e, k = job
-        return engine.attempt(sources[e], k, seed=seed, pos_sigma=pos, yaw_sigma=yaw, mode=mode)
-
-    return engine.keep_first(
-        list(sources),
-        per_demo,
-        lambda jobs: parallel_map(one, jobs, workers=workers, bar=None),
-        reasons=engine.FAILURES[mode],
-        cap=tries,
-    )
-
-
-def on_disk(out: Path, name: str, kept: list, seed: int) -> dict:
-    """Write kept episodes as a LeRobot v3 set under OUT/demos/NAME and read them back (train on disk)."""
-    import pusht_env
-    from ch37 import engine
-    from ch37.lerobot_io import load_arrays
-    from ch37.stamps import MADE_BY, replace_own_dir
-
-    keys = ("observation.state", "action", "episode_index", "aug.source_episode", "aug.start")
-    if not kept:
-        return {
-            "observation.state": np.zeros((0, pusht_env.OBS_DIM), np.float32),
-            "action": np.zeros((0, pusht_env.ACT_DIM), np.float32),
-            "episode_index": np.zeros(0, np.int64),
-            "aug.source_episode": np.zeros((0, 1), np.int64),
-            "aug.start": np.zeros((0, len(engine.START_NAMES)), np.float32),
-        }
+def grow(out: Path, mode: str, sources: dict, seed: int, c: dict, workers: int) -> tuple[dict, dict]:
+    """The kept set of `mode` written under OUT/demos and read back (training reads what is on disk),
+    and its row: attempts, yield, failures by reason, start coverage."""
+    t = time.perf_counter()
+    how = dict(mode=mode, cap=c["tries"], workers=workers, seed=seed, **SIGMAS)
+    kept, attempts, failures = engine.grow(sources, c["per_demo"], **how)
+    name = f"pusht_seed{seed}_{mode}_k{c['per_demo']}"
     path = out / "demos" / name
-    replace_own_dir(path)
-    engine.write_kept(
-        path, kept, repo_id=f"local/{name}", stamp={"made_by": MADE_BY, "kind": "augmented", "seed": seed}
-    )
-    return load_arrays(path, keys=keys)
+    engine.save(path, kept, repo_id=f"local/{name}", stamp={"kind": "augmented", "seed": seed})
+    d = load_arrays(path, keys=engine.KEPT_KEYS) if kept else engine.empty_kept()
+    _, first = np.unique(d["episode_index"], return_index=True)
+    cells, outside = bc.cells(d["aug.start"][first, :2])
+    row = {"attempts": attempts, "kept": len(kept), "wanted": len(sources) * c["per_demo"]}
+    row |= {"yield": len(kept) / attempts if attempts else 0.0, "failures": failures}
+    row |= {"coverage_cells": len(cells), "outside_annulus": outside}
+    return row | {"seconds": round(time.perf_counter() - t, 1)}, d
 
 
 def per_source(d: dict) -> dict[int, int]:
+    """{source episode: generated episodes from it} of a kept set."""
     _, first = np.unique(d["episode_index"], return_index=True)
     e, n = np.unique(d["aug.source_episode"].reshape(-1)[first], return_counts=True)
     return {int(a): int(b) for a, b in zip(e, n)}
 
 
-def compare_seed(out: Path, seed: int, c: dict, workers: int, quiet: bool) -> dict:
-    from ch37 import engine, recipe
-    from ch37.seeds import env_seed
+def arm_data(src: dict, sets: dict) -> dict:
+    """{arm: (states, actions, generated demos)}: the source demos plus the arm's rows of a grown set.
+    Replay keeps fewer, so resolve_matched takes per source demo as many re-solved demos as replay kept."""
+    res, rep = sets["resolve"], sets["replay"]
+    matched = engine.first_per_source(res["episode_index"], res["aug.source_episode"], per_source(rep))
+    every, none = slice(None), slice(0)
+    rows = {"source": (res, none), "replay": (rep, every), "resolve_matched": (res, matched)}
+    rows["resolve_all"] = (res, every)
+    return {
+        arm: (
+            np.concatenate([src["observation.state"], d["observation.state"][m]]),
+            np.concatenate([src["action"], d["action"][m]]),
+            len(np.unique(d["episode_index"][m])),
+        )
+        for arm, (d, m) in rows.items()
+    }
 
+
+def train_arms(data: dict, seed: int, c: dict, workers: int) -> dict:
+    """The four arms trained side by side from one init for the chapter's full budget (epochs passes
+    over source + all re-solved demos), each rolled out on the seed's held-out starts."""
+    t = time.perf_counter()
+    steps = math.ceil(c["epochs"] * len(data["resolve_all"][0]) / c["batch_size"])
+    init = bc.init_weights(c["hidden_dim"], seed)
+    hp = dict(batch_size=c["batch_size"], lr=DEFAULTS["lr"], seed=seed)
+    pols, fits = bc.train([data[a][:2] for a in ARMS], steps, init, **hp)
+    eval_seeds = [env_seed(seed, "eval", j) for j in range(c["eval_episodes"])]
+    arms = {}
+    for a, pol, fit in zip(ARMS, pols, fits):
+        x, _, generated = data[a]
+        rate = bc.evaluate(pol, eval_seeds, workers=workers)
+        arms[a] = {"demos": c["source_episodes"] + generated, "frames": len(x), "success": rate}
+        arms[a]["final_loss"] = round(fit, 6)
+    return {"steps": steps, "arms": arms, "train_eval_seconds": round(time.perf_counter() - t, 1)}
+
+
+def compare_seed(out: Path, seed: int, c: dict, workers: int, quiet: bool) -> dict:
+    """One seed: both modes grown from its source demos, then the four arms trained and evaluated."""
     t0 = time.perf_counter()
     src = source_set(out, seed, c["source_episodes"], quiet)
     sources = engine.sources(src)
     row, sets = {"seed": seed, "modes": {}}, {}
-    for mode in ("resolve", "replay"):
-        t = time.perf_counter()
-        kept, attempts, failures = grow(
-            sources,
-            mode,
-            seed=seed,
-            per_demo=c["per_demo"],
-            tries=c["tries"],
-            pos=POS_SIGMA,
-            yaw=YAW_SIGMA,
-            workers=workers,
-        )
-        d = sets[mode] = on_disk(out, f"pusht_seed{seed}_{mode}_k{c['per_demo']}", kept, seed)
-        _, first = np.unique(d["episode_index"], return_index=True)
-        cells, outside = recipe.coverage().cells(d["aug.start"][first, :2])
-        row["modes"][mode] = {
-            "attempts": attempts,
-            "kept": len(kept),
-            "wanted": len(sources) * c["per_demo"],
-            "yield": len(kept) / attempts if attempts else 0.0,
-            "failures": failures,
-            "coverage_cells": len(cells),
-            "outside_annulus": outside,
-            "seconds": round(time.perf_counter() - t, 1),
-        }
-    src_cells, _ = recipe.coverage().cells(np.array([s.states[0][2:4] for s in sources.values()]))
-    row["coverage_source"] = len(src_cells)
-    match = per_source(sets["replay"])  # replay keeps fewer: cut re-solve to its count per source demo
-    m = engine.first_per_source(
-        sets["resolve"]["episode_index"], sets["resolve"]["aug.source_episode"], match
-    )
-    x, y = src["observation.state"], src["action"]
-
-    def plus(d, rows=slice(None)):
-        return np.concatenate([x, d["observation.state"][rows]]), np.concatenate([y, d["action"][rows]])
-
-    data = {
-        "source": (x, y),
-        "replay": plus(sets["replay"]),
-        "resolve_matched": plus(sets["resolve"], m),
-        "resolve_all": plus(sets["resolve"]),
-    }
-    steps = math.ceil(
-        c["epochs"] * len(data["resolve_all"][0]) / c["batch_size"]
-    )  # the chapter's full budget
-    r = recipe.load(
-        hidden_dim=c["hidden_dim"], batch_size=c["batch_size"], lr=1e-3, seed=seed, workers=workers
-    )
-    t = time.perf_counter()
-    pols, fits = r.train([data[a] for a in ARMS], steps)
-    eval_seeds = [env_seed(seed, "eval", j) for j in range(c["eval_episodes"])]
-    n_gen = {
-        "source": 0,
-        "replay": len(np.unique(sets["replay"]["episode_index"])),
-        "resolve_matched": len(np.unique(sets["resolve"]["episode_index"][m])),
-        "resolve_all": len(np.unique(sets["resolve"]["episode_index"])),
-    }
-    row["steps"], row["arms"] = steps, {}
-    for a, pol, fit in zip(ARMS, pols, fits):
-        rate = r.evaluate(pol, eval_seeds)
-        row["arms"][a] = {
-            "demos": c["source_episodes"] + n_gen[a],
-            "frames": len(data[a][0]),
-            "success": rate,
-            "final_loss": round(fit, 6),
-        }
-    row["train_eval_seconds"] = round(time.perf_counter() - t, 1)
+    for mode in MODES:
+        row["modes"][mode], sets[mode] = grow(out, mode, sources, seed, c, workers)
+    row["coverage_source"] = len(bc.cells(np.array([s.states[0][2:4] for s in sources.values()]))[0])
+    row |= train_arms(arm_data(src, sets), seed, c, workers)
     row["seconds"] = round(time.perf_counter() - t0, 1)
     return row
 
 
 def summarize(rows: list[dict], eval_episodes: int) -> dict:
-    from ch37.recipe import interval
-
-    wilson = interval()
+    """Each arm's successes pooled over seeds (Wilson 95%), the paired differences, each mode's totals."""
     n = eval_episodes * len(rows)
-    pooled = {}
+    pooled, diffs, modes = {}, {}, {}
     for a in ARMS:
         k = sum(round(r["arms"][a]["success"] * eval_episodes) for r in rows)
-        pooled[a] = {"successes": k, "episodes": n, "rate": k / n, "ci95": wilson(k / n, n)}
-    diffs = {}
-    for name, (hi, lo) in {
-        "replay_vs_source": ("replay", "source"),
-        "resolve_matched_vs_source": ("resolve_matched", "source"),
-        "resolve_matched_vs_replay": ("resolve_matched", "replay"),
-        "resolve_all_vs_source": ("resolve_all", "source"),
-    }.items():
+        pooled[a] = {"successes": k, "episodes": n, "rate": k / n, "ci95": bc.wilson(k / n, n)}
+    for hi, lo in DIFFS:
         d = [r["arms"][hi]["success"] - r["arms"][lo]["success"] for r in rows]
-        diffs[name] = {
-            "per_seed": d,
-            "mean": float(np.mean(d)),
-            "positive": sum(v > 0 for v in d),
-            "negative": sum(v < 0 for v in d),
-        }
-    modes = {}
-    for mode in ("resolve", "replay"):
-        att = sum(r["modes"][mode]["attempts"] for r in rows)
-        kept = sum(r["modes"][mode]["kept"] for r in rows)
-        fails: dict[str, int] = {}
-        for r in rows:
-            for why, v in r["modes"][mode]["failures"].items():
-                fails[why] = fails.get(why, 0) + v
-        modes[mode] = {
-            "attempts": att,
-            "kept": kept,
-            "yield": kept / att if att else 0.0,
-            "failures": fails,
-            "coverage_cells_mean": float(np.mean([r["modes"][mode]["coverage_cells"] for r in rows])),
-        }
+        diffs[f"{hi}_vs_{lo}"] = {"per_seed": d, "mean": float(np.mean(d))}
+        diffs[f"{hi}_vs_{lo}"] |= {"positive": sum(v > 0 for v in d), "negative": sum(v < 0 for v in d)}
+    for mode in MODES:
+        got = [r["modes"][mode] for r in rows]
+        att, kept = sum(g["attempts"] for g in got), sum(g["kept"] for g in got)
+        fails = {why: sum(g["failures"][why] for g in got) for why in got[0]["failures"]}
+        modes[mode] = {"attempts": att, "kept": kept, "yield": kept / att if att else 0.0, "failures": fails}
+        modes[mode]["coverage_cells_mean"] = float(np.mean([g["coverage_cells"] for g in got]))
     return {"pooled": pooled, "differences": diffs, "modes": modes}
 
 
-def sigma_table(
-    out: Path, mults: list[float], seeds: list[int], c: dict, attempts: int, workers: int, quiet: bool
-) -> dict:
-    from ch37 import engine
-    from ch37.parallel import parallel_map
-    from ch37.recipe import interval
-
-    wilson = interval()
-    srcs = {s: engine.sources(source_set(out, s, c["source_episodes"], quiet)) for s in seeds}
-    rows = []
-    for m in mults:
-        for mode in ("resolve", "replay"):
-            t = time.perf_counter()
-            jobs = [(s, e, k) for s in seeds for e in srcs[s] for k in range(attempts)]
-
-            def one(job, mode=mode, m=m):
-                s, e, k = job
-                return engine.attempt(
-                    srcs[s][e], k, seed=s, pos_sigma=m * POS_SIGMA, yaw_sigma=m * YAW_SIGMA, mode=mode
-                )
-
-            res = parallel_map(one, jobs, workers=workers, bar=None)
-            kept = [(j, r) for j, r in zip(jobs, res) if not isinstance(r, str)]
-            shift = [
-                math.hypot(*(r["aug.start"][0][:2] - srcs[s][e].states[0][2:4])) for (s, e, _), r in kept
-            ]
-            fails = {why: sum(r == why for r in res) for why in engine.FAILURES[mode]}
-            rows.append(
-                {
-                    "multiplier": m,
-                    "pos_sigma": m * POS_SIGMA,
-                    "yaw_sigma": m * YAW_SIGMA,
-                    "mode": mode,
-                    "attempts": len(jobs),
-                    "kept": len(kept),
-                    "yield": len(kept) / len(jobs),
-                    "ci95": wilson(len(kept) / len(jobs), len(jobs)),
-                    "failures": fails,
-                    "kept_block_shift_m": {
-                        "median": float(np.median(shift)) if shift else None,
-                        "max": float(np.max(shift)) if shift else None,
-                    },
-                    "seconds": round(time.perf_counter() - t, 1),
-                }
-            )
-            print(
-                f"sigma x{m:g} {mode:8s} yield {rows[-1]['yield']:.3f} ({len(kept)}/{len(jobs)}) {fails}",
-                flush=True,
-            )
-    return {"rows": rows}
+def sigma_row(srcs: dict, m: float, mode: str, attempts: int, workers: int) -> dict:
+    """`attempts` attempts per source demo of every seed in `srcs` at m x the chapter's sigmas."""
+    t = time.perf_counter()
+    results, shift = [], []  # shift: m, from each kept start's block to its source start's
+    for s, sources in srcs.items():
+        jobs = [(e, k) for e in sources for k in range(attempts)]
+        how = dict(seed=s, pos_sigma=m * POS_SIGMA, yaw_sigma=m * YAW_SIGMA, mode=mode, workers=workers)
+        results += (got := engine.run_attempts(sources, jobs, **how))
+        for (e, _), r in zip(jobs, got):
+            if not isinstance(r, str):
+                shift.append(math.hypot(*(r["aug.start"][0][:2] - sources[e].states[0][2:4])))
+    n, kept = len(results), len(shift)
+    row = {"multiplier": m, "pos_sigma": m * POS_SIGMA, "yaw_sigma": m * YAW_SIGMA, "mode": mode}
+    row |= {"attempts": n, "kept": kept, "yield": kept / n, "ci95": bc.wilson(kept / n, n)}
+    row["failures"] = {why: results.count(why) for why in engine.FAILURES[mode]}
+    stats = {"median": np.median, "max": np.max}
+    row["kept_block_shift_m"] = {k: float(f(shift)) if shift else None for k, f in stats.items()}
+    return row | {"seconds": round(time.perf_counter() - t, 1)}
 
 
 def sigma_plot(path: Path, table: dict) -> Path:
@@ -290,9 +190,8 @@ def sigma_plot(path: Path, table: dict) -> Path:
         rows = [r for r in table["rows"] if r["mode"] == mode]
         xs = [r["multiplier"] for r in rows]
         ax.plot(xs, [r["yield"] for r in rows], "o-", color=color, label=mode)
-        ax.fill_between(
-            xs, [r["ci95"][0] for r in rows], [r["ci95"][1] for r in rows], color=color, alpha=0.2
-        )
+        lo, hi = zip(*[r["ci95"] for r in rows])
+        ax.fill_between(xs, lo, hi, color=color, alpha=0.2)
     ax.axvline(1.0, color="gray", ls=":", lw=1)
     ax.set_xscale("log")
     ax.set_xlabel("perturbation (x the chapter's 0.08 m, 0.5 rad)")
@@ -301,12 +200,43 @@ def sigma_plot(path: Path, table: dict) -> Path:
     ax.set_title("How far can you push the start before the task stops being the task?", fontsize=9)
     ax.legend()
     fig.tight_layout()
-    from ch37.viz import save_png
-
     return save_png(fig, path)
 
 
-def main(argv: list[str] | None = None) -> int:
+def compare(a, c: dict, out: Path, prov: dict) -> None:
+    rows = []
+    for s in range(a.seeds):
+        r = compare_seed(out, s, c, a.workers, a.smoke)
+        rows.append(r)
+        rates = " ".join(f"{k} {v['success']:.2f}" for k, v in r["arms"].items())
+        rep = r["modes"]["replay"]
+        print(
+            f"seed {s}: replay {rep['kept']}/{rep['attempts']} kept, {rates} ({r['seconds']} s)", flush=True
+        )
+    cmd = f"python -m tools.replay --seeds {a.seeds}" + (" --smoke" if a.smoke else "")
+    res = {"kind": "replay_compare", "command": cmd, "rows": rows, **summarize(rows, c["eval_episodes"])}
+    f = write_atomic(out / "replay_compare.json", dump_json(round_floats(res | prov, 4)))
+    print(f"wrote {rel(f)}")
+
+
+def sigma(a, c: dict, out: Path, prov: dict) -> None:
+    seeds = list(range(a.sigma_seeds))
+    srcs = {s: engine.sources(source_set(out, s, c["source_episodes"], a.smoke)) for s in seeds}
+    rows = []
+    for m in sorted(a.sigma):
+        for mode in MODES:
+            rows.append(r := sigma_row(srcs, m, mode, a.attempts, a.workers))
+            got = f"yield {r['yield']:.3f} ({r['kept']}/{r['attempts']}) {r['failures']}"
+            print(f"sigma x{m:g} {mode:8s} {got}", flush=True)
+    mults = " ".join(f"{m:g}" for m in a.sigma)
+    cmd = f"python -m tools.replay --sigma {mults} --attempts {a.attempts} --sigma_seeds {a.sigma_seeds}"
+    res = {"kind": "replay_sigma", "command": cmd + (" --smoke" if a.smoke else ""), "seeds": seeds}
+    res |= {"attempts_per_source": a.attempts, "rows": rows, **prov}
+    f = write_atomic(out / "replay_sigma.json", dump_json(round_floats(res, 4)))
+    print(f"wrote {rel(f)} and {rel(sigma_plot(out / 'replay_sigma.png', res))}")
+
+
+def main(argv: list[str]) -> int:
     p = parser("replay", __doc__)
     p.add_argument("--seeds", type=int, help="compare the two modes on seeds 0..N-1 (the chapter uses 5)")
     p.add_argument("--sigma", type=float, nargs="+", help="perturbation multipliers for the yield table")
@@ -317,58 +247,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, help="default outputs/replay (outputs/replay-smoke with --smoke)")
     a = p.parse_args(argv)
     if not a.seeds and not a.sigma:
-        raise ToolError("nothing to do: give --seeds N and/or --sigma M [M ...]")
-    if (a.seeds is not None and a.seeds < 1) or a.attempts < 1 or a.sigma_seeds < 1 or a.workers < 1:
-        raise ToolError("--seeds, --attempts, --sigma_seeds and --workers must be >= 1")
+        raise DataError("nothing to do: give --seeds N and/or --sigma M [M ...]")
+    check(a, positive=["attempts", "sigma_seeds", "workers"] + ["seeds"] * (a.seeds is not None))
     if a.sigma and any(not (0 < m < 100) for m in a.sigma):
-        raise ToolError("--sigma multipliers must be in (0, 100)")
-    c = SMOKE if a.smoke else DEFAULTS
+        raise DataError("--sigma multipliers must be in (0, 100)")
+    c = config(a.smoke)
     out = a.out or ROOT / ("outputs/replay-smoke" if a.smoke else "outputs/replay")
     out.mkdir(parents=True, exist_ok=True)
-    prov = {
-        "smoke": a.smoke,
-        "config": c,
-        "pos_sigma": POS_SIGMA,
-        "yaw_sigma": YAW_SIGMA,
-        **provenance(a.script),
-    }
+    prov = {"smoke": a.smoke, "config": c, "pos_sigma": POS_SIGMA, "yaw_sigma": YAW_SIGMA}
+    prov |= provenance(a.script)
     if a.seeds:
-        rows = []
-        for s in range(a.seeds):
-            rows.append(compare_seed(out, s, c, a.workers, a.smoke))
-            r = rows[-1]
-            print(
-                f"seed {s}: replay {r['modes']['replay']['kept']}/{r['modes']['replay']['attempts']} kept, "
-                + " ".join(f"{k} {v['success']:.2f}" for k, v in r["arms"].items())
-                + f" ({r['seconds']} s)",
-                flush=True,
-            )
-        res = {
-            "kind": "replay_compare",
-            "command": f"python -m tools.replay --seeds {a.seeds}" + (" --smoke" if a.smoke else ""),
-            "rows": rows,
-            **summarize(rows, c["eval_episodes"]),
-            **prov,
-        }
-        f = write_atomic(out / "replay_compare.json", dump_json(round_floats(res, 4)))
-        print(f"wrote {_rel(f)}")
+        compare(a, c, out, prov)
     if a.sigma:
-        seeds = list(range(a.sigma_seeds))
-        table = sigma_table(out, sorted(a.sigma), seeds, c, a.attempts, a.workers, a.smoke)
-        mults = " ".join(f"{m:g}" for m in a.sigma)
-        cmd = f"python -m tools.replay --sigma {mults} --attempts {a.attempts} --sigma_seeds {a.sigma_seeds}"
-        res = {
-            "kind": "replay_sigma",
-            "command": cmd + (" --smoke" if a.smoke else ""),
-            "seeds": seeds,
-            "attempts_per_source": a.attempts,
-            **table,
-            **prov,
-        }
-        f = write_atomic(out / "replay_sigma.json", dump_json(round_floats(res, 4)))
-        print(f"wrote {_rel(f)} and {_rel(sigma_plot(out / 'replay_sigma.png', res))}")
+        sigma(a, c, out, prov)
     return 0
 
 
 if __name__ == "__main__":
-    run_cli(main)
+    errors.main(main)

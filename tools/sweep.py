@@ -21,10 +21,12 @@ import sys
 import time
 from pathlib import Path
 
-from ch37 import ROOT
+from ch37 import ROOT, errors
+from ch37.config import check
+from ch37.errors import DataError
 from ch37.files import write_atomic
 from exercises.rules import PLATEAU_TOL, ex3_answer
-from tools.common import ToolError, _rel, parser, provenance, run_cli
+from tools.common import parser, provenance, rel
 
 SWEEP_OWNED = {"--seed", "--out", "--rerun", "--no-rerun"}
 ARMS = ("source_short", "augmented_short", "source_full", "augmented_full")
@@ -53,33 +55,25 @@ def run_one(script: Path, out: Path, seed: int, flags: list[str], root: Path) ->
     write_atomic(out / "run.log", f"$ {shlex.join(cmd)}\n{p.stdout}\n--- stderr ---\n{p.stderr}")
     if p.returncode != 0:
         tail = "\n".join((p.stdout + p.stderr).strip().splitlines()[-15:])
-        raise ToolError(
-            f"{shlex.join(cmd)} exited {p.returncode}; last lines:\n{tail}\n(full log: {out / 'run.log'})"
+        raise DataError(
+            f"{shlex.join(cmd)} exited {p.returncode}; last lines:\n{tail}\n(full log: {out}/run.log)"
         )
-    metrics = json.loads((out / "metrics.json").read_text())
-    metrics["_wall_s"] = round(time.perf_counter() - t0, 1)
-    return metrics
+    return json.loads((out / "metrics.json").read_text()) | {"_wall_s": round(time.perf_counter() - t0, 1)}
 
 
 def row_of(m: dict, **extra) -> dict:
     """One run's 2x2 as a sweep row: each arm's success, the effects, steps per budget, episodes."""
     a, n = m["arms"], m["config"]["eval_episodes"]
-    return {
-        **extra,
-        **{arm: a[arm]["success"] for arm in ARMS},
-        **{e: round(m["effects"][e], 6) for e in EFFECTS},
-        "delta": round(m["scale_effect"], 6),  # the headline: data effect at the full budget
+    row = extra | {arm: a[arm]["success"] for arm in ARMS} | {e: round(m["effects"][e], 6) for e in EFFECTS}
+    row["delta"] = round(m["scale_effect"], 6)  # the headline: data effect at the full budget
+    row |= {
         "steps": m["budgets"],
         "eval_episodes": n,
-        "successes": {arm: round(a[arm]["success"] * n) for arm in ARMS},
-        "yield": m["yield"],
-        "kept": m["kept"],
-        "attempts": m["attempts"],
-        "coverage_source": m["coverage"]["source"],
-        "coverage_union": m["coverage"]["union"],
-        "ci95": {arm: a[arm]["ci95"] for arm in ARMS},
-        "wall_s": m["_wall_s"],
+        "successes": {k: round(a[k]["success"] * n) for k in ARMS},
     }
+    row |= {k: m[k] for k in ("yield", "kept", "attempts")}
+    row |= {"coverage_source": m["coverage"]["source"], "coverage_union": m["coverage"]["union"]}
+    return row | {"ci95": {arm: a[arm]["ci95"] for arm in ARMS}, "wall_s": m["_wall_s"]}
 
 
 def mean_row(rows: list[dict]) -> dict:
@@ -87,10 +81,10 @@ def mean_row(rows: list[dict]) -> dict:
 
 
 def wilson(successes: int, n: int) -> list[float]:
-    """The measure region's Wilson 95% interval (ch37.recipe.interval), rounded to 6 places."""
-    from ch37.recipe import interval
+    """bc_recipe.wilson's 95% interval, rounded to 6 places."""
+    from bc_recipe import wilson  # here, not at the top: it loads torch, which the sweep itself never needs
 
-    return [round(v, 6) for v in interval()(successes / n, n)]
+    return [round(v, 6) for v in wilson(successes / n, n)]
 
 
 def paired(rows: list[dict]) -> dict:
@@ -103,15 +97,10 @@ def paired(rows: list[dict]) -> dict:
         mean = sum(d) / n
         std = math.sqrt(sum((x - mean) ** 2 for x in d) / (n - 1)) if n > 1 else None
         half = None if std is None else T975.get(n - 1, 1.96) * std / math.sqrt(n)
-        out[key] = {
-            "n": n,
-            "wins": sum(x > 0 for x in d),
-            "ties": sum(x == 0 for x in d),
-            "losses": sum(x < 0 for x in d),
-            "mean": round(mean, 6),
-            "std": None if std is None else round(std, 6),
-            "ci95": None if half is None else [round(mean - half, 6), round(mean + half, 6)],
-        }
+        out[key] = {"n": n, "wins": sum(x > 0 for x in d), "ties": sum(x == 0 for x in d)}
+        out[key] |= {"losses": sum(x < 0 for x in d), "mean": round(mean, 6)}
+        out[key]["std"] = None if std is None else round(std, 6)
+        out[key]["ci95"] = None if half is None else [round(mean - half, 6), round(mean + half, 6)]
     return out
 
 
@@ -127,152 +116,120 @@ def pooled(rows: list[dict]) -> dict:
 
 def format_table(rows: list[dict], key: str, mean: dict | None = None) -> str:
     head = " ".join(f"{a:>15s}" for a in ARMS)
-    out = [
-        f"{key:>12s} {head} {'data@full':>9s} {'data@short':>10s} {'yield':>6s} {'kept':>5s} "
-        f"{'coverage':>10s}"
-    ]
+    cols = f"{'data@full':>9s} {'data@short':>10s} {'yield':>6s} {'kept':>5s} {'coverage':>10s}"
+    out = [f"{key:>12s} {head} {cols}"]
     for r in rows + ([dict(mean, **{key: "mean"})] if mean else []):
-        cov = (
-            f"{r['coverage_source']} -> {r['coverage_union']}"
-            if "coverage_source" in r
-            else f"{r['coverage_union']:.1f}"
-        )
+        run = "coverage_source" in r  # a run's row, not the mean
+        cov = f"{r['coverage_source']} -> {r['coverage_union']}" if run else f"{r['coverage_union']:.1f}"
         kept = f"{r['kept']:5d}" if isinstance(r["kept"], int) else f"{r['kept']:5.1f}"
         cells = " ".join(f"{r[a]:15.3f}" for a in ARMS)
-        out.append(f"{r[key]!s:>12s} {cells} {r['data_full']:+9.3f} {r['data_short']:+10.3f} "
-                   f"{r['yield']:6.3f} "
-                   f"{kept} {cov:>10s}")  # fmt: skip
+        data = f"{r['data_full']:+9.3f} {r['data_short']:+10.3f} {r['yield']:6.3f}"
+        out.append(f"{r[key]!s:>12s} {cells} {data} {kept} {cov:>10s}")
     return "\n".join(out)
 
 
 def _print_summary(result: dict, rows: list[dict], kind: str) -> None:
-    print()
     steps = rows[0]["steps"]
-    print(
-        f"steps per arm: short {steps['short']}, full {steps['full']}"
-        + (" (seed 0)" if kind == "seeds" else "")
-    )
+    print(f"\nsteps per arm: short {steps['short']}, full {steps['full']}" + " (seed 0)" * (kind == "seeds"))
     print(format_table(rows, "seed" if kind == "seeds" else "aug_per_demo", result.get("mean")))
     if kind == "seeds":
         for key, pr in result["paired"].items():
             ci = "n/a" if pr["ci95"] is None else f"[{pr['ci95'][0]:+.3f}, {pr['ci95'][1]:+.3f}]"
-            print(f"paired {key}: > 0 on {pr['wins']} of {pr['n']} seeds "
-                  f"(ties {pr['ties']}, losses {pr['losses']}); "
-                  f"mean {pr['mean']:+.3f}, 95% interval over seeds {ci}")  # fmt: skip
+            seeds = f"> 0 on {pr['wins']} of {pr['n']} seeds (ties {pr['ties']}, losses {pr['losses']})"
+            print(f"paired {key}: {seeds}; mean {pr['mean']:+.3f}, 95% interval over seeds {ci}")
         for arm, pl in result["pooled"].items():
-            print(f"pooled {arm}: {pl['successes']}/{pl['episodes']} = {pl['success']:.3f} "
-                  f"[{pl['ci95'][0]:.3f}, {pl['ci95'][1]:.3f}]")  # fmt: skip
-    else:
-        s = {r["aug_per_demo"]: r["augmented_full"] for r in rows}
-        if sorted(s) == [0, 4, 8]:
-            print(f"curve 0 -> 4 -> 8 at {steps['full']} steps each: {ex3_answer(s[0], s[4], s[8])} "
-                  f"(plateau_tol {PLATEAU_TOL})")  # fmt: skip
+            ci = f"[{pl['ci95'][0]:.3f}, {pl['ci95'][1]:.3f}]"
+            print(f"pooled {arm}: {pl['successes']}/{pl['episodes']} = {pl['success']:.3f} {ci}")
+        return
+    s = {r["aug_per_demo"]: r["augmented_full"] for r in rows}
+    if sorted(s) == [0, 4, 8]:
+        curve = ex3_answer(s[0], s[4], s[8])
+        print(f"curve 0 -> 4 -> 8 at {steps['full']} steps each: {curve} (plateau_tol {PLATEAU_TOL})")
 
 
-def sweep(
-    *,
-    seeds: int | None,
-    aug: list[int] | None,
-    flags: list[str],
-    out_root: Path | None,
-    script: Path,
-    argv: list[str],
-) -> Path:
-    """Run the sweep, write sweep_seeds.json or sweep_aug.json under `out_root`, print its table."""
-    bad = sorted({f.split("=")[0] for f in flags} & SWEEP_OWNED)
-    if bad:
-        raise ToolError(f"{', '.join(bad)}: the sweep sets these itself (use --seeds/--aug and --out-root)")
-    smoke = "--smoke" in flags
-    out_root = Path(out_root or ("outputs/sweep-smoke" if smoke else "outputs/sweep"))
-    if not out_root.is_absolute():
-        out_root = ROOT / out_root
-    prov = provenance(script)
+def plan(seeds: int | None, aug: list[int] | None) -> tuple[str, list]:
+    """The sweep's kind and its runs: (seed, extra flags, run folder name, row label) each."""
     if seeds is not None:
-        kind, runs = "seeds", [(s, [], f"seed{s}", {"seed": s}) for s in range(seeds)]
-    else:  # the largest k first; the others then train for its full budget, so only the data moves
-        order = sorted(aug, reverse=True)
-        kind, runs = "aug", [(0, ["--aug_per_demo", str(k)], f"aug{k}", {"aug_per_demo": k}) for k in order]
+        return "seeds", [(s, [], f"seed{s}", {"seed": s}) for s in range(seeds)]
+    order = sorted(aug, reverse=True)  # the largest k first: the others train for its full budget
+    return "aug", [(0, ["--aug_per_demo", str(k)], f"aug{k}", {"aug_per_demo": k}) for k in order]
+
+
+def run_all(kind: str, runs: list, script: Path, out_root: Path, flags: list[str]) -> tuple[list, list]:
+    """Every run of the plan in turn: (sweep rows, metrics.json of each run)."""
     rows, metrics, full_steps = [], [], []
     for seed, extra, name, label in runs:
         print(f"sweep {kind}: {name} ...", end="", flush=True)
         m = run_one(script, out_root / kind / name, seed, flags + extra + full_steps, out_root)
         if kind == "aug" and not full_steps:
             full_steps = ["--full_steps", str(m["budgets"]["full"])]
-        a = m["arms"]
-        print(f" done ({m['_wall_s']:.0f} s): at {m['budgets']['full']} steps "
-              f"source {a['source_full']['success']:.2f} "
-              f"augmented {a['augmented_full']['success']:.2f}", flush=True)  # fmt: skip
-        effective = {}
+        a, steps = m["arms"], m["budgets"]["full"]
+        got = f"source {a['source_full']['success']:.2f} augmented {a['augmented_full']['success']:.2f}"
+        print(f" done ({m['_wall_s']:.0f} s): at {steps} steps {got}", flush=True)
         if kind == "aug":
-            effective = {"effective_aug_per_demo": m["config"]["aug_per_demo"]}
-            if m["config"]["aug_per_demo"] != label["aug_per_demo"]:
-                print(
-                    f"  warning: the run used aug_per_demo {m['config']['aug_per_demo']} (--smoke pins it), "
-                    f"not {label['aug_per_demo']}",
-                    file=sys.stderr,
-                )
-        rows.append(row_of(m, **label, **effective))
+            k, wanted = m["config"]["aug_per_demo"], label["aug_per_demo"]
+            label = label | {"effective_aug_per_demo": k}
+            if k != wanted:
+                warning = f"  warning: the run used aug_per_demo {k} (--smoke pins it), not {wanted}"
+                print(warning, file=sys.stderr)
+        rows.append(row_of(m, **label))
         metrics.append(m)
     if kind == "aug":
         rows.sort(key=lambda r: r["aug_per_demo"])
-    varied = (
-        {"seed", "aug_per_demo", "full_steps"} if kind == "aug" else {"seed"}
-    )  # what changes from run to run
-    config = {k: v for k, v in metrics[0]["config"].items() if k not in varied}
-    runs_command = [
-        "python",
-        "scale_data.py",
-        "--seed",
-        "{seed}",
-        "--no-rerun",
-        "--out",
-        str(out_root / kind / "{run}"),
+    return rows, metrics
+
+
+def sweep(a, flags: list[str], argv: list[str]) -> Path:
+    """Run the sweep of the parsed flags `a` (`flags` go to every run), write sweep_seeds.json or
+    sweep_aug.json under --out-root, print its table."""
+    bad = sorted({f.split("=")[0] for f in flags} & SWEEP_OWNED)
+    if bad:
+        raise DataError(f"{', '.join(bad)}: the sweep sets these itself (use --seeds/--aug and --out-root)")
+    smoke = "--smoke" in flags
+    out_root = ROOT / (a.out_root or ("outputs/sweep-smoke" if smoke else "outputs/sweep"))
+    prov = provenance(a.script)
+    kind, runs = plan(a.seeds, a.aug)
+    rows, metrics = run_all(kind, runs, a.script, out_root, flags)
+    varied = {"seed", "aug_per_demo", "full_steps"} if kind == "aug" else {"seed"}  # from run to run
+    each = ["--aug_per_demo", "{k}", "[--full_steps {full}]"] if kind == "aug" else []
+    runs_command = "python scale_data.py --seed {seed} --no-rerun --out".split() + [
+        str(out_root / kind / "{run}")
     ]
-    runs_command += [*flags] + (["--aug_per_demo", "{k}", "[--full_steps {full}]"] if kind == "aug" else [])
-    result = {
-        "kind": kind,
-        "smoke": smoke,
-        "command": shlex.join(["python", "-m", "tools.sweep", *argv]),
-        "runs_command": shlex.join(runs_command),
-        **prov,
-        "device": metrics[0]["config"].get("device"),
-        "config": config,
-        "action_dims": metrics[0]["action_dims"],
-        "padded_action_dim": metrics[0]["padded_action_dim"],
-        "rows": rows,
-    }
+    runs_command += flags + each
+    first = metrics[0]
+    result = {"kind": kind, "smoke": smoke, "command": shlex.join(["python", "-m", "tools.sweep", *argv])}
+    result |= {"runs_command": shlex.join(runs_command), **prov, "device": first["config"].get("device")}
+    result["config"] = {k: v for k, v in first["config"].items() if k not in varied}
+    result |= {k: first[k] for k in ("action_dims", "padded_action_dim")} | {"rows": rows}
     if kind == "seeds":
-        result["mean"] = mean_row(rows)
-        result["paired"] = paired(rows)
-        result["pooled"] = pooled(rows)
+        result |= {"mean": mean_row(rows), "paired": paired(rows), "pooled": pooled(rows)}
     else:
-        result["seed"] = 0
-        result["full_steps"] = rows[-1]["steps"]["full"]
+        result |= {"seed": 0, "full_steps": rows[-1]["steps"]["full"]}
     path = out_root / f"sweep_{kind}.json"
-    write_atomic(path, json.dumps(result, indent=1, sort_keys=False) + "\n")
+    # not ch37.files.dump_json: its sorted keys would reorder the rows that tools.meta copies into meta.yaml
+    write_atomic(path, json.dumps(result, indent=1) + "\n")
     _print_summary(result, rows, kind)
     if smoke:
         print("smoke sweep: numbers exercise the pipeline only")
-    print(f"wrote {_rel(path)}")
+    print(f"wrote {rel(path)}")
     return path
 
 
-def main(argv: list[str] | None = None) -> int:
-    argv = list(argv or [])
+def main(argv: list[str]) -> int:
     p = parser("sweep", __doc__)
     p.add_argument("--seeds", type=int, help="run seeds 0..N-1")
     p.add_argument("--aug", type=int, nargs="+", help="run seed 0 at these aug_per_demo values (ex3: 0 4 8)")
     p.add_argument("--out-root", type=Path, help="default outputs/sweep (outputs/sweep-smoke with --smoke)")
     a, flags = p.parse_known_args(argv)
     if (a.seeds is None) == (a.aug is None):
-        raise ToolError("give exactly one of --seeds N or --aug K [K ...]")
-    if a.seeds is not None and a.seeds < 1:
-        raise ToolError("--seeds must be >= 1")
+        raise DataError("give exactly one of --seeds N or --aug K [K ...]")
+    if a.seeds is not None:
+        check(a, positive=["seeds"])
     if a.aug is not None and (not a.aug or min(a.aug) < 0):
-        raise ToolError("--aug needs one or more values >= 0")
-    sweep(seeds=a.seeds, aug=a.aug, flags=flags, out_root=a.out_root, script=a.script, argv=argv)
+        raise DataError("--aug needs one or more values >= 0")
+    sweep(a, flags, argv)
     return 0
 
 
 if __name__ == "__main__":
-    run_cli(main)
+    errors.main(main)

@@ -27,17 +27,15 @@ import tempfile
 import time
 from pathlib import Path
 
-from ch37 import CHAPTER_ID, ROOT
+from ch37 import CHAPTER_ID, ROOT, errors
 from ch37.cli import TIERS, device_tier
+from ch37.errors import DataError
 from ch37.files import write_atomic
-from tools.common import WALLCLOCK, ToolError, _rel, parser, run_cli, supports_flag
+from tools.common import WALLCLOCK, parser, rel, supports_flag
 
 WALLCLOCK_FIELDS = ("chapter", "tier", "minutes", "config_hash", "date", "status")
-HASH_EXCLUDE = (
-    "device",
-    "workers",
-    "cache",
-)  # the tier names the device; workers and cache only change speed
+# not in config_hash: the tier names the device; workers and cache change speed only
+HASH_EXCLUDE = ("device", "workers", "cache")
 
 
 def config_hash(config: dict) -> str:
@@ -48,14 +46,7 @@ def config_hash(config: dict) -> str:
 
 
 def _pending(tier: str) -> dict:
-    return {
-        "chapter": CHAPTER_ID,
-        "tier": tier,
-        "minutes": "",
-        "config_hash": "",
-        "date": "",
-        "status": "pending",
-    }
+    return dict(chapter=CHAPTER_ID, tier=tier, minutes="", config_hash="", date="", status="pending")
 
 
 def read_wallclock(path: Path) -> list[dict]:
@@ -66,7 +57,7 @@ def read_wallclock(path: Path) -> list[dict]:
     with path.open(newline="") as f:
         rows = list(csv.DictReader(f))
     if rows and set(rows[0]) != set(WALLCLOCK_FIELDS):
-        raise ToolError(f"{_rel(path)}: columns must be {','.join(WALLCLOCK_FIELDS)}")
+        raise DataError(f"{rel(path)}: columns must be {','.join(WALLCLOCK_FIELDS)}")
     have = {r["tier"] for r in rows}
     return rows + [_pending(t) for t in TIERS if t not in have]
 
@@ -86,12 +77,8 @@ def write_wallclock_row(path: Path, row: dict) -> list[dict]:
 
 def measure_wallclock(script: Path, smoke: bool, tier: str | None) -> dict:
     """Run the chapter cold once and return its wallclock.csv row (tier from the device it used)."""
-    with tempfile.TemporaryDirectory(
-        prefix="ch37-wallclock-"
-    ) as tmp:  # cold: demos generated, as on a first run
-        cmd = [sys.executable, str(script), "--seed", "0", "--no-rerun", "--out", tmp] + (
-            ["--smoke"] if smoke else []
-        )
+    with tempfile.TemporaryDirectory(prefix="ch37-wallclock-") as tmp:  # cold: demos made, as on a first run
+        cmd = [sys.executable, str(script), "--seed", "0", "--no-rerun", "--out", tmp, *(["--smoke"] * smoke)]
         cmd += ["--no-cache"] if supports_flag(script, "--cache") else []  # time the work, never a replay
         print(f"timing: {shlex.join(cmd)}", flush=True)
         t0 = time.perf_counter()
@@ -99,27 +86,18 @@ def measure_wallclock(script: Path, smoke: bool, tier: str | None) -> dict:
         wall = time.perf_counter() - t0
         if p.returncode != 0:
             tail = "\n".join((p.stdout + p.stderr).strip().splitlines()[-15:])
-            raise ToolError(f"the timed run exited {p.returncode}:\n{tail}")
+            raise DataError(f"the timed run exited {p.returncode}:\n{tail}")
         config = json.loads((Path(tmp) / "metrics.json").read_text())["config"]
-    return {
-        "chapter": CHAPTER_ID,
-        "tier": tier or device_tier(config["device"]),
-        "minutes": f"{wall / 60:.2f}",
-        "config_hash": config_hash(config),
-        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d"),
-        "status": "measured",
-    }
+    date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d")
+    row = _pending(tier or device_tier(config["device"])) | {"minutes": f"{wall / 60:.2f}", "date": date}
+    return row | {"config_hash": config_hash(config), "status": "measured"}
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str]) -> int:
     p = parser("wallclock", __doc__)
     p.add_argument("--dry-run", action="store_true", help="print the row, write nothing")
-    p.add_argument(
-        "--smoke", action="store_true", help="time the --smoke run instead (printed only, never written)"
-    )
-    p.add_argument(
-        "--tier", help=f"tier name (default: from the device the run used; known: {', '.join(TIERS)})"
-    )
+    p.add_argument("--smoke", action="store_true", help="time the --smoke run (printed only, never written)")
+    p.add_argument("--tier", help=f"default: the tier of the device the run used; known: {', '.join(TIERS)}")
     p.add_argument("--csv", type=Path, default=WALLCLOCK, help="default wallclock.csv")
     a = p.parse_args(argv)
     row = measure_wallclock(a.script, a.smoke, a.tier)
@@ -128,14 +106,12 @@ def main(argv: list[str] | None = None) -> int:
     print(",".join(WALLCLOCK_FIELDS))
     print(",".join(row[k] for k in WALLCLOCK_FIELDS))
     if a.smoke or a.dry_run:
-        print(
-            "not written (" + ("a smoke time never goes into wallclock.csv" if a.smoke else "--dry-run") + ")"
-        )
+        print(f"not written ({'a smoke time never goes into wallclock.csv' if a.smoke else '--dry-run'})")
         return 0
     write_wallclock_row(a.csv, row)
-    print(f"wrote the {row['tier']} row of {_rel(a.csv)}")
+    print(f"wrote the {row['tier']} row of {rel(a.csv)}")
     return 0
 
 
 if __name__ == "__main__":
-    run_cli(main)
+    errors.main(main)
