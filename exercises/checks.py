@@ -191,7 +191,7 @@ def check_mix(fn, pusht_mask_density: float = 1 / 3, where: str = "exercises/ex2
                     yield f"ex2: {name} has {what} {g}, expected {w} ({case})"
             if not np.array_equal(got, want):
                 yield f"ex2: {name} is wrong: {_wrong_values(name, got, p, a)} ({case})"
-        density = res[1][: len(p)].mean() if len(p) else pusht_mask_density  # meta.yaml's value holds too
+        density = res[1][: len(p)].mean() if len(p) else pusht_mask_density  # meta.yaml's density vs the spec
         if not math.isclose(density, pusht_mask_density, abs_tol=1e-6):
             yield f"ex2: PushT mask density {density:.4f}, expected {pusht_mask_density:.4f}"
     return len(cases)
@@ -267,9 +267,7 @@ def check_ex1_measured(metrics: dict, band: dict):
     check_run_sane(metrics, "ex1")
     arms, eff, budgets = metrics["arms"], metrics["scale_effect"], metrics["budgets"]
     lo, hi = band.get("scale_effect_min", -math.inf), band.get("scale_effect_max", math.inf)
-    want = " and ".join(
-        f"scale_effect {op} {v:+.3f}" for op, v in ((">=", lo), ("<=", hi)) if math.isfinite(v)
-    )
+    want = " and ".join(f"scale_effect {o} {v:+.3f}" for o, v in ((">=", lo), ("<=", hi)) if math.isfinite(v))
     if not want:
         yield "ex1: meta.yaml's exercise_checks.ex1.band has neither scale_effect_min nor scale_effect_max"
     s, a = arms["source_full"]["success"], arms["augmented_full"]["success"]
@@ -303,8 +301,8 @@ def check_ex3_nested(runs: dict):
     """runs {k: metrics}: nested augmented sets (frames 0 < 4 < 8), one source set and one full budget
     (the same steps) in every run, so the curve moves the data alone."""
     ks = sorted(runs)
-    frames, first = [runs[k]["augmented_frames"] for k in ks], runs[ks[0]]
-    if frames[0] != 0 or first["kept"] != 0:
+    frames = [runs[k]["augmented_frames"] for k in ks]
+    if frames[0] != 0 or runs[ks[0]]["kept"] != 0:
         yield f"ex3: aug_per_demo {ks[0]} should add no frames, got {frames[0]}"
     if not all(x < y for x, y in zip(frames, frames[1:])):
         yield f"ex3: augmented frames should grow with aug_per_demo {ks}, got {frames}"
@@ -313,8 +311,6 @@ def check_ex3_nested(runs: dict):
     steps = {k: runs[k]["budgets"]["full"] for k in ks}
     if len(set(steps.values())) != 1:
         yield f"ex3: the full budget differs between runs ({steps} steps): the curve mixes data and training"
-    if first["arms"]["augmented_full"]["frames"] != first["source_frames"]:
-        yield f"ex3: at aug_per_demo {ks[0]} the augmented arm should train on the source frames only"
 
 
 @checker
