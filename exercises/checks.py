@@ -348,8 +348,9 @@ def run_ex1(say=print) -> None:
     meta = load_meta()["ex1"]
     pred = check_prediction(load_exercise("ex1"), tuple(EX1_CHOICES), "ex1")
     say(f"ex1: prediction {pred} ({EX1_CHOICES[pred]}) recorded; running the experiment")
-    m = run_chapter(int(meta.get("seed", CHAPTER.seed)), CHAPTER.aug_per_demo, smoke_mode(), say)
-    if smoke_mode():
+    smoke = smoke_mode()
+    m = run_chapter(int(meta.get("seed", CHAPTER.seed)), CHAPTER.aug_per_demo, smoke, say)
+    if smoke:
         check_run_sane(m, "ex1")
         return say(_smoke_note("ex1", "keys and ranges"))
     for line in check_ex1_measured(m, meta["band"]):
@@ -394,11 +395,8 @@ def run_ex3(say=print) -> None:
     for line in check_ex3_measured(rates, meta["band"], tol := float(meta["plateau_tol"])):
         say("ex3: " + line)
     shape = curve_shape(rates, tol)
-    ref = (
-        f" (the reference run in meta.yaml reads {meta['answer']!r})"
-        if meta.get("answer", shape) != shape
-        else ""
-    )
+    answer = meta.get("answer", shape)
+    ref = "" if answer == shape else f" (the reference run in meta.yaml reads {answer!r})"
     say(f"ex3: the data shows a {shape} at {steps} steps each; {verdict(pred, shape)}{ref}")
 
 
