@@ -22,8 +22,8 @@ What to do
     3. Run the check. It validates your answer, then runs scale_data.py at seed 0 with
        --aug_per_demo 8, then 0 and 4 at the k = 8 run's full budget (folders
        outputs/exercises/seed0_aug{0,4,8}; the k = 8 run is the one exercise 1 already made and is
-       reused if it is there), checks each measured
-       success against the bands in meta.yaml, and prints each step and the shape the data shows.
+       reused if it is there), checks each measured success against the bands in meta.yaml, and
+       prints each step and the shape the data shows.
     4. Look at the 95% intervals in each metrics.json: with 50 evaluation starts, which of the
        steps could be noise?
     5. Three points cannot say whether the curve keeps climbing past them, or where it bends:

@@ -1,23 +1,18 @@
-"""The answer rules of exercises 1 and 3 and the bands their measured checks assert.
-
-One home for each rule: `python -m tools.meta` derives meta.yaml's exercise_checks with these
-functions (and publishes RULES beside them), and checks.py judges a learner's curve with the same
-ex3_answer. A rule given bad input raises ValueError.
+"""The answer rules of exercises 1 and 3 and the bands their measured checks assert, in one home:
+`python -m tools.meta` derives meta.yaml's exercise_checks with them (publishing RULES beside them), and
+checks.py judges a learner's curve with the same ex3_answer. A rule given bad input raises ValueError.
 """
-
-from __future__ import annotations
 
 PLATEAU_TOL = 0.04  # a step of success smaller than this reads as flat (ex3)
 BAND_MIN_MARGIN = 0.06  # the narrowest half-width a band may have
 
 
 def band_margin(ci95) -> float:
-    """Band half-width around a measured success: max(0.06, half of the Wilson 95% half-width)."""
+    """Half the Wilson 95% half-width, at least BAND_MIN_MARGIN: room for another run's noise."""
     return max(BAND_MIN_MARGIN, (ci95[1] - ci95[0]) / 4)
 
 
 def success_band(success: float, ci95) -> list[float]:
-    """measured success +- band_margin(ci95), clipped to [0, 1]."""
     m = band_margin(ci95)
     return [round(max(0.0, success - m), 4), round(min(1.0, success + m), 4)]
 
@@ -27,65 +22,41 @@ def ex1_answer(deltas) -> str:
     deltas = list(deltas)
     if not deltas:
         raise ValueError("ex1: the seed sweep has no rows")
-    if all(d > 0 for d in deltas):
-        return "A"
-    if all(d < 0 for d in deltas):
-        return "B"
-    return "C"
+    return "A" if all(d > 0 for d in deltas) else "B" if all(d < 0 for d in deltas) else "C"
 
 
 def ex1_band(answer: str, effect0: float, ci95_aug0) -> dict:
-    """A: scale_effect_min = half the seed-0 effect; B: scale_effect_max = half of it (negative);
-    C: the seed-0 effect +- band_margin(the seed-0 augmented arm's interval)."""
-    if answer == "A":
-        return {"scale_effect_min": round(effect0 / 2, 4)}
-    if answer == "B":
-        return {"scale_effect_max": round(effect0 / 2, 4)}
+    """A or B: half the seed-0 effect as the floor or the ceiling, so a run must keep its sign with room
+    for noise; C: the seed-0 effect +- band_margin of the seed-0 augmented arm's interval."""
+    if answer in ("A", "B"):
+        return {"scale_effect_min" if answer == "A" else "scale_effect_max": round(effect0 / 2, 4)}
     m = band_margin(ci95_aug0)
     return {"scale_effect_min": round(effect0 - m, 4), "scale_effect_max": round(effect0 + m, 4)}
 
 
 def ex3_answer(s0: float, s4: float, s8: float, tol: float = PLATEAU_TOL) -> str:
-    """The question is what the curve does at the end (4 -> 8): climb if the last step is above
-    +tol, fall if it is below -tol, plateau otherwise; the first step (0 -> 4) is printed, not judged.
-    Steps are rounded to 6 decimals first, so a step of exactly tol (0.26 - 0.22) reads as flat."""
-    step2 = round(s8 - s4, 6)
-    if step2 > tol:
-        return "climb"
-    if step2 < -tol:
-        return "fall"
-    return "plateau"
+    """What the curve does at the end: the last step (4 -> 8) decides, the first (s0 -> s4) is printed for
+    the learner, not judged. Rounded to 6 decimals first, so a step of exactly tol (0.26 - 0.22) is flat."""
+    step = round(s8 - s4, 6)
+    return "climb" if step > tol else "fall" if step < -tol else "plateau"
 
 
 def derive_checks(seeds: dict, aug: dict) -> dict:
     """exercise_checks from a seed sweep and an aug sweep (the JSON files `python -m tools.sweep` writes)."""
-    rows = {r["seed"]: r for r in seeds["rows"]}
+    rows, by_k = {r["seed"]: r for r in seeds["rows"]}, {r["aug_per_demo"]: r for r in aug["rows"]}
     if 0 not in rows:
         raise ValueError("the seed sweep must include seed 0 (ex1 and ex3 are run at seed 0)")
-    r0 = rows[0]
-    answer = ex1_answer(r["delta"] for r in seeds["rows"])
-    by_k = {r["aug_per_demo"]: r for r in aug["rows"]}
     if aug.get("seed", 0) != 0:
         raise ValueError("the aug sweep must be at seed 0")
     if sorted(by_k) != [0, 4, 8]:
         raise ValueError(f"the aug sweep must cover aug_per_demo 0, 4, 8; it has {sorted(by_k)}")
-    s = {k: by_k[k]["augmented_full"] for k in (0, 4, 8)}
-    dims = seeds["action_dims"]
-    return {
-        "ex1": {
-            "seed": 0,
-            "answer": answer,
-            "band": ex1_band(answer, r0["delta"], r0["ci95"]["augmented_full"]),
-        },
-        "ex2": {"pusht_mask_density": round(dims["pusht"] / seeds["padded_action_dim"], 6)},
-        "ex3": {
-            "seed": 0,
-            "aug_per_demo": [0, 4, 8],
-            "answer": ex3_answer(s[0], s[4], s[8]),
-            "plateau_tol": PLATEAU_TOL,
-            "band": {str(k): success_band(s[k], by_k[k]["ci95"]["augmented_full"]) for k in (0, 4, 8)},
-        },
-    }
+    r0, s = rows[0], {k: r["augmented_full"] for k, r in by_k.items()}
+    answer, curve = ex1_answer(r["delta"] for r in seeds["rows"]), ex3_answer(s[0], s[4], s[8])
+    ex1 = {"seed": 0, "answer": answer, "band": ex1_band(answer, r0["delta"], r0["ci95"]["augmented_full"])}
+    ex3 = {"seed": 0, "aug_per_demo": [0, 4, 8], "answer": curve, "plateau_tol": PLATEAU_TOL}
+    bands = {str(k): success_band(s[k], by_k[k]["ci95"]["augmented_full"]) for k in (0, 4, 8)}
+    density = round(seeds["action_dims"]["pusht"] / seeds["padded_action_dim"], 6)
+    return {"ex1": ex1, "ex2": {"pusht_mask_density": density}, "ex3": {**ex3, "band": bands}}
 
 
 # The rules above in words, published in meta.yaml's reference_run beside the numbers they made.

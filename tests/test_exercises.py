@@ -272,6 +272,10 @@ def garbage_in_padding(p, a):
     return act, mask, ids
 
 
+def exits_early(p, a):
+    sys.exit(0)  # an unfinished answer that ends the process "successfully"
+
+
 WRONG_MIXES = [
     (pad_left, "pad on the right"),
     (mask_all_ones, "mask is all ones"),
@@ -283,6 +287,7 @@ WRONG_MIXES = [
     (not_implemented, r"not implemented yet \(NotImplementedError\)"),
     (two_outputs, "return a tuple"),
     (garbage_in_padding, "must be exactly zero"),
+    (exits_early, r"raised SystemExit: 0 \(case 1"),
 ]
 
 
@@ -311,6 +316,23 @@ def test_ex2_unfilled_fails_clearly_and_solutions_pass_under_pytest():
     p = run_checks("-k", "ex2", env_extra={"CH37_EXERCISE_DIR": "exercises/solutions"})
     assert p.returncode == 0, p.stdout + p.stderr
     assert "matches the specification" in p.stdout and "1 passed, 2 deselected" in p.stdout
+
+
+@pytest.mark.parametrize(
+    "answer",
+    ["import sys\nsys.exit(0)\n", "import sys\n\ndef mix_embodiments(p, a):\n    sys.exit(0)\n"],
+    ids=["at-import", "in-mix_embodiments"],
+)
+def test_ex2_answer_that_exits_fails_the_command(tmp_path, answer):
+    """sys.exit(0) at import or inside mix_embodiments is a failed check (exit 1, one line), never a pass."""
+    (tmp_path / checks.FILES["ex2"]).write_text(answer)
+    env = {k: v for k, v in os.environ.items() if k not in EXERCISE_VARS}
+    env.update(CH37_EXERCISE_DIR=str(tmp_path), CH37_META=str(META))
+    p = subprocess.run(
+        [sys.executable, "-m", "exercises.checks", "ex2"], cwd=ROOT, env=env, capture_output=True, text=True
+    )
+    assert p.returncode == 1 and p.stdout == "", p.stdout + p.stderr
+    assert p.stderr.count("\n") == 1 and "SystemExit" in p.stderr and "Traceback" not in p.stderr
 
 
 # ---------------------------------------------------------------- measured claims: ex1 and ex3
