@@ -21,7 +21,7 @@ resolve against resolve_fixed reads data apart from compute.
   2. generate  phase 1, one task per (engine, seed): the data engine's keep_first at the largest N;
                fresh demo sets and the expert's own success (the ceiling) beside them
   3. train     phase 2, one task per (curve, N, seed): the recipe's train + evaluate, largest first
-  4. emit      scale_lab.json (sorted, rounded, atomic), scale_lab.png and scale_lab.rrd
+  4. emit      scale_lab.json (sorted, rounded, atomic), scale_lab.png, scale_lab.html and scale_lab.rrd
 
 Every task is a pure function of its arguments with one torch thread, so local processes (the
 default) and Ray (--ray, --ray ADDRESS) give the same scale_lab.json, up to its "seconds" fields.
@@ -48,7 +48,7 @@ MODES = ("resolve", "replay")  # the engine modes behind the generated curves
 SOURCES = 12  # the chapter's --source_episodes: the seed set every generated curve grows from
 FIXED_N = 108  # the chapter's default point: 12 sources + 8 re-solves each; its steps are the fixed budget
 SMOKE_DEFAULTS = dict(n=[12, 24, 36], seeds=[0, 1], eval_episodes=4, hidden_dim=32, epochs=5, batch_size=64)
-RESULTS = ("scale_lab.json", "scale_lab.png", "scale_lab.rrd")
+RESULTS = ("scale_lab.json", "scale_lab.png", "scale_lab.html", "scale_lab.rrd")
 
 
 # --- 1. parse ---------------------------------------------------------------------------------------
@@ -422,9 +422,10 @@ def run(a: argparse.Namespace) -> int:
     }
     result = round_floats(result, 6)
     written = [write_atomic(a.out / "scale_lab.json", dump_json(result))]
-    from ch37 import viz
+    from ch37 import poster, viz
 
     written.append(viz.scale_lab_figure(a.out / "scale_lab.png", result))
+    written.append(poster.lab(a.out / "scale_lab.html", result))
     if a.rerun:
         written.append(viz.scale_lab_recording(a.out / "scale_lab.rrd", result))
     print(f"expert ceiling {e_mean:.2f}; success by N (mean over seeds):")

@@ -22,7 +22,13 @@ from ch37.cli import NOT_IN_KEY
 from ch37.errors import DataError
 from ch37.files import sha256_bytes, sweep_leftovers, write_atomic
 
-RESULT_FILES = ("metrics.json", "cross_embodiment.json", "scale_data.png", "scale_data.rrd")
+RESULT_FILES = (
+    "metrics.json",
+    "cross_embodiment.json",
+    "scale_data.png",
+    "scale_data.html",
+    "scale_data.rrd",
+)
 MANIFEST, SUMMARY = "manifest.json", "summary.txt"
 
 
