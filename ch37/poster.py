@@ -58,6 +58,9 @@ CSS = """\
 .poster svg{display:block;width:100%%;height:auto;max-width:100%%}
 .poster svg text{font-family:%(font)s;fill:var(--ink)}
 .poster svg .tk{font-size:13px}
+.poster svg .vl{font-size:13px;font-weight:700}
+.poster svg .gl{font-size:14px;font-weight:700}
+.poster svg .gs{font-size:12.5px}
 .poster svg.lab{max-width:820px;margin:0 auto}
 .poster .legend{display:flex;flex-wrap:wrap;gap:2px 16px;list-style:none;padding:0;margin:0 0 .4rem;
  font-size:.9rem}
@@ -97,7 +100,10 @@ CSS = """\
  .poster .strip .who{grid-column:1/-1;margin-top:.3rem}
  .poster .dim{font-size:.7rem}
  .poster svg.lab .tk{font-size:21px}
- .poster svg.lab .ylab{display:none}
+ .poster svg.lab .ylab,.poster svg.bars .ylab{display:none}
+ .poster svg.bars .tk,.poster svg.bars .gs{font-size:15px}
+ .poster svg.bars .vl{font-size:16px}
+ .poster svg.bars .gl{font-size:17px}
  .poster table{font-size:.82rem}
  .poster th,.poster td{padding-right:7px}
  .poster table.points td small{white-space:normal}
@@ -206,18 +212,19 @@ def _bars_svg(metrics: dict) -> str:
     """The 2x2: success with its 95% interval, two data arms side by side within each budget."""
     arms, budgets, eff = metrics["arms"], metrics["budgets"], metrics["effects"]
     order = [b for b in BUDGET_ORDER if b in budgets] + sorted(set(budgets) - set(BUDGET_ORDER))
-    w, h, x0, x1, top, bot = 380, 296, 44, 372, 22, 216
+    w, h, x0, x1, top, bot = 380, 296, 54, 372, 22, 216
 
     def y(v):
         return bot - v * (bot - top)
 
-    body = ['<g stroke="#ddd" font-size="12" text-anchor="end">']
+    # text sizes come from the page's CSS (classes tk, vl, gl, gs), so a phone can show them larger
+    body = ['<g class="tk" stroke="#ddd" text-anchor="end">']
     for v in (0, 0.25, 0.5, 0.75, 1):
         body.append(f'<line x1="{x0}" x2="{x1}" y1="{_c(y(v))}" y2="{_c(y(v))}"/>')
         body.append(f'<text x="{x0 - 6}" y="{_c(y(v) + 4)}" stroke="none">{v:g}</text>')
     body.append("</g>")
     body.append(
-        f'<text x="14" y="{(top + bot) // 2}" font-size="12" text-anchor="middle" '
+        f'<text class="tk ylab" x="14" y="{(top + bot) // 2}" text-anchor="middle" '
         f'transform="rotate(-90 14 {(top + bot) // 2})">success rate</text>'
     )
     group = (x1 - x0) / len(order)
@@ -238,25 +245,23 @@ def _bars_svg(metrics: dict) -> str:
                 f'M{_c(bx - 8)} {_c(y(hi))}h16" stroke="#222" stroke-width="1.6" fill="none"/>'
             )
             body.append(
-                f'<text x="{_c(bx)}" y="{_c(y(hi) - 6)}" font-size="13" font-weight="700" '
-                f'text-anchor="middle">{rate:.2f}</text>'
+                f'<text class="vl" x="{_c(bx)}" y="{_c(y(hi) - 6)}" text-anchor="middle">{rate:.2f}</text>'
             )
             desc.append(
                 f"{DATA_LABEL[data]} at the {budget} budget {rate:.2f} (95% interval {lo:.2f} to {hi:.2f})"
             )
         body.append(
-            f'<text x="{_c(cx)}" y="{bot + 22}" font-size="14" font-weight="700" '
-            f'text-anchor="middle">{_e(budget)} budget</text>'
+            f'<text class="gl" x="{_c(cx)}" y="{bot + 24}" text-anchor="middle">{_e(budget)} budget</text>'
         )
         body.append(
-            f'<text x="{_c(cx)}" y="{bot + 40}" font-size="12.5" text-anchor="middle">'
+            f'<text class="gs" x="{_c(cx)}" y="{bot + 43}" text-anchor="middle">'
             f"{budgets[budget]:,} steps each</text>"
         )
         effect = eff.get(f"data_{budget}")
         if effect is not None:
             body.append(
-                f'<text x="{_c(cx)}" y="{bot + 58}" font-size="12.5" text-anchor="middle">'
-                f"data effect {_pts(effect)} points</text>"
+                f'<text class="gs" x="{_c(cx)}" y="{bot + 62}" text-anchor="middle">'
+                f"data: {_pts(effect)} points</text>"
             )
     body.append(f'<line x1="{x0}" x2="{x1}" y1="{bot}" y2="{bot}" stroke="#444"/>')
     n = metrics["config"]["eval_episodes"]
