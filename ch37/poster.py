@@ -635,11 +635,14 @@ def lab_html(result: dict) -> str:
         f'<li><span class="sw" style="background:{HEX[c]}"></span>{_e(label)}</li>'
         for c, _, label in LAB_STYLE.values()
     )
-    legend += (
-        f'<li><span aria-hidden="true">&#9733;</span> the chapter\'s default point (N = {LAB_DEFAULT[1]}, '
-        're-solve)</li><li><span class="sw dash"></span>the expert\'s own success</li>'
-    )
+    if LAB_DEFAULT[1] in r["curves"].get(LAB_DEFAULT[0], {}):  # starred only where it was measured
+        legend += (
+            '<li><span aria-hidden="true">&#9733;</span> the chapter\'s default point '
+            f"(N = {LAB_DEFAULT[1]}, re-solve)</li>"
+        )
+    legend += '<li><span class="sw dash"></span>the expert\'s own success</li>'
     pooled = cfg["eval_episodes"] * len(cfg["seeds"])
+    seeds = ("seeds " if len(cfg["seeds"]) > 1 else "seed ") + ", ".join(map(str, cfg["seeds"]))
     answers = "".join(
         f"<li><b>{q}</b> {a}</li>"
         for q, a in (
@@ -652,7 +655,7 @@ def lab_html(result: dict) -> str:
     body = f"""\
 <header>
 <p class="kicker">Chapter 3.7 &middot; Datasets at Scale &middot; the Scale Lab &middot; \
-seeds {", ".join(map(str, cfg["seeds"]))}{" &middot; smoke" if r.get("smoke") else ""}</p>
+{seeds}{" &middot; smoke" if r.get("smoke") else ""}</p>
 <h1>See it work: success against the number of demos</h1>
 <p class="headline">The chapter's BC recipe at N = {", ".join(map(str, cfg["n"]))} PushT demos: fresh \
 expert demos against 12 sources grown by the data engine, equal steps per N; the expert's own success \
