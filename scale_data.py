@@ -13,7 +13,7 @@ at two budgets, so what the data buys is read apart from what more training buys
   2. wrangle  load both LeRobot sets, per-embodiment stats, normalize, zero-pad + action mask
   3. augment  perturbed PushT starts re-solved by the expert (or replayed), kept only on success
   4. measure  a 2x2: data {source, source+augmented} x budget {short, full}, equal steps per budget
-  5. emit     metrics.json, cross_embodiment.json, a PNG figure and a Rerun recording
+  5. emit     metrics.json, cross_embodiment.json, a PNG figure, an HTML poster and a Rerun recording
 
 Run:    python scale_data.py --seed 0
 Smoke:  python scale_data.py --smoke --seed 0     (seconds; two runs give identical metrics.json)
@@ -342,9 +342,12 @@ metrics = {
 }  # fmt: skip
 metrics_path = write_atomic(args.out / "metrics.json", dump_json(round_floats(metrics, 6)))
 written = [args.out / "cross_embodiment.json", metrics_path]
-from ch37 import viz  # noqa: E402  (matplotlib and rerun drawing code, kept out of the lesson)
+from ch37 import poster, viz  # noqa: E402  (the drawing code: PNG, HTML poster, Rerun; not the lesson)
 
 written.append(viz.figure(args.out / "scale_data.png", src_starts, aug_starts, metrics, bc.ANNULUS))
+written.append(
+    poster.chapter(args.out / "scale_data.html", metrics, cross, src_starts, aug_starts, bc.ANNULUS)
+)
 if args.rerun:
     shown = [  # a few augmented trajectories
         {"observation.state": aug["observation.state"][aug["episode_index"] == e]}
@@ -353,7 +356,7 @@ if args.rerun:
     rrd = viz.recording(args.out / "scale_data.rrd", metrics, src_starts, aug_starts, shown, bc.ANNULUS)
     written.append(rrd)
 rate = {name: arm["success"] for name, arm in arms.items()}
-opens = {".json": "JSON", ".png": "open as an image", ".rrd": "open with: rerun {}"}
+opens = {".json": "JSON", ".png": "open as an image", ".html": "any browser", ".rrd": "open with: rerun {}"}
 files_named = ", ".join(f"{f} ({opens[f.suffix].format(f)})" for f in written)
 summary = (
     f"headline: at equal steps ({budgets['full']} each), source {rate['source_full']:.2f} -> source+aug "

@@ -21,7 +21,7 @@ resolve against resolve_fixed reads data apart from compute.
   2. generate  phase 1, one task per (engine, seed): the data engine's keep_first at the largest N;
                fresh demo sets and the expert's own success (the ceiling) beside them
   3. train     phase 2, one task per (curve, N, seed): the recipe's train + evaluate, largest first
-  4. emit      scale_lab.json (sorted, rounded, atomic), scale_lab.png and scale_lab.rrd
+  4. emit      scale_lab.json (sorted, rounded, atomic), scale_lab.png, scale_lab.html and scale_lab.rrd
 
 Every task is a pure function of its arguments with one torch thread, so local processes (the
 default) and Ray (--ray, --ray ADDRESS) give the same scale_lab.json, up to its "seconds" fields.
@@ -51,7 +51,7 @@ SOURCES = D.source_episodes  # the seed set every generated curve grows from
 FIXED_N = SOURCES * (1 + D.aug_per_demo)  # the chapter's default point (108): its steps are the fixed budget
 SMOKE = dict(n=[12, 24, 36], seeds=[0, 1], eval_episodes=4, hidden_dim=32, epochs=5, batch_size=64)
 INTERVAL = "per point: Wilson 95% over its eval starts; per curve: Wilson over all seeds' episodes pooled"
-RESULTS = ("scale_lab.json", "scale_lab.png", "scale_lab.rrd")
+RESULTS = ("scale_lab.json", "scale_lab.png", "scale_lab.html", "scale_lab.rrd")
 SHAPING = tuple(
     "n seeds eval_episodes epochs batch_size lr hidden_dim pos_sigma yaw_sigma replay_tries smoke".split()
 )
@@ -316,7 +316,7 @@ def curves_of(a, points: list) -> dict:
 
 def emit(a, points, results, expert, generation, data, t_start, t_train) -> None:
     """scale_lab.json (sorted, rounded, atomic), the figure and the recording, and the curves printed."""
-    from ch37 import viz
+    from ch37 import poster, viz
     from ch37.files import dump_json, round_floats, write_atomic
 
     for p in points:
@@ -343,6 +343,7 @@ def emit(a, points, results, expert, generation, data, t_start, t_train) -> None
     )
     written = [write_atomic(a.out / "scale_lab.json", dump_json(result))]
     written.append(viz.scale_lab_figure(a.out / "scale_lab.png", result))
+    written.append(poster.lab(a.out / "scale_lab.html", result))
     if a.rerun:
         written.append(viz.scale_lab_recording(a.out / "scale_lab.rrd", result))
     print(f"expert ceiling {e_mean:.2f}; success by N (mean over seeds):")

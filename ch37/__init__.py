@@ -16,6 +16,7 @@ executors     where the shards run: local processes or Ray
 ensemble      several MLPs as one module: the arms of a training budget side by side
 result_cache  reuse a finished run whose flags and code match; entries verified by checksum
 viz           the PNG figures and the Rerun recordings (the chapter's and the Scale Lab's)
+poster        the self-contained HTML posters (scale_data.html, scale_lab.html): inline SVG, no script
 
 A command of its own (the data engine, a tool) gets the same guarantees from errors.run_main,
 files.claim (or files.check_out_path), stamps.replace_own_dir and parallel.worker_setup.
@@ -49,6 +50,7 @@ CODE_FILES = DATA_CODE + (
     "ch37/parallel.py",
     "ch37/stamps.py",
     "ch37/viz.py",
+    "ch37/poster.py",
     "ch37/ensemble.py",
     "ch37/engine.py",
     "ch37/shards.py",

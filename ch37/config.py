@@ -36,7 +36,13 @@ DEFAULTS = asdict(CHAPTER)
 SMOKE = dict(
     source_episodes=4, aug_per_demo=2, epochs=30, hidden_dim=64, eval_episodes=8, batch_size=64, device="cpu"
 )
-RESULT_FILES = ("metrics.json", "cross_embodiment.json", "scale_data.png", "scale_data.rrd")  # in --out
+RESULT_FILES = (
+    "metrics.json",
+    "cross_embodiment.json",
+    "scale_data.png",
+    "scale_data.html",
+    "scale_data.rrd",
+)
 NOT_IN_KEY = ("out", "cache", "workers")  # where results go and how fast they come never change them
 
 

@@ -521,7 +521,10 @@ def test_notebook_is_fresh_and_deterministic():
     nb = nbformat.reads(text, as_version=4)
     nbformat.validate(nb)
     code = [c for c in nb.cells if c.cell_type == "code"]
-    assert [c.source for c in code[2:]] == [r.code for r in common.parse_regions()]
+    parsed = common.parse_regions()
+    assert [c.source for c in code[2 : 2 + len(parsed)]] == [r.code for r in parsed]
+    (poster,) = code[2 + len(parsed) :]  # after the emit region: the poster, inline
+    assert poster.metadata.tags == ["poster"] and '"scale_data.html"' in poster.source
     assert (
         nb.cells[0].source.startswith("# Chapter 3.7")
         and "by `python -m tools.notebook`" in nb.cells[0].source
@@ -581,6 +584,9 @@ def test_notebook_runs_end_to_end_in_smoke_mode(tmp_path, smoke_sweep):
     client.execute(env=env)
     text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs)
     assert "lerobot ready" in text and "headline:" in text and "wrote" in text and "reusing" not in text
+    (poster,) = [c for c in nb.cells if "poster" in c.metadata.get("tags", [])]
+    shown = "".join(o.get("data", {}).get("text/html", "") for o in poster.outputs)
+    assert shown == (out / "scale_data.html").read_text(encoding="utf-8") and "<svg" in shown
     sweep_out, _ = smoke_sweep
     same_run = sweep_out / "seeds" / "seed0" / "metrics.json"  # the script itself, same flags
     assert (out / "metrics.json").read_bytes() == same_run.read_bytes()

@@ -47,6 +47,12 @@ ARGV_CELL = """\
 {cache_note}import sys
 
 sys.argv = ["scale_data.py", "--seed", "0", "--no-cache"]"""
+POSTER_CELL = """\
+# The poster this run wrote beside its PNG: scale_data.html, one self-contained page (inline SVG and
+# CSS, no script, nothing fetched), shown here inline. The file opens in any browser, shared as is.
+from IPython.display import HTML
+
+HTML((args.out / "scale_data.html").read_text(encoding="utf-8"))"""
 CACHE_NOTE = """\
 # --no-cache: every cell really runs. Without it an identical earlier run (same flags, same code)
 # is replayed from the result cache and the setup cell stops the notebook early ("SystemExit: 0").
@@ -89,6 +95,8 @@ def build_notebook(script: Path = SCRIPT) -> str:
     for i, r in enumerate(regions, 1):
         cells.append(_cell("markdown", f"{r.name}-md", f"## {i}. {r.name}\n\n{' '.join(r.intent)}"))
         cells.append(_cell("code", f"{r.name}-code", r.code, [f"region-{r.name}"]))
+        if r.name == "emit":  # after the emit region: the poster it wrote, inline
+            cells.append(_cell("code", "poster", POSTER_CELL, ["poster"]))
     kernel = {"display_name": "Python 3 (ipykernel)", "language": "python", "name": "python3"}
     meta = {
         "colab": {"provenance": [], "toc_visible": True},
