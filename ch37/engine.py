@@ -300,6 +300,16 @@ def write_kept(root, kept: list[dict], *, repo_id: str, stamp: dict) -> None:
     """Write kept episodes (with their provenance) to `root` as one LeRobot v3 PushT set."""
     from ch37.lerobot_io import features, write_dataset
 
-    feats = features(pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, PROVENANCE)
-    write_dataset(root, repo_id=repo_id, fps=pusht_env.FPS, robot_type=pusht_env.ROBOT_TYPE,
-                  task=pusht_env.TASK, feats=feats, episodes=kept, stamp=stamp)  # fmt: skip
+    feats = features(
+        pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, PROVENANCE, env_state_names=pusht_env.ENV_STATE_NAMES
+    )
+    write_dataset(
+        root,
+        repo_id=repo_id,
+        fps=pusht_env.FPS,
+        robot_type=pusht_env.ROBOT_TYPE,
+        task=pusht_env.TASK,
+        feats=feats,
+        episodes=kept,
+        stamp=stamp,
+    )

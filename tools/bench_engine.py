@@ -117,9 +117,8 @@ def per_demo_costs(src: Path, n: int = 100) -> dict:
     """Where one core's time per kept demo goes, in this process: the re-solve vs LeRobot's write."""
     import tempfile
 
-    import pusht_env
     from ch37 import engine
-    from ch37.lerobot_io import features, load_arrays, write_dataset
+    from ch37.lerobot_io import load_arrays
 
     sources = engine.sources(load_arrays(src))
     jobs = [(e, k) for k in range(n) for e in sources][:n]
@@ -129,14 +128,10 @@ def per_demo_costs(src: Path, n: int = 100) -> dict:
     eps = [engine.attempt(sources[e], k, **kw) for e, k in jobs]
     t1 = time.perf_counter()
     eps = [ep for ep in eps if not isinstance(ep, str)]
-    feats = features(pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, engine.PROVENANCE)
-    meta = dict(
-        repo_id="local/x", fps=pusht_env.FPS, robot_type="r", task=pusht_env.TASK, feats=feats, stamp={}
-    )
-    with tempfile.TemporaryDirectory() as tmp:
-        write_dataset(Path(tmp) / "warm", episodes=eps[:2], **meta)
+    with tempfile.TemporaryDirectory() as tmp:  # the engine's own writer, whatever columns it adds
+        engine.write_kept(Path(tmp) / "warm", eps[:2], repo_id="local/x", stamp={})
         t2 = time.perf_counter()
-        write_dataset(Path(tmp) / "set", episodes=eps, **meta)
+        engine.write_kept(Path(tmp) / "set", eps, repo_id="local/x", stamp={})
         t3 = time.perf_counter()
     return {
         "attempts": n,
