@@ -23,6 +23,9 @@ Observation, float32[10] (``STATE_NAMES``)
     8    target_x     m     delivery target x (constant within an episode)
     9    target_y     m     delivery target y (constant within an episode)
 
+The demo sets also store indices 6..9 (cube and target) as LeRobot's
+``observation.environment_state`` (``ENV_STATE_NAMES``), the object and task state its policies read.
+
 Action, float32[6] (``ACTION_NAMES``), every entry clipped to [-1, 1]
 
     idx  name             unit  meaning
@@ -122,6 +125,9 @@ STATE_NAMES = (
     "target_y",
 )
 ACTION_NAMES = ("right_vx", "right_vy", "right_grip_cmd", "left_vx", "left_vy", "left_grip_cmd")
+# LeRobot's convention puts the object and task state in observation.environment_state (its
+# policies need it or an image): here the cube and the target, state indices 6..9, by name.
+ENV_STATE_NAMES = ("cube_x", "cube_y", "target_x", "target_y")
 ROBOT_TYPE = "aloha_planar_bimanual"
 TASK = "Pick the cube with the right arm, hand it to the left arm, and place it on the target."
 

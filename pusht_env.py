@@ -21,6 +21,9 @@ Observation, float32[10] (``STATE_NAMES``):
     | 8     | target_sin_yaw | -    | sin(target yaw), always 0                    |
     | 9     | target_cos_yaw | -    | cos(target yaw), always 1                    |
 
+The demo sets also store indices 2..9 (block and target pose) as LeRobot's
+``observation.environment_state`` (``ENV_STATE_NAMES``), the object and task state its policies read.
+
 Action, float32[2] (``ACTION_NAMES``): the pusher's target velocity, clipped to [-1, 1] before
 use (the clip is the env's, so any policy output is safe to pass in):
 
@@ -87,6 +90,18 @@ STATE_NAMES = (
     "target_cos_yaw",
 )
 ACTION_NAMES = ("pusher_vx", "pusher_vy")
+# LeRobot's convention puts the object and task state in observation.environment_state (its
+# policies need it or an image): here the block and target poses, state indices 2..9, by name.
+ENV_STATE_NAMES = (
+    "block_x",
+    "block_y",
+    "block_sin_yaw",
+    "block_cos_yaw",
+    "target_x",
+    "target_y",
+    "target_sin_yaw",
+    "target_cos_yaw",
+)
 ROBOT_TYPE = "pusht_pusher"
 TASK = "Push the T-shaped block onto the target pose."
 

@@ -19,9 +19,9 @@ stamp=.venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)
 if [ ! -f "$stamp" ]; then
     echo "setting up .venv (first run downloads lerobot and torch, a few GB, a few minutes)..."
     .venv/bin/python -m pip install -q --upgrade pip
-    # the dependencies of pyproject.toml (runtime + dev + ray: the tests run the data engine on a
-    # real local Ray); the chapter itself runs from this folder
-    mapfile -t deps < <(.venv/bin/python -c 'import tomllib; p = tomllib.load(open("pyproject.toml", "rb"))["project"]; x = p["optional-dependencies"]; print("\n".join(p["dependencies"] + x["dev"] + x["ray"]))')
+    # the dependencies of pyproject.toml (runtime + dev + ray + train: the tests run the data engine
+    # on a real local Ray and LeRobot's own trainer); the chapter itself runs from this folder
+    mapfile -t deps < <(.venv/bin/python -c 'import tomllib; p = tomllib.load(open("pyproject.toml", "rb"))["project"]; x = p["optional-dependencies"]; print("\n".join(p["dependencies"] + x["dev"] + x["ray"] + x["train"]))')
     .venv/bin/python -m pip install -q "${deps[@]}"
     touch "$stamp"
 fi

@@ -51,7 +51,7 @@ GENERATOR_VERSION = f"3+{code_digest()}+lerobot{_lerobot_version()}"
 @dataclass(frozen=True)
 class Embodiment:
     name: str  # "pusht" | "aloha"
-    env_module: object  # module with the Env class and STATE_NAMES, ACTION_NAMES, FPS, ROBOT_TYPE, TASK
+    env_module: object  # the Env class, STATE_NAMES, ENV_STATE_NAMES, ACTION_NAMES, FPS, ROBOT_TYPE, TASK
     env_class: str
     expert_class: type
     default_noise: float  # action noise std (m/s) when --noise is not given
@@ -119,7 +119,7 @@ def generate(
         fps=m.FPS,
         robot_type=m.ROBOT_TYPE,
         task=m.TASK,
-        feats=features(m.STATE_NAMES, m.ACTION_NAMES, video=video),
+        feats=features(m.STATE_NAMES, m.ACTION_NAMES, video=video, env_state_names=m.ENV_STATE_NAMES),
         episodes=episodes_iter(),
         stamp=stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=video),
     )

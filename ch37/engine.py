@@ -343,7 +343,12 @@ def save(root, kept: list[dict], *, repo_id: str, stamp: dict) -> None:
 
     replace_own_dir(root)
     if kept:
-        feats = features(pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, PROVENANCE)
+        feats = features(
+            pusht_env.STATE_NAMES,
+            pusht_env.ACTION_NAMES,
+            PROVENANCE,
+            env_state_names=pusht_env.ENV_STATE_NAMES,
+        )
         write_dataset(
             root,
             repo_id=repo_id,

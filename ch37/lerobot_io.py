@@ -24,6 +24,10 @@ from ch37.stamps import STAMP_NAME, digests, holds_data
 VIDEO_BACKEND = "pyav"
 IMAGE_KEY = "observation.images.top"
 IMAGE_SIZE = 96  # px, the optional top-down video is IMAGE_SIZE x IMAGE_SIZE RGB
+# LeRobot's policies (diffusion, ACT) need an image or this key: the object and task state. The
+# writer fills it from observation.state's columns of the same names (each env's ENV_STATE_NAMES);
+# nothing in the chapter reads it, so a set without it is read as before.
+ENV_STATE_KEY = "observation.environment_state"
 
 
 def _lerobot_dataset_class():
@@ -53,9 +57,17 @@ def _embed_images_if_any(embed):
     return embed_images
 
 
-def features(state_names, action_names, extra: dict | None = None, video: bool = False) -> dict:
+def features(
+    state_names, action_names, extra: dict | None = None, video: bool = False, env_state_names=()
+) -> dict:
+    """LeRobot features of a demo set; env_state_names (a subset of state_names) adds ENV_STATE_KEY."""
     feats = {
-        "observation.state": {"dtype": "float32", "shape": (len(state_names),), "names": list(state_names)},
+        "observation.state": {"dtype": "float32", "shape": (len(state_names),), "names": list(state_names)}
+    }
+    if env_state_names:
+        env_names = list(env_state_names)
+        feats[ENV_STATE_KEY] = {"dtype": "float32", "shape": (len(env_names),), "names": env_names}
+    feats |= {
         "action": {"dtype": "float32", "shape": (len(action_names),), "names": list(action_names)},
         "next.success": {"dtype": "bool", "shape": (1,), "names": None},
     }
@@ -67,6 +79,15 @@ def features(state_names, action_names, extra: dict | None = None, video: bool =
         }
     feats.update(extra or {})
     return feats
+
+
+def columns(names, wanted) -> list[int]:
+    """Indices of `wanted` in `names`: where each environment-state number sits in the state."""
+    names = list(names)
+    missing = [n for n in wanted if n not in names]
+    if missing:
+        raise ValueError(f"{missing} are not state names ({names})")
+    return [names.index(n) for n in wanted]
 
 
 @contextlib.contextmanager
@@ -90,6 +111,9 @@ def write_dataset(
 ) -> None:
     """Write `episodes` (an iterable of dicts of per-frame arrays keyed like `feats`) to `out`.
 
+    ENV_STATE_KEY, when `feats` has it and an episode does not, is taken from the episode's
+    observation.state columns of the same names (see features).
+
     The set is built in a sibling temp directory and renamed into place, so an interrupted run
     never leaves a half-written set at `out`; what a killed run left is removed here. `out` must not
     hold data. The stamp lists every file of the set with its sha256 (ch37.stamps).
@@ -104,6 +128,11 @@ def write_dataset(
     if tmp.exists():
         shutil.rmtree(tmp)  # our own leftover from a crashed run with this pid
     use_videos = any(f["dtype"] == "video" for f in feats.values())
+    env_cols = (
+        columns(feats["observation.state"]["names"], feats[ENV_STATE_KEY]["names"])
+        if ENV_STATE_KEY in feats
+        else None
+    )
     try:
         ds = LeRobotDataset.create(
             repo_id,
@@ -116,6 +145,8 @@ def write_dataset(
         )
         with _fast_fingerprints():
             for ep in episodes:
+                if env_cols is not None and ENV_STATE_KEY not in ep:  # (T, 10) -> (T, len(env_cols))
+                    ep = ep | {ENV_STATE_KEY: np.ascontiguousarray(ep["observation.state"][:, env_cols])}
                 for t in range(len(ep["action"])):
                     ds.add_frame({k: ep[k][t] for k in feats} | {"task": task})
                 ds.save_episode()

@@ -35,6 +35,16 @@ def test_round_trip_matches_direct_rollout(tmp_path, gen, emb, noise, capsys):
     assert info["features"]["observation.state"]["names"] == list(emb.env_module.STATE_NAMES)
     assert info["features"]["action"]["names"] == list(emb.env_module.ACTION_NAMES)
     assert (out / "meta" / "stats.json").exists()
+    # LeRobot's convention beside the chapter's state: the object and task state, named, equal to
+    # the state's columns of the same names (what LeRobot's policies need to train on the set)
+    env_names = list(emb.env_module.ENV_STATE_NAMES)
+    assert info["features"][lerobot_io.ENV_STATE_KEY]["names"] == env_names
+    assert info["features"][lerobot_io.ENV_STATE_KEY]["shape"] == [len(env_names)]
+    cols = [list(emb.env_module.STATE_NAMES).index(n) for n in env_names]
+    d = lerobot_io.load_arrays(out, keys=("observation.state", lerobot_io.ENV_STATE_KEY))
+    assert d[lerobot_io.ENV_STATE_KEY].tobytes() == d["observation.state"][:, cols].tobytes()
+    item = ds[len(ds) - 1]  # through LeRobotDataset's own item path, as a LeRobot trainer reads it
+    assert item[lerobot_io.ENV_STATE_KEY].tolist() == item["observation.state"][cols].tolist()
     d = lerobot_io.load_arrays(out)
     env = emb.make_env()
     for i in range(3):
@@ -117,3 +127,39 @@ def test_bad_flags_one_line(tmp_path, capsys, argv, needle):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and needle in err[0]
     assert not (tmp_path / "x").exists()
+
+
+def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
+    """A user's set from before observation.environment_state (or from another writer) is read as
+    before: the schema check, the lesson's read, the data engine's read and its growth."""
+    import augment_demos
+    from ch37 import engine
+    from ch37.demos import ensure_demos
+
+    emb, m = gen_demos_pusht.PUSHT, gen_demos_pusht.PUSHT.env_module
+    env = emb.make_env()
+    eps = [
+        rollout(env, emb.expert_class(noise=0.0), env.reset(seeds.env_seed(0, "demo", i))) for i in range(2)
+    ]
+    old = tmp_path / "old"
+    lerobot_io.write_dataset(
+        old,
+        repo_id="local/old",
+        fps=m.FPS,
+        robot_type=m.ROBOT_TYPE,
+        task=m.TASK,
+        feats=lerobot_io.features(m.STATE_NAMES, m.ACTION_NAMES),
+        episodes=eps,
+        stamp={},
+    )
+    assert lerobot_io.ENV_STATE_KEY not in json.loads((old / "meta" / "info.json").read_text())["features"]
+    how = ensure_demos(emb, old, user_given=True, episodes=2, seed=0, noise=0.0, quiet=True)
+    assert how == "your own set, used as given"
+    d = lerobot_io.load_arrays(old)
+    assert d["observation.state"].tobytes() == b"".join(ep["observation.state"].tobytes() for ep in eps)
+    src = augment_demos.read_source(old)
+    kept = engine.attempt(engine.sources(src)[0], 0, seed=0, pos_sigma=0.0, yaw_sigma=0.0)
+    assert not isinstance(kept, str)  # the unperturbed start re-solved
+    engine.save(tmp_path / "grown", [kept], repo_id="local/grown", stamp={})
+    grown = lerobot_io.load_arrays(tmp_path / "grown", keys=("observation.state", lerobot_io.ENV_STATE_KEY))
+    assert grown[lerobot_io.ENV_STATE_KEY].tobytes() == grown["observation.state"][:, 2:].tobytes()

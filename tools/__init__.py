@@ -10,6 +10,7 @@
     python -m tools.bench [--smoke]              where the time of one run goes
     python -m tools.bench_envs                   speed and competence of the envs and their experts
     python -m tools.bench_engine                 the data engine: demos/s local vs Ray, peak memory
+    python -m tools.lerobot_eval --policy P      a LeRobot checkpoint on the lesson's held-out PushT starts
 
 Exit codes: 0 ok, 1 a check failed (drift, a stale notebook), 2 bad input (one `error:` line).
 """

@@ -25,12 +25,11 @@ import time
 from pathlib import Path
 
 import gen_demos_pusht
-import pusht_env
 from ch37 import ROOT, engine, errors
 from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
 from ch37.files import dump_json, round_floats, write_atomic
-from ch37.lerobot_io import features, load_arrays, write_dataset
+from ch37.lerobot_io import load_arrays
 from ch37.stamps import replace_own_dir
 from tools.common import parser, provenance
 
@@ -114,14 +113,10 @@ def per_demo_costs(src: Path, n: int = 100) -> dict:
     eps = [engine.attempt(sources[e], k, **kw) for e, k in jobs]
     t1 = time.perf_counter()
     eps = [ep for ep in eps if not isinstance(ep, str)]
-    feats = features(pusht_env.STATE_NAMES, pusht_env.ACTION_NAMES, engine.PROVENANCE)
-    meta = dict(
-        repo_id="local/x", fps=pusht_env.FPS, robot_type="r", task=pusht_env.TASK, feats=feats, stamp={}
-    )
-    with tempfile.TemporaryDirectory() as tmp:
-        write_dataset(Path(tmp) / "warm", episodes=eps[:2], **meta)
+    with tempfile.TemporaryDirectory() as tmp:  # the engine's own writer, whatever columns it adds
+        engine.save(Path(tmp) / "warm", eps[:2], repo_id="local/x", stamp={})
         t2 = time.perf_counter()
-        write_dataset(Path(tmp) / "set", episodes=eps, **meta)
+        engine.save(Path(tmp) / "set", eps, repo_id="local/x", stamp={})
         t3 = time.perf_counter()
     return {
         "attempts": n,

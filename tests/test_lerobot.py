@@ -1,0 +1,103 @@
+"""LeRobot's own policies on our sets: lerobot-train reads a set we write as it is, and a checkpoint it
+writes is rolled out in our PushT env by tools.lerobot_eval. Training runs only under -m slow."""
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import ROOT, run_script
+
+TRAIN = Path(sys.executable).with_name("lerobot-train")  # the console script of the `train` extra
+
+
+@pytest.fixture(scope="module")
+def grown(tmp_path_factory):
+    """A tiny PushT set grown by the data engine: 2 generated demos, 1 re-solved start each."""
+    d = tmp_path_factory.mktemp("sets")
+    run_script(ROOT / "gen_demos_pusht.py", "--episodes", "2", "--seed", "0", "--out", d / "src", "--quiet")
+    run_script(
+        ROOT / "augment_demos.py",
+        "--src",
+        d / "src",
+        "--per_demo",
+        "1",
+        "--out",
+        d / "aug",
+        "--workers",
+        "1",
+        "--quiet",
+    )
+    return d / "aug"
+
+
+def train(root: Path, out: Path, policy: str, *policy_flags: str) -> Path:
+    """lerobot-train for 2 steps on `root`: the dataset, the policy type and the length are all it
+    needs, plus push_to_hub=false (LeRobot asks for a hub repo id otherwise); the batch, the loader
+    workers and the device only keep the test small. Returns the step-2 pretrained_model folder."""
+    run_script(
+        TRAIN,
+        "--dataset.repo_id=local/pusht_aug",
+        f"--dataset.root={root}",
+        f"--policy.type={policy}",
+        "--steps=2",
+        "--policy.push_to_hub=false",
+        f"--output_dir={out}",
+        "--batch_size=2",
+        "--num_workers=0",
+        "--policy.device=cpu",
+        *policy_flags,
+    )
+    return out / "checkpoints" / "000002" / "pretrained_model"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("policy", ["diffusion", "act"])
+def test_lerobot_train_runs_on_a_set_we_write(grown, tmp_path, policy):
+    model = train(grown, tmp_path / "train", policy)
+    assert (model / "config.json").is_file() and (model / "model.safetensors").is_file()
+    cfg = json.loads((model / "config.json").read_text())
+    assert cfg["type"] == policy
+    assert cfg["input_features"]["observation.environment_state"]["shape"] == [8]
+    shutil.rmtree(tmp_path / "train")  # the default diffusion U-Net's checkpoint is about 1 GB
+
+
+@pytest.mark.slow
+def test_a_lerobot_checkpoint_rolls_out_in_our_env(grown, tmp_path):
+    from ch37.recipe import interval
+    from ch37.seeds import env_seed
+
+    # a small U-Net with 10 denoising steps: the rollout is what is tested, not the policy
+    flags = ("--policy.down_dims=[32,64]", "--policy.num_inference_steps=10")
+    model = train(grown, tmp_path / "train", "diffusion", *flags)
+    out = tmp_path / "eval.json"
+    p = run_script(
+        "-m",
+        "tools.lerobot_eval",
+        "--policy",
+        model,
+        "--seed",
+        "0",
+        "--episodes",
+        "2",
+        "--device",
+        "cpu",
+        "--out",
+        out,
+    )
+    assert "success" in p.stdout and str(out) in p.stdout
+    r = json.loads(out.read_text())
+    assert r["kind"] == "lerobot_eval" and r["policy_type"] == "diffusion" and r["episodes"] == 2
+    assert 0.0 <= r["success"] <= 1.0 and r["successes"] == sum(e["success"] for e in r["per_episode"])
+    assert [e["seed"] for e in r["per_episode"]] == [env_seed(0, "eval", j) for j in range(2)]
+    assert all(1 <= e["steps"] <= 300 for e in r["per_episode"])
+    assert r["ci95"] == pytest.approx(interval()(r["success"], 2), abs=1e-4)
+
+
+def test_lerobot_eval_bad_policy_is_one_line(tmp_path):
+    (tmp_path / "config.json").write_text('{"type": "no_such_policy"}')
+    for policy in (tmp_path / "absent", tmp_path):
+        p = run_script("-m", "tools.lerobot_eval", "--policy", policy, "--episodes", "1", check=False)
+        assert p.returncode == 2 and p.stderr.strip().startswith("error:"), p.stderr
+        assert len(p.stderr.strip().splitlines()) == 1

@@ -1,0 +1,163 @@
+"""A LeRobot policy checkpoint in our PushT env, on the lesson's held-out starts, judged by the lesson's rule.
+
+    python -m tools.lerobot_eval --policy OUT/checkpoints/last/pretrained_model --seed 0 --episodes 50
+
+--policy is a `pretrained_model` folder that lerobot-train wrote (diffusion, ACT, ... trained on a set
+this project wrote: observation.state [10] and observation.environment_state [8], no images). Episode
+j starts from env.reset(ch37.seeds.env_seed(seed, "eval", j)), the starts the lesson's measure region
+evaluates its MLP on; it succeeds when the env's info["success"] is set and ends when the env says
+done (success, or 300 control steps). The policy is reset and torch is seeded with that start's seed
+before each episode, so an episode's outcome does not depend on the ones before it. Prints the
+success rate with the lesson's 95% Wilson interval and writes it as JSON beside the policy folder
+(--out to choose): lerobot_eval_seed{S}_n{N}.json.
+
+Exit codes: 0 ok, 2 bad input (one `error:` line).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bc_recipe import wilson  # the lesson's 95% interval
+from ch37.config import parser
+from ch37.errors import DataError
+from ch37.errors import main as run
+from ch37.files import dump_json, round_floats, write_atomic
+from ch37.seeds import MAX_SEED, SEED_BLOCK
+
+KIND = "lerobot_eval"  # marks the JSON as this tool's, so a re-run may replace it and nothing else
+
+
+def load_policy(path: Path, device: str):
+    """(policy, preprocessor, postprocessor) from a `pretrained_model` folder, moved to `device`."""
+    if not (path / "config.json").is_file():
+        raise DataError(f"--policy {path} is not a LeRobot pretrained_model folder (no config.json)")
+    try:
+        from lerobot.configs.policies import PreTrainedConfig
+        from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+
+        cfg = PreTrainedConfig.from_pretrained(path)
+        cfg.device = device
+        policy = get_policy_class(cfg.type).from_pretrained(path, config=cfg)
+        pre, post = make_pre_post_processors(
+            cfg, pretrained_path=str(path), preprocessor_overrides={"device_processor": {"device": device}}
+        )
+    except (KeyboardInterrupt, MemoryError):
+        raise
+    except Exception as e:  # draccus, safetensors and torch each raise their own kinds on a bad folder
+        why = " ".join(str(e).split())[:160]
+        raise DataError(f"--policy {path} cannot be loaded ({type(e).__name__}: {why})") from e
+    return policy.eval(), pre, post
+
+
+def observation_builder(policy):
+    """obs float32[10] -> the batch the policy reads: its input features from our state, each (1, D)."""
+    import torch
+
+    import pusht_env
+    from ch37.lerobot_io import ENV_STATE_KEY, columns
+
+    ours = {
+        "observation.state": list(range(pusht_env.OBS_DIM)),
+        ENV_STATE_KEY: columns(pusht_env.STATE_NAMES, pusht_env.ENV_STATE_NAMES),
+    }
+    feats = policy.config.input_features
+    for key, f in feats.items():
+        if key not in ours:
+            raise DataError(f"the policy reads {key!r}; our PushT env gives {sorted(ours)} (no images)")
+        if tuple(f.shape) != (len(ours[key]),):
+            raise DataError(f"the policy's {key} has shape {tuple(f.shape)}; PushT's is ({len(ours[key])},)")
+    act = policy.config.output_features.get("action")
+    if act is None or tuple(act.shape) != (pusht_env.ACT_DIM,):
+        raise DataError(f"the policy's action has shape {act and tuple(act.shape)}; PushT's is (2,)")
+    device = policy.config.device
+
+    def build(obs):
+        x = torch.as_tensor(obs, dtype=torch.float32)
+        batch = {key: x[ours[key]].unsqueeze(0).to(device) for key in feats}
+        return batch | {"task": [pusht_env.TASK]}
+
+    return build
+
+
+def evaluate(policy, pre, post, seeds) -> list[dict]:
+    """One episode per env seed: {"seed", "success", "steps"}, the lesson's success rule."""
+    import torch
+
+    import pusht_env
+
+    env, build = pusht_env.PushTEnv(), observation_builder(policy)
+    episodes = []
+    with torch.inference_mode():
+        for s in seeds:
+            torch.manual_seed(s)  # diffusion's sampling noise: a pure function of the start
+            policy.reset()  # empties the action queue and the observation history
+            obs, done, steps, success = env.reset(s), False, 0, False
+            while not done:
+                action = post(policy.select_action(pre(build(obs))))  # (1, 2), m/s
+                obs, _, done, info = env.step(action[0].cpu().numpy().astype(np.float32))
+                success, steps = bool(info["success"]), steps + 1
+            episodes.append({"seed": s, "success": success, "steps": steps})
+    return episodes
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = parser(__doc__, prog="python -m tools.lerobot_eval")
+    p.add_argument("--policy", type=Path, required=True, help="a pretrained_model folder from lerobot-train")
+    p.add_argument("--seed", type=int, default=0, help="the lesson's --seed: which held-out starts")
+    p.add_argument("--episodes", type=int, default=50, help="held-out starts (the lesson's --eval_episodes)")
+    devices = ("auto", "cpu", "cuda", "mps")
+    p.add_argument("--device", choices=devices, default="auto", help="auto: cuda > mps > cpu")
+    p.add_argument("--out", type=Path, help="JSON path (default: beside --policy)")
+    a = p.parse_args(argv)
+    if not 0 <= a.seed <= MAX_SEED:
+        raise DataError(f"--seed must be in [0, {MAX_SEED}], got {a.seed}")
+    if not 0 < a.episodes <= SEED_BLOCK:
+        raise DataError(f"--episodes must be in [1, {SEED_BLOCK}], got {a.episodes}")
+    if not a.policy.is_dir():
+        raise DataError(f"--policy {a.policy} is not a folder")
+    out = a.out or a.policy.parent / f"{KIND}_seed{a.seed}_n{a.episodes}.json"
+    if out.exists():  # ours from an earlier run may be replaced; anything else is the user's
+        try:
+            ours = json.loads(out.read_text()).get("kind") == KIND
+        except (OSError, ValueError, AttributeError):
+            ours = False
+        if not ours:
+            raise DataError(f"{out} exists and was not written by this tool; pass another --out")
+    from ch37.cli import pick_device
+    from ch37.seeds import env_seed
+
+    device = pick_device(a.device)
+    policy, pre, post = load_policy(a.policy, device)
+    seeds = [env_seed(a.seed, "eval", j) for j in range(a.episodes)]
+    t0 = time.perf_counter()
+    episodes = evaluate(policy, pre, post, seeds)
+    k, n = sum(e["success"] for e in episodes), len(episodes)
+    result = {
+        "kind": KIND,
+        "policy": str(a.policy.resolve()),
+        "policy_type": policy.config.type,
+        "device": device,
+        "seed": a.seed,
+        "episodes": n,
+        "successes": k,
+        "success": k / n,
+        "ci95": wilson(k / n, n),
+        "per_episode": episodes,
+    }
+    write_atomic(out, dump_json(round_floats(result)))
+    lo, hi = result["ci95"]
+    print(
+        f"{policy.config.type} on {n} held-out PushT starts (seed {a.seed}): success {k / n:.2f} "
+        f"[{lo:.2f}, {hi:.2f}] ({k}/{n}, {time.perf_counter() - t0:.0f} s on {device})"
+    )
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    run(main)
