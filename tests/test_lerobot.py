@@ -65,7 +65,7 @@ def test_lerobot_train_runs_on_a_set_we_write(grown, tmp_path, policy):
 
 @pytest.mark.slow
 def test_a_lerobot_checkpoint_rolls_out_in_our_env(grown, tmp_path):
-    from ch37.recipe import interval
+    from bc_recipe import wilson
     from ch37.seeds import env_seed
 
     # a small U-Net with 10 denoising steps: the rollout is what is tested, not the policy
@@ -92,7 +92,7 @@ def test_a_lerobot_checkpoint_rolls_out_in_our_env(grown, tmp_path):
     assert 0.0 <= r["success"] <= 1.0 and r["successes"] == sum(e["success"] for e in r["per_episode"])
     assert [e["seed"] for e in r["per_episode"]] == [env_seed(0, "eval", j) for j in range(2)]
     assert all(1 <= e["steps"] <= 300 for e in r["per_episode"])
-    assert r["ci95"] == pytest.approx(interval()(r["success"], 2), abs=1e-4)
+    assert r["ci95"] == pytest.approx(wilson(r["success"], 2), abs=1e-4)
 
 
 def test_lerobot_eval_bad_policy_is_one_line(tmp_path):
