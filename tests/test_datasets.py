@@ -132,8 +132,7 @@ def test_bad_flags_one_line(tmp_path, capsys, argv, needle):
 def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
     """A user's set from before observation.environment_state (or from another writer) is read as
     before: the schema check, the lesson's read, the data engine's read and its growth."""
-    import augment_demos
-    from ch37 import engine
+    from ch37 import engine, shards
     from ch37.demos import ensure_demos
 
     emb, m = gen_demos_pusht.PUSHT, gen_demos_pusht.PUSHT.env_module
@@ -157,7 +156,7 @@ def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
     assert how == "your own set, used as given"
     d = lerobot_io.load_arrays(old)
     assert d["observation.state"].tobytes() == b"".join(ep["observation.state"].tobytes() for ep in eps)
-    src = augment_demos.read_source(old)
+    src = shards.read_source(old)
     kept = engine.attempt(engine.sources(src)[0], 0, seed=0, pos_sigma=0.0, yaw_sigma=0.0)
     assert not isinstance(kept, str)  # the unperturbed start re-solved
     engine.save(tmp_path / "grown", [kept], repo_id="local/grown", stamp={})
