@@ -24,7 +24,7 @@ HEX = {"tab:blue": "#1f77b4", "tab:orange": "#ff7f0e", "tab:green": "#2ca02c", "
 NAMES = {"pusht": "PushT", "aloha": "ALOHA"}  # embodiment names as the chapter writes them
 GROWN_BY = {"resolve": "re-solving", "replay": "replay"}
 DATA_LABEL = {"source": "source only", "augmented": "source + augmented"}
-DATA_VAR = {"source": "var(--src)", "augmented": "var(--aug)"}  # the CSS colours of the two arms
+DATA_VAR = {"source": "var(--src)", "augmented": "var(--aug)"}  # the arms' colours, set in CSS
 BUDGET_ORDER = ("short", "full")
 SHORT = {
     "fresh": "fresh",
@@ -33,56 +33,50 @@ SHORT = {
     "resolve_fixed": "re-solve, fixed budget",
 }
 DASH = {"-": {}, "-.": {"stroke_dasharray": "9 4 2 4"}}  # matplotlib line style -> SVG dashes
+QUESTIONS = ("Where the curve bends.", "The exchange rate.", "Data or compute.", "How far from the expert.")
+STAR = '<span aria-hidden="true">&#9733;</span> '  # the default point's legend mark; the SVG has its own
 SMOKE = (
-    '<p class="note">Smoke run: a tiny configuration that checks the pipeline in seconds; its numbers '
-    "are not meaningful.</p>\n"
+    '<p class="note">Smoke run: a tiny configuration that checks the pipeline in seconds; its numbers are \
+not meaningful.</p>\n'
 )
 FONT = 'system-ui,-apple-system,"Segoe UI",Roboto,"Liberation Sans",Arial,sans-serif'
-# SVG text sizes live here (classes tk, vl, gl, gs), so a phone (max-width 560px) can show them larger
+# SVG text sizes are classes (tk ticks, vl values, gl/gs group labels) so a phone can show them larger
 CSS = """\
-.poster{--src:%(src)s;--aug:%(aug)s;--real:#2a7d62;--ink:#1b1b1b;--muted:#555;--line:#d4d4d4;
- color:var(--ink);background:#fff;font:16px/1.45 %(font)s;max-width:1120px;margin:0 auto;
- padding:20px 16px 28px;-webkit-text-size-adjust:100%%}
+.poster{--src:%(src)s;--aug:%(aug)s;--real:#2a7d62;--ink:#1b1b1b;--muted:#555;--line:#d4d4d4;color:var(--ink);
+ background:#fff;font:16px/1.45 %(font)s;max-width:1120px;margin:0 auto;padding:20px 16px 28px;
+ -webkit-text-size-adjust:100%%}
 .poster *{box-sizing:border-box} .poster p{margin:.35rem 0} .poster ol{padding-left:1.3em;margin:.3rem 0}
 .poster h1{font-size:1.6rem;line-height:1.2;margin:.1rem 0 .5rem} .poster li{margin:.35rem 0}
 .poster h2{font-size:1.05rem;line-height:1.3;margin:0 0 .4rem} .poster .scroll{overflow-x:auto}
 .poster .kicker{font-size:.85rem;color:var(--muted);letter-spacing:.02em;margin:0}
 .poster .headline{font-size:1.25rem;line-height:1.35;margin:.2rem 0 .5rem}
 .poster b{font-weight:700;font-variant-numeric:tabular-nums}
-.poster .note{background:#fff5d9;border:1px solid #e5c66b;border-radius:6px;padding:.35rem .6rem;
- font-size:.9rem}
-.poster .row{display:flex;flex-wrap:wrap;gap:16px;margin:16px 0}
+.poster .row{display:flex;flex-wrap:wrap;gap:16px;margin:16px 0} .poster .note{background:#fff5d9;
+ border:1px solid #e5c66b;border-radius:6px;padding:.35rem .6rem;font-size:.9rem}
 .poster figure{margin:0;flex:1 1 360px;min-width:0;background:#fafafa;border:1px solid var(--line);
- border-radius:10px;padding:12px 14px}
-.poster figure.square{flex:1 1 300px;max-width:480px} .poster figure.wide{flex-basis:100%%}
-.poster figcaption{font-size:.9rem;color:var(--muted);margin-top:.5rem}
-.poster svg{display:block;width:100%%;height:auto;max-width:100%%}
-.poster svg.lab{max-width:820px;margin:0 auto}
-.poster svg text{font-family:%(font)s;fill:var(--ink)}
+ border-radius:10px;padding:12px 14px} .poster figure.square{flex:1 1 300px;max-width:480px}
+.poster figure.wide{flex-basis:100%%} .poster figcaption{font-size:.9rem;color:var(--muted);margin-top:.5rem}
+.poster svg{display:block;width:100%%;height:auto;max-width:100%%} .poster svg.lab{max-width:820px;
+ margin:0 auto} .poster svg text{font-family:%(font)s;fill:var(--ink)}
 .poster svg .tk{font-size:13px} .poster svg .vl{font-size:13px;font-weight:700}
 .poster svg .gl{font-size:14px;font-weight:700} .poster svg .gs{font-size:12.5px}
 .poster .legend{display:flex;flex-wrap:wrap;gap:2px 16px;list-style:none;padding:0;margin:0 0 .4rem;
- font-size:.9rem}
-.poster .sw{display:inline-block;width:.85em;height:.85em;margin-right:.35em;vertical-align:-.08em;
- border-radius:2px} .poster .sw.dot{border-radius:50%%}
+ font-size:.9rem} .poster .sw{display:inline-block;width:.85em;height:.85em;margin-right:.35em;
+ vertical-align:-.08em;border-radius:2px} .poster .sw.dot{border-radius:50%%}
 .poster .sw.dash{height:0;border-top:3px dashed #444;border-radius:0;vertical-align:.2em}
 .poster .strip{display:grid;grid-template-columns:10em repeat(6,minmax(0,1fr));gap:5px;align-items:stretch;
- margin:.3rem 0}
-.poster .strip .who{align-self:center;font-size:.95rem;line-height:1.3}
+ margin:.3rem 0} .poster .strip .who{align-self:center;font-size:.95rem;line-height:1.3}
 .poster .strip .who small{display:block;color:var(--muted);font-size:.8rem}
 .poster .dim{border-radius:6px;padding:7px 3px;font-size:.8rem;line-height:1.2;text-align:center;
  overflow-wrap:anywhere;min-height:3.2em;display:flex;flex-direction:column;justify-content:center}
-.poster .dim small{display:block;font-size:.75rem;opacity:.85}
-.poster .dim.real{background:var(--real);color:#fff}
-.poster .dim.pad{background:repeating-linear-gradient(135deg,#ececec 0 6px,#dcdcdc 6px 12px);color:#666}
-.poster table{border-collapse:collapse;font-size:.88rem;font-variant-numeric:tabular-nums}
+.poster .dim small{display:block;font-size:.75rem;opacity:.85} .poster .dim.real{background:var(--real);
+ color:#fff} .poster .dim.pad{background:repeating-linear-gradient(135deg,#ececec 0 6px,#dcdcdc 6px 12px);
+ color:#666} .poster table{border-collapse:collapse;font-size:.88rem;font-variant-numeric:tabular-nums}
 .poster th,.poster td{padding:4px 12px 4px 0;border-bottom:1px solid var(--line);text-align:left;
- vertical-align:top}
-.poster table.points td small{display:block;color:var(--muted);white-space:nowrap}
+ vertical-align:top} .poster table.points td small{display:block;color:var(--muted);white-space:nowrap}
 .poster footer{font-size:.85rem;color:var(--muted);border-top:1px solid var(--line);padding-top:10px;
- margin-top:18px}
-.poster code{font-family:ui-monospace,"DejaVu Sans Mono",Menlo,Consolas,monospace;font-size:.85em;
- overflow-wrap:anywhere}
+ margin-top:18px} .poster code{font-family:ui-monospace,"DejaVu Sans Mono",Menlo,Consolas,monospace;
+ font-size:.85em;overflow-wrap:anywhere}
 .poster .cfg{display:flex;flex-wrap:wrap;gap:4px 6px;list-style:none;padding:0;margin:.4rem 0}
 .poster .cfg li{background:#efefef;border-radius:4px;padding:1px 6px;margin:0}
 @media (max-width:560px){
@@ -113,29 +107,30 @@ def _e(text) -> str:
 
 
 def _el(tag: str, text=None, **attrs) -> str:
-    """One element; floats are coordinates (_c), and attribute names use _ for - (class_ is class)."""
-    a = "".join(
-        f' {k.rstrip("_").replace("_", "-")}="{_c(v) if isinstance(v, float) else v}"'
-        for k, v in attrs.items()
-    )
+    """One element. Floats are coordinates (_c), a list of (x, y) is points; a list of children goes one
+    a line; an attribute's _ is written - (class_ is class), as Python names cannot hold one."""
+    for k, v in attrs.items():
+        v = " ".join(f"{_c(a)},{_c(b)}" for a, b in v) if isinstance(v, list) else v
+        attrs[k] = _c(v) if isinstance(v, float) else v
+    a = "".join(f' {k.rstrip("_").replace("_", "-")}="{v}"' for k, v in attrs.items())
+    text = "\n".join(["", *text, ""]) if isinstance(text, list) else text
     return f"<{tag}{a}/>" if text is None else f"<{tag}{a}>{text}</{tag}>"
-
-
-def _g(children: list[str], **attrs) -> str:
-    return _el("g", "\n".join(["", *children, ""]), **attrs)
 
 
 def _svg(uid: str, width: int, height: int, title: str, desc: str, body: list[str]) -> str:
     head = [_el("title", _e(title), id=f"{uid}-t"), _el("desc", _e(desc), id=f"{uid}-d")]
-    labelled = {"role": "img", "aria_labelledby": f"{uid}-t {uid}-d"}
-    return "\n" + _el(
-        "svg", "\n".join(["", *head, *body, ""]), class_=uid, viewBox=f"0 0 {width} {height}", **labelled
-    )
+    box, labels = f"0 0 {width} {height}", f"{uid}-t {uid}-d"
+    return "\n" + _el("svg", head + body, class_=uid, viewBox=box, role="img", aria_labelledby=labels)
 
 
-def _axes(x0: int, x1: int, y, mid: int) -> list[str]:
-    """Gridlines at success 0, 0.25 .. 1 with their values, and the y label (a phone's CSS hides it)."""
-    ticks = []
+def _axes(x0: int, x1: int, top: int, bot: int):
+    """y(success) -> SVG y, and the body's start: gridlines at 0, 0.25 .. 1 with their values, and the
+    y label (a phone's CSS hides it)."""
+
+    def y(v):
+        return float(bot - v * (bot - top))
+
+    ticks, mid = [], (top + bot) // 2
     for v in (0, 0.25, 0.5, 0.75, 1):
         ticks += [
             _el("line", x1=x0, x2=x1, y1=y(v), y2=y(v)),
@@ -143,7 +138,7 @@ def _axes(x0: int, x1: int, y, mid: int) -> list[str]:
         ]
     rotate = f"rotate(-90 14 {mid})"
     label = _el("text", "success rate", class_="tk ylab", x=14, y=mid, text_anchor="middle", transform=rotate)
-    return [_g(ticks, class_="tk", stroke="#ddd", text_anchor="end"), label]
+    return y, [_el("g", ticks, class_="tk", stroke="#ddd", text_anchor="end"), label]
 
 
 def _sw(colour: str = "", cls: str = "sw") -> str:
@@ -167,10 +162,6 @@ def _doc(title: str, body: str, note: str, config: dict) -> str:
     )
 
 
-def _name(emb: str) -> str:
-    return NAMES.get(emb, _e(emb))
-
-
 def _pts(x: float) -> str:  # a success difference in percentage points, as scale_data.py prints it
     return f"{x * 100:+.0f}"
 
@@ -192,20 +183,13 @@ def _coverage_svg(src_starts, aug_starts, cov: dict, annulus) -> str:
     for th in (2 * math.pi * j / sectors for j in range(sectors)):
         (a, b), (c, d) = (xy((r * math.cos(th), r * math.sin(th))) for r in (r_min, r_max))
         grid.append(_el("line", x1=a, y1=b, x2=c, y2=d))
+    aug = [_el("circle", cx=x, cy=y, r=3) for x, y in map(xy, aug_starts)]
+    src = [_el("rect", x=x - 5, y=y - 5, width=10, height=10) for x, y in map(xy, src_starts)]
     body = [
         _el("rect", width=size, height=size, fill="#fff"),
-        _g(grid, fill="none", stroke="#bbb"),
-        _g(
-            [_el("circle", cx=x, cy=y, r=3) for x, y in map(xy, aug_starts)],
-            fill="var(--aug)",
-            fill_opacity="0.85",
-        ),
-        _g(
-            [_el("rect", x=x - 5, y=y - 5, width=10, height=10) for x, y in map(xy, src_starts)],
-            fill="var(--src)",
-            stroke="#fff",
-            stroke_width=1,
-        ),
+        _el("g", grid, fill="none", stroke="#bbb"),
+        _el("g", aug, fill="var(--aug)", fill_opacity="0.85"),
+        _el("g", src, fill="var(--src)", stroke="#fff", stroke_width=1),
         _el("path", d=f"M{mid - 7} {mid}h14M{mid} {mid - 7}v14", stroke="#222", stroke_width=2),
         _el("path", d=f"M12 {size - 14}h{_c(0.1 * scale)}", stroke="#222", stroke_width=2),  # 0.1 m scale bar
         _el("text", "0.1 m", x=12, y=size - 20, font_size=12),
@@ -229,16 +213,11 @@ def _bars_svg(metrics: dict) -> str:
     arms, budgets, eff = metrics["arms"], metrics["budgets"], metrics["effects"]
     order = [b for b in BUDGET_ORDER if b in budgets] + sorted(set(budgets) - set(BUDGET_ORDER))
     w, h, x0, x1, top, bot = 380, 296, 54, 372, 22, 216
-
-    def y(v):
-        return float(bot - v * (bot - top))
-
-    body, desc, group = _axes(x0, x1, y, (top + bot) // 2), [], (x1 - x0) / len(order)
+    (y, body), desc, group = _axes(x0, x1, top, bot), [], (x1 - x0) / len(order)
     for i, budget in enumerate(order):
         cx = x0 + group * (i + 0.5)
         for j, data in enumerate(DATA_COLOURS):
-            arm = arms[f"{data}_{budget}"]
-            rate, (lo, hi) = arm["success"], arm["ci95"]
+            rate, (lo, hi) = arms[f"{data}_{budget}"]["success"], arms[f"{data}_{budget}"]["ci95"]
             bx = cx + (j - 0.5) * 60
             bar_h = max(y(0) - y(rate), 1.5)  # a zero rate still shows a sliver of its colour
             whisker = f"M{_c(bx)} {_c(y(lo))}V{_c(y(hi))}" + "".join(
@@ -255,10 +234,8 @@ def _bars_svg(metrics: dict) -> str:
         effect = eff.get(f"data_{budget}")
         lines = [("gl", f"{_e(budget)} budget"), ("gs", f"{budgets[budget]:,} steps each")]
         lines += [] if effect is None else [("gs", f"data: {_pts(effect)} points")]
-        body += [
-            _el("text", s, class_=k, x=cx, y=bot + 24 + 19 * i, text_anchor="middle")
-            for i, (k, s) in enumerate(lines)
-        ]
+        for k, (cls, text) in enumerate(lines):
+            body.append(_el("text", text, class_=cls, x=cx, y=bot + 24 + 19 * k, text_anchor="middle"))
     body.append(_el("line", x1=x0, x2=x1, y1=bot, y2=bot, stroke="#444"))
     n = metrics["config"]["eval_episodes"]
     title = f"Success of the BC policy on {n} held-out PushT starts, by data and budget"
@@ -267,49 +244,45 @@ def _bars_svg(metrics: dict) -> str:
 
 def _strip(cross: dict) -> str:
     """Each robot's action, padded to the widest: real dimensions named, padding hatched."""
-    pad = cross["padded_action_dim"]
-    rows = []
+    pad, rows, said = cross["padded_action_dim"], [], []
     for e in cross["embodiments"]:
-        names = [_e(n).replace("_", "_<wbr>") for n in e["action_names"][: e["act_dim"]]]
-        cells = [
-            f'<div class="dim {"real" if d < len(names) else "pad"}"><small>{d}</small>'
-            f"{names[d] if d < len(names) else 'pad'}</div>"
-            for d in range(pad)
-        ]
+        names = [_e(n).replace("_", "_<wbr>") for n in e["action_names"][: e["act_dim"]]] + ["pad"] * pad
+        name = NAMES.get(e["name"], _e(e["name"]))
         rows.append(
-            f'<div class="who"><b>{_name(e["name"])}</b> {e["act_dim"]} of {pad} real'
-            f"<small>{e['frames']:,} frames, mask density {e['mask_density']:.3f}</small></div>"
-            + "".join(cells)
+            f'<div class="who"><b>{name}</b> {e["act_dim"]} of {pad} real<small>{e["frames"]:,} frames, mask '
+            f"density {e['mask_density']:.3f}</small></div>"
+            + "".join(
+                f'<div class="dim {"real" if d < e["act_dim"] else "pad"}"><small>{d}</small>{names[d]}</div>'
+                for d in range(pad)
+            )
         )
-    means = cross["state_index_2_means"]
-    said = " and ".join(
-        f"<code>{_e(means[e['name']])}</code> in {_name(e['name'])}" for e in cross["embodiments"]
-    )
-    real, pad0 = (_sw("var(--real)"), "real action dimension (in the loss)"), (_sw("#dcdcdc"), "zero padding")
-    legend = _legend([real, (pad0[0], f"{pad0[1]} (mask 0: no loss, no gradient)")])
+        said.append(f"<code>{_e(cross['state_index_2_means'][e['name']])}</code> in {name}")
+    real = (_sw("var(--real)"), "real action dimension (in the loss)")
+    legend = _legend([real, (_sw("#dcdcdc"), "zero padding (mask 0: no loss, no gradient)")])
     return (
         '<figure class="wide" aria-labelledby="strip-t">\n<h2 id="strip-t">Cross-embodiment: one action '
         f"head of width {pad}, a mask over the padding</h2>\n{legend}\n"
         f'<div class="strip">{"".join(rows)}</div>\n'
         f"<figcaption>Largest gradient on PushT's padded dimensions under the masked loss: "
-        f"<b>{cross['padded_dim_max_grad']:.1f}</b>. State index 2 is {said}: a shared network carries "
-        "structure across robots, not the meaning of a raw state number.</figcaption>\n</figure>"
+        f"<b>{cross['padded_dim_max_grad']:.1f}</b>. State index 2 is {' and '.join(said)}: a shared network "
+        "carries structure across robots, not the meaning of a raw state number.</figcaption>\n</figure>"
     )
 
 
 def chapter_html(metrics: dict, cross: dict, src_starts, aug_starts, annulus) -> str:
     """scale_data.html's text from the run's metrics.json and cross_embodiment.json dicts and the block
     starts (src_starts (S, 2), aug_starts (K, 2), metres); annulus = (r_min, r_max, rings, sectors)."""
-    m, cross = _as_written(metrics), _as_written(cross)
+    m = _as_written(metrics)
     rate = {k: a["success"] for k, a in m["arms"].items()}
     b, eff, cov, cfg = m["budgets"], m["effects"], m["coverage"], m["config"]
     n_eval, out = cfg["eval_episodes"], cov["outside_annulus"]
     run = f"seed {m['seed']}" + (", smoke" if m["smoke"] else "")
     frames = {"source": m["source_frames"], "augmented": m["source_frames"] + m["augmented_frames"]}
-    legend_cov = [
-        (_sw("var(--src)"), f"source starts ({len(src_starts)})"),
-        (_sw("var(--aug)", "sw dot"), f"kept augmented starts ({len(aug_starts)})"),
-    ]
+    src_sw = (_sw("var(--src)"), f"source starts ({len(src_starts)})")
+    legend_cov = _legend(
+        [src_sw, (_sw("var(--aug)", "sw dot"), f"kept augmented starts ({len(aug_starts)})")]
+    )
+    legend_bars = _legend((_sw(DATA_VAR[d]), f"{DATA_LABEL[d]} ({frames[d]:,} frames)") for d in DATA_COLOURS)
     body = f"""\
 <header>
 <p class="kicker">Chapter 3.7 &middot; Datasets at Scale &middot; scale_data.py &middot; {run}</p>
@@ -328,19 +301,19 @@ from {m["source_demos"]} source demos.</p>
 <div class="row">
 <figure class="square" aria-labelledby="cov-h">
 <h2 id="cov-h">Where the block starts: {cov["source"]} &rarr; {cov["union"]} of {cov["cells"]} cells</h2>
-{_legend(legend_cov)}{_coverage_svg(src_starts, aug_starts, cov, annulus)}
+{legend_cov}{_coverage_svg(src_starts, aug_starts, cov, annulus)}
 <figcaption>Each start is the block's position when a demo begins; a cell counts once it holds one. \
 Augmented alone: {cov["augmented"]} cells. Outside the annulus: source {out["source"]}, augmented \
 {out["augmented"]}.</figcaption>
 </figure>
 <figure aria-labelledby="bars-h">
 <h2 id="bars-h">Success on {n_eval} held-out starts, 95% intervals</h2>
-{_legend((_sw(DATA_VAR[d]), f"{DATA_LABEL[d]} ({frames[d]:,} frames)") for d in DATA_COLOURS)}{_bars_svg(m)}
+{legend_bars}{_bars_svg(m)}
 <figcaption>Within a budget both arms take the same gradient steps from the same initial weights and \
 batch order: the data is the only difference. Intervals are Wilson 95% over {n_eval} episodes.</figcaption>
 </figure>
 </div>
-{_strip(cross)}"""
+{_strip(_as_written(cross))}"""
     note = (
         f"Run: {run}, device {_e(cfg.get('device'))}. Drawn from this run's <code>metrics.json</code> and "
         "<code>cross_embodiment.json</code> only; the page holds no date (metrics.json has none), so the "
@@ -373,26 +346,18 @@ def _demos(d: float) -> str:  # a mean over seeds: whole demos as an integer, el
     return f"{d:.0f}" if d == round(d) else f"{d:.1f}"
 
 
-def _per_tripling(n1, s1, n2, s2) -> float:
-    return (s2 - s1) / math.log(n2 / n1, 3)
-
-
 def answer_bend(result: dict) -> str:
     """Where the fresh curve bends: the N where its rise per tripling of N grows the most."""
     rows = [(n, r["success"]) for n, r in _curve(result, "fresh")]
     if len(rows) < 3:
-        return "It takes at least three N to see a bend; this run measured " + f"{len(rows)}."
-    slopes = [_per_tripling(n1, s1, n2, s2) for (n1, s1), (n2, s2) in zip(rows, rows[1:])]
+        return f"It takes at least three N to see a bend; this run measured {len(rows)}."
+    slopes = [(s2 - s1) / math.log(n2 / n1, 3) for (n1, s1), (n2, s2) in zip(rows, rows[1:])]
     turns = [slopes[i] - slopes[i - 1] for i in range(1, len(slopes))]
     i = max(range(len(turns)), key=lambda k: (turns[k], -k))
     if turns[i] <= 0:
-        return (
-            f"No upward bend within N = {rows[0][0]} to {rows[-1][0]}: fresh demos give "
-            + ", ".join(f"{_f3(s)} at {n}" for n, s in rows)
-            + "."
-        )
-    (na, sa), (nb, sb), (nc, sc) = rows[i], rows[i + 1], rows[i + 2]
-    (nl, sl), (nz, sz) = rows[-2], rows[-1]
+        measured = ", ".join(f"{_f3(s)} at {n}" for n, s in rows)
+        return f"No upward bend within N = {rows[0][0]} to {rows[-1][0]}: fresh demos give {measured}."
+    (na, sa), (nb, sb), (nc, sc), (nl, sl), (nz, sz) = rows[i], rows[i + 1], rows[i + 2], rows[-2], rows[-1]
     return (
         f"Fresh demos bend at N = <b>{nb}</b>: {slopes[i]:+.2f} per tripling of N before it ({_f3(sa)} at "
         f"{na} &rarr; {_f3(sb)} at {nb}), <b>{slopes[i + 1]:+.2f}</b> after it ({_f3(sc)} at {nc}). The "
@@ -420,27 +385,29 @@ def exchange_rows(result: dict) -> list[dict]:
             if r["demos"] > sources:
                 fresh = matched_fresh(result, r["success"])
                 worth = None if fresh is None else (fresh - sources) / (r["demos"] - sources)
-                out.append({"curve": curve, "n": n, "demos": r["demos"], "success": r["success"]})
-                out[-1].update(fresh=fresh, worth=worth)
+                out.append(
+                    dict(curve=curve, n=n, demos=r["demos"], success=r["success"], fresh=fresh, worth=worth)
+                )
     return out
 
 
 def answer_exchange(result: dict) -> str:
-    rows = [
+    """The exchange rows as a table, under how they were read."""
+    rows = "".join(
         f"<tr><td>{SHORT[r['curve']]}</td><td>{_demos(r['demos'])}</td><td>{_f3(r['success'])}</td>"
         + ("<td>-</td><td>off the rising fresh curve</td>" if r["worth"] is None else "")
         + ("" if r["worth"] is None else f"<td>{r['fresh']:.0f}</td><td><b>{r['worth']:.2f}</b></td>")
         + "</tr>"
         for r in exchange_rows(result)
-    ]
-    if not rows:
-        return "No generated point past the sources was measured."
+    )
     return (
         f"Each generated point read off the fresh curve (log-linear between fresh points): the fresh "
         f"demos it matches, and what one generated demo is worth in fresh ones, (matched - "
         f"{result['config']['sources']}) / generated."
         '<div class="scroll"><table><thead><tr><th>engine</th><th>demos</th><th>success</th>'
-        f"<th>&asymp; fresh</th><th>worth</th></tr></thead><tbody>{''.join(rows)}</tbody></table></div>"
+        f"<th>&asymp; fresh</th><th>worth</th></tr></thead><tbody>{rows}</tbody></table></div>"
+        if rows
+        else "No generated point past the sources was measured."
     )
 
 
@@ -449,8 +416,7 @@ def answer_compute(result: dict) -> str:
     res, fix = _curve(result, "resolve"), _curve(result, "resolve_fixed")
     if len(res) < 2 or len(fix) < 2:
         return "It takes at least two N to compare."
-    (na, ra), (nb, rb) = res[-2], res[-1]
-    fa, fb = fix[-2][1], fix[-1][1]
+    (na, ra), (nb, rb), fa, fb = res[-2], res[-1], fix[-2][1], fix[-1][1]
     seed = str(result["config"]["seeds"][0])
     fixed = result["fixed_steps"].get(seed, fa["steps"][0])
     d_fix, d_full = fb["success"] - fa["success"], rb["success"] - ra["success"]
@@ -464,11 +430,9 @@ def answer_compute(result: dict) -> str:
 
 
 def answer_ceiling(result: dict) -> str:
-    best = max(
-        ((curve, n, r) for curve in LAB_STYLE for n, r in _curve(result, curve)),
-        key=lambda t: (t[2]["success"], -list(LAB_STYLE).index(t[0]), -t[1]),
-    )
-    curve, n, r = best
+    """The best point of any curve (ties: the earlier curve, then the smaller N) against the expert."""
+    points = ((curve, n, r) for curve in LAB_STYLE for n, r in _curve(result, curve))
+    curve, n, r = max(points, key=lambda t: (t[2]["success"], -list(LAB_STYLE).index(t[0]), -t[1]))
     e = result["expert"]
     return (
         f"Best point: {_e(LAB_STYLE[curve][2])} at N = {n}, {_ci(r)}. The expert on the same starts: "
@@ -486,26 +450,19 @@ def _lab_svg(result: dict) -> str:
     def x(demos):
         return x0 + (math.log(demos) - lo_n) / (hi_n - lo_n) * (x1 - x0)
 
-    def y(v):
-        return float(bot - v * (bot - top))
-
-    def pts(xys):
-        return " ".join(f"{_c(a)},{_c(b)}" for a, b in xys)
-
+    y, body = _axes(x0, x1, top, bot)
     xticks = [_el("line", x1=x(n), x2=x(n), y1=bot, y2=bot + 5, stroke="#444") for n in ns]
     xticks += [_el("text", n, x=x(n), y=bot + 24) for n in ns]
     xticks.append(_el("text", "PushT demos trained on (log scale)", x=(x0 + x1) // 2, y=h - 4))
-    body, desc = _axes(x0, x1, y, (top + bot) // 2) + [_g(xticks, class_="tk", text_anchor="middle")], []
+    body, desc = body + [_el("g", xticks, class_="tk", text_anchor="middle")], []
     for curve, (colour, ls, label) in LAB_STYLE.items():
         rows, hexc = [r for _, r in _curve(result, curve)], HEX[colour]
         if rows:
             band = [(x(r["demos"]), y(r["ci95"][1])) for r in rows]
             band += [(x(r["demos"]), y(r["ci95"][0])) for r in reversed(rows)]
             line = [(x(r["demos"]), y(r["success"])) for r in rows]
-            body.append(_el("polygon", points=pts(band), fill=hexc, fill_opacity="0.13"))
-            body.append(
-                _el("polyline", points=pts(line), fill="none", stroke=hexc, stroke_width=2.5, **DASH[ls])
-            )
+            body.append(_el("polygon", points=band, fill=hexc, fill_opacity="0.13"))
+            body.append(_el("polyline", points=line, fill="none", stroke=hexc, stroke_width=2.5, **DASH[ls]))
             body += [_el("circle", cx=a, cy=b, r=3.5, fill=hexc) for a, b in line]
             desc.append(
                 f"{label}: " + ", ".join(f"{_f3(r['success'])} at {_demos(r['demos'])} demos" for r in rows)
@@ -517,13 +474,12 @@ def _lab_svg(result: dict) -> str:
     body.append(_el("text", f"expert {e:.2f}", x=x1, y=y(e) - 6, class_="tk", text_anchor="end"))
     point = result["curves"].get(LAB_DEFAULT[0], {}).get(LAB_DEFAULT[1])
     if point is not None:  # a five-pointed star, radii 10 and 4.2
-        cx, cy = x(point["demos"]), y(point["success"])
-        rr = [10, 4.2] * 5
+        cx, cy, rr = x(point["demos"]), y(point["success"]), [10, 4.2] * 5
         star = [
             (cx + rr[k] * math.sin(k * math.pi / 5), cy - rr[k] * math.cos(k * math.pi / 5))
             for k in range(10)
         ]
-        body.append(_el("polygon", points=pts(star), fill="#111", stroke="#fff", stroke_width=1))
+        body.append(_el("polygon", points=star, fill="#111", stroke="#fff", stroke_width=1))
         desc.append(f"the chapter's default point, N = {LAB_DEFAULT[1]} re-solve: {_f3(point['success'])}")
     desc.append(f"the expert's own success: {e:.3f}")
     title = "Success of the BC policy against PushT demos, four curves, with pooled 95% bands"
@@ -535,15 +491,15 @@ def _lab_table(result: dict) -> str:
     head = "".join(f"<th>{_sw(HEX[c])}{SHORT[k]}</th>" for k, (c, *_) in LAB_STYLE.items())
     rows = []
     for n in result["config"]["n"]:
-        cells = []
+        rows.append(f"<tr><th>{n}</th>")
         for r in (result["curves"].get(curve, {}).get(str(n)) for curve in LAB_STYLE):
             kept = "" if r is None or r["demos"] == n else f"<small>{_demos(r['demos'])} demos</small>"
-            cells.append(
+            rows.append(
                 "<td>-</td>"
                 if r is None
                 else f"<td><b>{_f3(r['success'])}</b><small>{_ci(r)[6:]}</small>{kept}</td>"
             )
-        rows.append(f"<tr><th>{n}</th>{''.join(cells)}</tr>")
+        rows.append("</tr>")
     return (
         '<h2 id="pts-h">Every point: success, mean over seeds [pooled Wilson 95%]</h2>\n'
         '<div class="scroll"><table class="points" aria-labelledby="pts-h"><thead><tr><th>N</th>'
@@ -561,21 +517,10 @@ def lab_html(result: dict) -> str:
         gen.append(f"{mode} kept <b>{kept:,}</b> of {att:,} attempts ({kept / att if att else 0:.3f})")
     legend = [(_sw(HEX[c]), _e(label)) for c, _, label in LAB_STYLE.values()]
     if LAB_DEFAULT[1] in r["curves"].get(LAB_DEFAULT[0], {}):  # starred only where it was measured
-        legend.append(
-            (
-                '<span aria-hidden="true">&#9733;</span> ',
-                f"the chapter's default point (N = {LAB_DEFAULT[1]}, re-solve)",
-            )
-        )
+        legend.append((STAR, f"the chapter's default point (N = {LAB_DEFAULT[1]}, re-solve)"))
     legend.append((_sw(cls="sw dash"), "the expert's own success"))
     seeds = ("seeds " if len(cfg["seeds"]) > 1 else "seed ") + ", ".join(map(str, cfg["seeds"]))
-    questions = (
-        "Where the curve bends.",
-        "The exchange rate.",
-        "Data or compute.",
-        "How far from the expert.",
-    )
-    answers = (answer_bend, answer_exchange, answer_compute, answer_ceiling)
+    answers = (answer_bend(r), answer_exchange(r), answer_compute(r), answer_ceiling(r))
     body = f"""\
 <header>
 <p class="kicker">Chapter 3.7 &middot; Datasets at Scale &middot; the Scale Lab &middot; \
@@ -598,7 +543,7 @@ N = {cfg["fixed_n"]}'s steps; the others take {cfg["epochs"]} epochs of the re-s
 </div>
 <section aria-labelledby="ans-h">
 <h2 id="ans-h">The four answers, read off the curves</h2>
-<ol>{"".join(f"<li><b>{q}</b> {a(r)}</li>" for q, a in zip(questions, answers))}</ol>
+<ol>{"".join(f"<li><b>{q}</b> {a}</li>" for q, a in zip(QUESTIONS, answers))}</ol>
 </section>
 {_lab_table(r)}"""
     note = (
