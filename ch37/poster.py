@@ -3,11 +3,10 @@
     chapter(path, metrics, cross, src_starts, aug_starts, annulus)   scale_data.html
     lab(path, result)                                                 scale_lab.html
 
-Inline SVG and CSS only, nothing fetched: a page opens the same offline, shared as one file, or inline
-in the notebook, whose look its .poster-scoped CSS leaves alone. The bytes are a pure function of the
-arguments (the dicts go through the JSON files' own rounding; no date), so the same flags write the
-same page. Every figure has a <title> and a <desc> for screen readers. The Scale Lab's four answers
-are read off its curves here (log-linear between measured points); the JSON holds every input.
+Inline SVG and CSS only, nothing fetched: a page opens the same offline, as one file, or in the notebook
+(its CSS is scoped to .poster). No date, and the dicts pass the JSON files' rounding, so the same flags
+write the same bytes. Every figure has a <title> and <desc> for screen readers. The Scale Lab's four
+answers are read off its curves here (log-linear between measured points).
 """
 
 from __future__ import annotations
@@ -130,12 +129,9 @@ def _axes(x0: int, x1: int, top: int, bot: int):
     def y(v):
         return float(bot - v * (bot - top))
 
-    ticks, mid = [], (top + bot) // 2
-    for v in (0, 0.25, 0.5, 0.75, 1):
-        ticks += [
-            _el("line", x1=x0, x2=x1, y1=y(v), y2=y(v)),
-            _el("text", f"{v:g}", x=x0 - 6, y=y(v) + 4, stroke="none"),
-        ]
+    vs, mid = (0, 0.25, 0.5, 0.75, 1), (top + bot) // 2
+    ticks = [_el("line", x1=x0, x2=x1, y1=y(v), y2=y(v)) for v in vs]
+    ticks += [_el("text", f"{v:g}", x=x0 - 6, y=y(v) + 4, stroke="none") for v in vs]
     rotate = f"rotate(-90 14 {mid})"
     label = _el("text", "success rate", class_="tk ylab", x=14, y=mid, text_anchor="middle", transform=rotate)
     return y, [_el("g", ticks, class_="tk", stroke="#ddd", text_anchor="end"), label]
@@ -176,10 +172,8 @@ def _coverage_svg(src_starts, aug_starts, cov: dict, annulus) -> str:
     def xy(p):  # metres from the target -> SVG units (y points down)
         return mid + float(p[0]) * scale, mid - float(p[1]) * scale
 
-    grid = [
-        _el("circle", cx=mid, cy=mid, r=(r_min + (r_max - r_min) * i / rings) * scale)
-        for i in range(rings + 1)
-    ]
+    radii = [(r_min + (r_max - r_min) * i / rings) * scale for i in range(rings + 1)]
+    grid = [_el("circle", cx=mid, cy=mid, r=r) for r in radii]
     for th in (2 * math.pi * j / sectors for j in range(sectors)):
         (a, b), (c, d) = (xy((r * math.cos(th), r * math.sin(th))) for r in (r_min, r_max))
         grid.append(_el("line", x1=a, y1=b, x2=c, y2=d))
@@ -385,9 +379,7 @@ def exchange_rows(result: dict) -> list[dict]:
             if r["demos"] > sources:
                 fresh = matched_fresh(result, r["success"])
                 worth = None if fresh is None else (fresh - sources) / (r["demos"] - sources)
-                out.append(
-                    dict(curve=curve, n=n, demos=r["demos"], success=r["success"], fresh=fresh, worth=worth)
-                )
+                out.append(dict(r, curve=curve, n=n, fresh=fresh, worth=worth))
     return out
 
 
@@ -464,21 +456,17 @@ def _lab_svg(result: dict) -> str:
             body.append(_el("polygon", points=band, fill=hexc, fill_opacity="0.13"))
             body.append(_el("polyline", points=line, fill="none", stroke=hexc, stroke_width=2.5, **DASH[ls]))
             body += [_el("circle", cx=a, cy=b, r=3.5, fill=hexc) for a, b in line]
-            desc.append(
-                f"{label}: " + ", ".join(f"{_f3(r['success'])} at {_demos(r['demos'])} demos" for r in rows)
-            )
+            at = ", ".join(f"{_f3(r['success'])} at {_demos(r['demos'])} demos" for r in rows)
+            desc.append(f"{label}: {at}")
     e = result["expert"]["success"]
-    body.append(
-        _el("line", x1=x0, x2=x1, y1=y(e), y2=y(e), stroke="#444", stroke_width=1.6, stroke_dasharray="6 4")
-    )
-    body.append(_el("text", f"expert {e:.2f}", x=x1, y=y(e) - 6, class_="tk", text_anchor="end"))
+    body += [
+        _el("line", x1=x0, x2=x1, y1=y(e), y2=y(e), stroke="#444", stroke_width=1.6, stroke_dasharray="6 4"),
+        _el("text", f"expert {e:.2f}", x=x1, y=y(e) - 6, class_="tk", text_anchor="end"),
+    ]
     point = result["curves"].get(LAB_DEFAULT[0], {}).get(LAB_DEFAULT[1])
     if point is not None:  # a five-pointed star, radii 10 and 4.2
-        cx, cy, rr = x(point["demos"]), y(point["success"]), [10, 4.2] * 5
-        star = [
-            (cx + rr[k] * math.sin(k * math.pi / 5), cy - rr[k] * math.cos(k * math.pi / 5))
-            for k in range(10)
-        ]
+        cx, cy, rr, th = x(point["demos"]), y(point["success"]), [10, 4.2] * 5, math.pi / 5
+        star = [(cx + rr[k] * math.sin(k * th), cy - rr[k] * math.cos(k * th)) for k in range(10)]
         body.append(_el("polygon", points=star, fill="#111", stroke="#fff", stroke_width=1))
         desc.append(f"the chapter's default point, N = {LAB_DEFAULT[1]} re-solve: {_f3(point['success'])}")
     desc.append(f"the expert's own success: {e:.3f}")
@@ -495,9 +483,9 @@ def _lab_table(result: dict) -> str:
         for r in (result["curves"].get(curve, {}).get(str(n)) for curve in LAB_STYLE):
             kept = "" if r is None or r["demos"] == n else f"<small>{_demos(r['demos'])} demos</small>"
             rows.append(
-                "<td>-</td>"
-                if r is None
-                else f"<td><b>{_f3(r['success'])}</b><small>{_ci(r)[6:]}</small>{kept}</td>"
+                f"<td><b>{_f3(r['success'])}</b><small>{_ci(r).split(' ', 1)[1]}</small>{kept}</td>"
+                if r
+                else "<td>-</td>"
             )
         rows.append("</tr>")
     return (
