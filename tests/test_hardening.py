@@ -468,6 +468,33 @@ def test_cache_stores_only_what_this_run_wrote(tmp_path, monkeypatch):
         claim.release()
 
 
+def test_a_replay_prints_exactly_the_numbers_of_the_run_it_replays(tmp_path):
+    """Issue 22 item 5: --out 0 then --out 1 (same flags): the replay's summary is the run's, with only
+    the written paths under 1/ (the old "{out}" text replacement turned every 0 into a 1)."""
+    mine = _file(tmp_path, "notes.txt")
+    before = snapshot([mine])
+    env, outs = env_for(tmp_path / "cache"), {}
+    for out in ("0", "1"):
+        p = subprocess.run(
+            [sys.executable, ROOT / "scale_data.py", *SD[1:], "--out", out],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            env=env,
+        )
+        assert p.returncode == 0 and p.stderr.strip() == "", p.stdout + p.stderr
+        outs[out] = p.stdout
+    run_lines, replay_lines = outs["0"].splitlines(), outs["1"].splitlines()
+    assert "reusing the result" in outs["1"] and "reusing" not in outs["0"]
+    summary = run_lines[run_lines.index(next(x for x in run_lines if x.startswith("headline:"))) :]
+    wrote = summary[-1]
+    assert wrote.startswith("wrote 0/cross_embodiment.json") and "0.00 -> " in summary[0]
+    assert replay_lines[-len(summary) :] == [*summary[:-1], wrote.replace(" 0/", " 1/")]
+    assert (tmp_path / "1" / "metrics.json").read_bytes() == (tmp_path / "0" / "metrics.json").read_bytes()
+    assert snapshot([mine]) == before
+
+
 # ---------------------------------------------------------------------------------------------
 # Ownership, file by file
 # ---------------------------------------------------------------------------------------------
