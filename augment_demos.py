@@ -35,8 +35,11 @@ def parse(argv=None):
     )
     p.add_argument("--seed", type=int, default=0, help=">= 0; seeds draw disjoint perturbations (default 0)")
     sigmas = config.CHAPTER.aug_pos_sigma, config.CHAPTER.aug_yaw_sigma
-    p.add_argument("--pos_sigma", type=float, default=sigmas[0], help="m; block and pusher xy noise std")
-    p.add_argument("--yaw_sigma", type=float, default=sigmas[1], help="rad; block yaw noise std")
+    most = f"(at most {config.SIGMA_MAX:g})"
+    p.add_argument(
+        "--pos_sigma", type=float, default=sigmas[0], help=f"m; block and pusher xy noise std {most}"
+    )
+    p.add_argument("--yaw_sigma", type=float, default=sigmas[1], help=f"rad; block yaw noise std {most}")
     p.add_argument(
         "--mode",
         choices=("resolve", "replay"),  # ch37.engine.MODES (not imported here: --help stays instant)
@@ -63,7 +66,8 @@ def parse(argv=None):
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     a = p.parse_args(argv)
     positive, finite = ("per_demo", "workers", "shard_size"), ("pos_sigma", "yaw_sigma")
-    config.check(a, positive=positive, non_negative=("seed",), finite=finite, at_most={"seed": MAX_SEED})
+    at_most = {"seed": MAX_SEED, "pos_sigma": config.SIGMA_MAX, "yaw_sigma": config.SIGMA_MAX}
+    config.check(a, positive=positive, non_negative=("seed",), finite=finite, at_most=at_most)
     return a
 
 

@@ -283,6 +283,8 @@ BAD = [  # (id, make src or None (the good one), make out or None (a new folder)
     ("seed_negative", None, None, ["--seed", "-1"], "--seed"),
     ("pos_sigma_nan", None, None, ["--pos_sigma", "nan"], "--pos_sigma"),
     ("yaw_sigma_negative", None, None, ["--yaw_sigma", "-1"], "--yaw_sigma"),
+    ("yaw_sigma_huge", None, None, ["--yaw_sigma", "1e308"], "--yaw_sigma must be at most 10"),  # issue 22 #9
+    ("pos_sigma_huge", None, None, ["--pos_sigma", "11"], "--pos_sigma must be at most 10"),
     ("mode_unknown", None, None, ["--mode", "teleport"], "--mode"),
 ]
 

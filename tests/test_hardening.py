@@ -200,6 +200,19 @@ CASES = [
     ("workers-zero", _sd("--workers", "0"), 2, "--workers must be a positive integer"),
     ("workers-too-many", _sd("--workers", "100000"), 2, "--workers must be at most"),
     ("lr-above-one", _sd("--lr", "5"), 2, "--lr must be at most"),
+    # issue 22 item 9: a huge finite sigma was a math domain error in the workers
+    ("yaw-sigma-huge", _sd("--aug_yaw_sigma", "1e308"), 2, "--aug_yaw_sigma must be at most 10"),
+    ("pos-sigma-huge", _sd("--aug_pos_sigma", "10.5"), 2, "--aug_pos_sigma must be at most 10"),
+    (
+        "lab-yaw-sigma-huge",
+        lambda tmp, ref: (
+            ["scale_lab.py", "--smoke", "--out", tmp / "lab", "--yaw_sigma", "1e308"],
+            [],
+            None,
+        ),
+        2,
+        "--yaw_sigma must be at most 10",
+    ),
     ("lr-inf", _sd("--lr", "inf"), 2, "--lr must be a finite"),
     ("batch-size-not-int", _sd("--batch_size", "abc"), 2, "invalid int value"),
     ("device-unknown", _sd("--device", "tpu"), 2, "--device must be"),
