@@ -202,15 +202,16 @@ def ensure_demos(
 ) -> str:
     """Make sure `path` holds the demo set this run needs; return how it was obtained.
 
-    user_given: a set named by --pusht_data/--aloha_data. It is never modified. A set stamped by
-    this project must match the request; an unstamped set must have the right schema and is used
+    user_given: a set named by --pusht_data/--aloha_data. It is never modified. A demo set this
+    project generated must match the request; any other set (a user's, or one of our other outputs
+    such as an augment_demos.py run, stamp kind "engine") must have the right schema and is used
     as given. Otherwise (our private cache) a stale set we made is rebuilt, and a directory we did
     not make is refused.
     """
     m = emb.env_module
     want = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=False)
     stamp = read_stamp(path)
-    ours = is_ours(stamp)
+    ours = is_ours(stamp) and "kind" not in stamp  # a set gen_demos made (stamp_for); others have a kind
     matches = ours and all(stamp.get(k) == v for k, v in want.items())
     changed = changed_files(path, stamp) if matches else []  # missing, truncated or edited since written
     if user_given:
@@ -228,6 +229,8 @@ def ensure_demos(
                 f"{path} is damaged: {', '.join(changed[:3])} changed since it was written; "
                 f"regenerate it with gen_demos_{emb.name}.py (it was not modified)"
             )
+        if is_ours(stamp) and stamp.get("kind") == "engine" and not stamp.get("complete"):
+            raise DataError(f"{path} is an unfinished augment_demos.py run; finish it with the same command")
         problem = schema_problem(path, len(m.STATE_NAMES), len(m.ACTION_NAMES))
         if problem:
             raise DataError(problem)

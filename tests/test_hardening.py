@@ -120,6 +120,13 @@ def _user_set_corrupt(rel):
     return make
 
 
+def _unfinished_engine_run(tmp, ref):
+    mine = user_set(ref, tmp)
+    stamp = {"made_by": stamps.MADE_BY, "kind": "engine", "config": {}, "complete": False}
+    (mine / stamps.STAMP_NAME).write_text(json.dumps(stamp))
+    return [*SD, "--no-cache", "--out", tmp / "o", "--pusht_data", mine], [mine], None
+
+
 def _own_set_changed_as_user_data(tmp, ref):
     mine = user_set(ref, tmp, stamped=True)
     _corrupt(mine / "meta" / "stats.json", 10)
@@ -301,6 +308,7 @@ CASES = [
     ),
     ("user-data-bad-info-json", _user_set_corrupt("meta/info.json"), 2, "not a LeRobot v3 dataset"),
     ("own-set-given-damaged", _own_set_changed_as_user_data, 2, "is damaged: meta/stats.json changed"),
+    ("user-data-unfinished-engine-run", _unfinished_engine_run, 2, "unfinished augment_demos.py run"),
     # the generators
     (
         "gen-pusht-out-holds-data",
@@ -479,6 +487,31 @@ def test_cache_stores_only_what_this_run_wrote(tmp_path, monkeypatch):
         assert set(got) == {"metrics.json", "summary.txt"}
     finally:
         claim.release()
+
+
+def test_an_engine_output_is_a_pusht_set_like_any_other(ref, tmp_path):
+    """Issue 22 item 14: an augment_demos.py output (stamp kind "engine") passed as --pusht_data is
+    used as given, not refused as a mismatched generated set; it is never modified."""
+    eng = tmp_path / "eng"
+    p = run(
+        "augment_demos.py",
+        "--src",
+        ref["pusht"],
+        "--out",
+        eng,
+        "--per_demo",
+        "2",
+        "--workers",
+        "1",
+        "--quiet",
+    )
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert json.loads((eng / stamps.STAMP_NAME).read_text())["kind"] == "engine"
+    before = snapshot([eng])
+    p = run(*SD, "--no-cache", "--out", tmp_path / "o", "--pusht_data", eng)
+    assert p.returncode == 0 and p.stderr.strip() == "", p.stdout[-2000:] + p.stderr
+    assert "(your own set, used as given)" in p.stdout and "Traceback" not in p.stdout
+    assert (tmp_path / "o" / "metrics.json").exists() and snapshot([eng]) == before
 
 
 def test_a_replay_prints_exactly_the_numbers_of_the_run_it_replays(tmp_path):
