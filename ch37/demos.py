@@ -19,7 +19,16 @@ import numpy as np
 
 from ch37 import DATA_CODE, ROOT, config
 from ch37.errors import DataError, run_main
-from ch37.lerobot_io import IMAGE_KEY, IMAGE_SIZE, features, schema_problem, write_dataset
+from ch37.lerobot_io import (
+    IMAGE_KEY,
+    IMAGE_SIZE,
+    features,
+    fps_problem,
+    frames_problem,
+    load_arrays,
+    schema_problem,
+    write_dataset,
+)
 from ch37.parallel import progress
 from ch37.seeds import MAX_SEED, SEED_BLOCK, env_seed
 from ch37.stamps import MADE_BY, changed_files, holds_data, is_ours, read_stamp, replace_own_dir
@@ -204,9 +213,9 @@ def ensure_demos(
 
     user_given: a set named by --pusht_data/--aloha_data. It is never modified. A demo set this
     project generated must match the request; any other set (a user's, or one of our other outputs
-    such as an augment_demos.py run, stamp kind "engine") must have the right schema and is used
-    as given. Otherwise (our private cache) a stale set we made is rebuilt, and a directory we did
-    not make is refused.
+    such as an augment_demos.py run, stamp kind "engine") must have the right schema, the env's fps
+    and finite frames, and is used as given. Otherwise (our private cache) a stale set we made is
+    rebuilt, and a directory we did not make is refused.
     """
     m = emb.env_module
     want = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=False)
@@ -232,6 +241,10 @@ def ensure_demos(
         if is_ours(stamp) and stamp.get("kind") == "engine" and not stamp.get("complete"):
             raise DataError(f"{path} is an unfinished augment_demos.py run; finish it with the same command")
         problem = schema_problem(path, len(m.STATE_NAMES), len(m.ACTION_NAMES))
+        if not problem and not ours:  # a set we did not generate: its rate and frames are checked
+            problem = fps_problem(path, m.FPS) or frames_problem(
+                path, load_arrays(path, keys=("observation.state", "action"))
+            )
         if problem:
             raise DataError(problem)
         return "matches its stamp" if ours else "your own set, used as given"

@@ -44,7 +44,7 @@ from ch37 import DATA_CODE, engine, executors
 from ch37.demos import code_digest
 from ch37.errors import DataError
 from ch37.files import dump_json, lock, round_floats, unlock, write_atomic
-from ch37.lerobot_io import load_arrays, schema_problem
+from ch37.lerobot_io import fps_problem, frames_problem, load_arrays, schema_problem
 from ch37.seeds import SEED_BLOCK
 from ch37.stamps import MADE_BY, STAMP_NAME, check_ours, read_json, read_stamp
 
@@ -278,6 +278,9 @@ def read_source(src: Path) -> dict:
         names = feats[key].get("names")
         if names is not None and list(names) != list(want):
             raise DataError(f"--src {src}: {key} names {names} are not PushT's {list(want)}")
+    problem = fps_problem(src, pusht_env.FPS)
+    if problem:
+        raise DataError(f"--src {problem}")
     for f in sorted(src.glob("data/*/*.parquet")) + sorted(src.glob("meta/episodes/*/*.parquet")):
         try:
             pq.read_metadata(f)
@@ -295,8 +298,9 @@ def read_source(src: Path) -> dict:
         ) from None
     if len(arrays["action"]) == 0:
         raise DataError(f"--src {src} holds no frames")
-    if not (np.isfinite(arrays["observation.state"]).all() and np.isfinite(arrays["action"]).all()):
-        raise DataError(f"--src {src} holds non-finite states or actions")
+    problem = frames_problem(src, arrays)
+    if problem:
+        raise DataError(f"--src {problem}")
     if arrays["episode_index"].max() >= SEED_BLOCK:
         raise DataError(f"--src {src}: episode indices must be below {SEED_BLOCK:,} (the seed block)")
     return arrays

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT, run_script
+from conftest import ROOT, run_script, with_fps, with_nan
 
 import gen_demos_aloha
 import gen_demos_pusht
@@ -237,6 +237,14 @@ def _no_data_files(tmp, src):
     return bad
 
 
+def _edited(edit):  # issue 22 item 11 and the fps question: a copy of the good source, edited
+    def make(tmp, src):
+        shutil.copytree(src, tmp / "edited")
+        return edit(tmp / "edited")
+
+    return make
+
+
 def _aloha(tmp, src):
     out = tmp / "aloha"
     assert gen_demos_aloha.main(["--episodes", "1", "--out", str(out), "--quiet"]) == 0
@@ -273,6 +281,14 @@ BAD = [  # (id, make src or None (the good one), make out or None (a new folder)
     ("renamed_state", _renamed_state, None, [], "names"),
     ("corrupt_parquet", _corrupt_parquet, None, [], "not a readable parquet file"),
     ("no_data_files", _no_data_files, None, [], "could not be read"),
+    ("nan_action", _edited(with_nan), None, [], "non-finite values (NaN or inf) in action"),
+    (
+        "src_at_50fps",
+        _edited(lambda p: with_fps(p, 50)),
+        None,
+        [],
+        "recorded at 50 fps, but the env steps at 10",
+    ),
     ("out_holds_user_data", None, _user_out, [], "did not make"),
     ("out_other_settings", None, _other_settings_out, [], "other settings"),
     ("out_is_a_demo_set", None, _demo_set_out, [], "did not make"),

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import with_fps, with_nan
 
 from ch37 import files, result_cache, stamps
 
@@ -115,6 +116,14 @@ def _user_set_corrupt(rel):
     def make(tmp, ref):
         mine = user_set(ref, tmp)
         _corrupt(mine / rel)
+        return [*SD, "--no-cache", "--out", tmp / "o", "--pusht_data", mine], [mine], None
+
+    return make
+
+
+def _user_set_edited(edit):  # issue 22 item 11 and the fps question: a user set fit for no env
+    def make(tmp, ref):
+        mine = edit(user_set(ref, tmp))
         return [*SD, "--no-cache", "--out", tmp / "o", "--pusht_data", mine], [mine], None
 
     return make
@@ -308,6 +317,14 @@ CASES = [
     ),
     ("user-data-bad-info-json", _user_set_corrupt("meta/info.json"), 2, "not a LeRobot v3 dataset"),
     ("own-set-given-damaged", _own_set_changed_as_user_data, 2, "is damaged: meta/stats.json changed"),
+    ("user-data-nan", _user_set_edited(with_nan), 2, "holds non-finite values (NaN or inf) in action"),
+    (
+        "user-data-nan-state",
+        _user_set_edited(lambda p: with_nan(p, "observation.state", 0)),
+        2,
+        "non-finite values (NaN or inf) in observation.state in 1 frames, the first at row 0",
+    ),
+    ("user-data-50fps", _user_set_edited(lambda p: with_fps(p, 50)), 2, "recorded at 50 fps, but the env"),
     ("user-data-unfinished-engine-run", _unfinished_engine_run, 2, "unfinished augment_demos.py run"),
     # the generators
     (
