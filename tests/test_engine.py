@@ -294,6 +294,7 @@ BAD = [  # (id, make src or None (the good one), make out or None (a new folder)
     ("out_is_a_demo_set", None, _demo_set_out, [], "did not make"),
     ("out_inside_src", None, lambda t: None, ["--out", "{src}/aug"], "overlaps"),
     ("per_demo_0", None, None, ["--per_demo", "0"], "--per_demo"),
+    ("per_demo_huge", None, None, ["--per_demo", "1000000000"], "--per_demo must be at most 1000000"),  # #10
     ("shard_size_0", None, None, ["--shard_size", "0"], "--shard_size"),
     ("workers_0", None, None, ["--workers", "0"], "--workers"),
     ("seed_negative", None, None, ["--seed", "-1"], "--seed"),
@@ -303,6 +304,14 @@ BAD = [  # (id, make src or None (the good one), make out or None (a new folder)
     ("pos_sigma_huge", None, None, ["--pos_sigma", "11"], "--pos_sigma must be at most 10"),
     ("mode_unknown", None, None, ["--mode", "teleport"], "--mode"),
 ]
+
+
+def test_a_plan_beyond_memory_is_one_line():
+    """Issue 22 item 10: the plan's memory (ATTEMPT_BYTES an attempt) is checked against what is free."""
+    assert shards.plan_memory_problem(3, 10, 1 << 30) is None
+    assert shards.plan_memory_problem(12, 10**6, None) is None  # unknown memory: not refused
+    why = shards.plan_memory_problem(12, 10**6, 1 << 30)  # 12e6 attempts x 200 B = 2.2 GB > 1 GB
+    assert "12,000,000 attempts need about 2.2 GB" in why and "lower --per_demo" in why
 
 
 @pytest.mark.parametrize("make_src,make_out,extra,needle", [b[1:] for b in BAD], ids=[b[0] for b in BAD])
