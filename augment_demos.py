@@ -19,7 +19,7 @@ import os
 from pathlib import Path
 
 from ch37 import config, errors
-from ch37.seeds import MAX_SEED
+from ch37.seeds import MAX_SEED, SEED_BLOCK
 
 SHARD_SIZE = 100  # attempts per shard: ~0.4 MB of parquet, a few seconds of one core
 
@@ -28,15 +28,21 @@ def parse(argv=None):
     p = config.parser(__doc__.split("\n\n")[0], prog="augment_demos.py")
     p.add_argument("--src", type=Path, required=True, help="source LeRobot v3 PushT set (never modified)")
     p.add_argument(
-        "--per_demo", type=int, default=10, help="attempts (perturbed starts) per source episode (default 10)"
+        "--per_demo",
+        type=int,
+        default=10,
+        help=f"attempts (perturbed starts) per source episode (default 10, at most {SEED_BLOCK:,})",
     )
     p.add_argument(
         "--out", type=Path, required=True, help="output folder: new, or a run of this command to finish"
     )
     p.add_argument("--seed", type=int, default=0, help=">= 0; seeds draw disjoint perturbations (default 0)")
     sigmas = config.CHAPTER.aug_pos_sigma, config.CHAPTER.aug_yaw_sigma
-    p.add_argument("--pos_sigma", type=float, default=sigmas[0], help="m; block and pusher xy noise std")
-    p.add_argument("--yaw_sigma", type=float, default=sigmas[1], help="rad; block yaw noise std")
+    most = f"(at most {config.SIGMA_MAX:g})"
+    p.add_argument(
+        "--pos_sigma", type=float, default=sigmas[0], help=f"m; block and pusher xy noise std {most}"
+    )
+    p.add_argument("--yaw_sigma", type=float, default=sigmas[1], help=f"rad; block yaw noise std {most}")
     p.add_argument(
         "--mode",
         choices=("resolve", "replay"),  # ch37.engine.MODES (not imported here: --help stays instant)
@@ -63,7 +69,9 @@ def parse(argv=None):
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     a = p.parse_args(argv)
     positive, finite = ("per_demo", "workers", "shard_size"), ("pos_sigma", "yaw_sigma")
-    config.check(a, positive=positive, non_negative=("seed",), finite=finite, at_most={"seed": MAX_SEED})
+    at_most = {"seed": MAX_SEED, "pos_sigma": config.SIGMA_MAX, "yaw_sigma": config.SIGMA_MAX}
+    at_most["per_demo"] = SEED_BLOCK  # an attempt index stays in one seed block, like an episode's
+    config.check(a, positive=positive, non_negative=("seed",), finite=finite, at_most=at_most)
     return a
 
 

@@ -68,9 +68,9 @@ flag(
     help="attempts per wanted demo before a source demo gives up (replay's success filter rejects most)",
 )
 flag(
-    "--aug_pos_sigma", type=float, default=D.aug_pos_sigma, help="m; std of block and pusher xy perturbation"
+    "--aug_pos_sigma", type=float, default=D.aug_pos_sigma, help="m; std of block and pusher xy moves (<= 10)"
 )
-flag("--aug_yaw_sigma", type=float, default=D.aug_yaw_sigma, help="rad; std of block yaw perturbation")
+flag("--aug_yaw_sigma", type=float, default=D.aug_yaw_sigma, help="rad; std of block yaw moves (<= 10)")
 flag("--epochs", type=int, default=D.epochs, help="passes over a data set that make a budget (see measure)")
 flag(
     "--full_steps", type=int, default=0, help="steps of the full budget (0: --epochs passes over source+aug)"

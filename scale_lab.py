@@ -68,8 +68,13 @@ def parser():
     flag("--batch_size", type=int, default=D.batch_size, help="frames per gradient step (the chapter's)")
     flag("--lr", type=float, default=D.lr, help="Adam learning rate, cosine-decayed to 0 (the chapter's)")
     flag("--hidden_dim", type=int, default=D.hidden_dim, help="width of both hidden layers of the BC MLP")
-    flag("--pos_sigma", type=float, default=D.aug_pos_sigma, help="m; the engine's block and pusher xy noise")
-    flag("--yaw_sigma", type=float, default=D.aug_yaw_sigma, help="rad; the engine's block yaw noise")
+    flag(
+        "--pos_sigma",
+        type=float,
+        default=D.aug_pos_sigma,
+        help="m; the engine's block and pusher xy noise (<= 10)",
+    )
+    flag("--yaw_sigma", type=float, default=D.aug_yaw_sigma, help="rad; the engine's block yaw noise (<= 10)")
     flag("--replay_tries", type=int, default=10, help="replay attempts per wanted demo (yield ~2%% here)")
     flag("--out", type=Path, help="output folder (default outputs/scale_lab, -smoke appended with --smoke)")
     flag(
@@ -82,6 +87,9 @@ def parser():
     flag("--rerun", action=BooleanOptionalAction, default=True, help="write scale_lab.rrd")
     flag("--smoke", action="store_true", help="tiny settings for tests (seconds); explicit flags win")
     return p
+
+
+SIGMAS_AT_MOST = {"pos_sigma": config.SIGMA_MAX, "yaw_sigma": config.SIGMA_MAX}  # m, rad
 
 
 def parse(argv=None):
@@ -102,7 +110,7 @@ def parse(argv=None):
     if any(not 0 <= s <= MAX_SEED for s in a.seeds):
         raise DataError(f"--seeds must be in [0, {MAX_SEED}], got {a.seeds}")
     positive = ("eval_episodes", "epochs", "batch_size", "hidden_dim", "replay_tries", "workers")
-    config.check(a, positive=positive, finite=("pos_sigma", "yaw_sigma", "lr"))
+    config.check(a, positive=positive, finite=("pos_sigma", "yaw_sigma", "lr"), at_most=SIGMAS_AT_MOST)
     if max(a.n) > SEED_BLOCK or a.eval_episodes > SEED_BLOCK:
         raise DataError(f"--n and --eval_episodes must be at most {SEED_BLOCK} (one seed block)")
     return a

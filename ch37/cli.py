@@ -21,6 +21,7 @@ FINITE = ("aug_pos_sigma", "aug_yaw_sigma", "lr")
 # every env seed must fit in 63 bits. The step limits bound a run's frames for the memory estimate.
 # --epochs and --full_steps cost time, not memory: a huge value runs long (Ctrl-C stops it cleanly).
 AT_MOST = {"seed": MAX_SEED, "source_episodes": SEED_BLOCK, "eval_episodes": SEED_BLOCK, "lr": 1.0}
+AT_MOST.update(aug_pos_sigma=config.SIGMA_MAX, aug_yaw_sigma=config.SIGMA_MAX)
 PUSHT_MAX_STEPS, ALOHA_MAX_STEPS = 300, 400  # pusht_env.MAX_STEPS, aloha_env.MAX_STEPS (not imported: slow)
 ENV_BYTES = 1 << 20  # one evaluation env (a MuJoCo model and data): about 0.6 MB measured
 

@@ -19,7 +19,16 @@ import numpy as np
 
 from ch37 import DATA_CODE, ROOT, config
 from ch37.errors import DataError, run_main
-from ch37.lerobot_io import IMAGE_KEY, IMAGE_SIZE, features, schema_problem, write_dataset
+from ch37.lerobot_io import (
+    IMAGE_KEY,
+    IMAGE_SIZE,
+    features,
+    fps_problem,
+    frames_problem,
+    load_arrays,
+    schema_problem,
+    write_dataset,
+)
 from ch37.parallel import progress
 from ch37.seeds import MAX_SEED, SEED_BLOCK, env_seed
 from ch37.stamps import MADE_BY, changed_files, holds_data, is_ours, read_stamp, replace_own_dir
@@ -202,15 +211,16 @@ def ensure_demos(
 ) -> str:
     """Make sure `path` holds the demo set this run needs; return how it was obtained.
 
-    user_given: a set named by --pusht_data/--aloha_data. It is never modified. A set stamped by
-    this project must match the request; an unstamped set must have the right schema and is used
-    as given. Otherwise (our private cache) a stale set we made is rebuilt, and a directory we did
-    not make is refused.
+    user_given: a set named by --pusht_data/--aloha_data. It is never modified. A demo set this
+    project generated must match the request; any other set (a user's, or one of our other outputs
+    such as an augment_demos.py run, stamp kind "engine") must have the right schema, the env's fps
+    and finite frames, and is used as given. Otherwise (our private cache) a stale set we made is
+    rebuilt, and a directory we did not make is refused.
     """
     m = emb.env_module
     want = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=False)
     stamp = read_stamp(path)
-    ours = is_ours(stamp)
+    ours = is_ours(stamp) and "kind" not in stamp  # a set gen_demos made (stamp_for); others have a kind
     matches = ours and all(stamp.get(k) == v for k, v in want.items())
     changed = changed_files(path, stamp) if matches else []  # missing, truncated or edited since written
     if user_given:
@@ -228,7 +238,13 @@ def ensure_demos(
                 f"{path} is damaged: {', '.join(changed[:3])} changed since it was written; "
                 f"regenerate it with gen_demos_{emb.name}.py (it was not modified)"
             )
+        if is_ours(stamp) and stamp.get("kind") == "engine" and not stamp.get("complete"):
+            raise DataError(f"{path} is an unfinished augment_demos.py run; finish it with the same command")
         problem = schema_problem(path, len(m.STATE_NAMES), len(m.ACTION_NAMES))
+        if not problem and not ours:  # a set we did not generate: its rate and frames are checked
+            problem = fps_problem(path, m.FPS) or frames_problem(
+                path, load_arrays(path, keys=("observation.state", "action"))
+            )
         if problem:
             raise DataError(problem)
         return "matches its stamp" if ours else "your own set, used as given"

@@ -203,6 +203,33 @@ def load_arrays(root: Path, keys=("observation.state", "action", "episode_index"
         datasets_log.setLevel(level)
 
 
+# A user's set must suit the env it feeds, checked where it is read (ch37.demos.ensure_demos for
+# scale_data.py, ch37.shards.read_source for augment_demos.py): fps_problem before loading (LeRobot
+# may refuse a set whose timestamps do not fit its fps), frames_problem on the loaded arrays.
+def fps_problem(root: Path, fps: int) -> str | None:
+    """None if the set at `root` is recorded at `fps` Hz, the env's control rate, else why not. An
+    action is a command held for 1/fps s: a 50 fps set stepped at 10 fps runs each command 5x too long."""
+    try:
+        got = json.loads((Path(root) / "meta" / "info.json").read_text()).get("fps")
+    except (OSError, ValueError, AttributeError):
+        got = None
+    if got != fps:
+        return f"{root} is recorded at {got} fps, but the env steps at {fps} fps; resample it to {fps} fps"
+    return None
+
+
+def frames_problem(root: Path, arrays: dict) -> str | None:
+    """None if every state and action in `arrays` (N, D) is finite, else where the first bad frame is."""
+    for key in ("observation.state", "action"):
+        bad = ~np.isfinite(arrays[key]).all(axis=tuple(range(1, arrays[key].ndim)))
+        if bad.any():
+            return (
+                f"{root} holds non-finite values (NaN or inf) in {key} in {int(bad.sum())} frames, "
+                f"the first at row {int(np.argmax(bad))}; fix or drop those frames"
+            )
+    return None
+
+
 def schema_problem(root: Path, state_dim: int, action_dim: int) -> str | None:
     """None if `root` is a LeRobot dataset with the expected state/action widths, else why not."""
     info_path = Path(root) / "meta" / "info.json"

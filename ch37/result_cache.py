@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 import sys
 from importlib.metadata import version
@@ -23,6 +24,11 @@ from ch37.errors import DataError
 from ch37.files import claimed, sha256_bytes, sweep_leftovers, write_atomic
 
 MANIFEST, SUMMARY = "manifest.json", "summary.txt"
+# summary.txt keeps each written file as NUL + its name + NUL (NUL is in no path and no number), so a
+# replay rebuilds exactly the paths under its own --out and touches nothing else (issue 22 item 5:
+# the old "{out}" text replacement turned every "0" into "1" when --out 0 was replayed as --out 1).
+# Part of the key: an entry in an older summary format is never replayed.
+CACHE_FORMAT = "2"
 
 
 def cache_root() -> Path:
@@ -46,6 +52,7 @@ def result_key(config: dict) -> str:
     h = hashlib.sha256(
         json.dumps({k: str(v) for k, v in config.items() if k not in NOT_IN_KEY}, sort_keys=True).encode()
     )
+    h.update(f"cache format {CACHE_FORMAT}".encode())
     for name in CODE_FILES:
         h.update(name.encode())
         h.update((ROOT / name).read_bytes())
@@ -82,6 +89,21 @@ def read_entry(entry: Path) -> dict[str, bytes] | str | None:
         return f"{Path(e.filename).name} is missing"
     except (OSError, UnicodeDecodeError, ValueError) as e:
         return f"it cannot be read ({type(e).__name__})"
+
+
+def summary_template(summary: str, written: list[Path]) -> str:
+    """`summary` with each written file's path (exactly as printed) replaced by NUL name NUL."""
+    paths = sorted({str(p): Path(p).name for p in written}.items(), key=lambda kv: -len(kv[0]))
+    if not paths:
+        return summary
+    names = dict(paths)
+    return re.sub("|".join(re.escape(p) for p, _ in paths), lambda m: f"\0{names[m.group(0)]}\0", summary)
+
+
+def summary_for(template: str, out: Path) -> str:
+    """The summary of a stored `template` with its file names placed under `out`."""
+    parts = template.split("\0")
+    return "".join(str(out / part) if i % 2 else part for i, part in enumerate(parts))
 
 
 def discard_entry(entry: Path) -> None:
@@ -125,7 +147,7 @@ class ResultCache:
             f"reusing the result of an identical earlier run (same flags and code, cache key {self.key}; "
             "--no-cache runs it again)"
         )
-        print(got[SUMMARY].decode().replace("{out}", str(self.out)), end="")
+        print(summary_for(got[SUMMARY].decode(), self.out), end="")
         return True
 
     def store(self, written: list[Path], summary: str) -> None:
@@ -149,7 +171,7 @@ class ResultCache:
                 data = Path(path).read_bytes()
                 (tmp / name).write_bytes(data)
                 manifest[name] = sha256_bytes(data)
-            text = summary.replace(str(self.out), "{out}").encode()
+            text = summary_template(summary, written).encode()
             (tmp / SUMMARY).write_bytes(text)
             manifest[SUMMARY] = sha256_bytes(text)
             (tmp / MANIFEST).write_text(json.dumps(manifest, sort_keys=True, indent=1) + "\n")

@@ -41,10 +41,11 @@ import numpy as np
 
 import pusht_env
 from ch37 import DATA_CODE, engine, executors
+from ch37.cli import available_memory
 from ch37.demos import code_digest
 from ch37.errors import DataError
 from ch37.files import dump_json, lock, round_floats, unlock, write_atomic
-from ch37.lerobot_io import load_arrays, schema_problem
+from ch37.lerobot_io import fps_problem, frames_problem, load_arrays, schema_problem
 from ch37.seeds import SEED_BLOCK
 from ch37.stamps import MADE_BY, STAMP_NAME, check_ours, read_json, read_stamp
 
@@ -77,6 +78,23 @@ def source_identity(arrays: dict) -> dict:
 def run_key(config: dict) -> str:
     """A short digest of a run's settings; every shard stamp carries it."""
     return hashlib.sha256(json.dumps(config, sort_keys=True).encode()).hexdigest()[:16]
+
+
+# Memory the plan holds per attempt: its (e, k) tuple and slot, measured ~100 B (tracemalloc: 97 MB
+# for plan(range(10), 100000, 100)), doubled for the shard tasks and results that follow it.
+ATTEMPT_BYTES = 200
+
+
+def plan_memory_problem(n_sources: int, per_demo: int, free: int | None) -> str | None:
+    """None if a plan of n_sources x per_demo attempts fits in `free` bytes (None: unknown), else why."""
+    attempts = n_sources * per_demo
+    if free is None or attempts * ATTEMPT_BYTES <= free:
+        return None
+    return (
+        f"--per_demo {per_demo:,} x {n_sources} source episodes = {attempts:,} attempts need about "
+        f"{attempts * ATTEMPT_BYTES / 2**30:,.1f} GB of memory to plan, more than the "
+        f"{free / 2**30:,.1f} GB available here; lower --per_demo (or run it in parts with --seed)"
+    )
 
 
 def plan(episodes, per_demo: int, shard_size: int) -> list[list[tuple[int, int]]]:
@@ -278,6 +296,9 @@ def read_source(src: Path) -> dict:
         names = feats[key].get("names")
         if names is not None and list(names) != list(want):
             raise DataError(f"--src {src}: {key} names {names} are not PushT's {list(want)}")
+    problem = fps_problem(src, pusht_env.FPS)
+    if problem:
+        raise DataError(f"--src {problem}")
     for f in sorted(src.glob("data/*/*.parquet")) + sorted(src.glob("meta/episodes/*/*.parquet")):
         try:
             pq.read_metadata(f)
@@ -295,8 +316,9 @@ def read_source(src: Path) -> dict:
         ) from None
     if len(arrays["action"]) == 0:
         raise DataError(f"--src {src} holds no frames")
-    if not (np.isfinite(arrays["observation.state"]).all() and np.isfinite(arrays["action"]).all()):
-        raise DataError(f"--src {src} holds non-finite states or actions")
+    problem = frames_problem(src, arrays)
+    if problem:
+        raise DataError(f"--src {problem}")
     if arrays["episode_index"].max() >= SEED_BLOCK:
         raise DataError(f"--src {src}: episode indices must be below {SEED_BLOCK:,} (the seed block)")
     return arrays
@@ -366,6 +388,10 @@ def run(src: Path, out: Path, settings: dict, *, workers: int, ray: str | None =
     t0 = time.perf_counter()
     check_out(out, src)  # before reading the source: a folder that is not ours is refused at once
     arrays = read_source(src)
+    n_sources = len(np.unique(arrays["episode_index"]))
+    problem = plan_memory_problem(n_sources, settings["per_demo"], available_memory())
+    if problem:
+        raise DataError(problem)
     config = settings | {"source": source_identity(arrays), "engine": ENGINE_VERSION, "versions": versions()}
     check_out(out, src, config)  # every refusal comes before anything is created
     out.mkdir(parents=True, exist_ok=True)

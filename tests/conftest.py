@@ -1,3 +1,4 @@
+import json
 import os
 import subprocess
 import sys
@@ -26,3 +27,24 @@ def run_script(*args, cwd=ROOT, check=True, timeout=600):
 @pytest.fixture(scope="session")
 def root():
     return ROOT
+
+
+def with_nan(root: Path, key: str = "action", row: int = 3) -> Path:
+    """Put a NaN into `key` at `row` of the set's first data parquet, schema and metadata kept."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    f = sorted((root / "data").rglob("*.parquet"))[0]
+    t = pq.read_table(f)
+    values = t[key].to_pylist()
+    values[row] = [float("nan")] + values[row][1:]
+    col = t.schema.get_field_index(key)
+    pq.write_table(t.set_column(col, t.schema.field(key), pa.array(values, t.schema.field(key).type)), f)
+    return root
+
+
+def with_fps(root: Path, fps: int) -> Path:
+    """Record a different frame rate in the set's meta/info.json (its frames unchanged)."""
+    info = json.loads((root / "meta" / "info.json").read_text())
+    (root / "meta" / "info.json").write_text(json.dumps(dict(info, fps=fps), indent=4))
+    return root

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT, run_script
+from conftest import ROOT, run_script, with_fps, with_nan
 
 import gen_demos_aloha
 import gen_demos_pusht
@@ -237,6 +237,14 @@ def _no_data_files(tmp, src):
     return bad
 
 
+def _edited(edit):  # issue 22 item 11 and the fps question: a copy of the good source, edited
+    def make(tmp, src):
+        shutil.copytree(src, tmp / "edited")
+        return edit(tmp / "edited")
+
+    return make
+
+
 def _aloha(tmp, src):
     out = tmp / "aloha"
     assert gen_demos_aloha.main(["--episodes", "1", "--out", str(out), "--quiet"]) == 0
@@ -273,18 +281,37 @@ BAD = [  # (id, make src or None (the good one), make out or None (a new folder)
     ("renamed_state", _renamed_state, None, [], "names"),
     ("corrupt_parquet", _corrupt_parquet, None, [], "not a readable parquet file"),
     ("no_data_files", _no_data_files, None, [], "could not be read"),
+    ("nan_action", _edited(with_nan), None, [], "non-finite values (NaN or inf) in action"),
+    (
+        "src_at_50fps",
+        _edited(lambda p: with_fps(p, 50)),
+        None,
+        [],
+        "recorded at 50 fps, but the env steps at 10",
+    ),
     ("out_holds_user_data", None, _user_out, [], "did not make"),
     ("out_other_settings", None, _other_settings_out, [], "other settings"),
     ("out_is_a_demo_set", None, _demo_set_out, [], "did not make"),
     ("out_inside_src", None, lambda t: None, ["--out", "{src}/aug"], "overlaps"),
     ("per_demo_0", None, None, ["--per_demo", "0"], "--per_demo"),
+    ("per_demo_huge", None, None, ["--per_demo", "1000000000"], "--per_demo must be at most 1000000"),  # #10
     ("shard_size_0", None, None, ["--shard_size", "0"], "--shard_size"),
     ("workers_0", None, None, ["--workers", "0"], "--workers"),
     ("seed_negative", None, None, ["--seed", "-1"], "--seed"),
     ("pos_sigma_nan", None, None, ["--pos_sigma", "nan"], "--pos_sigma"),
     ("yaw_sigma_negative", None, None, ["--yaw_sigma", "-1"], "--yaw_sigma"),
+    ("yaw_sigma_huge", None, None, ["--yaw_sigma", "1e308"], "--yaw_sigma must be at most 10"),  # issue 22 #9
+    ("pos_sigma_huge", None, None, ["--pos_sigma", "11"], "--pos_sigma must be at most 10"),
     ("mode_unknown", None, None, ["--mode", "teleport"], "--mode"),
 ]
+
+
+def test_a_plan_beyond_memory_is_one_line():
+    """Issue 22 item 10: the plan's memory (ATTEMPT_BYTES an attempt) is checked against what is free."""
+    assert shards.plan_memory_problem(3, 10, 1 << 30) is None
+    assert shards.plan_memory_problem(12, 10**6, None) is None  # unknown memory: not refused
+    why = shards.plan_memory_problem(12, 10**6, 1 << 30)  # 12e6 attempts x 200 B = 2.2 GB > 1 GB
+    assert "12,000,000 attempts need about 2.2 GB" in why and "lower --per_demo" in why
 
 
 @pytest.mark.parametrize("make_src,make_out,extra,needle", [b[1:] for b in BAD], ids=[b[0] for b in BAD])

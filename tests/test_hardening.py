@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import with_fps, with_nan
 
 from ch37 import files, result_cache, stamps
 
@@ -120,6 +121,21 @@ def _user_set_corrupt(rel):
     return make
 
 
+def _user_set_edited(edit):  # issue 22 item 11 and the fps question: a user set fit for no env
+    def make(tmp, ref):
+        mine = edit(user_set(ref, tmp))
+        return [*SD, "--no-cache", "--out", tmp / "o", "--pusht_data", mine], [mine], None
+
+    return make
+
+
+def _unfinished_engine_run(tmp, ref):
+    mine = user_set(ref, tmp)
+    stamp = {"made_by": stamps.MADE_BY, "kind": "engine", "config": {}, "complete": False}
+    (mine / stamps.STAMP_NAME).write_text(json.dumps(stamp))
+    return [*SD, "--no-cache", "--out", tmp / "o", "--pusht_data", mine], [mine], None
+
+
 def _own_set_changed_as_user_data(tmp, ref):
     mine = user_set(ref, tmp, stamped=True)
     _corrupt(mine / "meta" / "stats.json", 10)
@@ -200,6 +216,19 @@ CASES = [
     ("workers-zero", _sd("--workers", "0"), 2, "--workers must be a positive integer"),
     ("workers-too-many", _sd("--workers", "100000"), 2, "--workers must be at most"),
     ("lr-above-one", _sd("--lr", "5"), 2, "--lr must be at most"),
+    # issue 22 item 9: a huge finite sigma was a math domain error in the workers
+    ("yaw-sigma-huge", _sd("--aug_yaw_sigma", "1e308"), 2, "--aug_yaw_sigma must be at most 10"),
+    ("pos-sigma-huge", _sd("--aug_pos_sigma", "10.5"), 2, "--aug_pos_sigma must be at most 10"),
+    (
+        "lab-yaw-sigma-huge",
+        lambda tmp, ref: (
+            ["scale_lab.py", "--smoke", "--out", tmp / "lab", "--yaw_sigma", "1e308"],
+            [],
+            None,
+        ),
+        2,
+        "--yaw_sigma must be at most 10",
+    ),
     ("lr-inf", _sd("--lr", "inf"), 2, "--lr must be a finite"),
     ("batch-size-not-int", _sd("--batch_size", "abc"), 2, "invalid int value"),
     ("device-unknown", _sd("--device", "tpu"), 2, "--device must be"),
@@ -288,6 +317,15 @@ CASES = [
     ),
     ("user-data-bad-info-json", _user_set_corrupt("meta/info.json"), 2, "not a LeRobot v3 dataset"),
     ("own-set-given-damaged", _own_set_changed_as_user_data, 2, "is damaged: meta/stats.json changed"),
+    ("user-data-nan", _user_set_edited(with_nan), 2, "holds non-finite values (NaN or inf) in action"),
+    (
+        "user-data-nan-state",
+        _user_set_edited(lambda p: with_nan(p, "observation.state", 0)),
+        2,
+        "non-finite values (NaN or inf) in observation.state in 1 frames, the first at row 0",
+    ),
+    ("user-data-50fps", _user_set_edited(lambda p: with_fps(p, 50)), 2, "recorded at 50 fps, but the env"),
+    ("user-data-unfinished-engine-run", _unfinished_engine_run, 2, "unfinished augment_demos.py run"),
     # the generators
     (
         "gen-pusht-out-holds-data",
@@ -466,6 +504,58 @@ def test_cache_stores_only_what_this_run_wrote(tmp_path, monkeypatch):
         assert set(got) == {"metrics.json", "summary.txt"}
     finally:
         claim.release()
+
+
+def test_an_engine_output_is_a_pusht_set_like_any_other(ref, tmp_path):
+    """Issue 22 item 14: an augment_demos.py output (stamp kind "engine") passed as --pusht_data is
+    used as given, not refused as a mismatched generated set; it is never modified."""
+    eng = tmp_path / "eng"
+    p = run(
+        "augment_demos.py",
+        "--src",
+        ref["pusht"],
+        "--out",
+        eng,
+        "--per_demo",
+        "2",
+        "--workers",
+        "1",
+        "--quiet",
+    )
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert json.loads((eng / stamps.STAMP_NAME).read_text())["kind"] == "engine"
+    before = snapshot([eng])
+    p = run(*SD, "--no-cache", "--out", tmp_path / "o", "--pusht_data", eng)
+    assert p.returncode == 0 and p.stderr.strip() == "", p.stdout[-2000:] + p.stderr
+    assert "(your own set, used as given)" in p.stdout and "Traceback" not in p.stdout
+    assert (tmp_path / "o" / "metrics.json").exists() and snapshot([eng]) == before
+
+
+def test_a_replay_prints_exactly_the_numbers_of_the_run_it_replays(tmp_path):
+    """Issue 22 item 5: --out 0 then --out 1 (same flags): the replay's summary is the run's, with only
+    the written paths under 1/ (the old "{out}" text replacement turned every 0 into a 1)."""
+    mine = _file(tmp_path, "notes.txt")
+    before = snapshot([mine])
+    env, outs = env_for(tmp_path / "cache"), {}
+    for out in ("0", "1"):
+        p = subprocess.run(
+            [sys.executable, ROOT / "scale_data.py", *SD[1:], "--out", out],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            env=env,
+        )
+        assert p.returncode == 0 and p.stderr.strip() == "", p.stdout + p.stderr
+        outs[out] = p.stdout
+    run_lines, replay_lines = outs["0"].splitlines(), outs["1"].splitlines()
+    assert "reusing the result" in outs["1"] and "reusing" not in outs["0"]
+    summary = run_lines[run_lines.index(next(x for x in run_lines if x.startswith("headline:"))) :]
+    wrote = summary[-1]
+    assert wrote.startswith("wrote 0/cross_embodiment.json") and "0.00 -> " in summary[0]
+    assert replay_lines[-len(summary) :] == [*summary[:-1], wrote.replace(" 0/", " 1/")]
+    assert (tmp_path / "1" / "metrics.json").read_bytes() == (tmp_path / "0" / "metrics.json").read_bytes()
+    assert snapshot([mine]) == before
 
 
 # ---------------------------------------------------------------------------------------------
