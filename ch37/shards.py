@@ -53,6 +53,7 @@ from ch37.stamps import (
     LOCK_NAME,
     MADE_BY,
     STAMP_NAME,
+    changed_files,
     check_ours,
     digests,
     file_list,
@@ -207,7 +208,8 @@ def foreign(out: Path, stamp: dict) -> list[str]:
 
 
 def finished(out: Path, config: dict, n_shards: int) -> dict[int, dict]:
-    """{shard index: stamp} of the whole shards of this run; the rest of shards/ is removed.
+    """{shard index: stamp} of the whole shards of this run whose files still have the sha256 their
+    stamp records; the rest of shards/ is removed (a damaged shard with one printed line).
 
     Only called on a run folder of `config` that foreign() found clean: all under shards/ is ours."""
     root = Path(out) / SHARDS_DIR
@@ -219,7 +221,12 @@ def finished(out: Path, config: dict, n_shards: int) -> dict[int, dict]:
         m = re.fullmatch(r"shard-(\d{5})", path.name)
         stamp = read_stamp(path) if m else None
         if is_ours(stamp) and stamp.get("run") == key and int(m.group(1)) < n_shards:
-            done[int(m.group(1))] = stamp
+            damaged = changed_files(path, stamp)  # its files against the sha256 its stamp recorded
+            if not damaged:
+                done[int(m.group(1))] = stamp
+                continue
+            print(f"shard {m.group(1)} is damaged ({names(damaged)} differs from its stamp); making it again")
+            shutil.rmtree(path)
         else:
             shutil.rmtree(path)  # a shard cut off mid-save, one from other settings, a killed scratch
     return done

@@ -350,7 +350,7 @@ def test_joining_a_ray_cluster_same_bytes(src, reference, tmp_path):
 
 
 # ----------------------------------------------------------------------------------------------
-# Resume after a kill: the user's files refused (issue 22: #3)
+# Resume after a kill: the user's files refused, damaged shards remade (issue 22: #3, #4)
 # ----------------------------------------------------------------------------------------------
 def _killed_after(src, out, n_shards: int) -> list[str]:
     """Start the --workers 1 run on `out`, SIGKILL it once `n_shards` shards are finished; their names."""
@@ -384,3 +384,22 @@ def test_resume_refuses_user_files_in_shards_and_data(src, tmp_path):
     assert "data/README.md" in err[0] and "shards/notes.txt" in err[0], err
     assert "Traceback" not in p.stdout + p.stderr
     assert sha256_tree(out) == before  # nothing changed, the user's files included
+
+
+def test_resume_remakes_damaged_shards_byte_identical(src, reference, tmp_path):
+    """A bit flipped in one finished shard's parquet, another's emptied (a crash before the data reached
+    the disk): the resume says so, remakes both and ends byte-identical to an uninterrupted run."""
+    out = tmp_path / "o"
+    done = _killed_after(src, out, 2)
+    flipped, emptied = [out / shards.SHARDS_DIR / d / "data/chunk-000/file-000.parquet" for d in done[:2]]
+    data = bytearray(flipped.read_bytes())
+    data[len(data) // 2] ^= 0x01  # one bit in the middle of the file
+    flipped.write_bytes(bytes(data))
+    emptied.write_bytes(b"")
+    p = augment("--src", src, "--out", out, "--workers", "1", *SETTINGS, check=False)
+    assert p.returncode == 0 and "Traceback" not in p.stdout + p.stderr, p.stdout + p.stderr
+    lines = [x for x in p.stdout.splitlines() if "is damaged" in x]
+    assert len(lines) == 2 and all("making it again" in x for x in lines), p.stdout
+    assert tree(out) == tree(reference)  # every data/ and meta/ file, byte for byte
+    rep = json.loads((out / shards.REPORT_NAME).read_text())
+    assert rep["shards"]["reused"] == len(done) - 2 and rep["attempts"] == 12
