@@ -172,6 +172,11 @@ def check_out_path(path: Path, flag: str = "--out") -> str | None:
     path = Path(path)
     if str(path) == "":
         return f"{flag} must not be empty"
+    try:  # a non-UTF-8 name (a byte such as \xff) reaches Python as surrogates; pyarrow cannot take it
+        str(path.absolute()).encode("utf-8")
+    except UnicodeEncodeError:
+        shown = os.fsencode(path).decode("utf-8", "backslashreplace")
+        return f"{flag} {shown} is not a UTF-8 path (pyarrow cannot write it); pass a folder name in UTF-8"
     if path.exists() and not path.is_dir():
         return f"{flag} {path} is a file, not a folder; pass a folder path"
     where = path

@@ -46,7 +46,7 @@ import pusht_env
 from ch37 import DATA_CODE, engine, executors
 from ch37.demos import code_digest
 from ch37.errors import DataError
-from ch37.files import LEFTOVER, dump_json, lock, round_floats, unlock, write_atomic
+from ch37.files import LEFTOVER, check_out_path, dump_json, lock, round_floats, unlock, write_atomic
 from ch37.lerobot_io import load_arrays, schema_problem
 from ch37.seeds import SEED_BLOCK
 from ch37.stamps import (
@@ -433,6 +433,9 @@ def run(src: Path, out: Path, settings: dict, *, workers: int, ray: str | None =
     on Ray (ch37.executors.run): a run cut off earlier is finished, its whole shards kept; a complete
     run is left as it is. A second run on `out` waits for the first. Returns the generation report."""
     t0 = time.perf_counter()
+    problem = check_out_path(out)  # a path the file system or pyarrow cannot take, before anything
+    if problem:
+        raise DataError(problem)
     check_out(out, src)  # before reading the source: a folder that is not ours is refused at once
     arrays = read_source(src)
     config = settings | {"source": source_identity(arrays), "engine": ENGINE_VERSION, "versions": versions()}

@@ -278,6 +278,7 @@ BAD = [  # (id, make src or None (the good one), make out or None (a new folder)
     ("out_other_settings", None, _other_settings_out, [], "other settings"),
     ("out_is_a_demo_set", None, _demo_set_out, [], "did not make"),
     ("out_inside_src", None, lambda t: None, ["--out", "{src}/aug"], "overlaps"),
+    ("out_not_utf8", None, lambda t: Path(os.fsdecode(os.fsencode(t) + b"/out\xff")), [], "UTF-8"),
     ("per_demo_0", None, None, ["--per_demo", "0"], "--per_demo"),
     ("shard_size_0", None, None, ["--shard_size", "0"], "--shard_size"),
     ("workers_0", None, None, ["--workers", "0"], "--workers"),

@@ -184,6 +184,11 @@ def _gen(which, *flags, out="new"):
     return lambda tmp, ref: ([f"gen_demos_{which}.py", "--quiet", "--out", tmp / out, *flags], [], None)
 
 
+def _not_utf8(tmp) -> str:
+    """A folder name holding the byte 0xff (not UTF-8), as Python's argv carries it (a surrogate)."""
+    return os.fsdecode(os.fsencode(tmp) + b"/out\xff")
+
+
 CASES = [
     # scale_data.py: flags and limits (checked before any heavy import)
     ("seed-overflow", _sd("--seed", str(2**64)), 2, "--seed must be at most"),
@@ -198,6 +203,14 @@ CASES = [
     ("batch-beyond-ram", _sd("--batch_size", str(10**11)), 2, "lower --batch_size"),
     ("full-steps-negative", _sd("--full_steps", "-1"), 2, "--full_steps must be >= 0"),
     ("workers-zero", _sd("--workers", "0"), 2, "--workers must be a positive integer"),
+    # a path pyarrow cannot take (issue 22, item 12): refused before anything is written
+    ("out-not-utf8", lambda tmp, ref: ([*SD, "--no-cache", "--out", _not_utf8(tmp)], [], None), 2, "UTF-8"),
+    (
+        "gen-out-not-utf8",
+        lambda tmp, ref: (["gen_demos_pusht.py", "--quiet", "--out", _not_utf8(tmp)], [], None),
+        2,
+        "UTF-8",
+    ),
     ("workers-too-many", _sd("--workers", "100000"), 2, "--workers must be at most"),
     ("lr-above-one", _sd("--lr", "5"), 2, "--lr must be at most"),
     ("lr-inf", _sd("--lr", "inf"), 2, "--lr must be a finite"),
