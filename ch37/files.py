@@ -41,8 +41,11 @@ try:
 except ImportError:  # Windows: no advisory locks here; runs on one folder must then be kept apart by hand
     fcntl = None
 
-# what a crashed run can leave beside its target: .NAME.tmp-PID, .NAME.partial-PID, .NAME.old-PID
-LEFTOVER = re.compile(r"^\..+\.(tmp|partial|old)-(\d+)$")
+# What a crashed run of this project can leave beside its target: .NAME.ch37-tmp-PID (a file) and
+# .NAME.ch37-partial-PID (a folder holding our stamp from its first moment, see partial_dir). The
+# "ch37-" token is ours: a user's .NAME.tmp-N or .NAME.old-N never matches (issue 22, item 1).
+TOKEN = "ch37"
+LEFTOVER = re.compile(rf"^\.(.+)\.{TOKEN}-(tmp|partial)-(\d+)$")
 _CLAIMED: dict[Path, Claim] = {}  # folder (resolved) -> this process's claim on it (write_atomic's check)
 _HELD: dict[Path, int] = {}  # folder (resolved) -> the descriptor of its lock file, held by this process
 
@@ -84,12 +87,31 @@ def place(tmp: Path, path: Path) -> Path:
     return path
 
 
+def temp_path(path: Path, kind: str = "tmp") -> Path:
+    """Where this process builds `path` (a file: kind "tmp"; a folder: "partial"), beside it."""
+    path = Path(path)
+    return path.with_name(f".{path.name}.{TOKEN}-{kind}-{os.getpid()}")
+
+
+def partial_dir(path: Path) -> Path:
+    """A new folder beside `path` to build it in, marked as ours (our stamp inside) before anything else
+    is put there, so that sweep_leftovers can tell it from a user's folder of a similar name."""
+    tmp = temp_path(path, "partial")
+    if tmp.exists() or tmp.is_symlink():  # left by a crashed run that had this pid, if it is ours
+        if not _ours_to_sweep(tmp):
+            raise DataError(f"{tmp} is in the way and was not made by this program; move it and run again")
+        _remove(tmp)
+    tmp.mkdir(parents=True)
+    (tmp / STAMP_NAME).write_text(dump_json({"made_by": MADE_BY, "kind": "partial"}))
+    return tmp
+
+
 def write_atomic(path: Path, data: str | bytes) -> Path:
     """Write `data` to `path` through a temp file in the same folder and a rename: a reader sees the
     old file or the new one, never half of one. Creates the parent folder."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp = temp_path(path)
     try:
         tmp.write_bytes(data.encode("utf-8") if isinstance(data, str) else data)
     except BaseException:
@@ -108,9 +130,25 @@ def pid_alive(pid: int) -> bool:
     return True
 
 
-def sweep_leftovers(folder: Path) -> list[str]:
-    """Remove what a killed run of this project left in `folder`: temp files and half-written sets named
-    .NAME.tmp-PID / .NAME.partial-PID / .NAME.old-PID whose process is gone. Returns their names."""
+def _ours_to_sweep(p: Path) -> bool:
+    """A temp file of ours (the name says so), or a partial folder of ours: our stamp inside, or
+    nothing at all (cut off between its mkdir and its stamp; removing it loses nothing)."""
+    if p.is_symlink() or not p.is_dir():
+        return not p.is_symlink() and LEFTOVER.match(p.name).group(2) == "tmp"
+    return is_ours(read_stamp(p)) or not any(p.iterdir())
+
+
+def _remove(p: Path) -> None:
+    if p.is_dir() and not p.is_symlink():
+        shutil.rmtree(p, ignore_errors=True)
+    else:
+        p.unlink(missing_ok=True)
+
+
+def sweep_leftovers(folder: Path, name: str | None = None) -> list[str]:
+    """Remove what a killed run of this project left in `folder` (of `name` only, when given): temp
+    files .NAME.ch37-tmp-PID and partial folders .NAME.ch37-partial-PID holding our stamp, whose
+    process is gone. Nothing else, whatever its name. Returns the names removed."""
     removed = []
     try:
         entries = list(Path(folder).iterdir())
@@ -118,12 +156,12 @@ def sweep_leftovers(folder: Path) -> list[str]:
         return removed
     for p in entries:
         m = LEFTOVER.match(p.name)
-        if not m or int(m.group(2)) == os.getpid() or pid_alive(int(m.group(2))):
+        if not m or (name is not None and m.group(1) != name):
             continue
-        if p.is_dir() and not p.is_symlink():
-            shutil.rmtree(p, ignore_errors=True)
-        else:
-            p.unlink(missing_ok=True)
+        pid = int(m.group(3))
+        if pid == os.getpid() or pid_alive(pid) or not _ours_to_sweep(p):
+            continue
+        _remove(p)
         removed.append(p.name)
     return removed
 
@@ -134,6 +172,11 @@ def check_out_path(path: Path, flag: str = "--out") -> str | None:
     path = Path(path)
     if str(path) == "":
         return f"{flag} must not be empty"
+    try:  # a non-UTF-8 name (a byte such as \xff) reaches Python as surrogates; pyarrow cannot take it
+        str(path.absolute()).encode("utf-8")
+    except UnicodeEncodeError:
+        shown = os.fsencode(path).decode("utf-8", "backslashreplace")
+        return f"{flag} {shown} is not a UTF-8 path (pyarrow cannot write it); pass a folder name in UTF-8"
     if path.exists() and not path.is_dir():
         return f"{flag} {path} is a file, not a folder; pass a folder path"
     where = path
@@ -141,7 +184,7 @@ def check_out_path(path: Path, flag: str = "--out") -> str | None:
         where = where.parent
     if not where.is_dir():
         return f"{flag} {path} cannot be created: {where} is a file, not a folder"
-    probe = where / f".{path.name or 'out'}.tmp-{os.getpid()}"
+    probe = temp_path(where / (path.name or "out"))
     try:
         probe.write_bytes(b"")
         probe.unlink()
@@ -211,7 +254,7 @@ class Claim:
 
     def _save(self) -> None:  # not through write_atomic: that would consult this claim
         stamp = {"made_by": MADE_BY, "kind": "results", "files": self.files, "pending": self.pending}
-        tmp = self.out / f".{STAMP_NAME}.tmp-{os.getpid()}"
+        tmp = temp_path(self.out / STAMP_NAME)
         tmp.write_text(dump_json(stamp))
         os.replace(tmp, self.out / STAMP_NAME)
 

@@ -9,14 +9,13 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
-import os
 import shutil
 from pathlib import Path
 
 import numpy as np
 
 from ch37.errors import DataError
-from ch37.files import dump_json, sweep_leftovers
+from ch37.files import dump_json, partial_dir, sweep_leftovers
 from ch37.stamps import STAMP_NAME, digests, holds_data
 
 # torchcodec needs system FFmpeg libraries and prints long tracebacks when they are missing;
@@ -114,25 +113,25 @@ def write_dataset(
     ENV_STATE_KEY, when `feats` has it and an episode does not, is taken from the episode's
     observation.state columns of the same names (see features).
 
-    The set is built in a sibling temp directory and renamed into place, so an interrupted run
-    never leaves a half-written set at `out`; what a killed run left is removed here. `out` must not
+    The set is built in a sibling temp directory (ch37.files.partial_dir) and renamed into place, so
+    an interrupted run never leaves a half-written set at `out`; what a killed run left for `out` is
+    removed here, and nothing else beside it. `out` must not
     hold data. The stamp lists every file of the set with its sha256 (ch37.stamps).
     """
     LeRobotDataset = _lerobot_dataset_class()
     out = Path(out)
     if holds_data(out):
         raise DataError(f"{out} already holds data; pick another --out or remove it yourself")
-    tmp = out.parent / f".{out.name}.partial-{os.getpid()}"
     out.parent.mkdir(parents=True, exist_ok=True)
-    sweep_leftovers(out.parent)
-    if tmp.exists():
-        shutil.rmtree(tmp)  # our own leftover from a crashed run with this pid
+    sweep_leftovers(out.parent, out.name)  # a killed run's partial `out` only: the parent is not ours
     use_videos = any(f["dtype"] == "video" for f in feats.values())
     env_cols = (
         columns(feats["observation.state"]["names"], feats[ENV_STATE_KEY]["names"])
         if ENV_STATE_KEY in feats
         else None
     )
+    work = partial_dir(out)  # .NAME.ch37-partial-PID, our stamp inside; LeRobot writes the set in work/set
+    tmp = work / "set"
     try:
         ds = LeRobotDataset.create(
             repo_id,
@@ -170,8 +169,7 @@ def write_dataset(
                 f"{out} was written by another run at the same time; run the same command again"
             ) from e
     finally:
-        if tmp.exists():
-            shutil.rmtree(tmp)
+        shutil.rmtree(work, ignore_errors=True)
 
 
 def open_dataset(root: Path, repo_id: str = "local/demos"):

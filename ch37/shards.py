@@ -12,12 +12,15 @@ machine needs no shared disk. Layout of a run's folder:
     OUT/.scale_data.lock               held while a run writes OUT (ch37.files.lock)
     OUT/shards/shard-00007/            a finished shard: a LeRobot v3 set and its stamp (counts)
     OUT/shards/.shard-00007.partial/   a shard being saved; discarded by the next run
+    OUT/shards/.shard-00007.scratch/   a worker's scratch for a shard (local executors)
     OUT/data, OUT/meta                 the merged LeRobot v3 set (LeRobot's aggregate_datasets)
     OUT/generation_report.json         attempts, kept, yield, failures, timing (written last)
 
 A shard is saved into its .partial folder and renamed into place with its stamp inside, so a
 shard folder without the .partial suffix is always whole. The shards are removed once the run is
-stamped complete; the same command re-run after a kill makes only the missing shards.
+stamped complete; the same command re-run after a kill makes only the missing shards. What a run
+writes is known: these names, each shard's files (its stamp), data/ and meta/ (listed in the run's
+stamp before they are renamed into OUT); a resume that finds anything else refuses, changing nothing.
 """
 
 from __future__ import annotations
@@ -44,13 +47,30 @@ from ch37 import DATA_CODE, engine, executors
 from ch37.cli import available_memory
 from ch37.demos import code_digest
 from ch37.errors import DataError
-from ch37.files import dump_json, lock, round_floats, unlock, write_atomic
+from ch37.files import LEFTOVER, check_out_path, dump_json, lock, round_floats, unlock, write_atomic
 from ch37.lerobot_io import fps_problem, frames_problem, load_arrays, schema_problem
 from ch37.seeds import SEED_BLOCK
-from ch37.stamps import MADE_BY, STAMP_NAME, check_ours, read_json, read_stamp
+from ch37.stamps import (
+    LOCK_NAME,
+    MADE_BY,
+    STAMP_NAME,
+    changed_files,
+    check_ours,
+    digests,
+    file_list,
+    is_ours,
+    names,
+    read_json,
+    read_stamp,
+)
 
 SHARDS_DIR = "shards"
 REPORT_NAME = "generation_report.json"
+MERGE_DIR = ".merged.partial"  # the merge is built here, then its data/ and meta/ are renamed into OUT
+# What a run writes directly in OUT and in OUT/shards (both its own, under its lock); anything else
+# there is the user's, and a resume refuses to start rather than delete it (ch37.shards.foreign).
+RUN_NAMES = {STAMP_NAME, LOCK_NAME, REPORT_NAME, SHARDS_DIR, "data", "meta", MERGE_DIR}
+SHARD_NAMES = re.compile(r"shard-\d{5}|\.shard-\d{5}\.(partial|scratch)")
 SETTINGS = ("mode", "per_demo", "seed", "pos_sigma", "yaw_sigma", "shard_size")  # a run's flags
 # The engine's own code: a shard made by other code is never mixed into a run.
 ENGINE_VERSION = code_digest(DATA_CODE + ("ch37/engine.py", "ch37/shards.py"))
@@ -138,13 +158,30 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
     }
     if not kept:
         return {"files": {STAMP_NAME: dump_json(stamp).encode()}, "stamp": stamp}
-    with tempfile.TemporaryDirectory(prefix=".scratch-", dir=scratch) as tmp:
-        root = Path(tmp) / "set"
+    with _scratch(scratch, index) as tmp:
+        root = tmp / "set"
         engine.save(root, kept, repo_id="local/pusht_aug_shard", stamp=stamp)
         files = {
             p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
         }
     return {"files": files, "stamp": stamp}
+
+
+@contextlib.contextmanager
+def _scratch(scratch: str | None, index: int):
+    """A folder to write one shard in: OUT/shards/.shard-NNNNN.scratch (a name SHARD_NAMES knows, so
+    a killed run's is recognised and removed), or a fresh one in the system's temp folder."""
+    if scratch is None:
+        with tempfile.TemporaryDirectory(prefix="ch37-shard-") as tmp:
+            yield Path(tmp)
+        return
+    tmp = Path(scratch) / f".shard-{index:05d}.scratch"
+    shutil.rmtree(tmp, ignore_errors=True)  # a killed run's (OUT/shards is this run's, under its lock)
+    tmp.mkdir()
+    try:
+        yield tmp
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -165,10 +202,34 @@ def save_shard(out: Path, index: int, result: dict) -> None:
     tmp.rename(final)
 
 
-def finished(out: Path, config: dict, n_shards: int) -> dict[int, dict]:
-    """{shard index: stamp} of the whole shards of this run; partial and foreign shards are removed.
+def foreign(out: Path, stamp: dict) -> list[str]:
+    """What under the run folder `out` (of run stamp `stamp`) this command did not write, as paths
+    relative to `out`: names outside RUN_NAMES, SHARD_NAMES and our temp files; files in a stamped
+    shard its stamp does not list; files in data/ and meta/ the merge did not record in `stamp`."""
+    out, bad = Path(out), []
+    merged = stamp.get("merged") if isinstance(stamp.get("merged"), dict) else {}
+    for p in sorted(out.iterdir()):
+        folder = p.name in ("data", "meta", SHARDS_DIR, MERGE_DIR)
+        if p.is_symlink() or folder != p.is_dir() or (p.name not in RUN_NAMES and not LEFTOVER.match(p.name)):
+            bad.append(p.name)
+        elif p.name in ("data", "meta"):
+            bad += [f"{p.name}/{rel}" for rel in file_list(p) if f"{p.name}/{rel}" not in merged]
+        elif p.name == SHARDS_DIR:
+            for q in sorted(p.iterdir()):
+                st = read_stamp(q) if q.is_dir() else None
+                if q.is_symlink() or not q.is_dir() or not SHARD_NAMES.fullmatch(q.name):
+                    bad.append(f"{SHARDS_DIR}/{q.name}")
+                elif is_ours(st) and isinstance(st.get("files", {}), dict):
+                    listed = st.get("files", {})
+                    bad += [f"{SHARDS_DIR}/{q.name}/{r}" for r in file_list(q) if r not in listed]
+    return bad
 
-    Only called on a folder whose run stamp matches `config`, so everything under shards/ is ours."""
+
+def finished(out: Path, config: dict, n_shards: int) -> dict[int, dict]:
+    """{shard index: stamp} of the whole shards of this run whose files still have the sha256 their
+    stamp records; the rest of shards/ is removed (a damaged shard with one printed line).
+
+    Only called on a run folder of `config` that foreign() found clean: all under shards/ is ours."""
     root = Path(out) / SHARDS_DIR
     done = {}
     if not root.is_dir():
@@ -176,27 +237,32 @@ def finished(out: Path, config: dict, n_shards: int) -> dict[int, dict]:
     key = run_key(config)
     for path in sorted(root.iterdir()):
         m = re.fullmatch(r"shard-(\d{5})", path.name)
-        stamp = read_stamp(path) if m and path.is_dir() else None
-        if stamp and stamp.get("run") == key and int(m.group(1)) < n_shards:
-            done[int(m.group(1))] = stamp
-        elif path.is_dir():
-            shutil.rmtree(path)  # a shard cut off mid-save, or one from other settings
+        stamp = read_stamp(path) if m else None
+        if is_ours(stamp) and stamp.get("run") == key and int(m.group(1)) < n_shards:
+            damaged = changed_files(path, stamp)  # its files against the sha256 its stamp recorded
+            if not damaged:
+                done[int(m.group(1))] = stamp
+                continue
+            print(f"shard {m.group(1)} is damaged ({names(damaged)} differs from its stamp); making it again")
+            shutil.rmtree(path)
         else:
-            path.unlink()
+            shutil.rmtree(path)  # a shard cut off mid-save, one from other settings, a killed scratch
     return done
 
 
-def merge(out: Path, n_shards: int) -> int:
+def merge(out: Path, n_shards: int, run_stamp: dict) -> int:
     """Merge the shards that hold episodes into OUT/data and OUT/meta with LeRobot's
     aggregate_datasets and recompute meta/stats.json over all frames. The shards stay until the
-    run is stamped complete. Returns the number of merged episodes (0: nothing kept, no set)."""
+    run is stamped complete. Before data/ and meta/ are renamed into OUT, their files and sha256
+    are recorded in the run's stamp (`run_stamp` gains "merged"), so a resume knows them as ours.
+    Returns the number of merged episodes (0: nothing kept, no set)."""
     from lerobot.datasets.aggregate import aggregate_datasets
 
     out = Path(out)
     roots = [
         shard_dir(out, i) for i in range(n_shards) if (shard_dir(out, i) / "meta" / "info.json").exists()
     ]
-    tmp = out / ".merged.partial"
+    tmp = out / MERGE_DIR
     for stale in (tmp, out / "data", out / "meta"):  # ours: a merge cut off earlier in this folder
         if stale.exists():
             shutil.rmtree(stale)
@@ -212,6 +278,9 @@ def merge(out: Path, n_shards: int) -> int:
                 concatenate_data=False,
             )
         write_frame_stats(tmp)
+        listing = digests(tmp)
+        run_stamp["merged"] = {rel: d for rel, d in listing.items() if rel.split("/")[0] in ("data", "meta")}
+        write_atomic(out / STAMP_NAME, dump_json(run_stamp))
         (tmp / "data").rename(out / "data")
         (tmp / "meta").rename(out / "meta")
         shutil.rmtree(tmp)
@@ -386,6 +455,9 @@ def run(src: Path, out: Path, settings: dict, *, workers: int, ray: str | None =
     on Ray (ch37.executors.run): a run cut off earlier is finished, its whole shards kept; a complete
     run is left as it is. A second run on `out` waits for the first. Returns the generation report."""
     t0 = time.perf_counter()
+    problem = check_out_path(out)  # a path the file system or pyarrow cannot take, before anything
+    if problem:
+        raise DataError(problem)
     check_out(out, src)  # before reading the source: a folder that is not ours is refused at once
     arrays = read_source(src)
     n_sources = len(np.unique(arrays["episode_index"]))
@@ -398,6 +470,12 @@ def run(src: Path, out: Path, settings: dict, *, workers: int, ray: str | None =
     lock(out)
     try:
         stamp = check_out(out, src, config)  # again: a run waited for may have changed the folder
+        bad = foreign(out, stamp) if stamp else []
+        if bad:  # before anything is written: a resume deletes what a killed run left, never these
+            raise DataError(
+                f"{out} holds files this command did not write ({names(bad)}); move them elsewhere "
+                "and run the same command again (nothing was changed)"
+            )
         old = read_json(out / REPORT_NAME) if stamp and stamp.get("complete") else None
         if old:
             remove_shards(out)  # left over if a run was stopped right after its stamp
@@ -433,7 +511,7 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
     t_gen = time.perf_counter()
     made = _collect(out, results, done, config["versions"], total=sum(map(len, shards)), quiet=quiet)
     t_merge = time.perf_counter()
-    merged = merge(out, len(shards))
+    merged = merge(out, len(shards), run_stamp)
     seconds = time.perf_counter() - t0
     vers = {"python": platform.python_version(), **config["versions"]}
     if ray is not None:

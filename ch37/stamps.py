@@ -94,7 +94,7 @@ def changed_files(root: Path, stamp: dict) -> list[str]:
     return bad
 
 
-def _names(files: list[str], n: int = 3) -> str:
+def names(files: list[str], n: int = 3) -> str:
     return ", ".join(files[:n]) + (f" and {len(files) - n} more" if len(files) > n else "")
 
 
@@ -116,7 +116,7 @@ def check_replaceable(path: Path) -> None:
     foreign = foreign_files(path, stamp) if stamp else []
     if foreign:
         raise DataError(
-            f"{path} must be rebuilt but holds files this program did not write ({_names(foreign)}); "
+            f"{path} must be rebuilt but holds files this program did not write ({names(foreign)}); "
             "move them elsewhere and run the same command again (nothing was changed)"
         )
 

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import io
 import math
-import os
 from pathlib import Path
 
 import numpy as np
 
-from ch37.files import place, write_atomic
+from ch37.files import place, temp_path, write_atomic
 
 DATA_COLOURS = {"source": "tab:blue", "augmented": "tab:orange"}
 RERUN_APP_ID = "ch3_7_scale_data"  # letters, digits and underscores: accepted by Rerun as is
@@ -73,7 +72,7 @@ def save_rrd(path: Path, recording_id: str, log) -> Path:
     import rerun as rr
 
     rec = rr.RecordingStream(RERUN_APP_ID, recording_id=recording_id)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp = temp_path(path)
     try:
         rec.save(tmp)
         log(rec)

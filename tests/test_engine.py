@@ -1,6 +1,7 @@
 """The data engine: one attempt as a pure function, augment_demos.py's shards, merge, stats, executors,
 resume after SIGKILL, and its refusals. Real MuJoCo, real LeRobot, real Ray, real subprocesses."""
 
+import hashlib
 import json
 import math
 import os
@@ -20,7 +21,7 @@ import gen_demos_pusht
 import pusht_env
 from ch37 import engine, shards
 from ch37.lerobot_io import load_arrays, open_dataset
-from ch37.stamps import MADE_BY, STAMP_NAME
+from ch37.stamps import LOCK_NAME, MADE_BY, STAMP_NAME
 
 PER_DEMO, SHARD = 4, 2  # 3 sources x 4 = 12 attempts in 6 shards: enough to kill one run mid-way
 SETTINGS = ["--per_demo", str(PER_DEMO), "--shard_size", str(SHARD), "--quiet"]
@@ -293,6 +294,7 @@ BAD = [  # (id, make src or None (the good one), make out or None (a new folder)
     ("out_other_settings", None, _other_settings_out, [], "other settings"),
     ("out_is_a_demo_set", None, _demo_set_out, [], "did not make"),
     ("out_inside_src", None, lambda t: None, ["--out", "{src}/aug"], "overlaps"),
+    ("out_not_utf8", None, lambda t: Path(os.fsdecode(os.fsencode(t) + b"/out\xff")), [], "UTF-8"),
     ("per_demo_0", None, None, ["--per_demo", "0"], "--per_demo"),
     ("per_demo_huge", None, None, ["--per_demo", "1000000000"], "--per_demo must be at most 1000000"),  # #10
     ("shard_size_0", None, None, ["--shard_size", "0"], "--shard_size"),
@@ -373,3 +375,59 @@ def test_joining_a_ray_cluster_same_bytes(src, reference, tmp_path):
     assert tree(tmp_path / "joined") == tree(reference)
     rep = json.loads((tmp_path / "joined" / shards.REPORT_NAME).read_text())
     assert rep["executor"] == f"ray 127.0.0.1:{port}"
+
+
+# ----------------------------------------------------------------------------------------------
+# Resume after a kill: the user's files refused, damaged shards remade (issue 22: #3, #4)
+# ----------------------------------------------------------------------------------------------
+def _killed_after(src, out, n_shards: int) -> list[str]:
+    """Start the --workers 1 run on `out`, SIGKILL it once `n_shards` shards are finished; their names."""
+    cmd = [sys.executable, str(ROOT / "augment_demos.py"), "--src", str(src), "--out", str(out)]
+    proc = subprocess.Popen([*cmd, "--workers", "1", *SETTINGS], cwd=ROOT, stdout=subprocess.PIPE)
+    deadline = time.monotonic() + 300
+    while len(list((out / shards.SHARDS_DIR).glob("shard-*"))) < n_shards and proc.poll() is None:
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.communicate()
+    assert proc.returncode == -signal.SIGKILL, "the run ended before it was killed"
+    return sorted(p.name for p in (out / shards.SHARDS_DIR).glob("shard-*"))
+
+
+def sha256_tree(root) -> dict:
+    """{relative path: sha256} of every file under root but the lock file (which names its holder)."""
+    return {rel: hashlib.sha256(data).hexdigest() for rel, data in tree(root, skip=(LOCK_NAME,)).items()}
+
+
+def test_resume_refuses_user_files_in_shards_and_data(src, tmp_path):
+    out = tmp_path / "o"
+    _killed_after(src, out, 1)
+    (out / shards.SHARDS_DIR / "notes.txt").write_text("mine\n")
+    (out / "data").mkdir(exist_ok=True)
+    (out / "data" / "README.md").write_text("my readme\n")
+    before = sha256_tree(out)
+    p = augment("--src", src, "--out", out, "--workers", "1", *SETTINGS, check=False)
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(err) == 1 and err[0].startswith("error: "), p.stdout + p.stderr
+    assert "data/README.md" in err[0] and "shards/notes.txt" in err[0], err
+    assert "Traceback" not in p.stdout + p.stderr
+    assert sha256_tree(out) == before  # nothing changed, the user's files included
+
+
+def test_resume_remakes_damaged_shards_byte_identical(src, reference, tmp_path):
+    """A bit flipped in one finished shard's parquet, another's emptied (a crash before the data reached
+    the disk): the resume says so, remakes both and ends byte-identical to an uninterrupted run."""
+    out = tmp_path / "o"
+    done = _killed_after(src, out, 2)
+    flipped, emptied = [out / shards.SHARDS_DIR / d / "data/chunk-000/file-000.parquet" for d in done[:2]]
+    data = bytearray(flipped.read_bytes())
+    data[len(data) // 2] ^= 0x01  # one bit in the middle of the file
+    flipped.write_bytes(bytes(data))
+    emptied.write_bytes(b"")
+    p = augment("--src", src, "--out", out, "--workers", "1", *SETTINGS, check=False)
+    assert p.returncode == 0 and "Traceback" not in p.stdout + p.stderr, p.stdout + p.stderr
+    lines = [x for x in p.stdout.splitlines() if "is damaged" in x]
+    assert len(lines) == 2 and all("making it again" in x for x in lines), p.stdout
+    assert tree(out) == tree(reference)  # every data/ and meta/ file, byte for byte
+    rep = json.loads((out / shards.REPORT_NAME).read_text())
+    assert rep["shards"]["reused"] == len(done) - 2 and rep["attempts"] == 12

@@ -200,6 +200,11 @@ def _gen(which, *flags, out="new"):
     return lambda tmp, ref: ([f"gen_demos_{which}.py", "--quiet", "--out", tmp / out, *flags], [], None)
 
 
+def _not_utf8(tmp) -> str:
+    """A folder name holding the byte 0xff (not UTF-8), as Python's argv carries it (a surrogate)."""
+    return os.fsdecode(os.fsencode(tmp) + b"/out\xff")
+
+
 CASES = [
     # scale_data.py: flags and limits (checked before any heavy import)
     ("seed-overflow", _sd("--seed", str(2**64)), 2, "--seed must be at most"),
@@ -214,6 +219,14 @@ CASES = [
     ("batch-beyond-ram", _sd("--batch_size", str(10**11)), 2, "lower --batch_size"),
     ("full-steps-negative", _sd("--full_steps", "-1"), 2, "--full_steps must be >= 0"),
     ("workers-zero", _sd("--workers", "0"), 2, "--workers must be a positive integer"),
+    # a path pyarrow cannot take (issue 22, item 12): refused before anything is written
+    ("out-not-utf8", lambda tmp, ref: ([*SD, "--no-cache", "--out", _not_utf8(tmp)], [], None), 2, "UTF-8"),
+    (
+        "gen-out-not-utf8",
+        lambda tmp, ref: (["gen_demos_pusht.py", "--quiet", "--out", _not_utf8(tmp)], [], None),
+        2,
+        "UTF-8",
+    ),
     ("workers-too-many", _sd("--workers", "100000"), 2, "--workers must be at most"),
     ("lr-above-one", _sd("--lr", "5"), 2, "--lr must be at most"),
     # issue 22 item 9: a huge finite sigma was a math domain error in the workers
@@ -604,13 +617,51 @@ def test_leftovers_of_dead_processes_are_swept_and_live_ones_kept(tmp_path):
         [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True
     )
     gone, alive = int(dead.stdout), os.getppid()
-    (tmp_path / f".set.partial-{gone}").mkdir()
-    (tmp_path / f".set.partial-{gone}" / "x").write_text("half")
-    (tmp_path / f".metrics.json.tmp-{gone}").write_text("half")
-    (tmp_path / f".metrics.json.tmp-{alive}").write_text("in flight")
-    (tmp_path / ".hidden.txt").write_text("user's")
-    assert sorted(files.sweep_leftovers(tmp_path)) == [f".metrics.json.tmp-{gone}", f".set.partial-{gone}"]
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".hidden.txt", f".metrics.json.tmp-{alive}"]
+    (tmp_path / f".set.ch37-partial-{gone}").mkdir()  # ours: our stamp inside (files.partial_dir)
+    ours = json.dumps({"made_by": stamps.MADE_BY, "kind": "partial"})
+    (tmp_path / f".set.ch37-partial-{gone}" / stamps.STAMP_NAME).write_text(ours)
+    (tmp_path / f".set.ch37-partial-{gone}" / "x").write_text("half")
+    (tmp_path / f".empty.ch37-partial-{gone}").mkdir()  # cut off before its stamp: nothing to lose
+    (tmp_path / f".metrics.json.ch37-tmp-{gone}").write_text("half")
+    (tmp_path / f".metrics.json.ch37-tmp-{alive}").write_text("in flight")
+    users = [".hidden.txt", f".thesis.old-{gone}", f".notes.tmp-{gone}", f".mine.ch37-partial-{gone}"]
+    for name in users:  # a user's, whatever the name looks like: no file or folder of ours says so
+        (tmp_path / name).write_text("user's") if "partial" not in name else (tmp_path / name).mkdir()
+    (tmp_path / f".project.partial-{gone}").mkdir()
+    (tmp_path / f".project.partial-{gone}" / stamps.STAMP_NAME).write_text('{"made_by": "me"}')
+    (tmp_path / f".mine.ch37-partial-{gone}" / "draft.txt").write_text("user's")
+    kept = sorted([*users, f".metrics.json.ch37-tmp-{alive}", f".project.partial-{gone}"])
+    assert sorted(files.sweep_leftovers(tmp_path)) == sorted(
+        [f".empty.ch37-partial-{gone}", f".metrics.json.ch37-tmp-{gone}", f".set.ch37-partial-{gone}"]
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == kept
+
+
+def _lookalikes(folder: Path, target: str) -> list[Path]:
+    """A user's files named like a crashed run's leftovers (issue 22, item 1); none is ours."""
+    folder.mkdir(parents=True, exist_ok=True)
+    made = [_file(folder, ".thesis.old-2024", "chapter 1\n"), _file(folder, ".zshrc.old-2023", "alias\n")]
+    for name in (".project.tmp-31337", ".backup.partial-4242", f".{target}.ch37-partial-4242"):
+        (folder / name).mkdir()
+        made.append(_file(folder / name, "work.txt", "mine\n"))
+    return made
+
+
+@pytest.mark.parametrize("which", ["scale_data", "gen_demos_pusht"])
+def test_a_users_lookalike_leftovers_are_never_swept(ref, tmp_path, which):
+    """scale_data.py sweeps its --out, the generators the parent of theirs: only what we wrote goes."""
+    if which == "scale_data":  # the cached run: its claim of --out sweeps there as a full run's does
+        out, env = tmp_path / "o", env_for(ref["cache"])
+        argv, protect = [*SD, "--out", out], _lookalikes(out, "demos")
+    else:
+        out, env = tmp_path / "home" / "my_pusht", env_for()
+        argv = ["gen_demos_pusht.py", "--quiet", "--episodes", "1", "--no-video", "--out", out]
+        protect = _lookalikes(out.parent, out.name)
+    before = snapshot(protect)
+    p = run(*argv, env=env)
+    assert p.returncode == 0 and p.stderr.strip() == "", p.stdout[-2000:] + p.stderr
+    assert "Traceback" not in p.stdout + p.stderr
+    assert snapshot(protect) == before and len(before) == len(protect)  # every one, byte for byte
 
 
 def test_ex2_check_refuses_an_output_that_shares_memory_with_its_input():
