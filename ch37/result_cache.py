@@ -21,7 +21,8 @@ from pathlib import Path
 from ch37 import CODE_FILES, ROOT
 from ch37.config import NOT_IN_KEY, RESULT_FILES
 from ch37.errors import DataError
-from ch37.files import claimed, sha256_bytes, sweep_leftovers, write_atomic
+from ch37.files import claimed, dump_json, partial_dir, sha256_bytes, sweep_leftovers, temp_path, write_atomic
+from ch37.stamps import STAMP_NAME
 
 MANIFEST, SUMMARY = "manifest.json", "summary.txt"
 # summary.txt keeps each written file as NUL + its name + NUL (NUL is in no path and no number), so a
@@ -161,11 +162,11 @@ class ResultCache:
             return
         root = cache_root()
         dst = root / self.key
-        tmp = root / f".{self.key}.tmp-{os.getpid()}"
+        tmp = temp_path(dst, "partial")
         try:
             root.mkdir(parents=True, exist_ok=True)
             sweep_leftovers(root)
-            tmp.mkdir(exist_ok=True)
+            tmp = partial_dir(dst)  # marked as ours, so a crash here leaves nothing the sweep cannot tell
             manifest = {}
             for path, name in zip(written, names):
                 data = Path(path).read_bytes()
@@ -174,7 +175,8 @@ class ResultCache:
             text = summary_template(summary, written).encode()
             (tmp / SUMMARY).write_bytes(text)
             manifest[SUMMARY] = sha256_bytes(text)
-            (tmp / MANIFEST).write_text(json.dumps(manifest, sort_keys=True, indent=1) + "\n")
+            (tmp / MANIFEST).write_text(dump_json(manifest))
+            (tmp / STAMP_NAME).unlink()  # an entry holds exactly its manifest's files
             if isinstance(read_entry(dst), str):  # a damaged entry for this key: ours to replace
                 discard_entry(dst)
             try:
