@@ -32,6 +32,7 @@ from ch37.stamps import (
     check_ours,
     check_replaceable,
     is_ours,
+    names,
     read_stamp,
     sha256_file,
 )
@@ -298,6 +299,12 @@ class Claim:
             self.files = {k: v for k, v in (stamp.get("files") or {}).items() if isinstance(v, str)}
             self.pending = {k: v for k, v in (stamp.get("pending") or {}).items() if isinstance(v, str)}
         mine = {name for name in set(self.files) | set(self.pending) if self.is_own(out / name)}
+        others = sorted(mine - set(results))  # another command's results (scale_lab.py's, scale_data.py's)
+        if others:
+            raise DataError(
+                f"--out {out} holds another command's results ({names(others)}); pass another --out or move "
+                "them (nothing was changed)"
+            )
         for name in results:
             if name not in mine:
                 self.refuse(out / name)

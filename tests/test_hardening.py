@@ -574,6 +574,31 @@ def test_a_replay_prints_exactly_the_numbers_of_the_run_it_replays(tmp_path):
 # ---------------------------------------------------------------------------------------------
 # Ownership, file by file
 # ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "theirs, command",
+    [
+        (("scale_lab.json", "scale_lab.png"), SD),  # the lesson on a finished lab's folder
+        (result_cache.RESULT_FILES[:3], ("scale_lab.py", "--smoke", "--no-rerun")),  # and the reverse
+    ],
+)
+def test_one_commands_results_are_never_cleared_by_another(tmp_path, theirs, command):
+    """Issue 22 #2: results of another command in --out (ours, so not a user's file) stop the run with
+    one line naming them; nothing is deleted."""
+    out = tmp_path / "out"
+    c = files.claim(out, results=theirs)  # as that command's run leaves them: written under its claim
+    for name in theirs:
+        files.write_atomic(out / name, f"{name} of a finished run\n")
+    c.release()
+    before = snapshot([out])
+    p = run(*command, "--out", out, env=env_for(tmp_path / "cache"))
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(err) == 1 and "Traceback" not in p.stderr, p.stderr
+    assert "another command's results" in err[0] and theirs[0] in err[0]
+    assert {k: v for k, v in snapshot([out]).items() if not k.endswith(stamps.LOCK_NAME)} == {
+        k: v for k, v in before.items() if not k.endswith(stamps.LOCK_NAME)
+    }
+
+
 def test_claimed_out_refuses_a_foreign_file_and_clears_only_its_own(tmp_path):
     from ch37.errors import DataError
 
