@@ -300,6 +300,8 @@ BAD = [  # (id, make src or None (the good one), make out or None (a new folder)
     ("shard_size_0", None, None, ["--shard_size", "0"], "--shard_size"),
     ("workers_0", None, None, ["--workers", "0"], "--workers"),
     ("seed_negative", None, None, ["--seed", "-1"], "--seed"),
+    ("seed_too_big", None, None, ["--seed", "3074457345618"], "--seed must be at most"),  # issue 22 #8
+    ("out_name_too_long", None, None, ["--out", "/tmp/" + "a" * 300], "too long"),  # issue 22 #7
     ("pos_sigma_nan", None, None, ["--pos_sigma", "nan"], "--pos_sigma"),
     ("yaw_sigma_negative", None, None, ["--yaw_sigma", "-1"], "--yaw_sigma"),
     ("yaw_sigma_huge", None, None, ["--yaw_sigma", "1e308"], "--yaw_sigma must be at most 10"),  # issue 22 #9
@@ -334,6 +336,24 @@ def test_bad_input_is_one_line_and_exit_2(src, tmp_path, make_src, make_out, ext
         assert (tree(path, skip=()) if path.is_dir() else None) == files, path
     if make_out is None:
         assert not out.exists() and not (src / "aug").exists()
+
+
+def test_sigterm_is_one_line_and_143_and_the_run_finishes_later(src, reference, tmp_path):
+    """Issue 22 #7: SIGTERM mid-run is one `terminated:` line and exit 143; the same command finishes."""
+    out = tmp_path / "term"
+    cmd = [sys.executable, str(ROOT / "augment_demos.py"), "--src", str(src), "--out", str(out)]
+    cmd += ["--workers", "1", *SETTINGS]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while not list((out / shards.SHARDS_DIR).glob("shard-*")) and proc.poll() is None:
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    lines = err.strip().splitlines()
+    assert proc.returncode == 143 and len(lines) == 1 and lines[0].startswith("terminated:"), err
+    augment(*cmd[2:])
+    assert tree(out) == tree(reference)
 
 
 @pytest.mark.slow
