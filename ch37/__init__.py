@@ -22,7 +22,12 @@ A command of its own (the data engine, a tool) gets the same guarantees from err
 files.claim (or files.check_out_path), stamps.replace_own_dir and parallel.worker_setup.
 """
 
+import os
 from pathlib import Path
+
+# Offline by construction: everything the chapter reads it made itself, so no LeRobot or Hugging Face
+# call may reach for the Hub (a missing local file must be an error here, never a download).
+os.environ["HF_HUB_OFFLINE"] = os.environ["HF_DATASETS_OFFLINE"] = "1"
 
 ROOT = Path(__file__).resolve().parent.parent  # the repository root: scale_data.py, the envs, meta.yaml
 CHAPTER_ID = "ch3.7-scale-data"

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ch37.errors import DataError
-from ch37.files import dump_json, partial_dir, sweep_leftovers
+from ch37.files import dump_json, partial_dir, sweep_leftovers, temp_path
 from ch37.stamps import STAMP_NAME, digests, holds_data
 
 # torchcodec needs system FFmpeg libraries and prints long tracebacks when they are missing;
@@ -36,6 +36,17 @@ def _lerobot_dataset_class():
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     datasets.disable_progress_bars()
+    cache = Path(datasets.config.HF_DATASETS_CACHE)  # where datasets keeps its Arrow files of every read
+    try:
+        cache.mkdir(parents=True, exist_ok=True)
+        probe = temp_path(cache / "probe")
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        raise DataError(
+            f"the Hugging Face cache {cache} cannot be written ({e.strerror}); set HF_HOME to a folder "
+            "you can write to (your data sets are fine)"
+        ) from None
     if not getattr(dataset_writer.embed_images, "skips_imageless", False):
         dataset_writer.embed_images = _embed_images_if_any(dataset_writer.embed_images)
     return LeRobotDataset

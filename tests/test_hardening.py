@@ -396,6 +396,17 @@ CASES = [
         2,
         "is not a readable JSON sweep file",
     ),
+    # an unusable Hugging Face cache is named as the cause, not the (good) data set (issue 22, item 13)
+    (
+        "hf-home-is-a-file",
+        lambda tmp, ref: (
+            [*SD, "--no-cache", "--out", tmp / "o"],
+            [_file(tmp, "hf")],
+            env_for(HF_HOME=str(tmp / "hf")),
+        ),
+        2,
+        "the Hugging Face cache",
+    ),
     # the exercise checks (item 10)
     ("checks-ex2-output-aliases-input", _checks("ex2", ALIASING_MIX), 1, "shares memory with an input array"),
     ("checks-ex1-no-prediction", _checks("ex1", "WHY = 'no letter'\n"), 1, "PREDICTION is missing"),
