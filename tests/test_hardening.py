@@ -813,3 +813,42 @@ def test_kill_term_and_ctrl_c_leave_nothing_behind_and_the_same_command_continue
     assert p.returncode == 0 and p.stderr.strip() == "", p.stdout + p.stderr
     assert (out / "metrics.json").read_bytes() == ref["metrics"]
     assert not [x for x in out.rglob(".*") if x.name != stamps.LOCK_NAME]  # no temp file, no partial set
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 3 MB tmpfs; fill(free) leaves `free` bytes beside a user's file. Skipped where mounts fail."""
+    mnt = tmp_path / "disk"
+    mnt.mkdir()
+    mount = ["mount", "-t", "tmpfs", "-o", "size=3m", "tmpfs", str(mnt)]
+    if subprocess.run(mount, capture_output=True).returncode:
+        pytest.skip("cannot mount a tmpfs here (needs root); the full-disk rows run where it can")
+
+    def fill(free: int) -> Path:
+        st = os.statvfs(mnt)
+        filler = mnt / "my_big_file"
+        filler.write_bytes(b"x" * max(0, st.f_bavail * st.f_frsize - free))
+        return filler
+
+    yield mnt, fill
+    subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
+
+
+@pytest.mark.parametrize("free", [0, 128 << 10])
+def test_a_full_disk_under_the_engine_is_one_line(ref, small_disk, free):
+    """Issue 22 #7: augment_demos.py writing onto a full disk (before, during or after its first shard) ends
+    in one line naming the cause and exit 2, the user's file untouched; with space, the same command works."""
+    mnt, fill = small_disk
+    user = fill(free)
+    before = snapshot([user])
+    cmd = ["augment_demos.py", "--src", ref["pusht"], "--out", mnt / "aug", "--per_demo", "10", "--quiet"]
+    p = run(*cmd, "--workers", "1")
+    err = p.stderr.strip().splitlines()
+    assert "Traceback" not in p.stdout + p.stderr
+    assert snapshot([user]) == before
+    if p.returncode == 0:  # it fit: nothing to report
+        return
+    assert p.returncode == 2 and len(err) == 1 and "free some disk space" in err[0], p.stderr
+    user.unlink()  # space again: the same command finishes
+    p = run(*cmd, "--workers", "1")
+    assert p.returncode == 0, p.stderr
