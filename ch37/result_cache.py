@@ -107,8 +107,9 @@ def summary_for(template: str, out: Path) -> str:
     return "".join(str(out / part) if i % 2 else part for i, part in enumerate(parts))
 
 
-def discard_entry(entry: Path) -> None:
-    """Remove an entry's own files (the ones a cache entry can hold) and the folder if then empty."""
+def discard_entry(entry: Path) -> bool:
+    """Remove an entry's own files (the ones a cache entry can hold) and the folder if then empty;
+    True if the entry is gone."""
     for name in (*RESULT_FILES, SUMMARY, MANIFEST):
         try:
             (entry / name).unlink(missing_ok=True)
@@ -118,6 +119,7 @@ def discard_entry(entry: Path) -> None:
         entry.rmdir()
     except OSError:
         pass
+    return not entry.exists()
 
 
 class ResultCache:
@@ -137,8 +139,9 @@ class ResultCache:
         if got is None:
             return False
         if isinstance(got, str):
-            _warn(f"the cached result {entry} was damaged ({got}); discarded, computing it again")
-            discard_entry(entry)
+            gone = discard_entry(entry)
+            what = "discarded" if gone else "it could not be removed (remove it yourself)"
+            _warn(f"the cached result {entry} was damaged ({got}); {what}; computing it again")
             return False
         self.out.mkdir(parents=True, exist_ok=True)
         for name, data in got.items():
