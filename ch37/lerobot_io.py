@@ -29,13 +29,11 @@ IMAGE_SIZE = 96  # px, the optional top-down video is IMAGE_SIZE x IMAGE_SIZE RG
 ENV_STATE_KEY = "observation.environment_state"
 
 
-def _lerobot_dataset_class():
-    """LeRobotDataset, with Hugging Face datasets' per-episode "Map" bars silenced (our own bar is enough)."""
+def check_hf_cache() -> None:
+    """DataError (one line) unless Hugging Face datasets can write its cache: every read of a set goes
+    through it, and without this check a cache problem reads as a damaged data set."""
     import datasets
-    from lerobot.datasets import dataset_writer
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    datasets.disable_progress_bars()
     cache = Path(datasets.config.HF_DATASETS_CACHE)  # where datasets keeps its Arrow files of every read
     try:
         cache.mkdir(parents=True, exist_ok=True)
@@ -47,6 +45,16 @@ def _lerobot_dataset_class():
             f"the Hugging Face cache {cache} cannot be written ({e.strerror}); set HF_HOME to a folder "
             "you can write to (your data sets are fine)"
         ) from None
+
+
+def _lerobot_dataset_class():
+    """LeRobotDataset, with Hugging Face datasets' per-episode "Map" bars silenced (our own bar is enough)."""
+    import datasets
+    from lerobot.datasets import dataset_writer
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    datasets.disable_progress_bars()
+    check_hf_cache()
     if not getattr(dataset_writer.embed_images, "skips_imageless", False):
         dataset_writer.embed_images = _embed_images_if_any(dataset_writer.embed_images)
     return LeRobotDataset

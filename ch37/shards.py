@@ -48,7 +48,7 @@ from ch37.cli import available_memory
 from ch37.demos import code_digest
 from ch37.errors import DataError
 from ch37.files import LEFTOVER, check_out_path, dump_json, lock, round_floats, unlock, write_atomic
-from ch37.lerobot_io import fps_problem, frames_problem, load_arrays, schema_problem
+from ch37.lerobot_io import check_hf_cache, fps_problem, frames_problem, load_arrays, schema_problem
 from ch37.seeds import SEED_BLOCK
 from ch37.stamps import (
     LOCK_NAME,
@@ -376,6 +376,7 @@ def read_source(src: Path) -> dict:
                 f"--src {src}: {f.relative_to(src)} is not a readable parquet file ({e})"
             ) from None
     datasets.logging.set_verbosity(datasets.logging.CRITICAL)  # a failure below is our one line, not a log
+    check_hf_cache()  # a cache we cannot write is named as the cause, not the set
     try:
         arrays = load_arrays(src, keys=("observation.state", "action", "episode_index"))
     except Exception as e:  # pyarrow, datasets and lerobot each raise their own kinds for a broken set

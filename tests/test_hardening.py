@@ -852,3 +852,59 @@ def test_a_full_disk_under_the_engine_is_one_line(ref, small_disk, free):
     user.unlink()  # space again: the same command finishes
     p = run(*cmd, "--workers", "1")
     assert p.returncode == 0, p.stderr
+
+
+@pytest.fixture(scope="module")
+def as_nobody(ref):
+    """Run a command as an unprivileged user (uid 65534) with a world-readable copy of this interpreter,
+    in a world-readable scratch folder holding a copy of the reference PushT set. Skipped unless root."""
+    if os.geteuid() != 0 or shutil.which("setpriv") is None:
+        pytest.skip("needs root and setpriv to run a case as an unprivileged user")
+    import site
+    import tempfile
+
+    work = Path(tempfile.mkdtemp(prefix="ch37-nobody-"))
+    try:
+        py = work / "python"
+        shutil.copytree(sys.base_prefix, py, symlinks=True)
+        shutil.copytree(ref["pusht"], work / "src")
+        for p in [work, *work.rglob("*")]:
+            if not p.is_symlink():
+                p.chmod(0o755 if p.is_dir() or os.access(p, os.X_OK) else 0o644)
+        path = os.pathsep.join([*site.getsitepackages(), str(ROOT)])
+        env = {
+            "PATH": "/usr/bin:/bin",
+            "HOME": "/nonexistent",
+            "LD_LIBRARY_PATH": str(py / "lib"),
+            "PYTHONPATH": path,
+        }
+        exe = py / "bin" / Path(sys.executable).resolve().name
+
+        def run_nobody(*args):
+            cmd = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", str(exe), *map(str, args)]
+            return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, env=env, timeout=300)
+
+        if run_nobody("-c", "import numpy, ch37").returncode:
+            pytest.skip("this checkout or its packages are not readable by an unprivileged user")
+        yield work, run_nobody
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+@pytest.mark.parametrize(
+    "case, needle",
+    [("read_only_out", "cannot be written"), ("unwritable_home", "the Hugging Face cache")],
+)
+def test_unprivileged_cases_are_one_line(as_nobody, case, needle):
+    """Issue 22 #7 and #13, as an unprivileged user: --out inside a read-only folder, and a HOME that
+    cannot hold the Hugging Face cache (the good source set must not be blamed)."""
+    work, run_nobody = as_nobody
+    (work / "ro").mkdir(mode=0o555, exist_ok=True)
+    (work / "rw").mkdir(mode=0o777, exist_ok=True)
+    (work / "rw").chmod(0o777)
+    out = work / "ro" / "aug" if case == "read_only_out" else work / "rw" / case
+    before = snapshot([work / "src"])
+    p = run_nobody(ROOT / "augment_demos.py", "--src", work / "src", "--out", out, "--per_demo", "2")
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(err) == 1 and needle in err[0], p.stderr
+    assert "Traceback" not in p.stdout + p.stderr and snapshot([work / "src"]) == before
