@@ -127,7 +127,7 @@ STATE_NAMES = (
 ACTION_NAMES = ("right_vx", "right_vy", "right_grip_cmd", "left_vx", "left_vy", "left_grip_cmd")
 # LeRobot's convention puts the object and task state in observation.environment_state (its
 # policies need it or an image): here the cube and the target, state indices 6..9, by name.
-ENV_STATE_NAMES = ("cube_x", "cube_y", "target_x", "target_y")
+ENV_STATE_NAMES = STATE_NAMES[6:]  # cube_x, cube_y, target_x, target_y
 ROBOT_TYPE = "aloha_planar_bimanual"
 TASK = "Pick the cube with the right arm, hand it to the left arm, and place it on the target."
 

@@ -92,16 +92,7 @@ STATE_NAMES = (
 ACTION_NAMES = ("pusher_vx", "pusher_vy")
 # LeRobot's convention puts the object and task state in observation.environment_state (its
 # policies need it or an image): here the block and target poses, state indices 2..9, by name.
-ENV_STATE_NAMES = (
-    "block_x",
-    "block_y",
-    "block_sin_yaw",
-    "block_cos_yaw",
-    "target_x",
-    "target_y",
-    "target_sin_yaw",
-    "target_cos_yaw",
-)
+ENV_STATE_NAMES = STATE_NAMES[2:]  # block_x .. target_cos_yaw
 ROBOT_TYPE = "pusht_pusher"
 TASK = "Push the T-shaped block onto the target pose."
 

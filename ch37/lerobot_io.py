@@ -7,6 +7,7 @@ whole into a sibling temp folder and renamed into place, with the stamp (ch37.st
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import logging
 import shutil
@@ -34,7 +35,11 @@ def check_hf_cache() -> None:
     through it, and without this check a cache problem reads as a damaged data set."""
     import datasets
 
-    cache = Path(datasets.config.HF_DATASETS_CACHE)  # where datasets keeps its Arrow files of every read
+    _probe_cache(Path(datasets.config.HF_DATASETS_CACHE))
+
+
+@functools.cache
+def _probe_cache(cache: Path) -> None:  # once per folder and process: every read and write calls it
     try:
         cache.mkdir(parents=True, exist_ok=True)
         probe = temp_path(cache / "probe")
