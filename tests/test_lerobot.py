@@ -101,3 +101,64 @@ def test_lerobot_eval_bad_policy_is_one_line(tmp_path):
         p = run_script("-m", "tools.lerobot_eval", "--policy", policy, "--episodes", "1", check=False)
         assert p.returncode == 2 and p.stderr.strip().startswith("error:"), p.stderr
         assert len(p.stderr.strip().splitlines()) == 1
+
+
+def test_lerobot_lab_samples_are_lerobot_datasets_items(grown):
+    """tools.lerobot_lab's own loader gives, for every training sample, what lerobot-train's loader
+    gives: LeRobotDataset's item (observation windows, action chunk, pad flags) at the frames its
+    EpisodeAwareSampler draws."""
+    import numpy as np
+    from lerobot.datasets import EpisodeAwareSampler
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from ch37.lerobot_io import ENV_STATE_KEY, load_arrays
+    from tools import lerobot_lab
+
+    info = json.loads((grown / "meta" / "info.json").read_text())
+    a = load_arrays(grown, keys=("observation.state", "action", "episode_index"))
+    episodes = [
+        {k: a[k][a["episode_index"] == e] for k in ("observation.state", "action")}
+        for e in np.unique(a["episode_index"])
+    ]
+    policy, _, _ = lerobot_lab.policy_and_processors({}, seed=0)
+    cfg = policy.config
+    lengths = [len(e["action"]) for e in episodes]
+    s = lerobot_lab.samples(lengths, cfg)
+    frames = lerobot_lab.frame_arrays(episodes)
+    fps = info["fps"]
+    delta = {
+        k: [i / fps for i in cfg.observation_delta_indices] for k in ("observation.state", ENV_STATE_KEY)
+    }
+    delta["action"] = [i / fps for i in cfg.action_delta_indices]
+    ds = LeRobotDataset("local/pusht_aug", root=grown, delta_timestamps=delta, video_backend="pyav")
+    sampler = EpisodeAwareSampler(
+        ds.meta.episodes["dataset_from_index"],
+        ds.meta.episodes["dataset_to_index"],
+        drop_n_last_frames=cfg.drop_n_last_frames,
+    )
+    assert sorted(sampler) == s["rows"].tolist() and len(s["rows"]) > 0
+    ours = lerobot_lab.batch_of(frames, s, np.arange(len(s["rows"])))
+    for j, row in enumerate(s["rows"]):
+        item = ds[int(row)]
+        for key in (
+            "observation.state",
+            ENV_STATE_KEY,
+            "action",
+            "action_is_pad",
+            "observation.state_is_pad",
+        ):
+            assert np.array_equal(item[key].numpy(), ours[key][j].numpy()), (key, row)
+    assert ours["action_is_pad"].any() and ours["observation.state_is_pad"].any()  # both edges met
+
+
+@pytest.mark.slow
+def test_lerobot_lab_runs_end_to_end(tmp_path):
+    """A few steps on each point and one start: the pipeline, its JSON and the saved checkpoint."""
+    p = run_script(
+        "-m", "tools.lerobot_lab", "--steps", "3", "--seeds", "0", "--eval_episodes", "1", "--out", tmp_path
+    )
+    r = json.loads((tmp_path / "lerobot_lab.json").read_text())
+    assert set(r["table"]) == {"source", "fresh", "resolve", "exchange_rate"}, p.stdout
+    fresh, resolve = (json.loads((tmp_path / f"{k}_seed0.json").read_text()) for k in ("fresh", "resolve"))
+    assert (fresh["demos"], resolve["demos"]) == (108, 108) and fresh["frames"] != resolve["frames"]
+    assert (tmp_path / "resolve_seed0" / "pretrained_model" / "config.json").is_file()

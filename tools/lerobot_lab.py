@@ -1,0 +1,328 @@
+"""LeRobot's diffusion policy beside the chapter's MLP on three of the Scale Lab's points.
+
+    python -m tools.lerobot_lab                          # 3 points x seeds 0..2, 100 held-out starts each
+    python -m tools.lerobot_lab --pilot 8000             # one loss curve (fresh, N = 108, seed 0): the length
+    python -m tools.lerobot_lab --steps 30 --seeds 0 --eval_episodes 2 --out /tmp/ll   # seconds: the pipeline
+
+The points and their data are the lab's own (scale_lab.py): `source` (N = 12: episodes 0..11 of the
+chapter's PushT demo generator at the seed), `fresh` (N = 108: episodes 0..107) and `resolve` (12 +
+96: the 12 sources and the first 8 re-solved demos of each, exactly the lab's resolve point at 108).
+Each is trained with LeRobot's DiffusionPolicy (its config, network, noise scheduler, normalizer and
+optimizer and LR-scheduler presets, `policy.forward` + `loss.backward()`), a configuration small
+enough for a 2-core CPU (CONFIG below: the Diffusion Policy paper's PushT horizons, a 2-level U-Net),
+then rolled out through tools.lerobot_eval on the lab's held-out starts with the lesson's success
+rule and Wilson interval.
+
+What is ours is the data loader: lerobot-train reads each sample through LeRobotDataset (about 7 ms
+a sample here, 0.43 s of a 0.7 s step at batch 64), so this tool builds the same samples from the
+arrays: for frame t of an episode, observations at t-1, t and actions at t-1 .. t+14, clamped to
+the episode with `*_is_pad` flags, never the last `drop_n_last_frames` frames of an episode as a
+start (LeRobot's EpisodeAwareSampler). tests/test_lerobot.py checks them against LeRobotDataset's
+own items. Each run saves a `pretrained_model` folder (policy and processors) that tools.lerobot_eval
+and lerobot's own tools read. One JSON per (point, seed) under --out, kept across runs (a re-run
+skips what is done), and OUT/lerobot_lab.json with the pooled table.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bc_recipe import wilson
+from ch37 import ROOT
+from ch37.config import DEFAULTS, parser
+from ch37.errors import DataError
+from ch37.errors import main as run
+from ch37.files import dump_json, round_floats, write_atomic
+
+SOURCES = DEFAULTS["source_episodes"]  # 12
+N = 108  # the lab's point where the MLP's exchange rate is 0.65
+POINTS = ("source", "fresh", "resolve")
+# LeRobot 0.6.1's DiffusionConfig with the Diffusion Policy paper's PushT horizons (2 observations,
+# 16 actions predicted, 8 executed; its default is 64 / 32) and a 2-level U-Net (default 3 levels
+# of 512-2048 channels, ~250 M parameters, ~6 s a step here): 1.28 M parameters, 64 ms a step at
+# batch 64 on one core. 10 denoising steps at rollout (100 in training).
+CONFIG = dict(horizon=16, n_action_steps=8, n_obs_steps=2, down_dims=(64, 128), num_inference_steps=10)
+BATCH = 64
+KIND = "lerobot_lab"
+
+
+def point_episodes(point: str, seed: int, cache: Path) -> list[dict]:
+    """The lab's data at (point, seed) as episodes: {"observation.state": (T, 10), "action": (T, 2)}."""
+    import scale_lab
+    from ch37 import engine
+    from ch37.lerobot_io import load_arrays
+
+    path = cache / f"pusht_seed{seed}_ep{N}"
+    scale_lab.fresh_demos(path, seed, N)  # the lab's fresh set (made once, then read)
+    f = load_arrays(path, keys=("observation.state", "action", "episode_index"))
+    episodes = [
+        {k: f[k][f["episode_index"] == e] for k in ("observation.state", "action")}
+        for e in range(N if point == "fresh" else SOURCES)
+    ]
+    if point == "resolve":  # the lab's nested prefix: its largest per-source count, then the first 8
+        srcs = engine.sources({k: v[f["episode_index"] < SOURCES] for k, v in f.items()})
+        per = scale_lab.per_source(N)
+        kept, _, _ = engine.grow(
+            srcs,
+            80,
+            mode="resolve",
+            seed=seed,
+            pos_sigma=DEFAULTS["aug_pos_sigma"],
+            yaw_sigma=DEFAULTS["aug_yaw_sigma"],
+        )
+        taken: dict[int, int] = {}  # kept is in (source, k) order: the first `per` of each source
+        for ep in kept:
+            src = int(np.asarray(ep["aug.source_episode"]).flat[0])
+            taken[src] = taken.get(src, 0) + 1
+            if taken[src] <= per:
+                episodes.append({k: ep[k] for k in ("observation.state", "action")})
+    return episodes
+
+
+def samples(lengths, cfg) -> dict:
+    """Index arrays of every training sample, as LeRobotDataset and its EpisodeAwareSampler make them.
+
+    lengths: frames per episode, in order. Returns rows (S,) of the frame t each sample starts at,
+    obs (S, n_obs) and act (S, horizon) frame rows clamped to the episode, and their pad masks."""
+    starts = np.cumsum([0, *lengths[:-1]])
+    rows, lo, hi = [], [], []
+    for b, n in zip(starts, lengths, strict=True):
+        t = np.arange(b, b + max(n - cfg.drop_n_last_frames, 0))
+        rows.append(t)
+        lo.append(np.full(len(t), b))
+        hi.append(np.full(len(t), b + n - 1))
+    t, lo, hi = (np.concatenate(x) for x in (rows, lo, hi))
+    obs = t[:, None] + np.asarray(cfg.observation_delta_indices)[None]  # (S, 2)
+    act = t[:, None] + np.asarray(cfg.action_delta_indices)[None]  # (S, 16)
+    clamp = lambda q: np.clip(q, lo[:, None], hi[:, None])  # noqa: E731
+    pad = lambda q: (q < lo[:, None]) | (q > hi[:, None])  # noqa: E731
+    return {"rows": t, "obs": clamp(obs), "act": clamp(act), "obs_pad": pad(obs), "act_pad": pad(act)}
+
+
+def policy_and_processors(stats: dict, seed: int):
+    """A fresh LeRobot DiffusionPolicy (CONFIG) with its pre/post processors normalizing by `stats`."""
+    import torch
+    from lerobot.configs.types import FeatureType, PolicyFeature
+    from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
+    from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
+    from lerobot.policies.factory import make_pre_post_processors
+
+    import pusht_env
+    from ch37.lerobot_io import ENV_STATE_KEY
+
+    cfg = DiffusionConfig(
+        input_features={
+            "observation.state": PolicyFeature(FeatureType.STATE, (pusht_env.OBS_DIM,)),
+            ENV_STATE_KEY: PolicyFeature(FeatureType.ENV, (len(pusht_env.ENV_STATE_NAMES),)),
+        },
+        output_features={"action": PolicyFeature(FeatureType.ACTION, (pusht_env.ACT_DIM,))},
+        device="cpu",
+        **CONFIG,
+    )
+    torch.manual_seed(seed)  # the network's initial weights
+    policy = DiffusionPolicy(cfg)
+    pre, post = make_pre_post_processors(cfg, dataset_stats=stats)
+    return policy, pre, post
+
+
+def frame_arrays(episodes) -> dict:
+    """The set's frames: observation.state (F, 10), its environment_state columns (F, 8), action (F, 2)."""
+    import pusht_env
+    from ch37.lerobot_io import ENV_STATE_KEY, columns
+
+    x = np.concatenate([e["observation.state"] for e in episodes]).astype(np.float32)
+    env_cols = columns(pusht_env.STATE_NAMES, pusht_env.ENV_STATE_NAMES)
+    y = np.concatenate([e["action"] for e in episodes]).astype(np.float32)
+    return {"observation.state": x, ENV_STATE_KEY: np.ascontiguousarray(x[:, env_cols]), "action": y}
+
+
+def batch_of(frames: dict, s: dict, idx) -> dict:
+    """LeRobotDataset's items for the samples `idx`, stacked: (B, 2, D) observations, (B, 16, 2) actions."""
+    import torch
+
+    b = {k: torch.from_numpy(v[s["obs"][idx]]) for k, v in frames.items() if k != "action"}
+    b |= {f"{k}_is_pad": torch.from_numpy(s["obs_pad"][idx]) for k in list(b)}
+    b["action"] = torch.from_numpy(frames["action"][s["act"][idx]])
+    b["action_is_pad"] = torch.from_numpy(s["act_pad"][idx])
+    return b
+
+
+def train(episodes, steps: int, seed: int, log_every: int = 100):
+    """LeRobot's diffusion training step on our batches: (policy, pre, post, [(step, mean loss)])."""
+    import torch
+
+    frames = frame_arrays(episodes)
+    stats = {
+        k: {"min": v.min(0), "max": v.max(0), "mean": v.mean(0), "std": v.std(0)} for k, v in frames.items()
+    }
+    policy, pre, post = policy_and_processors(stats, seed)
+    cfg = policy.config
+    s = samples([len(e["action"]) for e in episodes], cfg)
+    opt = cfg.get_optimizer_preset().build(policy.parameters())
+    sched = cfg.get_scheduler_preset().build(opt, steps)
+    gen = torch.Generator().manual_seed(seed)  # the batch order: shuffled epochs, like a DataLoader
+    order, curve, window = torch.empty(0, dtype=torch.long), [], []
+    policy.train()
+    for step in range(1, steps + 1):
+        if len(order) < BATCH:
+            order = torch.cat([order, torch.randperm(len(s["rows"]), generator=gen)])
+        idx, order = order[:BATCH].numpy(), order[BATCH:]
+        loss, _ = policy.forward(pre(batch_of(frames, s, idx)))
+        opt.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(policy.parameters(), cfg.get_optimizer_preset().grad_clip_norm)
+        opt.step()
+        sched.step()
+        window.append(loss.item())
+        if step % log_every == 0 or step == steps:
+            curve.append((step, float(np.mean(window))))
+            window = []
+    return policy.eval(), pre, post, curve
+
+
+def one_run(job) -> dict:
+    """(point, seed, steps, eval_episodes, out): train, save, roll out; one JSON under out."""
+    import torch
+
+    from ch37.seeds import env_seed
+    from tools.lerobot_eval import evaluate
+
+    point, seed, steps, n_eval, out = job
+    torch.set_num_threads(1)
+    t0 = time.perf_counter()
+    episodes = point_episodes(point, seed, out / "demos")
+    policy, pre, post, curve = train(episodes, steps, seed)
+    t_train = time.perf_counter() - t0
+    folder = out / f"{point}_seed{seed}" / "pretrained_model"
+    for part in (policy, pre, post):
+        part.save_pretrained(folder)
+    eps = evaluate(policy, pre, post, [env_seed(seed, "eval", j) for j in range(n_eval)])
+    k = sum(e["success"] for e in eps)
+    result = {
+        "kind": KIND,
+        "point": point,
+        "seed": seed,
+        "demos": len(episodes),
+        "frames": int(sum(len(e["action"]) for e in episodes)),
+        "steps": steps,
+        "batch_size": BATCH,
+        "config": {k: list(v) if isinstance(v, tuple) else v for k, v in CONFIG.items()},
+        "successes": k,
+        "episodes": n_eval,
+        "success": k / n_eval,
+        "ci95": wilson(k / n_eval, n_eval),
+        "final_loss": curve[-1][1],
+        "loss_curve": curve,
+        "seconds_train": t_train,
+        "seconds_eval": time.perf_counter() - t0 - t_train,
+        "per_episode": eps,
+    }
+    write_atomic(out / f"{point}_seed{seed}.json", dump_json(round_floats(result)))
+    return result
+
+
+def pilot(steps: int, out: Path) -> None:
+    """The loss curve of one long run (fresh, N = 108, seed 0), printed and written: the length."""
+    import torch
+
+    torch.set_num_threads(2)
+    t0 = time.perf_counter()
+    _, _, _, curve = train(point_episodes("fresh", 0, out / "demos"), steps, 0, log_every=250)
+    for step, loss in curve:
+        print(f"step {step:6d}  loss {loss:.4f}")
+    write_atomic(
+        out / "pilot.json",
+        dump_json(
+            round_floats(
+                {"kind": KIND, "steps": steps, "loss_curve": curve, "seconds": time.perf_counter() - t0}
+            )
+        ),
+    )
+
+
+def fresh_equivalent(rate: float, r12: float, r108: float) -> float:
+    """Fresh demos that reach `rate`, log-linear in N between the fresh points at 12 and 108."""
+    if r108 <= r12:
+        return math.nan
+    frac = (rate - r12) / (r108 - r12)
+    return SOURCES * (N / SOURCES) ** frac
+
+
+def table(results: list[dict], seeds: list[int]) -> dict:
+    """Pooled success per point (mean over seeds, Wilson over all episodes) and the exchange rate."""
+    rows = {}
+    for p in POINTS:
+        got = [r for r in results if r["point"] == p]
+        if len(got) != len(seeds):
+            continue
+        n = sum(r["episodes"] for r in got)
+        rate = sum(r["successes"] for r in got) / n
+        rows[p] = {
+            "success": rate,
+            "ci95": wilson(rate, n),
+            "per_seed": {str(r["seed"]): r["success"] for r in got},
+        }
+    if len(rows) == len(POINTS):
+        eq = fresh_equivalent(rows["resolve"]["success"], rows["source"]["success"], rows["fresh"]["success"])
+        rows["exchange_rate"] = {"fresh_equivalent": eq, "per_generated_demo": (eq - SOURCES) / (N - SOURCES)}
+    return rows
+
+
+def main(argv=None) -> int:
+    p = parser(__doc__, prog="python -m tools.lerobot_lab")
+    p.add_argument(
+        "--steps", type=int, default=3000, help="gradient steps per run (the pilot's curve says why)"
+    )
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="the lab's seeds")
+    p.add_argument("--eval_episodes", type=int, default=100, help="held-out starts per run (the lab's 100)")
+    p.add_argument("--workers", type=int, default=2, help="runs at once, one torch thread each")
+    p.add_argument("--pilot", type=int, default=0, help="instead: one run of this many steps, its loss curve")
+    p.add_argument("--out", type=Path, default=ROOT / "outputs" / "lerobot_lab", help="results folder")
+    a = p.parse_args(argv)
+    if a.steps < 1 or a.workers < 1 or not 1 <= a.eval_episodes <= 1000:
+        raise DataError("--steps and --workers must be >= 1, --eval_episodes in [1, 1000]")
+    a.out.mkdir(parents=True, exist_ok=True)
+    if a.pilot:
+        pilot(a.pilot, a.out)
+        return 0
+    from ch37.parallel import imap
+
+    def done(point, seed):
+        path = a.out / f"{point}_seed{seed}.json"
+        if not path.exists():
+            return None
+        r = json.loads(path.read_text())
+        return r if (r["steps"], r["episodes"]) == (a.steps, a.eval_episodes) else None
+
+    import scale_lab
+
+    results, jobs = [], []
+    for s in a.seeds:
+        scale_lab.fresh_demos(a.out / "demos" / f"pusht_seed{s}_ep{N}", s, N)  # here, before the workers
+        for point in ("fresh", "resolve", "source"):  # the long ones first
+            r = done(point, s)
+            results.append(r) if r else jobs.append((point, s, a.steps, a.eval_episodes, a.out))
+    for r in imap(one_run, jobs, workers=min(a.workers, max(len(jobs), 1)), ordered=False):
+        print(
+            f"{r['point']:8s} seed {r['seed']}: {r['successes']}/{r['episodes']} successes, "
+            f"loss {r['final_loss']:.4f}, train {r['seconds_train']:.0f} s, eval {r['seconds_eval']:.0f} s",
+            flush=True,
+        )
+        results.append(r)
+    rows = table(results, a.seeds)
+    write_atomic(
+        a.out / "lerobot_lab.json",
+        dump_json(round_floats({"kind": KIND, "steps": a.steps, "seeds": a.seeds, "table": rows})),
+    )
+    for k, v in rows.items():
+        print(k, v)
+    return 0
+
+
+if __name__ == "__main__":
+    run(main)
