@@ -1,23 +1,29 @@
-"""Validated demos per second of the data engine, end to end, local processes vs Ray. Asserts nothing.
+"""Validated demos per second of the data engine, end to end: local processes, Ray, two Ray nodes.
 
-    python -m tools.bench_engine                                  # 10^3 and 10^4 demos, local and Ray
+    python -m tools.bench_engine                                  # 10^3, 10^4, 10^5 demos; local, ray, ray2
     python -m tools.bench_engine --sizes 1000 --executors local   # quicker
 
-Each point is one real `augment_demos.py` run (re-solve + LeRobot write of the shards + merge +
-stats) from a 12-episode gen_demos_pusht.py set, timed from outside, with the peak memory of its
-process tree sampled every 0.2 s (psutil): the driver alone, the largest single process, and the
-whole tree. Runs of one size on both executors must give the same bytes; the table says whether
-they did. Then an estimate for 10^5 and 10^6 demos on a Ray cluster of --cluster_cores cores, from
-the measured per-core rate and the measured merge cost per shard (assumptions printed beside it).
+Each point is one real `augment_demos.py` run (re-solve + shard write + merge + stats) from a
+12-episode gen_demos_pusht.py set, timed from outside, with the peak memory of its process tree
+sampled every 0.2 s (psutil): the driver alone, the largest single process, and the whole tree.
+`ray` is a private local Ray of --workers CPUs; `ray2` is a cluster of two Ray nodes on this
+machine (`ray start --head` and a second `ray start --address`, --workers / 2 CPUs each) that the
+run joins with `--ray ADDRESS`. Runs of one size must give the same bytes on every executor; the
+table says whether they did. Then an estimate for 10^5 and 10^6 demos on 64 and 1,024 cores from
+the measured per-core rate and the measured merge cost per demo (assumptions printed beside it).
 Writes OUT/bench_engine.json (default outputs/bench_engine); the runs' own folders are removed.
+Asserts nothing: the figures are for docs/engine.md.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import math
 import os
+import shutil
+import socket
 import subprocess
 import sys
 import tempfile
@@ -25,15 +31,25 @@ import time
 from pathlib import Path
 
 import gen_demos_pusht
-from ch37 import ROOT, engine, errors
+from ch37 import ROOT, engine, errors, shards
 from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
 from ch37.files import dump_json, round_floats, write_atomic
 from ch37.lerobot_io import load_arrays
-from ch37.stamps import replace_own_dir
+from ch37.stamps import is_ours, read_stamp
 from tools.common import parser, provenance
 
 SOURCE_EPISODES = DEFAULTS["source_episodes"]
+TABLE = {  # printed column: row key
+    "wall s": "wall_s",
+    "gen s": "generate_s",
+    "write s": "write_s",
+    "merge s": "merge_s",
+    "merge %": "merge_pct",
+    "demos/s": "demos_per_s",
+    "/worker": "generate_demos_per_s_per_worker",
+}
+EXECUTORS = ("local", "ray", "ray2")  # ray2: two Ray nodes on this machine, joined by address
 
 
 def tree_digest(root: Path) -> str:
@@ -45,12 +61,13 @@ def tree_digest(root: Path) -> str:
     return h.hexdigest()
 
 
-def run_sampled(cmd: list[str]) -> dict:
-    """Run `cmd`; wall seconds and peak RSS (MB) of the driver, of the largest process, of the tree."""
+def run_sampled(cmd: list[str], env: dict | None = None) -> dict:
+    """Run `cmd`; wall seconds and peak RSS (MB) of the driver, of the largest process, of the tree
+    (the tree: the driver's descendants; a joined cluster's workers are not its children)."""
     import psutil
 
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     root = psutil.Process(proc.pid)
     peak = {"driver": 0, "largest": 0, "tree": 0}
     while proc.poll() is None:
@@ -76,30 +93,68 @@ def run_sampled(cmd: list[str]) -> dict:
     return {"wall_s": wall, **{f"peak_rss_{k}_mb": v / 2**20 for k, v in peak.items()}, "stdout": out}
 
 
+@contextlib.contextmanager
+def two_ray_nodes(workers: int):
+    """A Ray cluster of two nodes on this machine, as an operator starts one: its address, then stopped.
+    `ray start` enables token authentication, so the run that joins needs RAY_AUTH_MODE=token."""
+    ray = [str(Path(sys.executable).with_name("ray"))]
+    env = os.environ | {"RAY_AUTH_MODE": "token"}
+    with socket.socket() as s:  # a free port for the head's GCS
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    cpus = [str(max(1, workers // 2)), str(max(1, workers - workers // 2))]
+    quiet = dict(env=env, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        head = ["--head", f"--port={port}", "--include-dashboard=false"]
+        for where, n in ((head, cpus[0]), ([f"--address=127.0.0.1:{port}"], cpus[1])):
+            subprocess.run([*ray, "start", *where, f"--num-cpus={n}", "--disable-usage-stats"], **quiet)
+        yield f"127.0.0.1:{port}", env
+    finally:
+        subprocess.run(
+            [*ray, "stop", "--force"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        )
+
+
+def remove_run(run_dir: Path) -> None:
+    """Remove an engine run this tool made (shards.foreign finds nothing else in it); refuse otherwise."""
+    if not run_dir.exists():
+        return
+    stamp = read_stamp(run_dir)
+    if not is_ours(stamp) or stamp.get("kind") != "engine" or shards.foreign(run_dir, stamp):
+        raise DataError(f"{run_dir} holds files this tool did not write; move it elsewhere")
+    shutil.rmtree(run_dir)
+
+
 def point(src: Path, out: Path, n: int, executor: str, workers: int, shard_size: int | None) -> dict:
     per_demo = math.ceil(n / SOURCE_EPISODES)
     run_dir = out / "runs" / f"n{n}-{executor}"
-    replace_own_dir(run_dir)  # an earlier run of this tool; anything else is refused
+    remove_run(run_dir)  # an earlier run of this tool; anything else is refused
     cmd = [sys.executable, str(ROOT / "augment_demos.py"), "--src", str(src), "--out", str(run_dir)]
     cmd += ["--per_demo", str(per_demo), "--workers", str(workers), "--quiet"]
-    cmd += ["--ray"] if executor == "ray" else []
     cmd += ["--shard_size", str(shard_size)] if shard_size else []
-    m = run_sampled(cmd)
+    if executor == "ray2":
+        with two_ray_nodes(workers) as (address, env):
+            m = run_sampled([*cmd, "--ray", address], env)
+    else:
+        m = run_sampled(cmd + (["--ray"] if executor == "ray" else []))
     rep = json.loads((run_dir / "generation_report.json").read_text())
     gen, start, merge = rep["seconds_generate"], rep["seconds_start_executor"], rep["seconds_merge"]
     shards, wall = rep["shards"]["total"], m.pop("wall_s")
     row = {"demos_requested": n, "executor": executor, "workers": workers, "shards": shards}
     row |= {k: rep[k] for k in ("attempts", "kept", "yield", "frames")} | {"wall_s": wall}
     row |= {"generate_s": gen, "start_executor_s": start, "merge_s": merge}  # start_executor_s: of generate_s
+    row |= {"write_s": rep.get("seconds_write", math.nan)}  # summed over workers: of their generate time
     row |= {
         "other_s": wall - gen - merge,
         "demos_per_s": rep["kept"] / wall,
         "merge_s_per_shard": merge / shards,
+        "merge_s_per_demo": merge / max(rep["kept"], 1),
+        "merge_pct": 100 * merge / wall,
     }
     row |= {"generate_demos_per_s_per_worker": rep["kept"] / (gen - start) / workers}
     row |= {"shard_size": rep["settings"]["shard_size"], "sha256": tree_digest(run_dir)}
     row |= {"summary": m.pop("stdout").strip().splitlines()[-1], **m}  # m: the peak RSS
-    replace_own_dir(run_dir)
+    remove_run(run_dir)
     return row
 
 
@@ -125,53 +180,58 @@ def per_demo_costs(src: Path, n: int = 100) -> dict:
     }
 
 
-def estimate(rows: list[dict], cores: int) -> dict:
-    """10^5 and 10^6 demos on `cores` Ray cores, from the largest measured size."""
+def estimate(rows: list[dict], cores_list=(64, 1024)) -> dict:
+    """10^5 and 10^6 demos on clusters of `cores_list` cores, from the largest measured local run."""
     big = max(r["demos_requested"] for r in rows)
-    local = [r for r in rows if r["demos_requested"] == big and r["executor"] == "local"]
-    ray = [r for r in rows if r["demos_requested"] == big and r["executor"] == "ray"]
-    base = local[0] if local else ray[0]
+    at = {r["executor"]: r for r in rows if r["demos_requested"] == big}
+    base = at.get("local") or next(iter(at.values()))
     rate = base["generate_demos_per_s_per_worker"]  # validated demos per second per core, write included
-    busy = [r["generate_s"] - r["start_executor_s"] for r in (ray[:1] + local[:1])]
-    ray_factor = busy[0] / busy[1] if (ray and local) else 1.0
-    start = (ray or local)[0]["other_s"] + (ray or local)[0]["start_executor_s"]  # imports, source, Ray
-    merge_per_shard, shard = base["merge_s_per_shard"], base["shard_size"]
+    ray = at.get("ray2") or at.get("ray")
+    busy = lambda r: r["generate_s"] - r["start_executor_s"]  # noqa: E731
+    ray_factor = busy(ray) / busy(base) if ray and base is not ray else 1.0
+    fixed = (ray or base)["other_s"] + (ray or base)["start_executor_s"]  # imports, source, Ray
+    merge_per_demo = base["merge_s_per_demo"]
     out = {
         "measured_at_demos": big,
         "per_core_demos_per_s": rate,
         "ray_vs_local_generate_time": ray_factor,
-        "fixed_s": start,
-        "merge_s_per_shard": merge_per_shard,
+        "fixed_s": fixed,
+        "merge_s_per_demo": merge_per_demo,
         "assumptions": [
             f"every cluster core makes demos at this machine's measured rate per worker ({rate:.1f}/s, "
-            "LeRobot write included) and shards scale perfectly (they share nothing)",
+            "write included) and shards scale perfectly (they share nothing)",
             f"Ray's overhead on the generation is the measured ratio to the local pool ({ray_factor:.2f})",
-            f"fixed cost (imports, reading the source, starting Ray) as measured here ({start:.0f} s)",
-            f"the merge runs on the driver alone at the measured cost per shard ({merge_per_shard:.2f} s for "
-            f"{shard} attempts) times the number of shards; stats need one feature of all frames in memory",
-            "shard bytes reach the driver fast enough (~0.4 MB per 100 demos; 10^6 demos: ~4 GB)",
+            f"fixed cost (imports, reading the source, starting Ray) as measured here ({fixed:.0f} s)",
+            f"the merge runs on the driver alone, linear in demos at {merge_per_demo * 1e3:.2f} ms a demo"
+            " (it places each shard once and reads every frame once for the exact stats)",
+            "shard bytes reach the driver as fast as they are made (~0.4 MB per 100 demos; 10^6: ~4 GB)",
             "yield as measured (about 1.0 for resolve)",
         ],
     }
-    for n in (10**5, 10**6):
-        gen = n / (rate * cores) * ray_factor
-        merge = math.ceil(n / shard) * merge_per_shard
-        total = start + gen + merge
-        out[str(n)] = {"generate_s": gen, "merge_s": merge, "total_s": total, "demos_per_s": n / total}
+    for cores in cores_list:
+        for n in (10**5, 10**6):
+            gen = n / (rate * cores) * ray_factor
+            merge = n * merge_per_demo
+            total = fixed + gen + merge
+            out[f"{n}@{cores}"] = {
+                "generate_s": gen,
+                "merge_s": merge,
+                "total_s": total,
+                "demos_per_s": n / total,
+            }
     return out
 
 
 def main(argv: list[str]) -> int:
     p = parser("bench_engine", __doc__)
-    p.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000], help="demos per run")
-    p.add_argument("--executors", nargs="+", choices=("local", "ray"), default=["local", "ray"])
+    p.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000, 100000], help="demos per run")
+    p.add_argument("--executors", nargs="+", choices=EXECUTORS, default=list(EXECUTORS))
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes / Ray CPUs")
     p.add_argument("--shard_size", type=int, help="attempts per shard (default: augment_demos.py's)")
     p.add_argument("--src", type=Path, help="a PushT set (default: a 12-episode set made under --out)")
     p.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_engine")
-    p.add_argument("--cluster_cores", type=int, default=64, help="cores of the cluster the estimate is for")
     a = p.parse_args(argv)
-    check(a, positive=("workers", "cluster_cores"))
+    check(a, positive=("workers",))
     if min(a.sizes) < 1:
         raise DataError("--sizes must be positive")
     src = a.src or a.out / f"src_pusht_seed0_ep{SOURCE_EPISODES}"
@@ -181,33 +241,33 @@ def main(argv: list[str]) -> int:
     costs = per_demo_costs(src)
     print(
         f"one core, in process: re-solve {costs['resolve_ms_per_attempt']:.1f} ms per attempt, "
-        f"LeRobot write (write_dataset) {costs['write_ms_per_demo']:.1f} ms per demo"
+        f"write (write_dataset) {costs['write_ms_per_demo']:.1f} ms per demo"
     )
     rows = []
-    head = f"{'wall s':>7s} {'gen s':>7s} {'merge s':>7s} {'demos/s':>8s} {'/worker':>7s}"
+    head = " ".join(f"{h:>7s}" for h in TABLE)
     print(f"{'demos':>6s} {'executor':8s} {'kept':>6s} {head} {'RSS MB driver/largest/tree':>27s}")
     for n in a.sizes:
         for ex in a.executors:
             r = point(src, a.out, n, ex, a.workers, a.shard_size)
             rows.append(r)
             rss = f"{r['peak_rss_driver_mb']:.0f}/{r['peak_rss_largest_mb']:.0f}/{r['peak_rss_tree_mb']:.0f}"
-            secs = f"{r['wall_s']:7.1f} {r['generate_s']:7.1f} {r['merge_s']:7.1f}"
-            rate = f"{r['demos_per_s']:8.1f} {r['generate_demos_per_s_per_worker']:7.1f}"
-            print(f"{n:6d} {ex:8s} {r['kept']:6d} {secs} {rate} {rss:>27s}", flush=True)
+            cells = " ".join(f"{r[k]:7.1f}" for k in TABLE.values())
+            print(f"{n:6d} {ex:8s} {r['kept']:6d} {cells} {rss:>27s}", flush=True)
         same = {r["sha256"] for r in rows if r["demos_requested"] == n}
         if len(a.executors) > 1:
-            print(f"{n:6d} local and Ray outputs byte-identical: {len(same) == 1}")
-    est = estimate(rows, a.cluster_cores)
-    for n in ("100000", "1000000"):
-        e = est[n]
-        print(
-            f"estimate {int(n):>9,d} demos on {a.cluster_cores} Ray cores: {e['total_s'] / 60:6.1f} min "
-            f"({e['demos_per_s']:.0f} demos/s; generate {e['generate_s'] / 60:.1f} min, "
-            f"merge {e['merge_s'] / 60:.1f} min)"
-        )
+            print(f"{n:6d} outputs byte-identical across {', '.join(a.executors)}: {len(same) == 1}")
+    est = estimate(rows)
+    for key, e in est.items():
+        if "@" in key:
+            n, cores = map(int, key.split("@"))
+            print(
+                f"estimate {n:>9,d} demos on {cores:>5,d} Ray cores: {e['total_s'] / 60:6.1f} min "
+                f"({e['demos_per_s']:.0f} demos/s; generate {e['generate_s'] / 60:.1f} min, "
+                f"merge {e['merge_s'] / 60:.1f} min)"
+            )
     print("assumptions: " + "; ".join(est["assumptions"]))
     same = {str(n): len({r["sha256"] for r in rows if r["demos_requested"] == n}) == 1 for n in a.sizes}
-    result = {"per_demo_costs": costs, "runs": rows, "estimate": est, "cluster_cores": a.cluster_cores}
+    result = {"per_demo_costs": costs, "runs": rows, "estimate": est}
     result |= {"provenance": provenance(a.script), "identical_across_executors": same}
     path = write_atomic(a.out / "bench_engine.json", dump_json(round_floats(result, 4)))
     print(f"wrote {path}")
