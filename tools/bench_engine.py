@@ -125,11 +125,12 @@ def remove_run(run_dir: Path) -> None:
     shutil.rmtree(run_dir)
 
 
-def point(src: Path, out: Path, n: int, executor: str, workers: int, shard_size: int | None) -> dict:
+def point(src: Path, out: Path, n: int, executor: str, a) -> dict:
+    workers, shard_size = a.workers, a.shard_size
     per_demo = math.ceil(n / SOURCE_EPISODES)
     run_dir = out / "runs" / f"n{n}-{executor}"
     remove_run(run_dir)  # an earlier run of this tool; anything else is refused
-    cmd = [sys.executable, str(ROOT / "augment_demos.py"), "--src", str(src), "--out", str(run_dir)]
+    cmd = [sys.executable, str(a.checkout / "augment_demos.py"), "--src", str(src), "--out", str(run_dir)]
     cmd += ["--per_demo", str(per_demo), "--workers", str(workers), "--quiet"]
     cmd += ["--shard_size", str(shard_size)] if shard_size else []
     if executor == "ray2":
@@ -230,8 +231,12 @@ def main(argv: list[str]) -> int:
     p.add_argument("--shard_size", type=int, help="attempts per shard (default: augment_demos.py's)")
     p.add_argument("--src", type=Path, help="a PushT set (default: a 12-episode set made under --out)")
     p.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_engine")
+    help = "the checkout whose augment_demos.py runs (default this one); another commit's for a before/after"
+    p.add_argument("--checkout", type=Path, default=ROOT, help=help)
     a = p.parse_args(argv)
     check(a, positive=("workers",))
+    if not (a.checkout / "augment_demos.py").is_file():
+        raise DataError(f"--checkout {a.checkout} has no augment_demos.py")
     if min(a.sizes) < 1:
         raise DataError("--sizes must be positive")
     src = a.src or a.out / f"src_pusht_seed0_ep{SOURCE_EPISODES}"
@@ -240,15 +245,15 @@ def main(argv: list[str]) -> int:
             raise DataError(f"could not make the source set at {src}")
     costs = per_demo_costs(src)
     print(
-        f"one core, in process: re-solve {costs['resolve_ms_per_attempt']:.1f} ms per attempt, "
-        f"write (write_dataset) {costs['write_ms_per_demo']:.1f} ms per demo"
+        f"this checkout, one core: re-solve {costs['resolve_ms_per_attempt']:.1f} ms an attempt, "
+        f"write (write_dataset) {costs['write_ms_per_demo']:.1f} ms a demo"
     )
     rows = []
     head = " ".join(f"{h:>7s}" for h in TABLE)
     print(f"{'demos':>6s} {'executor':8s} {'kept':>6s} {head} {'RSS MB driver/largest/tree':>27s}")
     for n in a.sizes:
         for ex in a.executors:
-            r = point(src, a.out, n, ex, a.workers, a.shard_size)
+            r = point(src, a.out, n, ex, a)
             rows.append(r)
             rss = f"{r['peak_rss_driver_mb']:.0f}/{r['peak_rss_largest_mb']:.0f}/{r['peak_rss_tree_mb']:.0f}"
             cells = " ".join(f"{r[k]:7.1f}" for k in TABLE.values())
@@ -267,7 +272,7 @@ def main(argv: list[str]) -> int:
             )
     print("assumptions: " + "; ".join(est["assumptions"]))
     same = {str(n): len({r["sha256"] for r in rows if r["demos_requested"] == n}) == 1 for n in a.sizes}
-    result = {"per_demo_costs": costs, "runs": rows, "estimate": est}
+    result = {"per_demo_costs": costs, "runs": rows, "estimate": est, "checkout": str(a.checkout.resolve())}
     result |= {"provenance": provenance(a.script), "identical_across_executors": same}
     path = write_atomic(a.out / "bench_engine.json", dump_json(round_floats(result, 4)))
     print(f"wrote {path}")

@@ -152,7 +152,7 @@ def batch_of(frames: dict, s: dict, idx) -> dict:
     return b
 
 
-def train(episodes, steps: int, seed: int, log_every: int = 100):
+def train(episodes, steps: int, seed: int, log_every: int = 100, show: bool = False):
     """LeRobot's diffusion training step on our batches: (policy, pre, post, [(step, mean loss)])."""
     import torch
 
@@ -182,6 +182,8 @@ def train(episodes, steps: int, seed: int, log_every: int = 100):
         if step % log_every == 0 or step == steps:
             curve.append((step, float(np.mean(window))))
             window = []
+            if show:
+                print(f"step {step:6d}  loss {curve[-1][1]:.4f}", flush=True)
     return policy.eval(), pre, post, curve
 
 
@@ -232,9 +234,7 @@ def pilot(steps: int, out: Path) -> None:
 
     torch.set_num_threads(2)
     t0 = time.perf_counter()
-    _, _, _, curve = train(point_episodes("fresh", 0, out / "demos"), steps, 0, log_every=250)
-    for step, loss in curve:
-        print(f"step {step:6d}  loss {loss:.4f}")
+    _, _, _, curve = train(point_episodes("fresh", 0, out / "demos"), steps, 0, log_every=250, show=True)
     write_atomic(
         out / "pilot.json",
         dump_json(
@@ -276,7 +276,7 @@ def table(results: list[dict], seeds: list[int]) -> dict:
 def main(argv=None) -> int:
     p = parser(__doc__, prog="python -m tools.lerobot_lab")
     p.add_argument(
-        "--steps", type=int, default=3000, help="gradient steps per run (the pilot's curve says why)"
+        "--steps", type=int, default=2000, help="gradient steps per run (docs/lerobot.md: the loss curves)"
     )
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="the lab's seeds")
     p.add_argument("--eval_episodes", type=int, default=100, help="held-out starts per run (the lab's 100)")
