@@ -1,4 +1,4 @@
-"""A data-engine run on disk: fixed shards of attempts, each a LeRobot v3 set with a stamp, merged by LeRobot.
+"""A data-engine run on disk: fixed shards of attempts, each a LeRobot v3 set with a stamp, merged in a pass.
 
     run(src, out, settings, workers=, ray=, quiet=) -> the generation report   (augment_demos.py)
 
@@ -13,8 +13,17 @@ machine needs no shared disk. Layout of a run's folder:
     OUT/shards/shard-00007/            a finished shard: a LeRobot v3 set and its stamp (counts)
     OUT/shards/.shard-00007.partial/   a shard being saved; discarded by the next run
     OUT/shards/.shard-00007.scratch/   a worker's scratch for a shard (local executors)
-    OUT/data, OUT/meta                 the merged LeRobot v3 set (LeRobot's aggregate_datasets)
+    OUT/data, OUT/meta                 the merged LeRobot v3 set (merge_sets)
     OUT/generation_report.json         attempts, kept, yield, failures, timing (written last)
+
+The merge (merge_sets) reads each shard's data and episodes parquet once, moves its episode and
+frame indices by those before it, and writes every file of the set once: data and meta/episodes
+files of up to LeRobot's 100 MB (cut by row counts, never where a shard ends, so the data files'
+bytes do not depend on --shard_size), tasks, info.json, and stats.json over all frames
+(write_frame_stats).
+It costs one read and one write per frame, where LeRobot's aggregate_datasets re-read and rewrote
+its growing episodes file for every shard. LeRobotDataset reads what either writes the same
+(tests/test_merge.py).
 
 A shard is saved into its .partial folder and renamed into place with its stamp inside, so a
 shard folder without the .partial suffix is always whole. The shards are removed once the run is
@@ -134,7 +143,8 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
     under `scratch`, the system's when None), then read it back as bytes.
 
     Returns {"files": {relative path: bytes}, "stamp": the shard's stamp}. The stamp holds the
-    counts the report needs (attempts, kept, failures by reason, per source, episode lengths)."""
+    counts the report needs (attempts, kept, failures by reason, per source, episode lengths) and
+    seconds_write, the seconds the worker spent writing the set and reading it back."""
     how = {k: config[k] for k in ("seed", "pos_sigma", "yaw_sigma", "mode")}
     results = engine.run_attempts(sources, jobs, workers=1, **how)
     kept = [r for r in results if not isinstance(r, str)]
@@ -157,13 +167,16 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
     }
     if not kept:
         return {"files": {STAMP_NAME: dump_json(stamp).encode()}, "stamp": stamp}
+    t0 = time.perf_counter()
     with _scratch(scratch, index) as tmp:
         root = tmp / "set"
         engine.save(root, kept, repo_id="local/pusht_aug_shard", stamp=stamp)
         files = {
             p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
         }
-    return {"files": files, "stamp": stamp}
+    # the report's seconds_write (summed over shards); only in the stamp handed back, not in the
+    # shard's files (their stamp is written inside the set, before the write ends)
+    return {"files": files, "stamp": stamp | {"seconds_write": time.perf_counter() - t0}}
 
 
 @contextlib.contextmanager
@@ -274,8 +287,8 @@ def merge(out: Path, n_shards: int, run_stamp: dict) -> int:
     return episodes
 
 
-# Episode rows per row group of meta/episodes: a fixed count, so the file's bytes never depend on
-# how the episodes were cut into shards (LeRobot's own writer buffers a few episodes per group).
+# Episode rows per row group of meta/episodes: a fixed count, so the row groups never depend on how
+# the episodes were cut into shards (LeRobot's own writer buffers a few episodes per group).
 EPISODE_ROWS = 1000
 SHIFTED_STATS = ("min", "max", "mean", "q01", "q10", "q50", "q90", "q99")  # move with their column
 
@@ -704,6 +717,8 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
             "seconds_generate": t_merge - t_gen,
             "seconds_start_executor": timing["start_s"],
             "seconds_merge": time.perf_counter() - t_merge,
+            # worker seconds (summed over the shards made by this run) inside seconds_generate
+            "seconds_write": sum(done[i].get("seconds_write", 0.0) for i in todo),
             "demos_per_s": made / seconds,
             "command": " ".join(shlex.quote(x) for x in [Path(sys.executable).name, *sys.argv]),
             "versions": vers,
