@@ -360,8 +360,9 @@ def _read_set(root: Path) -> tuple:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    eps = pa.concat_tables(pq.read_table(f) for f in sorted(root.glob("meta/episodes/*/*.parquet")))
-    data = pa.concat_tables(pq.read_table(f) for f in sorted(root.glob("data/*/*.parquet")))
+    # ParquetFile.read: read_table's dataset path costs ~10x more on a 100-row-group file (95 ms, 10 ms)
+    eps = pa.concat_tables(pq.ParquetFile(f).read() for f in sorted(root.glob("meta/episodes/*/*.parquet")))
+    data = pa.concat_tables(pq.ParquetFile(f).read() for f in sorted(root.glob("data/*/*.parquet")))
     n = eps.num_rows
     ep = eps.column("episode_index").to_numpy()
     lo, hi = eps.column("dataset_from_index").to_numpy(), eps.column("dataset_to_index").to_numpy()
@@ -489,7 +490,7 @@ def column(files, key: str) -> np.ndarray:
 
     parts = []
     for f in files:
-        col = pq.read_table(f, columns=[key]).column(key).combine_chunks()
+        col = pq.ParquetFile(f).read(columns=[key]).column(key).combine_chunks()
         if pa.types.is_list(col.type) or pa.types.is_fixed_size_list(col.type):
             parts.append(
                 col.flatten().to_numpy(zero_copy_only=False).astype(np.float64).reshape(len(col), -1)
