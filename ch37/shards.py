@@ -1,4 +1,4 @@
-"""A data-engine run on disk: fixed shards of attempts, each a LeRobot v3 set with a stamp, merged in a pass.
+"""A data-engine run on disk: fixed shards of attempts, each a LeRobot v3 set with a stamp, merged once.
 
     run(src, out, settings, workers=, ray=, quiet=) -> the generation report   (augment_demos.py)
 
@@ -20,10 +20,9 @@ The merge (merge_sets) reads each shard's data and episodes parquet once, moves 
 frame indices by those before it, and writes every file of the set once: data and meta/episodes
 files of up to LeRobot's 100 MB (cut by row counts, never where a shard ends, so the data files'
 bytes do not depend on --shard_size), tasks, info.json, and stats.json over all frames
-(write_frame_stats).
-It costs one read and one write per frame, where LeRobot's aggregate_datasets re-read and rewrote
-its growing episodes file for every shard. LeRobotDataset reads what either writes the same
-(tests/test_merge.py).
+(write_frame_stats). It costs one read and one write per frame, and one more read of each column
+for the exact stats, where LeRobot's aggregate_datasets re-read and rewrote its growing episodes
+file for every shard. LeRobotDataset reads what either writes the same (tests/test_merge.py).
 
 A shard is saved into its .partial folder and renamed into place with its stamp inside, so a
 shard folder without the .partial suffix is always whole. The shards are removed once the run is
