@@ -91,6 +91,7 @@ def point(src: Path, out: Path, n: int, executor: str, workers: int, shard_size:
     row = {"demos_requested": n, "executor": executor, "workers": workers, "shards": shards}
     row |= {k: rep[k] for k in ("attempts", "kept", "yield", "frames")} | {"wall_s": wall}
     row |= {"generate_s": gen, "start_executor_s": start, "merge_s": merge}  # start_executor_s: of generate_s
+    row |= {"write_s": rep["seconds_write"]}  # worker seconds writing shards, summed: inside generate_s
     row |= {
         "other_s": wall - gen - merge,
         "demos_per_s": rep["kept"] / wall,
