@@ -1,4 +1,4 @@
-"""A data-engine run on disk: fixed shards of attempts, each a LeRobot v3 set with a stamp, merged by LeRobot.
+"""A data-engine run on disk: fixed shards of attempts, each a LeRobot v3 set with a stamp, merged once.
 
     run(src, out, settings, workers=, ray=, quiet=) -> the generation report   (augment_demos.py)
 
@@ -13,8 +13,16 @@ machine needs no shared disk. Layout of a run's folder:
     OUT/shards/shard-00007/            a finished shard: a LeRobot v3 set and its stamp (counts)
     OUT/shards/.shard-00007.partial/   a shard being saved; discarded by the next run
     OUT/shards/.shard-00007.scratch/   a worker's scratch for a shard (local executors)
-    OUT/data, OUT/meta                 the merged LeRobot v3 set (LeRobot's aggregate_datasets)
+    OUT/data, OUT/meta                 the merged LeRobot v3 set (merge_sets)
     OUT/generation_report.json         attempts, kept, yield, failures, timing (written last)
+
+The merge (merge_sets) reads each shard's data and episodes parquet once, moves its episode and
+frame indices by those before it, and writes every file of the set once: data and meta/episodes
+files of up to LeRobot's 100 MB (cut by row counts, never where a shard ends, so the data files'
+bytes do not depend on --shard_size), tasks, info.json, and stats.json over all frames
+(write_frame_stats). It costs one read and one write per frame, and one more read of each column
+for the exact stats, where LeRobot's aggregate_datasets re-read and rewrote its growing episodes
+file for every shard. LeRobotDataset reads what either writes the same (tests/test_merge.py).
 
 A shard is saved into its .partial folder and renamed into place with its stamp inside, so a
 shard folder without the .partial suffix is always whole. The shards are removed once the run is
@@ -27,7 +35,6 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import io
 import json
 import platform
 import re
@@ -135,7 +142,8 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
     under `scratch`, the system's when None), then read it back as bytes.
 
     Returns {"files": {relative path: bytes}, "stamp": the shard's stamp}. The stamp holds the
-    counts the report needs (attempts, kept, failures by reason, per source, episode lengths)."""
+    counts the report needs (attempts, kept, failures by reason, per source, episode lengths) and
+    seconds_write, the seconds the worker spent writing the set and reading it back."""
     how = {k: config[k] for k in ("seed", "pos_sigma", "yaw_sigma", "mode")}
     results = engine.run_attempts(sources, jobs, workers=1, **how)
     kept = [r for r in results if not isinstance(r, str)]
@@ -158,13 +166,16 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
     }
     if not kept:
         return {"files": {STAMP_NAME: dump_json(stamp).encode()}, "stamp": stamp}
+    t0 = time.perf_counter()
     with _scratch(scratch, index) as tmp:
         root = tmp / "set"
         engine.save(root, kept, repo_id="local/pusht_aug_shard", stamp=stamp)
         files = {
             p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
         }
-    return {"files": files, "stamp": stamp}
+    # the report's seconds_write (summed over shards); only in the stamp handed back, not in the
+    # shard's files (their stamp is written inside the set, before the write ends)
+    return {"files": files, "stamp": stamp | {"seconds_write": time.perf_counter() - t0}}
 
 
 @contextlib.contextmanager
@@ -251,13 +262,11 @@ def finished(out: Path, config: dict, n_shards: int) -> dict[int, dict]:
 
 
 def merge(out: Path, n_shards: int, run_stamp: dict) -> int:
-    """Merge the shards that hold episodes into OUT/data and OUT/meta with LeRobot's
-    aggregate_datasets and recompute meta/stats.json over all frames. The shards stay until the
-    run is stamped complete. Before data/ and meta/ are renamed into OUT, their files and sha256
-    are recorded in the run's stamp (`run_stamp` gains "merged"), so a resume knows them as ours.
+    """Merge the shards that hold episodes into OUT/data and OUT/meta in one pass (merge_sets), with
+    meta/stats.json over all frames. The shards stay until the run is stamped complete. Before data/
+    and meta/ are renamed into OUT, their files and sha256 are recorded in the run's stamp
+    (`run_stamp` gains "merged"), so a resume knows them as ours.
     Returns the number of merged episodes (0: nothing kept, no set)."""
-    from lerobot.datasets.aggregate import aggregate_datasets
-
     out = Path(out)
     roots = [
         shard_dir(out, i) for i in range(n_shards) if (shard_dir(out, i) / "meta" / "info.json").exists()
@@ -266,25 +275,203 @@ def merge(out: Path, n_shards: int, run_stamp: dict) -> int:
     for stale in (tmp, out / "data", out / "meta"):  # ours: a merge cut off earlier in this folder
         if stale.exists():
             shutil.rmtree(stale)
+    episodes = merge_sets(roots, tmp) if roots else 0
     if roots:
-        with contextlib.redirect_stderr(io.StringIO()):  # aggregate_datasets' own tqdm bars
-            # one data file per shard: appending would re-read and rewrite the merged file for
-            # every shard (30 shards of 100: 67 s instead of 34 s here, and memory growing with N)
-            aggregate_datasets(
-                [f"local/shard-{i:05d}" for i in range(len(roots))],
-                "local/pusht_aug",
-                roots=roots,
-                aggr_root=tmp,
-                concatenate_data=False,
-            )
-        write_frame_stats(tmp)
         listing = digests(tmp)
         run_stamp["merged"] = {rel: d for rel, d in listing.items() if rel.split("/")[0] in ("data", "meta")}
         write_atomic(out / STAMP_NAME, dump_json(run_stamp))
         (tmp / "data").rename(out / "data")
         (tmp / "meta").rename(out / "meta")
         shutil.rmtree(tmp)
-    return sum(read_json(r / "meta" / "info.json")["total_episodes"] for r in roots)
+    return episodes
+
+
+# Episode rows per row group of meta/episodes: a fixed count, so the row groups never depend on how
+# the episodes were cut into shards (LeRobot's own writer buffers a few episodes per group).
+EPISODE_ROWS = 1000
+SHIFTED_STATS = ("min", "max", "mean", "q01", "q10", "q50", "q90", "q99")  # move with their column
+
+
+class _Files:
+    """A series of parquet files `pattern` (chunk, file) under `root`, each written once, in order.
+
+    A file holds at most `limit` rows, where limit = max_bytes / the Arrow size of the first row
+    written (every row here has the same size: fixed-width columns and lists of fixed length), and
+    a block of rows (one row group) never straddles two files. The cut is a rule on row counts, so
+    where files end never depends on the shards. After chunks_size files the next chunk begins
+    (LeRobot's update_chunk_file_indices)."""
+
+    def __init__(self, root: Path, pattern: str, max_bytes: int, chunks_size: int):
+        self.root, self.pattern, self.max_bytes, self.chunks_size = root, pattern, max_bytes, chunks_size
+        self.chunk = self.file = self.rows = 0
+        self.limit = self.writer = None
+
+    def place(self, rows: int, first_row) -> tuple[int, int]:
+        """Where the next block of `rows` rows goes: (chunk, file), starting a new file if needed."""
+        if self.limit is None:
+            self.limit = max(1, self.max_bytes // max(1, first_row.nbytes))
+        if self.writer is not None and self.rows + rows > self.limit:
+            from lerobot.datasets.utils import update_chunk_file_indices
+
+            self.close()
+            self.chunk, self.file = update_chunk_file_indices(self.chunk, self.file, self.chunks_size)
+        return self.chunk, self.file
+
+    def write(self, table) -> None:
+        """Write `table` as one row group into the file place() gave."""
+        import pyarrow.parquet as pq
+
+        if self.writer is None:
+            path = self.root / self.pattern.format(chunk_index=self.chunk, file_index=self.file)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            # LeRobot's own settings (io_utils.write_table_one_row_group_per_episode)
+            self.writer = pq.ParquetWriter(path, table.schema, compression="snappy", use_dictionary=True)
+            self.rows = 0
+        self.writer.write_table(table)
+        self.rows += table.num_rows
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
+            self.writer = None
+
+
+def _shifted(table, name: str, by: int, *, fill: bool = False):
+    """`table` with `by` added to its column `name` (int64, or a list<double> of per-episode stats,
+    added in float64 as LeRobot's aggregate does), or every value set to `by` (fill); type kept."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    i = table.schema.get_field_index(name)
+    col = table.column(i).combine_chunks()
+    if pa.types.is_list(col.type):
+        by = pa.scalar(float(by), col.type.value_type)
+        values = pc.if_else(True, by, col.values) if fill else pc.add(col.values, by)
+        new = pa.ListArray.from_arrays(col.offsets, values, type=col.type)
+    else:
+        new = pc.add(col, pa.scalar(by, col.type))
+    return table.set_column(i, table.schema.field(i), new)
+
+
+def _read_set(root: Path) -> tuple:
+    """A shard's episodes table and data table (all its parquet files, in order), checked to be a fresh
+    LeRobot v3 set of one task: episodes 0..n-1, frames 0..N-1 in episode order."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    # ParquetFile.read: read_table's dataset path costs ~10x more on a 100-row-group file (95 ms, 10 ms)
+    eps = pa.concat_tables(pq.ParquetFile(f).read() for f in sorted(root.glob("meta/episodes/*/*.parquet")))
+    data = pa.concat_tables(pq.ParquetFile(f).read() for f in sorted(root.glob("data/*/*.parquet")))
+    n = eps.num_rows
+    ep = eps.column("episode_index").to_numpy()
+    lo, hi = eps.column("dataset_from_index").to_numpy(), eps.column("dataset_to_index").to_numpy()
+    length = eps.column("length").to_numpy()
+    ok = (ep == np.arange(n)).all() and lo[0] == 0 and (lo[1:] == hi[:-1]).all() and (hi - lo == length).all()
+    ok = ok and data.num_rows == hi[-1] and (data.column("index").to_numpy() == np.arange(hi[-1])).all()
+    ok = ok and (data.column("task_index").to_numpy() == 0).all()
+    if not ok:
+        raise RuntimeError(f"{root} is not a LeRobot v3 set of one task with episodes in order")
+    return eps, data
+
+
+def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, chunks_size=None) -> int:
+    """Merge the LeRobot v3 sets `roots` (each of one task, no videos) into the new set `dest`, in one
+    pass: each set's data and episodes parquet is read once, its episode and frame indices (and the
+    episodes table's per-episode index stats) moved by the episodes and frames before it, and written
+    into data/chunk-XXX/file-YYY.parquet files of up to the first set's data_files_size_in_mb
+    (`max_bytes` to override; one row group per episode, as LeRobot writes) and meta/episodes files
+    the same way; tasks, info.json and stats.json (exact over all frames, write_frame_stats) once each.
+    No file is written twice. Returns the episodes merged.
+
+    What LeRobotDataset reads is what LeRobot's aggregate_datasets + write_frame_stats give for the
+    same sets (tests/test_merge.py); only the file layout differs, and it depends on the frames alone."""
+    import pandas as pd
+    import pyarrow as pa
+    from lerobot.datasets.io_utils import load_info, write_info, write_tasks
+    from lerobot.datasets.utils import DEFAULT_DATA_PATH, DEFAULT_EPISODES_PATH
+
+    dest = Path(dest)
+    info = load_info(roots[0])
+    if any(ft["dtype"] in ("video", "image") for ft in info.features.values()):
+        raise RuntimeError("merge_sets merges sets without images or videos")
+    max_bytes = max_bytes or info.data_files_size_in_mb * 2**20  # LeRobot's MB are MiB
+    chunks_size = chunks_size or info.chunks_size
+    data_out = _Files(dest, DEFAULT_DATA_PATH, max_bytes, chunks_size)
+    meta_out = _Files(dest, DEFAULT_EPISODES_PATH, max_bytes, chunks_size)
+    n_eps = n_frames = 0
+    task, pending = None, []  # episode rows not yet written (fewer than EPISODE_ROWS)
+
+    def flush(rows: int) -> None:  # write the first `rows` pending episode rows as one row group
+        nonlocal pending
+        table = pa.concat_tables(pending)
+        block, rest = table.slice(0, rows), table.slice(rows)
+        chunk, file = meta_out.place(rows, block.slice(0, 1))
+        for name, value in (("meta/episodes/chunk_index", chunk), ("meta/episodes/file_index", file)):
+            i = block.schema.get_field_index(name)
+            block = block.set_column(i, block.schema.field(i), pa.array([value] * rows, pa.int64()))
+        meta_out.write(block)
+        pending = [rest] if rest.num_rows else []
+
+    try:
+        for root in roots:
+            eps, data = _read_set(root)
+            tasks = eps.column("tasks").to_pylist()
+            task = task if task is not None else tasks[0]
+            if any(t != task for t in tasks):
+                raise RuntimeError(f"{root}: tasks {tasks[0]} differ from {task}; merge_sets takes one task")
+            data = _shifted(_shifted(data, "episode_index", n_eps), "index", n_frames)
+            places = []
+            for lo, hi in zip(
+                eps.column("dataset_from_index").to_numpy(), eps.column("dataset_to_index").to_numpy()
+            ):
+                episode = data.slice(lo, hi - lo)
+                places.append(data_out.place(episode.num_rows, episode.slice(0, 1)))
+                data_out.write(episode)
+            shifts = {"episode_index": n_eps, "dataset_from_index": n_frames, "dataset_to_index": n_frames}
+            for name, by in (("episode_index", n_eps), ("index", n_frames)):  # aggregate's update_meta_data
+                shifts |= {f"stats/{name}/{stat}": by for stat in SHIFTED_STATS}
+            for name, by in shifts.items():
+                if name in eps.column_names:
+                    eps = _shifted(eps, name, by)
+            for stat in ("std", *SHIFTED_STATS):
+                # aggregate recomputes these from the episode's task ids (the one task: 0), where the
+                # shard's writer estimated quantiles from a histogram (q01 = 4e-16, not 0)
+                if f"stats/task_index/{stat}" in eps.column_names:
+                    eps = _shifted(eps, f"stats/task_index/{stat}", 0, fill=True)
+            for j, name in enumerate(("data/chunk_index", "data/file_index")):
+                i = eps.schema.get_field_index(name)
+                eps = eps.set_column(i, eps.schema.field(i), pa.array([p[j] for p in places], pa.int64()))
+            pending.append(eps)
+            n_eps, n_frames = n_eps + eps.num_rows, n_frames + data.num_rows
+            while sum(t.num_rows for t in pending) >= EPISODE_ROWS:
+                flush(EPISODE_ROWS)
+        if pending:
+            flush(sum(t.num_rows for t in pending))
+    finally:
+        data_out.close()
+        meta_out.close()
+    tasks = [task[0]] if task else []
+    write_tasks(pd.DataFrame({"task_index": range(len(tasks))}, index=pd.Index(tasks, name="task")), dest)
+    info.total_episodes, info.total_frames, info.total_tasks = n_eps, n_frames, len(tasks)
+    info.splits = {"train": f"0:{n_eps}"}
+    write_info(info, dest)
+    write_frame_stats(dest, _stats_template(roots, data.column_names))
+    return n_eps
+
+
+def _stats_template(roots: list[Path], columns) -> dict:
+    """The stats.json entries write_frame_stats fills: the first set's keys and stat names; a key that
+    is no data column (none in the engine's sets) gets LeRobot's aggregate of every set's stats."""
+    first = read_json(roots[0] / "meta" / "stats.json")
+    other = [k for k in first if k not in columns]
+    if not other:
+        return first
+    from lerobot.datasets.compute_stats import aggregate_stats
+    from lerobot.datasets.io_utils import load_stats
+    from lerobot.datasets.utils import serialize_dict
+
+    agg = aggregate_stats([{k: v for k, v in load_stats(r).items() if k in other} for r in roots])
+    return first | serialize_dict(agg)
 
 
 def remove_shards(out: Path) -> None:
@@ -302,7 +489,7 @@ def column(files, key: str) -> np.ndarray:
 
     parts = []
     for f in files:
-        col = pq.read_table(f, columns=[key]).column(key).combine_chunks()
+        col = pq.ParquetFile(f).read(columns=[key]).column(key).combine_chunks()
         if pa.types.is_list(col.type) or pa.types.is_fixed_size_list(col.type):
             parts.append(
                 col.flatten().to_numpy(zero_copy_only=False).astype(np.float64).reshape(len(col), -1)
@@ -328,8 +515,9 @@ def frame_stats(x: np.ndarray, names) -> dict:
     return stats
 
 
-def write_frame_stats(root: Path) -> None:
-    """Rewrite root/meta/stats.json with every numeric feature's stats over all frames.
+def write_frame_stats(root: Path, template: dict | None = None) -> None:
+    """Write root/meta/stats.json with every numeric feature's stats over all frames: the entries of
+    `template` (the stats.json there when None), each key that is a data column recomputed.
 
     LeRobot 0.6.1's aggregate_datasets (and recompute_stats) combine per-episode statistics, and
     their q01..q99 are averages of per-episode quantiles (lerobot issue 4156), not quantiles of the
@@ -338,7 +526,7 @@ def write_frame_stats(root: Path) -> None:
 
     root = Path(root)
     path = root / "meta" / "stats.json"
-    old = read_json(path)
+    old = read_json(path) if template is None else template
     files = sorted((root / "data").rglob("*.parquet"))
     columns = set(pq.read_schema(files[0]).names)
     new = {
@@ -529,6 +717,8 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
             "seconds_generate": t_merge - t_gen,
             "seconds_start_executor": timing["start_s"],
             "seconds_merge": time.perf_counter() - t_merge,
+            # worker seconds (summed over the shards made by this run) inside seconds_generate
+            "seconds_write": sum(done[i].get("seconds_write", 0.0) for i in todo),
             "demos_per_s": made / seconds,
             "command": " ".join(shlex.quote(x) for x in [Path(sys.executable).name, *sys.argv]),
             "versions": vers,

@@ -132,6 +132,8 @@ def test_run_writes_the_attempts_in_order_loadable_with_provenance(src, referenc
     assert rep["episode_length"]["min"] == min(lengths) and rep["episode_length"]["max"] == max(lengths)
     assert rep["shards"] == {"total": 6, "made_this_run": 6, "reused": 0}
     assert rep["seconds"] > 0 and rep["demos_per_s"] > 0 and "augment_demos.py" in rep["command"]
+    # the time split (issue 19 #5): the workers' write seconds lie inside the generate phase's
+    assert rep["seconds_merge"] > 0 and 0 < rep["seconds_write"] < rep["seconds_generate"]
     assert {"lerobot", "mujoco", "numpy", "python"} <= set(rep["versions"])
 
 
@@ -163,6 +165,31 @@ def test_stats_are_over_all_frames(reference):
 def test_two_workers_same_bytes(src, reference, tmp_path):
     augment("--src", src, "--out", tmp_path / "w2", "--workers", "2", *SETTINGS)
     assert tree(tmp_path / "w2") == tree(reference)
+
+
+def test_shard_size_changes_no_frame_byte(src, reference, tmp_path):
+    """The merge cuts files by row counts, never where a shard ends: shards of 5 attempts (3 shards,
+    not 6) give the same data/ files, tasks, info.json and stats.json, byte for byte. The episodes
+    table differs only in the index and episode_index stats LeRobot estimated inside each shard (a
+    histogram's quantiles of shard-local values, then shifted, as aggregate_datasets does)."""
+    import pandas as pd
+
+    out = tmp_path / "s5"
+    augment("--src", src, "--out", out, "--workers", "1", "--per_demo", str(PER_DEMO), "--shard_size", "5")
+    assert json.loads((out / shards.REPORT_NAME).read_text())["shards"]["total"] == 3
+    got, want = tree(out), tree(reference)
+    assert got.keys() == want.keys()
+    same = [
+        k
+        for k in got
+        if k.startswith("data/") or k in ("meta/info.json", "meta/stats.json", "meta/tasks.parquet")
+    ]
+    assert len(same) >= 4 and all(got[k] == want[k] for k in same), [k for k in same if got[k] != want[k]]
+    ea, eb = (pd.read_parquet(root / "meta/episodes/chunk-000/file-000.parquet") for root in (out, reference))
+    assert list(ea.columns) == list(eb.columns)
+    for key in ea.columns:
+        if not key.startswith(("stats/index/", "stats/episode_index/")):
+            assert ea[key].astype(str).equals(eb[key].astype(str)), key
 
 
 def test_local_ray_same_bytes(src, reference, tmp_path):

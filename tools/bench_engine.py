@@ -144,7 +144,7 @@ def point(src: Path, out: Path, n: int, executor: str, a) -> dict:
     row = {"demos_requested": n, "executor": executor, "workers": workers, "shards": shards}
     row |= {k: rep[k] for k in ("attempts", "kept", "yield", "frames")} | {"wall_s": wall}
     row |= {"generate_s": gen, "start_executor_s": start, "merge_s": merge}  # start_executor_s: of generate_s
-    row |= {"write_s": rep.get("seconds_write", math.nan)}  # summed over workers: of their generate time
+    row |= {"write_s": rep.get("seconds_write", math.nan)}  # worker seconds, inside generate_s
     row |= {
         "other_s": wall - gen - merge,
         "demos_per_s": rep["kept"] / wall,

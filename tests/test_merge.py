@@ -1,0 +1,147 @@
+"""ch37.shards.merge_sets, the engine's one-pass merge, against the merge it replaced: LeRobot's
+aggregate_datasets (one data file per shard) followed by write_frame_stats. The same real shards
+merged both ways must read back the same through LeRobotDataset: features, every column of every
+frame, episode boundaries and per-episode metadata, stats.json. Real MuJoCo shards, real LeRobot."""
+
+import shutil
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+import torch
+
+import gen_demos_pusht
+from ch37 import engine, shards
+from ch37.lerobot_io import load_arrays, open_dataset
+from ch37.stamps import read_json
+
+CONFIG = {"mode": "resolve", "per_demo": 4, "seed": 0, "pos_sigma": 0.08, "yaw_sigma": 0.5, "shard_size": 5}
+LAYOUT = ("data/chunk_index", "data/file_index", "meta/episodes/chunk_index", "meta/episodes/file_index")
+
+
+@pytest.fixture(scope="module")
+def roots(tmp_path_factory):
+    """3 sources x 4 attempts in shards of 5, 5 and 2 attempts, made and saved as a run makes them."""
+    tmp = tmp_path_factory.mktemp("merge")
+    assert gen_demos_pusht.main(["--episodes", "3", "--seed", "0", "--out", str(tmp / "src"), "--quiet"]) == 0
+    sources = engine.sources(load_arrays(tmp / "src"))
+    plan = shards.plan(sources, CONFIG["per_demo"], CONFIG["shard_size"])
+    for i, jobs in enumerate(plan):
+        result = shards.make_shard(i, jobs, {e: sources[e] for e in sorted({e for e, _ in jobs})}, CONFIG)
+        shards.save_shard(tmp / "run", i, result)
+    return [shards.shard_dir(tmp / "run", i) for i in range(len(plan))]
+
+
+@pytest.fixture(scope="module")
+def lerobots(roots, tmp_path_factory):
+    """The shards merged the old way: aggregate_datasets, then stats over all frames."""
+    from lerobot.datasets.aggregate import aggregate_datasets
+
+    out = tmp_path_factory.mktemp("lerobot") / "set"
+    names = [f"local/shard-{i:05d}" for i in range(len(roots))]
+    aggregate_datasets(names, "local/pusht_aug", roots=roots, aggr_root=out, concatenate_data=False)
+    shards.write_frame_stats(out)
+    return out
+
+
+def episodes_table(root) -> pd.DataFrame:
+    """meta/episodes with its stats/ columns, which LeRobotDataset's meta.episodes leaves out."""
+    return pd.concat(
+        [pd.read_parquet(f) for f in sorted(root.glob("meta/episodes/*/*.parquet"))], ignore_index=True
+    )
+
+
+def assert_same_set(new, old):
+    a, b = open_dataset(new), open_dataset(old)
+    assert a.meta.features == b.meta.features and a.fps == b.fps
+    assert read_json(new / "meta" / "info.json") == read_json(old / "meta" / "info.json")
+    assert a.num_episodes == b.num_episodes and a.num_frames == b.num_frames
+    # every column of every frame, as Hugging Face datasets reads them (types from info.json)
+    cols_a, cols_b = a.hf_dataset.with_format("numpy")[:], b.hf_dataset.with_format("numpy")[:]
+    assert set(cols_a) == set(cols_b) == set(a.hf_dataset.column_names)
+    for key in cols_a:
+        x, y = np.asarray(cols_a[key]), np.asarray(cols_b[key])
+        assert x.dtype == y.dtype and x.shape == y.shape and x.tobytes() == y.tobytes(), key
+    # and as a policy reads them: LeRobotDataset[i], the task string included
+    for i in range(a.num_frames):
+        fa, fb = a[i], b[i]
+        assert fa.keys() == fb.keys()
+        for key in fa:
+            same = torch.equal(fa[key], fb[key]) if torch.is_tensor(fa[key]) else fa[key] == fb[key]
+            assert same, (i, key)
+    # the episodes: boundaries, lengths, tasks and every per-episode stats column, all but the layout
+    ea, eb = episodes_table(new), episodes_table(old)
+    assert list(ea.columns) == list(eb.columns)
+    for key in (c for c in ea.columns if c not in LAYOUT):
+        x, y = ea[key].to_numpy(), eb[key].to_numpy()
+        if x.dtype == object:
+            x, y = np.stack([np.asarray(v) for v in x]), np.stack([np.asarray(v) for v in y])
+        assert x.dtype == y.dtype and np.array_equal(x, y), key
+    assert (ea["episode_index"] == range(len(ea))).all() and ea["dataset_to_index"].iloc[-1] == a.num_frames
+    assert a.meta.tasks.equals(b.meta.tasks)
+    assert (new / "meta" / "stats.json").read_bytes() == (old / "meta" / "stats.json").read_bytes()
+    # each episode is where its layout columns say: the rows of its data file, in its meta file
+    for _, ep in ea.iterrows():
+        chunk, file = ep["data/chunk_index"], ep["data/file_index"]
+        data = pq.read_table(new / f"data/chunk-{chunk:03d}/file-{file:03d}.parquet")
+        rows = data.column("episode_index").to_numpy() == ep["episode_index"]
+        assert rows.sum() == ep["length"]
+        assert (
+            data.column("index").to_numpy()[rows]
+            == np.arange(*ep[["dataset_from_index", "dataset_to_index"]])
+        ).all()
+        chunk, file = ep["meta/episodes/chunk_index"], ep["meta/episodes/file_index"]
+        meta = pq.read_table(new / f"meta/episodes/chunk-{chunk:03d}/file-{file:03d}.parquet")
+        assert ep["episode_index"] in meta.column("episode_index").to_pylist()
+    return a, b
+
+
+def test_merge_reads_back_as_lerobots_merge(roots, lerobots, tmp_path):
+    n = shards.merge_sets(roots, tmp_path / "set")
+    assert n == sum(read_json(r / "meta" / "info.json")["total_episodes"] for r in roots) == 12
+    assert_same_set(tmp_path / "set", lerobots)
+    # one file each: the set is far below LeRobot's 100 MB per file
+    files = sorted(p.relative_to(tmp_path / "set").as_posix() for p in (tmp_path / "set").rglob("*.parquet"))
+    assert files == [
+        "data/chunk-000/file-000.parquet",
+        "meta/episodes/chunk-000/file-000.parquet",
+        "meta/tasks.parquet",
+    ]
+    # one row group per episode, as LeRobot writes its data files
+    assert pq.ParquetFile(tmp_path / "set" / files[0]).num_row_groups == n
+
+
+def test_small_files_roll_over_files_and_chunks(roots, lerobots, tmp_path, monkeypatch):
+    """Files of at most 4,000 B of rows (25 frames; an episode is never split), 2 files a chunk, row
+    groups of 5 episodes in meta/episodes: many files and chunks, read back the same, and LeRobot's
+    own delete_episodes (which follows data/file_index) gives the same set from both."""
+    from lerobot.datasets.dataset_tools import delete_episodes
+
+    monkeypatch.setattr(shards, "EPISODE_ROWS", 5)
+    new = tmp_path / "set"
+    shards.merge_sets(roots, new, max_bytes=4000, chunks_size=2)
+    data = sorted(p.relative_to(new).as_posix() for p in new.glob("data/*/*.parquet"))
+    meta = sorted(p.relative_to(new).as_posix() for p in new.glob("meta/episodes/*/*.parquet"))
+    assert len(data) >= 6 and "data/chunk-001/file-000.parquet" in data and len(meta) == 3, (data, meta)
+    a, b = assert_same_set(new, lerobots)
+    drop = [0, 5, 11]
+    da = delete_episodes(a, drop, output_dir=tmp_path / "del_new", repo_id="local/del_new")
+    db = delete_episodes(b, drop, output_dir=tmp_path / "del_old", repo_id="local/del_old")
+    assert da.num_episodes == db.num_episodes == 9 and da.num_frames == db.num_frames
+    for key in ("observation.state", "action", "aug.start", "episode_index", "index"):
+        x = np.asarray(da.hf_dataset.with_format("numpy")[key])
+        assert x.tobytes() == np.asarray(db.hf_dataset.with_format("numpy")[key]).tobytes(), key
+
+
+def test_a_set_out_of_order_is_refused(roots, tmp_path):
+    """merge_sets takes sets as LeRobot writes them; a set whose frames are not 0..N-1 is an error."""
+    bad = tmp_path / "bad"
+    shutil.copytree(roots[0], bad)
+    f = sorted(bad.glob("data/*/*.parquet"))[0]
+    t = pq.read_table(f)
+    i = t.schema.get_field_index("index")
+    pq.write_table(t.set_column(i, t.schema.field(i), pa.array(t.column(i).to_numpy()[::-1])), f)
+    with pytest.raises(RuntimeError, match="episodes in order"):
+        shards.merge_sets([roots[1], bad], tmp_path / "set")
