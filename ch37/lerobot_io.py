@@ -137,43 +137,39 @@ def write_dataset(
     ENV_STATE_KEY, when `feats` has it and an episode does not, is taken from the episode's
     observation.state columns of the same names (see features).
 
+    A set of numeric features of shape (d,) (every set the chapter writes) is written in one pass
+    from the arrays (_write_direct): the same files, columns, Arrow types and metadata LeRobot's
+    per-frame path (LeRobotDataset.create / add_frame / save_episode / finalize) writes, read back
+    equal frame by frame (tests/test_writer.py), without its per-frame and per-episode costs.
+    A set with a video (or any other) feature goes through LeRobot's own path (_write_lerobot):
+    encoding mp4 is LeRobot's job.
+
     The set is built in a sibling temp directory (ch37.files.partial_dir) and renamed into place, so
     an interrupted run never leaves a half-written set at `out`; what a killed run left for `out` is
     removed here, and nothing else beside it. `out` must not
     hold data. The stamp lists every file of the set with its sha256 (ch37.stamps).
     """
-    LeRobotDataset = _lerobot_dataset_class()
     out = Path(out)
     if holds_data(out):
         raise DataError(f"{out} already holds data; pick another --out or remove it yourself")
     out.parent.mkdir(parents=True, exist_ok=True)
     sweep_leftovers(out.parent, out.name)  # a killed run's partial `out` only: the parent is not ours
-    use_videos = any(f["dtype"] == "video" for f in feats.values())
-    env_cols = (
-        columns(feats["observation.state"]["names"], feats[ENV_STATE_KEY]["names"])
-        if ENV_STATE_KEY in feats
-        else None
-    )
-    work = partial_dir(out)  # .NAME.ch37-partial-PID, our stamp inside; LeRobot writes the set in work/set
+    episodes = _with_env_state(episodes, feats)
+    work = partial_dir(out)  # .NAME.ch37-partial-PID, our stamp inside; the set is written in work/set
     tmp = work / "set"
     try:
-        ds = LeRobotDataset.create(
-            repo_id,
-            fps=fps,
-            features=feats,
-            root=tmp,
-            robot_type=robot_type,
-            use_videos=use_videos,
-            video_backend=VIDEO_BACKEND,
-        )
-        with _fast_fingerprints():
-            for ep in episodes:
-                if env_cols is not None and ENV_STATE_KEY not in ep:  # (T, 10) -> (T, len(env_cols))
-                    ep = ep | {ENV_STATE_KEY: np.ascontiguousarray(ep["observation.state"][:, env_cols])}
-                for t in range(len(ep["action"])):
-                    ds.add_frame({k: ep[k][t] for k in feats} | {"task": task})
-                ds.save_episode()
-        ds.finalize()
+        if all(f["dtype"] in _DIRECT_DTYPES and len(f["shape"]) == 1 for f in feats.values()):
+            _write_direct(tmp, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes)
+        else:
+            _write_lerobot(
+                tmp,
+                repo_id=repo_id,
+                fps=fps,
+                robot_type=robot_type,
+                task=task,
+                feats=feats,
+                episodes=episodes,
+            )
         stats = (
             tmp / "meta" / "stats.json"
         )  # lerobot orders its keys by string hash; sorted, equal sets are equal bytes
@@ -194,6 +190,159 @@ def write_dataset(
             ) from e
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+# Feature dtypes _write_direct writes as plain Arrow columns (a scalar for shape (1,), else a
+# fixed-size list); images and videos go through LeRobot's own path.
+_DIRECT_DTYPES = {"bool", "float32", "float64", "int8", "int16", "int32", "int64", "uint8"}
+
+
+def _with_env_state(episodes, feats: dict):
+    """`episodes`, each with ENV_STATE_KEY filled from its observation.state columns when missing."""
+    if ENV_STATE_KEY not in feats:
+        yield from episodes
+        return
+    cols = columns(feats["observation.state"]["names"], feats[ENV_STATE_KEY]["names"])
+    for ep in episodes:
+        if ENV_STATE_KEY not in ep:  # (T, 10) -> (T, len(cols))
+            ep = ep | {ENV_STATE_KEY: np.ascontiguousarray(ep["observation.state"][:, cols])}
+        yield ep
+
+
+def _write_lerobot(tmp: Path, *, repo_id, fps, robot_type, task, feats, episodes) -> None:
+    """LeRobot's per-frame path: kept for sets with a video feature (LeRobot encodes the mp4)."""
+    ds = _lerobot_dataset_class().create(
+        repo_id,
+        fps=fps,
+        features=feats,
+        root=tmp,
+        robot_type=robot_type,
+        use_videos=any(f["dtype"] == "video" for f in feats.values()),
+        video_backend=VIDEO_BACKEND,
+    )
+    with _fast_fingerprints():
+        for ep in episodes:
+            for t in range(len(ep["action"])):
+                ds.add_frame({k: ep[k][t] for k in feats} | {"task": task})
+            ds.save_episode()
+    ds.finalize()
+
+
+def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes) -> None:
+    """Write a LeRobot v3 set (no video) in one pass from the episodes' arrays.
+
+    What LeRobot 0.6.1's save_episode does per episode, done once for the set: the data columns
+    (each feature, timestamp, frame_index, episode_index, index, task_index; DEFAULT_FEATURES) in
+    data/chunk-CCC/file-FFF.parquet with the Arrow schema of get_hf_features_from_features, a new
+    file when the current one would pass info's data_files_size_in_mb (LeRobot's rule, on the
+    uncompressed size); per-episode stats by compute_episode_stats on the same arrays save_episode
+    stats (so equal values), the episodes table with LeRobot's columns in its order, tasks.parquet,
+    info.json, and stats.json as aggregate_stats of the episodes' stats (LeRobot folds them one
+    episode at a time: the same values up to float rounding). No clock, no randomness: equal
+    episodes give equal bytes. No episodes: info.json only, as LeRobot leaves it.
+    """
+    import pandas as pd
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    from lerobot.datasets.compute_stats import aggregate_stats, compute_episode_stats
+    from lerobot.datasets.dataset_metadata import CODEBASE_VERSION
+    from lerobot.datasets.feature_utils import (
+        create_empty_dataset_info,
+        get_hf_features_from_features,
+        validate_frame,
+    )
+    from lerobot.datasets.io_utils import write_info, write_stats, write_tasks
+    from lerobot.datasets.utils import DEFAULT_EPISODES_PATH, update_chunk_file_indices
+    from lerobot.utils.constants import DEFAULT_FEATURES
+    from lerobot.utils.utils import flatten_dict
+
+    check_hf_cache()  # as on LeRobot's path: a cache problem is named here, not at the first read
+    all_feats = {k: dict(f, shape=tuple(f["shape"])) for k, f in feats.items()} | DEFAULT_FEATURES
+    info = create_empty_dataset_info(CODEBASE_VERSION, fps, all_feats, False, robot_type)
+    tmp.mkdir(parents=True)
+    schema = get_hf_features_from_features(all_feats).arrow_schema  # with its "huggingface" metadata
+    frame_bytes = sum(np.dtype(f["dtype"]).itemsize * f["shape"][0] for f in all_feats.values())
+    limit = info.data_files_size_in_mb * 1024**2  # bytes, LeRobot's DEFAULT_DATA_FILE_SIZE_IN_MB
+
+    def column(field, parts: list[np.ndarray]):
+        flat = pa.array(
+            np.concatenate(parts).reshape(-1),
+            type=field.type.value_type if field.type.num_fields else field.type,
+        )
+        return pa.FixedSizeListArray.from_arrays(flat, type=field.type) if field.type.num_fields else flat
+
+    def write_file(parts: dict, chunk: int, file: int) -> None:
+        path = tmp / info.data_path.format(chunk_index=chunk, file_index=file)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        table = pa.Table.from_arrays([column(f, parts[f.name]) for f in schema], schema=schema)
+        pq.write_table(table, path, compression="snappy", use_dictionary=True)
+
+    rows: dict[str, list] = {}  # the episodes table, column by column
+    ep_stats = []
+    parts = {k: [] for k in all_feats}  # the current data file's columns, episode by episode
+    chunk = file = frames = in_file = 0
+    for e, ep in enumerate(episodes):
+        n = len(ep["action"])
+        if n == 0:
+            raise ValueError(f"episode {e} has no frames")
+        validate_frame({k: ep[k][0] for k in feats} | {"task": task}, all_feats)  # LeRobot's messages
+        buf = {}
+        for k in feats:
+            x = np.asarray(ep[k])
+            if len(x) != n:
+                raise ValueError(f"episode {e}: {k} has {len(x)} frames, action has {n}")
+            buf[k] = x.reshape(n) if all_feats[k]["shape"] == (1,) else x.reshape(n, -1)
+        buf["timestamp"] = np.arange(n) / fps  # float64 (T,), as save_episode stacks it; float32 on disk
+        buf["frame_index"] = np.arange(n)
+        buf["episode_index"] = np.full(n, e)
+        buf["index"] = np.arange(frames, frames + n)
+        buf["task_index"] = np.zeros(n, dtype=np.int64)  # one task per set
+        stats = compute_episode_stats(buf, all_feats)
+        ep_stats.append(stats)
+        if in_file and (in_file + n) * frame_bytes >= limit:
+            write_file(parts, chunk, file)
+            parts = {k: [] for k in all_feats}
+            chunk, file = update_chunk_file_indices(chunk, file, info.chunks_size)
+            in_file = 0
+        for k, x in buf.items():
+            parts[k].append(x.astype(np.float32) if k == "timestamp" else x)
+        row = {
+            "episode_index": e,
+            "tasks": [task],
+            "length": n,
+            "data/chunk_index": chunk,
+            "data/file_index": file,
+            "dataset_from_index": frames,
+            "dataset_to_index": frames + n,
+        } | {k: v.tolist() for k, v in flatten_dict({"stats": stats}).items()}
+        for k, v in row.items():
+            rows.setdefault(k, []).append(v)
+        frames += n
+        in_file += n
+    if not ep_stats:
+        write_info(info, tmp)
+        return
+    write_file(parts, chunk, file)
+    n_eps = len(ep_stats)
+    # The episodes table in files of at most data_files_size_in_mb (as LeRobot splits it): one file
+    # up to ~50,000 episodes of this chapter's width (~2 KB a row).
+    row_bytes = pa.Table.from_pydict(rows).nbytes / n_eps
+    per_file = max(1, int(limit // row_bytes))
+    m_chunk = m_file = 0
+    for lo in range(0, n_eps, per_file):
+        if lo:
+            m_chunk, m_file = update_chunk_file_indices(m_chunk, m_file, info.chunks_size)
+        part = {k: v[lo : lo + per_file] for k, v in rows.items()}
+        part["meta/episodes/chunk_index"] = [m_chunk] * len(part["length"])
+        part["meta/episodes/file_index"] = [m_file] * len(part["length"])
+        path = tmp / DEFAULT_EPISODES_PATH.format(chunk_index=m_chunk, file_index=m_file)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        pq.write_table(pa.Table.from_pydict(part), path, compression="snappy", use_dictionary=True)
+    write_tasks(pd.DataFrame({"task_index": range(1)}, index=pd.Index([task], name="task")), tmp)
+    info.total_episodes, info.total_frames, info.total_tasks = n_eps, frames, 1
+    info.splits = {"train": f"0:{n_eps}"}
+    write_info(info, tmp)
+    write_stats(aggregate_stats(ep_stats), tmp)
 
 
 def open_dataset(root: Path, repo_id: str = "local/demos"):
