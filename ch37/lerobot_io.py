@@ -10,6 +10,7 @@ import contextlib
 import functools
 import json
 import logging
+import math
 import shutil
 from pathlib import Path
 
@@ -228,6 +229,71 @@ def _write_lerobot(tmp: Path, *, repo_id, fps, robot_type, task, feats, episodes
     ds.finalize()
 
 
+def _feature_stats(data: np.ndarray) -> dict:
+    """lerobot.datasets.compute_stats.get_feature_stats(data, axis=0, keepdims=data.ndim == 1) for a
+    numeric (T,) or (T, D) episode column, equal bit for bit and in dtype, ~10x faster.
+
+    LeRobot's RunningQuantileStats, fed one batch, bins each dimension into 5,000 bins between
+    min - 1e-10 and max + 1e-10 (np.linspace) and reads a quantile q off the cumulated histogram:
+    the first bin j whose cumulated count reaches q*T, interpolated inside it. The cumulated count
+    of bin j is the number of values below edge j+1, so that bin is where the ceil(q*T)-th smallest
+    value falls: the same bin and the same float operations from one sort, without the 5,000-bin
+    histograms and cumsums (per dimension and quantile). Fewer than 2 frames: LeRobot's own code.
+    """
+    from lerobot.datasets.compute_stats import DEFAULT_QUANTILES, get_feature_stats
+
+    x = data.reshape(-1, 1) if data.ndim == 1 else data
+    n, dims = x.shape
+    if n < 2:
+        return get_feature_stats(data, axis=0, keepdims=data.ndim == 1)
+    x = x.astype(np.result_type(x.dtype, np.float32), copy=False)  # as RunningQuantileStats.update
+    mean, mean_sq = np.mean(x, axis=0), np.mean(x**2, axis=0)
+    mean += (np.mean(x, axis=0) - mean) * (n / n)  # its running update, kept for equal bits (inf, NaN)
+    mean_sq += (np.mean(x**2, axis=0) - mean_sq) * (n / n)
+    lo, hi = np.min(x, axis=0), np.max(x, axis=0)
+    stats = {
+        "min": lo,
+        "max": hi,
+        "mean": mean,
+        "std": np.sqrt(np.maximum(0, mean_sq - mean**2)),
+        "count": np.array([n]),
+    }
+    # np.linspace(lo - 1e-10, hi + 1e-10, 5001) per dimension, element by element as numpy does it
+    bins = 5000
+    start, stop = lo - 1e-10, hi + 1e-10
+    delta = np.subtract(stop, start, dtype=start.dtype)
+    step = delta / bins
+    j = np.arange(bins + 1, dtype=start.dtype)
+    edges = j * step[:, None] + start[:, None]  # (D, 5001): one row per dimension, rows contiguous
+    flat = step == 0  # numpy's other formula for a zero step (a constant column in float32)
+    if flat.any():
+        edges[flat] = (j / bins) * delta[flat, None] + start[flat, None]
+    edges[:, -1] = stop
+    srt = np.sort(x, axis=0)
+    cols = np.arange(dims)
+    for q in DEFAULT_QUANTILES:
+        target = q * n
+        v = srt[math.ceil(target) - 1]  # (D,) the value where the cumulated count reaches target
+        idx = np.minimum((edges[:, 1:bins] <= v[:, None]).sum(axis=1), bins - 1)  # its bin, (D,)
+        e0, e1 = edges[cols, idx], edges[cols, idx + 1]
+        below = (srt < e0).sum(axis=0)  # values below the bin, below its upper edge: (D,)
+        upto = np.where(idx < bins - 1, (srt < e1).sum(axis=0), n)  # the last bin holds all to stop
+        count_before = np.where(idx == 0, 0, below).astype(np.float64)
+        in_bin = upto.astype(np.float64) - count_before
+        plain = (idx == 0) | (in_bin == 0)  # LeRobot returns the edge itself (its dtype) there
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inside = e0 + ((target - count_before) / in_bin) * (e1 - e0)
+        stats[f"q{int(q * 100):02d}"] = e0.copy() if plain.all() else np.where(plain, e0, inside)
+    if data.ndim == 1:  # keepdims: (1,) each, as LeRobot reshapes a (T,) column's stats
+        stats = {k: v.reshape(1) for k, v in stats.items()}
+    return stats
+
+
+def _episode_stats(buf: dict, feats: dict) -> dict:
+    """compute_episode_stats(buf, feats) for numeric features, through _feature_stats."""
+    return {k: _feature_stats(x) for k, x in buf.items() if feats[k]["dtype"] not in {"string", "language"}}
+
+
 def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes) -> None:
     """Write a LeRobot v3 set (no video) in one pass from the episodes' arrays.
 
@@ -235,16 +301,17 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes) -> None:
     (each feature, timestamp, frame_index, episode_index, index, task_index; DEFAULT_FEATURES) in
     data/chunk-CCC/file-FFF.parquet with the Arrow schema of get_hf_features_from_features, a new
     file when the current one would pass info's data_files_size_in_mb (LeRobot's rule, on the
-    uncompressed size); per-episode stats by compute_episode_stats on the same arrays save_episode
-    stats (so equal values), the episodes table with LeRobot's columns in its order, tasks.parquet,
-    info.json, and stats.json as aggregate_stats of the episodes' stats (LeRobot folds them one
-    episode at a time: the same values up to float rounding). No clock, no randomness: equal
-    episodes give equal bytes. No episodes: info.json only, as LeRobot leaves it.
+    uncompressed size); per-episode stats equal bit for bit to compute_episode_stats on the arrays
+    save_episode stacks (_episode_stats, a faster equal of it), the episodes table with LeRobot's
+    columns in its order, tasks.parquet, info.json, and stats.json as aggregate_stats of the
+    episodes' stats (LeRobot folds them one episode at a time: the same values up to rounding).
+    No clock, no randomness: equal episodes give equal bytes. No episodes: info.json only, as
+    LeRobot leaves it.
     """
     import pandas as pd
     import pyarrow as pa
     import pyarrow.parquet as pq
-    from lerobot.datasets.compute_stats import aggregate_stats, compute_episode_stats
+    from lerobot.datasets.compute_stats import aggregate_stats
     from lerobot.datasets.dataset_metadata import CODEBASE_VERSION
     from lerobot.datasets.feature_utils import (
         create_empty_dataset_info,
@@ -297,7 +364,7 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes) -> None:
         buf["episode_index"] = np.full(n, e)
         buf["index"] = np.arange(frames, frames + n)
         buf["task_index"] = np.zeros(n, dtype=np.int64)  # one task per set
-        stats = compute_episode_stats(buf, all_feats)
+        stats = _episode_stats(buf, all_feats)
         ep_stats.append(stats)
         if in_file and (in_file + n) * frame_bytes >= limit:
             write_file(parts, chunk, file)

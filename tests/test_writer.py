@@ -194,3 +194,25 @@ def test_lerobot_edit_dataset_works_on_our_output(tmp_path):
     parts = sorted(p.parent.parent for p in (tmp_path / "split").rglob("meta/info.json"))
     sizes = sorted(lerobot_io.open_dataset(p).meta.total_frames for p in parts)
     assert sizes == sorted([7 + 2 + 15 + 4, 30 + 3])
+
+
+def test_episode_stats_equal_lerobots_bit_for_bit():
+    """_feature_stats against LeRobot's get_feature_stats on the columns a set holds and the cases
+    its histogram quantiles treat apart: constant columns, ties, 1-3 frames, bool, int, huge, tiny."""
+    from lerobot.datasets.compute_stats import get_feature_stats
+
+    rng = np.random.default_rng(7)
+    cols = []
+    for n in (1, 2, 3, 7, 30, 99, 100, 101, 400):
+        x = rng.standard_normal((n, 6)).astype(np.float32)
+        x[:, 1] = 0.25  # constant: float32 keeps min - 1e-10 == min, numpy's zero-step linspace
+        x[:, 2] = np.round(x[:, 2], 1)  # ties
+        x[:, 3] *= 1e7
+        x[:, 4] = 1e-30
+        cols += [x, np.arange(n) == n - 1, np.arange(n), np.full(n, 12345), np.arange(n) / 10, x[:, 0]]
+    for x in cols:
+        ours, theirs = lerobot_io._feature_stats(x), get_feature_stats(x, axis=0, keepdims=x.ndim == 1)
+        assert list(ours) == list(theirs)
+        for k in theirs:
+            assert ours[k].dtype == theirs[k].dtype and ours[k].shape == theirs[k].shape, (k, x.shape)
+            np.testing.assert_array_equal(ours[k], theirs[k], err_msg=f"{k} {x.dtype} {x.shape}")
