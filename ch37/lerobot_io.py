@@ -294,7 +294,7 @@ def _episode_stats(buf: dict, feats: dict) -> dict:
     return {k: _feature_stats(x) for k, x in buf.items() if feats[k]["dtype"] not in {"string", "language"}}
 
 
-def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes) -> None:
+def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb: int | None = None) -> None:
     """Write a LeRobot v3 set (no video) in one pass from the episodes' arrays.
 
     What LeRobot 0.6.1's save_episode does per episode, done once for the set: the data columns
@@ -306,7 +306,7 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes) -> None:
     columns in its order, tasks.parquet, info.json, and stats.json as aggregate_stats of the
     episodes' stats (LeRobot folds them one episode at a time: the same values up to rounding).
     No clock, no randomness: equal episodes give equal bytes. No episodes: info.json only, as
-    LeRobot leaves it.
+    LeRobot leaves it. file_mb: the file size limit in MB (LeRobot's default when None; tests).
     """
     import pandas as pd
     import pyarrow as pa
@@ -325,7 +325,7 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes) -> None:
 
     check_hf_cache()  # as on LeRobot's path: a cache problem is named here, not at the first read
     all_feats = {k: dict(f, shape=tuple(f["shape"])) for k, f in feats.items()} | DEFAULT_FEATURES
-    info = create_empty_dataset_info(CODEBASE_VERSION, fps, all_feats, False, robot_type)
+    info = create_empty_dataset_info(CODEBASE_VERSION, fps, all_feats, False, robot_type, None, file_mb)
     tmp.mkdir(parents=True)
     schema = get_hf_features_from_features(all_feats).arrow_schema  # with its "huggingface" metadata
     frame_bytes = sum(np.dtype(f["dtype"]).itemsize * f["shape"][0] for f in all_feats.values())

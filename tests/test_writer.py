@@ -216,3 +216,30 @@ def test_episode_stats_equal_lerobots_bit_for_bit():
         for k in theirs:
             assert ours[k].dtype == theirs[k].dtype and ours[k].shape == theirs[k].shape, (k, x.shape)
             np.testing.assert_array_equal(ours[k], theirs[k], err_msg=f"{k} {x.dtype} {x.shape}")
+
+
+def test_one_pass_writer_splits_files_as_lerobot_names_them(tmp_path):
+    """Past data_files_size_in_mb (1 MB here, ~10,800 frames) data and episodes tables go on in
+    chunk-000/file-001, ..., and LeRobot reads the set as the same frames and episodes."""
+    feats, _ = pusht_case()
+    m = gen_demos_pusht.PUSHT.env_module
+    eps = synthetic(m.STATE_NAMES, len(m.ACTION_NAMES), [20 + e % 5 for e in range(600)], 2, extra=True)
+    eps = list(lerobot_io._with_env_state(eps, feats))
+    split = tmp_path / "split"
+    lerobot_io._write_direct(split, fps=10, robot_type="r", task=TASK, feats=feats, episodes=eps, file_mb=1)
+    write_ours(tmp_path / "one", feats, eps)
+    assert [p.name for p in sorted((split / "data/chunk-000").iterdir())] == [
+        "file-000.parquet",
+        "file-001.parquet",
+    ]
+    assert len(list((split / "meta/episodes/chunk-000").iterdir())) == 2
+    a, b = lerobot_io.open_dataset(split), lerobot_io.open_dataset(tmp_path / "one")
+    fa, fb = a.hf_dataset.with_format("numpy")[:], b.hf_dataset.with_format("numpy")[:]
+    for k in fb:
+        np.testing.assert_array_equal(fa[k], fb[k], err_msg=k)
+    for col in ("episode_index", "length", "dataset_from_index", "dataset_to_index"):
+        assert a.meta.episodes[col] == b.meta.episodes[col], col
+    for e in (0, 299, 599):  # each episode's rows are in the file its episodes row names
+        rows = pq.read_table(split / a.meta.get_data_file_path(e)).column("episode_index").to_numpy()
+        assert (rows == e).sum() == a.meta.episodes[e]["length"]
+    assert a[len(a) - 1]["index"] == len(b) - 1
