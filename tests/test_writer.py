@@ -197,25 +197,42 @@ def test_lerobot_edit_dataset_works_on_our_output(tmp_path):
 
 
 def test_episode_stats_equal_lerobots_bit_for_bit():
-    """_feature_stats against LeRobot's get_feature_stats on the columns a set holds and the cases
-    its histogram quantiles treat apart: constant columns, ties, 1-3 frames, bool, int, huge, tiny."""
-    from lerobot.datasets.compute_stats import get_feature_stats
+    """_episode_stats against LeRobot's compute_episode_stats on episodes shaped like a set's, with
+    the cases its histogram quantiles treat apart: constant columns, ties, 1-3 frames, bool, int,
+    huge and tiny values; bit for bit, dtypes and shapes included."""
+    from lerobot.datasets.compute_stats import compute_episode_stats
 
+    feats, _ = pusht_case()
+    feats = feats | {k: {"dtype": "int64"} for k in ("frame_index", "episode_index", "index", "task_index")}
+    feats["timestamp"] = {"dtype": "float32"}
     rng = np.random.default_rng(7)
-    cols = []
-    for n in (1, 2, 3, 7, 30, 99, 100, 101, 400):
-        x = rng.standard_normal((n, 6)).astype(np.float32)
+    for e, n in enumerate((1, 2, 3, 7, 9, 30, 99, 100, 101, 400)):
+        x = rng.standard_normal((n, 10)).astype(np.float32)
         x[:, 1] = 0.25  # constant: float32 keeps min - 1e-10 == min, numpy's zero-step linspace
         x[:, 2] = np.round(x[:, 2], 1)  # ties
         x[:, 3] *= 1e7
         x[:, 4] = 1e-30
-        cols += [x, np.arange(n) == n - 1, np.arange(n), np.full(n, 12345), np.arange(n) / 10, x[:, 0]]
-    for x in cols:
-        ours, theirs = lerobot_io._feature_stats(x), get_feature_stats(x, axis=0, keepdims=x.ndim == 1)
+        buf = {
+            "observation.state": x,
+            "observation.environment_state": x[:, 2:5].copy(),
+            "action": rng.standard_normal((n, 2)).astype(np.float32),
+            "next.success": np.arange(n) == n - 1,
+            "aug.source_episode": np.full(n, e % 3),
+            "aug.start": rng.random((n, len(START_NAMES)), dtype=np.float32),
+            "timestamp": np.arange(n) / 10,
+            "frame_index": np.arange(n),
+            "episode_index": np.full(n, e),
+            "index": np.arange(1000 * e, 1000 * e + n),
+            "task_index": np.zeros(n, dtype=np.int64),
+        }
+        ours, theirs = lerobot_io._episode_stats(buf, feats), compute_episode_stats(buf, feats)
         assert list(ours) == list(theirs)
-        for k in theirs:
-            assert ours[k].dtype == theirs[k].dtype and ours[k].shape == theirs[k].shape, (k, x.shape)
-            np.testing.assert_array_equal(ours[k], theirs[k], err_msg=f"{k} {x.dtype} {x.shape}")
+        for key in theirs:
+            assert list(ours[key]) == list(theirs[key])
+            for st in theirs[key]:
+                a, b = ours[key][st], theirs[key][st]
+                assert a.dtype == b.dtype and a.shape == b.shape, (key, st, n)
+                np.testing.assert_array_equal(a, b, err_msg=f"{key} {st} {n} frames")
 
 
 def test_one_pass_writer_splits_files_as_lerobot_names_them(tmp_path):
