@@ -10,6 +10,7 @@ import contextlib
 import functools
 import json
 import logging
+import math
 import shutil
 from pathlib import Path
 
@@ -137,43 +138,39 @@ def write_dataset(
     ENV_STATE_KEY, when `feats` has it and an episode does not, is taken from the episode's
     observation.state columns of the same names (see features).
 
+    A set of numeric features of shape (d,) (every set the chapter writes) is written in one pass
+    from the arrays (_write_direct): the same files, columns, Arrow types and metadata LeRobot's
+    per-frame path (LeRobotDataset.create / add_frame / save_episode / finalize) writes, read back
+    equal frame by frame (tests/test_writer.py), without its per-frame and per-episode costs.
+    A set with a video (or any other) feature goes through LeRobot's own path (_write_lerobot):
+    encoding mp4 is LeRobot's job.
+
     The set is built in a sibling temp directory (ch37.files.partial_dir) and renamed into place, so
     an interrupted run never leaves a half-written set at `out`; what a killed run left for `out` is
     removed here, and nothing else beside it. `out` must not
     hold data. The stamp lists every file of the set with its sha256 (ch37.stamps).
     """
-    LeRobotDataset = _lerobot_dataset_class()
     out = Path(out)
     if holds_data(out):
         raise DataError(f"{out} already holds data; pick another --out or remove it yourself")
     out.parent.mkdir(parents=True, exist_ok=True)
     sweep_leftovers(out.parent, out.name)  # a killed run's partial `out` only: the parent is not ours
-    use_videos = any(f["dtype"] == "video" for f in feats.values())
-    env_cols = (
-        columns(feats["observation.state"]["names"], feats[ENV_STATE_KEY]["names"])
-        if ENV_STATE_KEY in feats
-        else None
-    )
-    work = partial_dir(out)  # .NAME.ch37-partial-PID, our stamp inside; LeRobot writes the set in work/set
+    episodes = _with_env_state(episodes, feats)
+    work = partial_dir(out)  # .NAME.ch37-partial-PID, our stamp inside; the set is written in work/set
     tmp = work / "set"
     try:
-        ds = LeRobotDataset.create(
-            repo_id,
-            fps=fps,
-            features=feats,
-            root=tmp,
-            robot_type=robot_type,
-            use_videos=use_videos,
-            video_backend=VIDEO_BACKEND,
-        )
-        with _fast_fingerprints():
-            for ep in episodes:
-                if env_cols is not None and ENV_STATE_KEY not in ep:  # (T, 10) -> (T, len(env_cols))
-                    ep = ep | {ENV_STATE_KEY: np.ascontiguousarray(ep["observation.state"][:, env_cols])}
-                for t in range(len(ep["action"])):
-                    ds.add_frame({k: ep[k][t] for k in feats} | {"task": task})
-                ds.save_episode()
-        ds.finalize()
+        if all(f["dtype"] in _DIRECT_DTYPES and len(f["shape"]) == 1 for f in feats.values()):
+            _write_direct(tmp, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes)
+        else:
+            _write_lerobot(
+                tmp,
+                repo_id=repo_id,
+                fps=fps,
+                robot_type=robot_type,
+                task=task,
+                feats=feats,
+                episodes=episodes,
+            )
         stats = (
             tmp / "meta" / "stats.json"
         )  # lerobot orders its keys by string hash; sorted, equal sets are equal bytes
@@ -194,6 +191,264 @@ def write_dataset(
             ) from e
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+# Feature dtypes _write_direct writes as plain Arrow columns (a scalar for shape (1,), else a
+# fixed-size list); images and videos go through LeRobot's own path.
+_DIRECT_DTYPES = {"bool", "float32", "float64", "int8", "int16", "int32", "int64", "uint8"}
+
+
+def _with_env_state(episodes, feats: dict):
+    """`episodes`, each with ENV_STATE_KEY filled from its observation.state columns when missing."""
+    if ENV_STATE_KEY not in feats:
+        yield from episodes
+        return
+    cols = columns(feats["observation.state"]["names"], feats[ENV_STATE_KEY]["names"])
+    for ep in episodes:
+        if ENV_STATE_KEY not in ep:  # (T, 10) -> (T, len(cols))
+            ep = ep | {ENV_STATE_KEY: np.ascontiguousarray(ep["observation.state"][:, cols])}
+        yield ep
+
+
+def _write_lerobot(tmp: Path, *, repo_id, fps, robot_type, task, feats, episodes) -> None:
+    """LeRobot's per-frame path: kept for sets with a video feature (LeRobot encodes the mp4)."""
+    ds = _lerobot_dataset_class().create(
+        repo_id,
+        fps=fps,
+        features=feats,
+        root=tmp,
+        robot_type=robot_type,
+        use_videos=any(f["dtype"] == "video" for f in feats.values()),
+        video_backend=VIDEO_BACKEND,
+    )
+    with _fast_fingerprints():
+        for ep in episodes:
+            for t in range(len(ep["action"])):
+                ds.add_frame({k: ep[k][t] for k in feats} | {"task": task})
+            ds.save_episode()
+    ds.finalize()
+
+
+def _quantiles(x: np.ndarray):
+    """Min, max and LeRobot's histogram quantiles of each column of x (T >= 2, D), bit for bit.
+
+    LeRobot's RunningQuantileStats, fed one batch, bins each column into 5,000 bins between
+    min - 1e-10 and max + 1e-10 (np.linspace) and reads a quantile q off the cumulated histogram:
+    the first bin j whose cumulated count reaches q*T, interpolated inside it. The cumulated count
+    of bin j is the number of values below edge j+1, so that bin is where the ceil(q*T)-th smallest
+    value falls: the same bin and the same float operations from one sort, without the 5,000-bin
+    histograms and cumsums per column and quantile. Returns lo, hi and per quantile (key, the bin's
+    lower edge, the interpolated value, where LeRobot returns the edge itself), each (D,).
+    """
+    from lerobot.datasets.compute_stats import DEFAULT_QUANTILES
+
+    n, dims = x.shape
+    lo, hi = np.min(x, axis=0), np.max(x, axis=0)
+    # Edge k of each dimension's np.linspace(lo - 1e-10, hi + 1e-10, 5001), as numpy computes it
+    bins = 5000
+    start, stop = lo - 1e-10, hi + 1e-10
+    delta = np.subtract(stop, start, dtype=start.dtype)
+    step = delta / bins
+    flat = step == 0  # numpy's other formula for a zero step (a constant column in float32)
+
+    def edge(k):  # k: (Q, D, W) bin numbers -> (Q, D, W) edges in the column's dtype
+        kk = k.astype(start.dtype)
+        s0, st, de = start[:, None], step[:, None], delta[:, None]
+        return np.where(
+            k == bins, stop[:, None], np.where(flat[:, None], (kk / bins) * de + s0, kk * st + s0)
+        )
+
+    srt = np.sort(x, axis=0)
+    targets = np.array([q * n for q in DEFAULT_QUANTILES])[:, None]  # (Q, 1), LeRobot's q * count
+    v = srt[[math.ceil(q * n) - 1 for q in DEFAULT_QUANTILES]]  # (Q, D): where each count is reached
+    # Its bin: how many of edges 1..4999 are <= v (edges rise with k). Counted in a window of 9
+    # edges around a float64 guess; exact when the window's ends bracket v, else over the whole row.
+    with np.errstate(all="ignore"):
+        guess = np.nan_to_num((v - start.astype(np.float64)) / step.astype(np.float64))
+    first = np.clip(np.floor(np.clip(guess, -16, bins + 16)).astype(np.int64) - 4, 1, bins - 1)
+    win = first[..., None] + np.arange(9)  # (Q, D, 9)
+    ew = edge(np.minimum(win, bins - 1))
+    idx = first - 1 + ((ew <= v[..., None]) & (win <= bins - 1)).sum(axis=-1)
+    ok = ((first == 1) | (ew[..., 0] <= v)) & ((first + 8 >= bins - 1) | (ew[..., 8] > v))
+    if not ok.all():
+        row = edge(np.broadcast_to(np.arange(1, bins), (1, dims, bins - 1)))[0]  # (D, 4999)
+        for qi, d in zip(*np.nonzero(~ok), strict=True):
+            idx[qi, d] = (row[d] <= v[qi, d]).sum()
+    e0, e1 = edge(idx[..., None])[..., 0], edge(idx[..., None] + 1)[..., 0]
+    below = (srt[None] < e0[:, None]).sum(axis=1)  # (Q, D) values below the bin ...
+    upto = np.where(idx < bins - 1, (srt[None] < e1[:, None]).sum(axis=1), n)  # ... and up to its top
+    count_before = np.where(idx == 0, 0, below).astype(np.float64)
+    in_bin = upto.astype(np.float64) - count_before
+    plain = (idx == 0) | (in_bin == 0)  # LeRobot returns the edge itself (its dtype) there
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inside = e0 + ((targets - count_before) / in_bin) * (e1 - e0)
+    keys = [f"q{int(q * 100):02d}" for q in DEFAULT_QUANTILES]
+    return lo, hi, [(key, e0[i], inside[i], plain[i]) for i, key in enumerate(keys)]
+
+
+def _episode_stats(buf: dict, feats: dict) -> dict:
+    """compute_episode_stats(buf, feats) for numeric features, equal bit for bit and in dtype.
+
+    Per feature, mean and std as RunningQuantileStats computes them (on the feature's own array:
+    a sum's rounding depends on its layout); min, max and quantiles column by column (_quantiles)
+    over all features of one dtype at once. An episode of one frame: LeRobot's own code.
+    """
+    from lerobot.datasets.compute_stats import get_feature_stats
+
+    out, groups = {}, {}
+    for k, data in buf.items():
+        if feats[k]["dtype"] in {"string", "language"}:
+            continue
+        if len(data) < 2:
+            out[k] = get_feature_stats(data, axis=0, keepdims=data.ndim == 1)
+            continue
+        x = data.reshape(-1, 1) if data.ndim == 1 else data
+        x = x.astype(np.result_type(x.dtype, np.float32), copy=False)  # as RunningQuantileStats.update
+        n = len(x)
+        mean, mean_sq = np.mean(x, axis=0), np.mean(x**2, axis=0)
+        mean += (np.mean(x, axis=0) - mean) * (n / n)  # its running update, kept for equal bits
+        mean_sq += (np.mean(x**2, axis=0) - mean_sq) * (n / n)
+        std = np.sqrt(np.maximum(0, mean_sq - mean**2))
+        out[k] = {"min": None, "max": None, "mean": mean, "std": std, "count": np.array([n])}
+        groups.setdefault(x.dtype, []).append((k, x))
+    for members in groups.values():
+        lo, hi, qs = _quantiles(np.concatenate([x for _, x in members], axis=1))
+        at = 0
+        for k, x in members:
+            cols = slice(at, at + x.shape[1])
+            at += x.shape[1]
+            st = out[k]
+            st["min"], st["max"] = lo[cols].copy(), hi[cols].copy()
+            for key, e0, inside, plain in qs:  # LeRobot's np.array of edges alone stays in their dtype
+                st[key] = (
+                    e0[cols].copy() if plain[cols].all() else np.where(plain[cols], e0[cols], inside[cols])
+                )
+            if buf[k].ndim == 1:  # keepdims: (1,) each, as LeRobot reshapes a (T,) column's stats
+                out[k] = {name: v.reshape(1) for name, v in st.items()}
+    return out
+
+
+def _feature_stats(data: np.ndarray) -> dict:
+    """get_feature_stats(data, axis=0, keepdims=data.ndim == 1) of one (T,) or (T, D) column."""
+    return _episode_stats({"x": data}, {"x": {"dtype": "float32"}})["x"]
+
+
+def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb: int | None = None) -> None:
+    """Write a LeRobot v3 set (no video) in one pass from the episodes' arrays.
+
+    What LeRobot 0.6.1's save_episode does per episode, done once for the set: the data columns
+    (each feature, timestamp, frame_index, episode_index, index, task_index; DEFAULT_FEATURES) in
+    data/chunk-CCC/file-FFF.parquet with the Arrow schema of get_hf_features_from_features, a new
+    file when the current one would pass info's data_files_size_in_mb (LeRobot's rule, on the
+    uncompressed size); per-episode stats equal bit for bit to compute_episode_stats on the arrays
+    save_episode stacks (_episode_stats, a faster equal of it), the episodes table with LeRobot's
+    columns in its order, tasks.parquet, info.json, and stats.json as aggregate_stats of the
+    episodes' stats (LeRobot folds them one episode at a time: the same values up to rounding).
+    No clock, no randomness: equal episodes give equal bytes. No episodes: info.json only, as
+    LeRobot leaves it. file_mb: the file size limit in MB (LeRobot's default when None; tests).
+    """
+    import pandas as pd
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    from lerobot.datasets.compute_stats import aggregate_stats
+    from lerobot.datasets.dataset_metadata import CODEBASE_VERSION
+    from lerobot.datasets.feature_utils import (
+        create_empty_dataset_info,
+        get_hf_features_from_features,
+        validate_frame,
+    )
+    from lerobot.datasets.io_utils import write_info, write_stats, write_tasks
+    from lerobot.datasets.utils import DEFAULT_EPISODES_PATH, update_chunk_file_indices
+    from lerobot.utils.constants import DEFAULT_FEATURES
+    from lerobot.utils.utils import flatten_dict
+
+    check_hf_cache()  # as on LeRobot's path: a cache problem is named here, not at the first read
+    all_feats = {k: dict(f, shape=tuple(f["shape"])) for k, f in feats.items()} | DEFAULT_FEATURES
+    info = create_empty_dataset_info(CODEBASE_VERSION, fps, all_feats, False, robot_type, None, file_mb)
+    tmp.mkdir(parents=True)
+    schema = get_hf_features_from_features(all_feats).arrow_schema  # with its "huggingface" metadata
+    frame_bytes = sum(np.dtype(f["dtype"]).itemsize * f["shape"][0] for f in all_feats.values())
+    limit = info.data_files_size_in_mb * 1024**2  # bytes, LeRobot's DEFAULT_DATA_FILE_SIZE_IN_MB
+
+    def column(field, parts: list[np.ndarray]):
+        flat = pa.array(
+            np.concatenate(parts).reshape(-1),
+            type=field.type.value_type if field.type.num_fields else field.type,
+        )
+        return pa.FixedSizeListArray.from_arrays(flat, type=field.type) if field.type.num_fields else flat
+
+    def write_file(parts: dict, chunk: int, file: int) -> None:
+        path = tmp / info.data_path.format(chunk_index=chunk, file_index=file)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        table = pa.Table.from_arrays([column(f, parts[f.name]) for f in schema], schema=schema)
+        pq.write_table(table, path, compression="snappy", use_dictionary=True)
+
+    rows: dict[str, list] = {}  # the episodes table, column by column
+    ep_stats = []
+    parts = {k: [] for k in all_feats}  # the current data file's columns, episode by episode
+    chunk = file = frames = in_file = 0
+    for e, ep in enumerate(episodes):
+        n = len(ep["action"])
+        if n == 0:
+            raise ValueError(f"episode {e} has no frames")
+        validate_frame({k: ep[k][0] for k in feats} | {"task": task}, all_feats)  # LeRobot's messages
+        buf = {}
+        for k in feats:
+            x = np.asarray(ep[k])
+            if len(x) != n:
+                raise ValueError(f"episode {e}: {k} has {len(x)} frames, action has {n}")
+            buf[k] = x.reshape(n) if all_feats[k]["shape"] == (1,) else x.reshape(n, -1)
+        buf["timestamp"] = np.arange(n) / fps  # float64 (T,), as save_episode stacks it; float32 on disk
+        buf["frame_index"] = np.arange(n)
+        buf["episode_index"] = np.full(n, e)
+        buf["index"] = np.arange(frames, frames + n)
+        buf["task_index"] = np.zeros(n, dtype=np.int64)  # one task per set
+        stats = _episode_stats(buf, all_feats)
+        ep_stats.append(stats)
+        if in_file and (in_file + n) * frame_bytes >= limit:
+            write_file(parts, chunk, file)
+            parts = {k: [] for k in all_feats}
+            chunk, file = update_chunk_file_indices(chunk, file, info.chunks_size)
+            in_file = 0
+        for k, x in buf.items():
+            parts[k].append(x.astype(np.float32) if k == "timestamp" else x)
+        row = {
+            "episode_index": e,
+            "tasks": [task],
+            "length": n,
+            "data/chunk_index": chunk,
+            "data/file_index": file,
+            "dataset_from_index": frames,
+            "dataset_to_index": frames + n,
+        } | {k: v.tolist() for k, v in flatten_dict({"stats": stats}).items()}
+        for k, v in row.items():
+            rows.setdefault(k, []).append(v)
+        frames += n
+        in_file += n
+    if not ep_stats:
+        write_info(info, tmp)
+        return
+    write_file(parts, chunk, file)
+    n_eps = len(ep_stats)
+    # The episodes table in files of at most data_files_size_in_mb (as LeRobot splits it): one file
+    # up to ~50,000 episodes of this chapter's width (~2 KB a row).
+    row_bytes = pa.Table.from_pydict(rows).nbytes / n_eps
+    per_file = max(1, int(limit // row_bytes))
+    m_chunk = m_file = 0
+    for lo in range(0, n_eps, per_file):
+        if lo:
+            m_chunk, m_file = update_chunk_file_indices(m_chunk, m_file, info.chunks_size)
+        part = {k: v[lo : lo + per_file] for k, v in rows.items()}
+        part["meta/episodes/chunk_index"] = [m_chunk] * len(part["length"])
+        part["meta/episodes/file_index"] = [m_file] * len(part["length"])
+        path = tmp / DEFAULT_EPISODES_PATH.format(chunk_index=m_chunk, file_index=m_file)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        pq.write_table(pa.Table.from_pydict(part), path, compression="snappy", use_dictionary=True)
+    write_tasks(pd.DataFrame({"task_index": range(1)}, index=pd.Index([task], name="task")), tmp)
+    info.total_episodes, info.total_frames, info.total_tasks = n_eps, frames, 1
+    info.splits = {"train": f"0:{n_eps}"}
+    write_info(info, tmp)
+    write_stats(aggregate_stats(ep_stats), tmp)
 
 
 def open_dataset(root: Path, repo_id: str = "local/demos"):
