@@ -55,7 +55,7 @@ def load_policy(path: Path, device: str):
 
 
 def observation_builder(policy):
-    """obs float32[10] -> the batch the policy reads: its input features from our state, each (1, D)."""
+    """obs float32 (10,) or (B, 10) -> the batch the policy reads: its input features of our state, (B, D)"""
     import torch
 
     import pusht_env
@@ -76,10 +76,10 @@ def observation_builder(policy):
         raise DataError(f"the policy's action has shape {act and tuple(act.shape)}; PushT's is (2,)")
     device = policy.config.device
 
-    def build(obs):
-        x = torch.as_tensor(obs, dtype=torch.float32)
-        batch = {key: x[ours[key]].unsqueeze(0).to(device) for key in feats}
-        return batch | {"task": [pusht_env.TASK]}
+    def build(obs):  # (10,) or (B, 10)
+        x = torch.as_tensor(np.atleast_2d(obs), dtype=torch.float32)
+        batch = {key: x[:, ours[key]].to(device) for key in feats}
+        return batch | {"task": [pusht_env.TASK] * len(x)}
 
     return build
 
