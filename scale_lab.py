@@ -151,11 +151,8 @@ def expert_success(seed: int, eval_seeds: list[int]):
     from scripted_expert import PushTExpert
 
     env = pusht_env.PushTEnv()
-    return (
-        "expert",
-        seed,
-        sum(rollout(env, PushTExpert(noise=0.0), env.reset(s))["success"] for s in eval_seeds),
-    )
+    wins = sum(rollout(env, PushTExpert(noise=0.0), env.reset(s))["success"] for s in eval_seeds)
+    return "expert", seed, wins
 
 
 def generate(a, srcs: dict, eval_seeds: dict, gen_paths: dict, max_per: dict):
@@ -175,14 +172,9 @@ def generate(a, srcs: dict, eval_seeds: dict, gen_paths: dict, max_per: dict):
         mode, s, kept, attempts, failures = got
         stamp = {"kind": "augmented", "seed": s, "mode": mode}
         engine.save(gen_paths[(mode, s)], kept, repo_id=f"local/pusht_{mode}", stamp=stamp)
-        generation.setdefault(mode, {})[str(s)] = {
-            "attempts": attempts,
-            "kept": len(kept),
-            "yield": len(kept) / attempts if attempts else 0.0,
-            "failures": failures,
-            "per_demo_wanted": max_per[mode],
-            "cap": cap[mode] * max_per[mode],
-        }
+        g = {"attempts": attempts, "kept": len(kept), "yield": len(kept) / attempts if attempts else 0.0}
+        g |= {"failures": failures, "per_demo_wanted": max_per[mode], "cap": cap[mode] * max_per[mode]}
+        generation.setdefault(mode, {})[str(s)] = g
         if kept:  # train on what is on disk
             generated[(mode, s)] = load_arrays(gen_paths[(mode, s)], keys=engine.KEPT_KEYS)
     for mode, by_seed in sorted(generation.items()):
@@ -201,14 +193,8 @@ def train_point(key: tuple, x, y, steps: int, seed: int, eval_seeds: list[int], 
 
     torch.set_num_threads(1)
     t0 = time.perf_counter()
-    (pol,), (fit,) = bc.train(
-        [(x, y)],
-        steps,
-        bc.init_weights(hp["hidden_dim"], seed),
-        seed=seed,
-        batch_size=hp["batch_size"],
-        lr=hp["lr"],
-    )
+    init = bc.init_weights(hp["hidden_dim"], seed)
+    (pol,), (fit,) = bc.train([(x, y)], steps, init, seed=seed, batch_size=hp["batch_size"], lr=hp["lr"])
     rate = bc.evaluate(pol, eval_seeds)
     out = {"success": rate, "ci95": bc.wilson(rate, len(eval_seeds)), "final_loss": fit}
     return key, out | {"seconds": time.perf_counter() - t0}
@@ -262,17 +248,8 @@ class Data:
                         same = ("resolve" if curve == "resolve_fixed" else curve, n)
                     unit = (*same, s, steps)
                     units.setdefault(unit, (x, y))
-                    points.append(
-                        {
-                            "curve": curve,
-                            "n": n,
-                            "demos": demos,
-                            "seed": s,
-                            "frames": len(x),
-                            "steps": steps,
-                            "unit": unit,
-                        }
-                    )
+                    point = dict(curve=curve, n=n, demos=demos, seed=s)
+                    points.append(point | dict(frames=len(x), steps=steps, unit=unit))
         return points, units
 
 
@@ -288,11 +265,8 @@ def train_all(a, points: list, units: dict, eval_seeds: dict) -> dict:
     for i, (u, r) in enumerate(executors.run(train_point, tasks, workers=a.workers, ray=a.ray), 1):
         results[tuple(u)] = r
         names = ", ".join(f"{p['curve']} N={p['n']}" for p in points if p["unit"] == u)
-        print(
-            f"  [{i}/{len(tasks)}] seed {u[2]}, {u[3]} steps: {names}: success {r['success']:.2f} "
-            f"({r['seconds']:.1f} s)",
-            flush=True,
-        )
+        done = f"success {r['success']:.2f} ({r['seconds']:.1f} s)"
+        print(f"  [{i}/{len(tasks)}] seed {u[2]}, {u[3]} steps: {names}: {done}", flush=True)
     return results
 
 
@@ -312,13 +286,9 @@ def curves_of(a, points: list) -> dict:
         for n in a.n:
             pts = [p for p in points if p["curve"] == curve and p["n"] == n]
             mean, ci = pooled([p["success"] for p in pts], a.eval_episodes)
-            curves[curve][str(n)] = {
-                "success": mean,
-                "ci95": ci,
-                "demos": sum(p["demos"] for p in pts) / len(pts),
-                "steps": [p["steps"] for p in pts],
-                "frames": [p["frames"] for p in pts],
-            }
+            row = {"success": mean, "ci95": ci, "demos": sum(p["demos"] for p in pts) / len(pts)}
+            row |= {"steps": [p["steps"] for p in pts], "frames": [p["frames"] for p in pts]}
+            curves[curve][str(n)] = row
     return curves
 
 
