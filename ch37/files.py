@@ -16,6 +16,7 @@ the folder's stamp (ch37.stamps). The lock is released when the process ends.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import hashlib
 import json
@@ -233,10 +234,8 @@ def unlock(folder: Path) -> None:
 
 def _close_locks_in_child() -> None:  # a forked worker must never keep a run's lock alive
     for fd in _HELD.values():
-        try:
+        with contextlib.suppress(OSError):
             os.close(fd)
-        except OSError:
-            pass
     _HELD.clear()
 
 

@@ -9,6 +9,7 @@ folder that cannot be read or written is skipped with one warning line.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -111,14 +112,10 @@ def discard_entry(entry: Path) -> bool:
     """Remove an entry's own files (the ones a cache entry can hold) and the folder if then empty;
     True if the entry is gone."""
     for name in (*RESULT_FILES, SUMMARY, MANIFEST):
-        try:
+        with contextlib.suppress(OSError):
             (entry / name).unlink(missing_ok=True)
-        except OSError:
-            pass
-    try:
+    with contextlib.suppress(OSError):
         entry.rmdir()
-    except OSError:
-        pass
     return not entry.exists()
 
 
