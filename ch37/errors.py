@@ -59,10 +59,8 @@ def one_line(exc: BaseException) -> tuple[int, str] | None:
         return 2, "error: " + " ".join(str(exc).split())
     if isinstance(exc, OSError) and exc.errno in ENVIRONMENT_ERRNOS:
         where = f"{exc.filename}: " if exc.filename is not None else ""
-        return (
-            2,
-            f"error: {where}{exc.strerror}; {ENVIRONMENT_ERRNOS[exc.errno]}, then run the same command again",
-        )
+        fix = ENVIRONMENT_ERRNOS[exc.errno]
+        return 2, f"error: {where}{exc.strerror}; {fix}, then run the same command again"
     return None
 
 

@@ -209,10 +209,8 @@ def replay_section(folder: Path) -> dict | None:
             if kind == "compare":
                 out[kind] = _compare(d)
             else:
-                out[kind] = {
-                    "command": d["command"],
-                    "rows": [{k: r[k] for k in SIGMA_ROW_KEYS} for r in d["rows"]],
-                }
+                rows = [{k: r[k] for k in SIGMA_ROW_KEYS} for r in d["rows"]]
+                out[kind] = {"command": d["command"], "rows": rows}
             out["provisional"] = bool(out.get("provisional") or d.get("smoke"))
         except (OSError, ValueError, KeyError, TypeError) as e:
             raise DataError(
@@ -281,11 +279,8 @@ def main(argv: list[str]) -> int:
     lab, current = read_scale_lab(a.scale_lab), region_hashes(a.script)
     for name, s in (("seed", seeds), ("aug", aug)):
         if stale := ", ".join(drifted(current, s.get("script_region_hashes"))):
-            print(
-                f"warning: the {name} sweep ran a different scale_data.py (regions {stale} changed since); "
-                "re-run it if those changes can move the numbers",
-                file=sys.stderr,
-            )
+            why = f"the {name} sweep ran a different scale_data.py (regions {stale} changed since)"
+            print(f"warning: {why}; re-run it if those changes can move the numbers", file=sys.stderr)
     old = load_yaml(a.meta)
     meta = {k: old.get(k, v) for k, v in META_STATIC.items()} | old
     try:

@@ -66,11 +66,8 @@ def row_of(m: dict, **extra) -> dict:
     a, n = m["arms"], m["config"]["eval_episodes"]
     row = extra | {arm: a[arm]["success"] for arm in ARMS} | {e: round(m["effects"][e], 6) for e in EFFECTS}
     row["delta"] = round(m["scale_effect"], 6)  # the headline: data effect at the full budget
-    row |= {
-        "steps": m["budgets"],
-        "eval_episodes": n,
-        "successes": {k: round(a[k]["success"] * n) for k in ARMS},
-    }
+    row |= {"steps": m["budgets"], "eval_episodes": n}
+    row["successes"] = {k: round(a[k]["success"] * n) for k in ARMS}
     row |= {k: m[k] for k in ("yield", "kept", "attempts")}
     row |= {"coverage_source": m["coverage"]["source"], "coverage_union": m["coverage"]["union"]}
     return row | {"ci95": {arm: a[arm]["ci95"] for arm in ARMS}, "wall_s": m["_wall_s"]}
@@ -192,10 +189,8 @@ def sweep(a, flags: list[str], argv: list[str]) -> Path:
     rows, metrics = run_all(kind, runs, a.script, out_root, flags)
     varied = {"seed", "aug_per_demo", "full_steps"} if kind == "aug" else {"seed"}  # from run to run
     each = ["--aug_per_demo", "{k}", "[--full_steps {full}]"] if kind == "aug" else []
-    runs_command = "python scale_data.py --seed {seed} --no-rerun --out".split() + [
-        str(out_root / kind / "{run}")
-    ]
-    runs_command += flags + each
+    runs_out = str(out_root / kind / "{run}")
+    runs_command = [*"python scale_data.py --seed {seed} --no-rerun --out".split(), runs_out, *flags, *each]
     first = metrics[0]
     result = {"kind": kind, "smoke": smoke, "command": shlex.join(["python", "-m", "tools.sweep", *argv])}
     result |= {"runs_command": shlex.join(runs_command), **prov, "device": first["config"].get("device")}
