@@ -75,12 +75,6 @@ def owned(stamp: dict | None) -> set[str]:
     return set(listed) if isinstance(listed, dict) else set()
 
 
-def foreign_files(root: Path, stamp: dict | None) -> list[str]:
-    """Files under `root` this program did not write (all of them when the stamp is not ours)."""
-    mine = owned(stamp)
-    return [rel for rel in file_list(root) if rel not in mine]
-
-
 def changed_files(root: Path, stamp: dict) -> list[str]:
     """Files our stamp lists that are missing or whose bytes differ from what was written."""
     bad = []
@@ -113,7 +107,8 @@ def check_ours(path: Path, kind: str | None = None) -> dict | None:
 def check_replaceable(path: Path) -> None:
     """DataError unless `path` is absent, empty, or holds only files our stamp lists."""
     stamp = check_ours(path)
-    foreign = foreign_files(path, stamp) if stamp else []
+    mine = owned(stamp)  # the files not among them are a user's
+    foreign = [rel for rel in file_list(path) if rel not in mine] if stamp else []
     if foreign:
         raise DataError(
             f"{path} must be rebuilt but holds files this program did not write ({names(foreign)}); "

@@ -67,7 +67,7 @@ def checker(problems):
 
 
 def smoke_mode() -> bool:
-    return os.environ.get("CH37_EXERCISE_SMOKE", "").strip().lower() not in ("", "0", "false", "no")
+    return errors.env_flag("CH37_EXERCISE_SMOKE")
 
 
 @checker
