@@ -100,8 +100,7 @@ def parse(argv=None):
         p.set_defaults(**SMOKE)
         a = p.parse_args(argv)
     a.out = a.out if a.out is not None else Path("outputs/scale_lab" + ("-smoke" if a.smoke else ""))
-    bad = [n for n in a.n if n < SOURCES or (n - SOURCES) % SOURCES]
-    if bad:
+    if bad := [n for n in a.n if n < SOURCES or (n - SOURCES) % SOURCES]:
         raise DataError(
             f"--n {bad[0]}: every N must be >= {SOURCES} with N - {SOURCES} divisible by {SOURCES} "
             f"({SOURCES} source demos, each grown by the same count), e.g. 12 36 108"

@@ -184,8 +184,7 @@ def _main(emb: Embodiment, argv=None) -> int:
     config.check(a, finite=("noise",))
     if holds_data(a.out):
         raise DataError(f"{a.out} already holds data; pick another --out (nothing was touched)")
-    problem = check_out_path(a.out, "--out") or (check_gl() if a.video else None)
-    if problem:
+    if problem := check_out_path(a.out, "--out") or (check_gl() if a.video else None):
         raise DataError(problem)
     s = generate(emb, a.out, episodes=a.episodes, seed=a.seed, noise=a.noise, video=a.video, quiet=a.quiet)
     wrote = f"wrote {s['episodes']} {emb.name} episodes, {s['frames']} frames to {a.out}"

@@ -298,8 +298,7 @@ class Claim:
             self.files = {k: v for k, v in (stamp.get("files") or {}).items() if isinstance(v, str)}
             self.pending = {k: v for k, v in (stamp.get("pending") or {}).items() if isinstance(v, str)}
         mine = {name for name in set(self.files) | set(self.pending) if self.is_own(out / name)}
-        others = sorted(mine - set(results))  # another command's results (scale_lab.py's, scale_data.py's)
-        if others:
+        if others := sorted(mine - set(results)):  # another command's (scale_lab.py or scale_data.py)
             raise DataError(
                 f"--out {out} holds another command's results ({names(others)}); pass another --out or move "
                 "them (nothing was changed)"
@@ -336,8 +335,7 @@ def claim(
     replaces  folders the run will rebuild: each must hold only files this program wrote
     """
     out = Path(out)
-    problem = check_out_path(out)
-    if problem:
+    if problem := check_out_path(out):
         raise DataError(problem)
     for flag, given in (inputs or {}).items():
         if given is not None and out.resolve().is_relative_to(Path(given).resolve()):

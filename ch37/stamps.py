@@ -108,8 +108,7 @@ def check_replaceable(path: Path) -> None:
     """DataError unless `path` is absent, empty, or holds only files our stamp lists."""
     stamp = check_ours(path)
     mine = owned(stamp)  # the files not among them are a user's
-    foreign = [rel for rel in file_list(path) if rel not in mine] if stamp else []
-    if foreign:
+    if stamp and (foreign := [rel for rel in file_list(path) if rel not in mine]):
         raise DataError(
             f"{path} must be rebuilt but holds files this program did not write ({names(foreign)}); "
             "move them elsewhere and run the same command again (nothing was changed)"

@@ -227,8 +227,7 @@ def read_scale_lab(path: Path) -> dict | None:
     data = _read_json(path, "scale_lab.json", "re-run scale_lab.py")
     if not isinstance(data, dict) or data.get("kind") != "scale_lab":
         raise DataError(f"--scale-lab {rel(path)} is not a scale_lab.json written by scale_lab.py")
-    missing = [k for k in SCALE_LAB_KEYS if k not in data]
-    if missing:
+    if missing := [k for k in SCALE_LAB_KEYS if k not in data]:
         raise DataError(f"{rel(path)} is incomplete: it lacks {', '.join(missing)}; re-run scale_lab.py")
     return data
 

@@ -179,8 +179,7 @@ def run_all(kind: str, runs: list, script: Path, out_root: Path, flags: list[str
 def sweep(a, flags: list[str], argv: list[str]) -> Path:
     """Run the sweep of the parsed flags `a` (`flags` go to every run), write sweep_seeds.json or
     sweep_aug.json under --out-root, print its table."""
-    bad = sorted({f.split("=")[0] for f in flags} & SWEEP_OWNED)
-    if bad:
+    if bad := sorted({f.split("=")[0] for f in flags} & SWEEP_OWNED):
         raise DataError(f"{', '.join(bad)}: the sweep sets these itself (use --seeds/--aug and --out-root)")
     smoke = "--smoke" in flags
     out_root = ROOT / (a.out_root or ("outputs/sweep-smoke" if smoke else "outputs/sweep"))
