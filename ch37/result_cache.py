@@ -27,8 +27,7 @@ from ch37.stamps import STAMP_NAME
 
 MANIFEST, SUMMARY = "manifest.json", "summary.txt"
 # summary.txt keeps each written file as NUL + its name + NUL (NUL is in no path and no number), so a
-# replay rebuilds exactly the paths under its own --out and touches nothing else (issue 22 item 5:
-# the old "{out}" text replacement turned every "0" into "1" when --out 0 was replayed as --out 1).
+# replay rebuilds exactly the paths under its own --out, whatever --out's name also matches in the text.
 # Part of the key: an entry in an older summary format is never replayed.
 CACHE_FORMAT = "2"
 
@@ -144,10 +143,8 @@ class ResultCache:
         for name, data in got.items():
             if name != SUMMARY:
                 write_atomic(self.out / name, data)
-        print(
-            f"reusing the result of an identical earlier run (same flags and code, cache key {self.key}; "
-            "--no-cache runs it again)"
-        )
+        why = f"same flags and code, cache key {self.key}; --no-cache runs it again"
+        print(f"reusing the result of an identical earlier run ({why})")
         print(summary_for(got[SUMMARY].decode(), self.out), end="")
         return True
 

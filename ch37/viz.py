@@ -162,15 +162,11 @@ def scale_lab_figure(path: Path, result: dict) -> Path:
     ns = cfg["n"]
     ax.set_xticks(ns, [str(n) for n in ns])
     ax.minorticks_off()
-    ax.set(
-        ylim=(0, 1.02),
-        xlabel="PushT demos trained on (log scale)",
-        ylabel="success rate on held-out starts",
-        title=f"BC success vs demos: mean over seeds {cfg['seeds']}, band = Wilson 95% of "
-        f"{cfg['eval_episodes'] * len(cfg['seeds'])} pooled episodes"
-        + (" (smoke)" if result.get("smoke") else ""),
-    )
-    ax.title.set_fontsize(9)
+    seeds, pooled = cfg["seeds"], cfg["eval_episodes"] * len(cfg["seeds"])
+    title = f"BC success vs demos: mean over seeds {seeds}, band = Wilson 95% of {pooled} pooled episodes"
+    ax.set_ylim(0, 1.02)
+    ax.set(xlabel="PushT demos trained on (log scale)", ylabel="success rate on held-out starts")
+    ax.set_title(title + (" (smoke)" if result.get("smoke") else ""), fontsize=9)
     ax.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
     return save_png(fig, path, dpi=100)
