@@ -58,7 +58,8 @@ SHAPING = tuple(
 
 
 # --- 1. parse ---------------------------------------------------------------------------------------
-def parser():
+def parser(smoke: bool = False):
+    """The lab's flags; with `smoke`, SMOKE's values are their defaults."""
     p = config.parser(__doc__.split("\n\n")[0])
     flag = p.add_argument
     flag("--n", type=int, nargs="+", default=[12, 36, 108, 324, 972], help="total demos per point (N)")
@@ -77,15 +78,12 @@ def parser():
     flag("--yaw_sigma", type=float, default=D.aug_yaw_sigma, help="rad; the engine's block yaw noise (<= 10)")
     flag("--replay_tries", type=int, default=10, help="replay attempts per wanted demo (yield ~2%% here)")
     flag("--out", type=Path, help="output folder (default outputs/scale_lab, -smoke appended with --smoke)")
-    flag(
-        "--workers",
-        type=int,
-        default=os.cpu_count() or 1,
-        help="local processes or a local Ray's CPUs; same results",
-    )
+    cpus = os.cpu_count() or 1
+    flag("--workers", type=int, default=cpus, help="local processes or a local Ray's CPUs; same results")
     flag("--ray", nargs="?", const="local", metavar="ADDRESS", help="a private local Ray, or join ADDRESS")
     flag("--rerun", action=BooleanOptionalAction, default=True, help="write scale_lab.rrd")
     flag("--smoke", action="store_true", help="tiny settings for tests (seconds); explicit flags win")
+    p.set_defaults(**(SMOKE if smoke else {}))
     return p
 
 
@@ -94,11 +92,9 @@ SIGMAS_AT_MOST = {"pos_sigma": config.SIGMA_MAX, "yaw_sigma": config.SIGMA_MAX} 
 
 def parse(argv=None):
     """The flags, checked; a problem is a DataError (one line, exit 2)."""
-    p = parser()
-    a = p.parse_args(argv)
+    a = parser().parse_args(argv)
     if a.smoke:
-        p.set_defaults(**SMOKE)
-        a = p.parse_args(argv)
+        a = parser(smoke=True).parse_args(argv)
     a.out = a.out if a.out is not None else Path("outputs/scale_lab" + ("-smoke" if a.smoke else ""))
     if bad := [n for n in a.n if n < SOURCES or (n - SOURCES) % SOURCES]:
         raise DataError(
@@ -118,9 +114,7 @@ def parse(argv=None):
 def command(a) -> str:
     """The command that gives these numbers, with only the result-shaping flags that differ from their
     defaults (so the local and the Ray run write the same line)."""
-    p = parser()
-    if a.smoke:
-        p.set_defaults(**SMOKE)
+    p = parser(a.smoke)
     parts = ["python scale_lab.py"] + (["--smoke"] if a.smoke else [])
     for k in SHAPING[:-1]:
         v = getattr(a, k)

@@ -389,9 +389,8 @@ def run_ex3(say=print) -> None:
     if smoke:
         say("ex3: steps " + ", ".join(step_lines(rates)))
         frames = [runs[k]["augmented_frames"] for k in ks]
-        return say(
-            _smoke_note("ex3", f"keys, ranges, nested sizes (augmented frames {frames}) and equal budgets")
-        )
+        checked = f"keys, ranges, nested sizes (augmented frames {frames}) and equal budgets"
+        return say(_smoke_note("ex3", checked))
     for line in check_ex3_measured(rates, meta["band"], tol := float(meta["plateau_tol"])):
         say("ex3: " + line)
     shape = curve_shape(rates, tol)
