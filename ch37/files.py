@@ -198,10 +198,8 @@ def lock(folder: Path) -> None:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
         holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
-        print(
-            f"waiting: another run (pid {holder}) is writing to {folder}; this one starts when it ends",
-            flush=True,
-        )
+        waiting = f"waiting: another run (pid {holder}) is writing to {folder}"
+        print(f"{waiting}; this one starts when it ends", flush=True)
         fcntl.flock(fd, fcntl.LOCK_EX)
     except OSError as e:
         os.close(fd)

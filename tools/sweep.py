@@ -77,13 +77,6 @@ def mean_row(rows: list[dict]) -> dict:
     return {k: round(sum(r[k] for r in rows) / len(rows), 6) for k in MEAN_KEYS}
 
 
-def wilson(successes: int, n: int) -> list[float]:
-    """bc_recipe.wilson's 95% interval, rounded to 6 places."""
-    from bc_recipe import wilson  # here, not at the top: it loads torch, which the sweep itself never needs
-
-    return [round(v, 6) for v in wilson(successes / n, n)]
-
-
 def paired(rows: list[dict]) -> dict:
     """Per effect (data at each budget, compute per data set), the seeds' paired differences: wins,
     ties, losses, mean, sample std, and a 95% t-interval over seeds (None with one seed)."""
@@ -103,11 +96,14 @@ def paired(rows: list[dict]) -> dict:
 
 def pooled(rows: list[dict]) -> dict:
     """Each arm's successes over all seeds' evaluation episodes, with a Wilson 95% interval."""
+    from bc_recipe import wilson  # here, not at the top: it loads torch, which the sweep itself never needs
+
     n = sum(r["eval_episodes"] for r in rows)
     out = {}
     for arm in ARMS:
         k = sum(r["successes"][arm] for r in rows)
-        out[arm] = {"successes": k, "episodes": n, "success": round(k / n, 6), "ci95": wilson(k, n)}
+        ci = [round(v, 6) for v in wilson(k / n, n)]
+        out[arm] = {"successes": k, "episodes": n, "success": round(k / n, 6), "ci95": ci}
     return out
 
 
