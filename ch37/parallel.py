@@ -229,13 +229,11 @@ def _env_worker(conn, make_env, seeds, rank: int, parent: int, inherited) -> Non
         cpus = sorted(os.sched_getaffinity(0))  # often queue on the core of the process that woke them
         os.sched_setaffinity(0, {cpus[rank % len(cpus)]})
     envs = [make_env() for _ in seeds]
-    try:
+    with contextlib.suppress(EOFError, OSError):  # the parent gone: nothing left to serve
         while (msg := conn.recv()) is not None:
             try:
                 reply = _env_serve(envs, seeds, *msg)
             except Exception as e:  # the caller re-raises it
                 reply = e
             conn.send(reply)
-    except (EOFError, OSError):  # the parent is gone: nothing left to serve
-        pass
     conn.close()

@@ -176,10 +176,8 @@ class ResultCache:
             (tmp / STAMP_NAME).unlink()  # an entry holds exactly its manifest's files
             if isinstance(read_entry(dst), str):  # a damaged entry for this key: ours to replace
                 discard_entry(dst)
-            try:
+            with contextlib.suppress(OSError):  # a good entry for this key exists (another run stored it)
                 os.rename(tmp, dst)
-            except OSError:  # a good entry for this key exists (another run stored the same result)
-                pass
         except OSError as e:
             _warn(
                 f"could not store this result in the cache {root} ({e.strerror}); the run itself is complete"
