@@ -25,12 +25,10 @@ from ch37 import ROOT, errors
 from ch37.config import check
 from ch37.errors import DataError
 from ch37.files import write_atomic
-from exercises.rules import PLATEAU_TOL, ex3_answer
+from exercises.rules import ARMS, EFFECTS, PLATEAU_TOL, ex3_answer
 from tools.common import parser, provenance, rel
 
 SWEEP_OWNED = {"--seed", "--out", "--rerun", "--no-rerun"}
-ARMS = ("source_short", "augmented_short", "source_full", "augmented_full")
-EFFECTS = ("data_full", "data_short", "compute_source", "compute_augmented")
 MEAN_KEYS = (*ARMS, *EFFECTS, "yield", "kept", "coverage_union")
 T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262, 10: 2.228}
 
