@@ -140,13 +140,7 @@ def reference_run(seeds: dict, aug: dict) -> dict:
 
     seed_part = {"rows": rows(seeds)} | {k: seeds[k] for k in ("mean", "paired", "pooled")} | prov(seeds)
     aug_part = {"seed": aug.get("seed", 0), "rows": rows(aug)} | prov(aug)
-    return {
-        "provisional": provisional,
-        "note": note,
-        "seeds": seed_part,
-        "aug_curve": aug_part,
-        "rules": RULES,
-    }
+    return {"provisional": provisional, "note": note} | dict(seeds=seed_part, aug_curve=aug_part, rules=RULES)
 
 
 def read_sweep(path: Path, kind: str, flag: str) -> dict:
