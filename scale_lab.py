@@ -58,7 +58,8 @@ SHAPING = tuple(
 
 
 # --- 1. parse ---------------------------------------------------------------------------------------
-def parser():
+def parser(smoke: bool = False):
+    """The lab's flags; with `smoke`, SMOKE's values are their defaults."""
     p = config.parser(__doc__.split("\n\n")[0])
     flag = p.add_argument
     flag("--n", type=int, nargs="+", default=[12, 36, 108, 324, 972], help="total demos per point (N)")
@@ -77,15 +78,12 @@ def parser():
     flag("--yaw_sigma", type=float, default=D.aug_yaw_sigma, help="rad; the engine's block yaw noise (<= 10)")
     flag("--replay_tries", type=int, default=10, help="replay attempts per wanted demo (yield ~2%% here)")
     flag("--out", type=Path, help="output folder (default outputs/scale_lab, -smoke appended with --smoke)")
-    flag(
-        "--workers",
-        type=int,
-        default=os.cpu_count() or 1,
-        help="local processes or a local Ray's CPUs; same results",
-    )
+    cpus = os.cpu_count() or 1
+    flag("--workers", type=int, default=cpus, help="local processes or a local Ray's CPUs; same results")
     flag("--ray", nargs="?", const="local", metavar="ADDRESS", help="a private local Ray, or join ADDRESS")
     flag("--rerun", action=BooleanOptionalAction, default=True, help="write scale_lab.rrd")
     flag("--smoke", action="store_true", help="tiny settings for tests (seconds); explicit flags win")
+    p.set_defaults(**(SMOKE if smoke else {}))
     return p
 
 
@@ -94,14 +92,11 @@ SIGMAS_AT_MOST = {"pos_sigma": config.SIGMA_MAX, "yaw_sigma": config.SIGMA_MAX} 
 
 def parse(argv=None):
     """The flags, checked; a problem is a DataError (one line, exit 2)."""
-    p = parser()
-    a = p.parse_args(argv)
+    a = parser().parse_args(argv)
     if a.smoke:
-        p.set_defaults(**SMOKE)
-        a = p.parse_args(argv)
+        a = parser(smoke=True).parse_args(argv)
     a.out = a.out if a.out is not None else Path("outputs/scale_lab" + ("-smoke" if a.smoke else ""))
-    bad = [n for n in a.n if n < SOURCES or (n - SOURCES) % SOURCES]
-    if bad:
+    if bad := [n for n in a.n if n < SOURCES or (n - SOURCES) % SOURCES]:
         raise DataError(
             f"--n {bad[0]}: every N must be >= {SOURCES} with N - {SOURCES} divisible by {SOURCES} "
             f"({SOURCES} source demos, each grown by the same count), e.g. 12 36 108"
@@ -119,9 +114,7 @@ def parse(argv=None):
 def command(a) -> str:
     """The command that gives these numbers, with only the result-shaping flags that differ from their
     defaults (so the local and the Ray run write the same line)."""
-    p = parser()
-    if a.smoke:
-        p.set_defaults(**SMOKE)
+    p = parser(a.smoke)
     parts = ["python scale_lab.py"] + (["--smoke"] if a.smoke else [])
     for k in SHAPING[:-1]:
         v = getattr(a, k)
@@ -151,11 +144,8 @@ def expert_success(seed: int, eval_seeds: list[int]):
     from scripted_expert import PushTExpert
 
     env = pusht_env.PushTEnv()
-    return (
-        "expert",
-        seed,
-        sum(rollout(env, PushTExpert(noise=0.0), env.reset(s))["success"] for s in eval_seeds),
-    )
+    wins = sum(rollout(env, PushTExpert(noise=0.0), env.reset(s))["success"] for s in eval_seeds)
+    return "expert", seed, wins
 
 
 def generate(a, srcs: dict, eval_seeds: dict, gen_paths: dict, max_per: dict):
@@ -175,14 +165,9 @@ def generate(a, srcs: dict, eval_seeds: dict, gen_paths: dict, max_per: dict):
         mode, s, kept, attempts, failures = got
         stamp = {"kind": "augmented", "seed": s, "mode": mode}
         engine.save(gen_paths[(mode, s)], kept, repo_id=f"local/pusht_{mode}", stamp=stamp)
-        generation.setdefault(mode, {})[str(s)] = {
-            "attempts": attempts,
-            "kept": len(kept),
-            "yield": len(kept) / attempts if attempts else 0.0,
-            "failures": failures,
-            "per_demo_wanted": max_per[mode],
-            "cap": cap[mode] * max_per[mode],
-        }
+        g = {"attempts": attempts, "kept": len(kept), "yield": len(kept) / attempts if attempts else 0.0}
+        g |= {"failures": failures, "per_demo_wanted": max_per[mode], "cap": cap[mode] * max_per[mode]}
+        generation.setdefault(mode, {})[str(s)] = g
         if kept:  # train on what is on disk
             generated[(mode, s)] = load_arrays(gen_paths[(mode, s)], keys=engine.KEPT_KEYS)
     for mode, by_seed in sorted(generation.items()):
@@ -201,14 +186,8 @@ def train_point(key: tuple, x, y, steps: int, seed: int, eval_seeds: list[int], 
 
     torch.set_num_threads(1)
     t0 = time.perf_counter()
-    (pol,), (fit,) = bc.train(
-        [(x, y)],
-        steps,
-        bc.init_weights(hp["hidden_dim"], seed),
-        seed=seed,
-        batch_size=hp["batch_size"],
-        lr=hp["lr"],
-    )
+    init = bc.init_weights(hp["hidden_dim"], seed)
+    (pol,), (fit,) = bc.train([(x, y)], steps, init, seed=seed, batch_size=hp["batch_size"], lr=hp["lr"])
     rate = bc.evaluate(pol, eval_seeds)
     out = {"success": rate, "ci95": bc.wilson(rate, len(eval_seeds)), "final_loss": fit}
     return key, out | {"seconds": time.perf_counter() - t0}
@@ -262,17 +241,8 @@ class Data:
                         same = ("resolve" if curve == "resolve_fixed" else curve, n)
                     unit = (*same, s, steps)
                     units.setdefault(unit, (x, y))
-                    points.append(
-                        {
-                            "curve": curve,
-                            "n": n,
-                            "demos": demos,
-                            "seed": s,
-                            "frames": len(x),
-                            "steps": steps,
-                            "unit": unit,
-                        }
-                    )
+                    point = dict(curve=curve, n=n, demos=demos, seed=s)
+                    points.append(point | dict(frames=len(x), steps=steps, unit=unit))
         return points, units
 
 
@@ -288,11 +258,8 @@ def train_all(a, points: list, units: dict, eval_seeds: dict) -> dict:
     for i, (u, r) in enumerate(executors.run(train_point, tasks, workers=a.workers, ray=a.ray), 1):
         results[tuple(u)] = r
         names = ", ".join(f"{p['curve']} N={p['n']}" for p in points if p["unit"] == u)
-        print(
-            f"  [{i}/{len(tasks)}] seed {u[2]}, {u[3]} steps: {names}: success {r['success']:.2f} "
-            f"({r['seconds']:.1f} s)",
-            flush=True,
-        )
+        done = f"success {r['success']:.2f} ({r['seconds']:.1f} s)"
+        print(f"  [{i}/{len(tasks)}] seed {u[2]}, {u[3]} steps: {names}: {done}", flush=True)
     return results
 
 
@@ -312,13 +279,9 @@ def curves_of(a, points: list) -> dict:
         for n in a.n:
             pts = [p for p in points if p["curve"] == curve and p["n"] == n]
             mean, ci = pooled([p["success"] for p in pts], a.eval_episodes)
-            curves[curve][str(n)] = {
-                "success": mean,
-                "ci95": ci,
-                "demos": sum(p["demos"] for p in pts) / len(pts),
-                "steps": [p["steps"] for p in pts],
-                "frames": [p["frames"] for p in pts],
-            }
+            row = {"success": mean, "ci95": ci, "demos": sum(p["demos"] for p in pts) / len(pts)}
+            row |= {"steps": [p["steps"] for p in pts], "frames": [p["frames"] for p in pts]}
+            curves[curve][str(n)] = row
     return curves
 
 

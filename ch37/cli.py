@@ -65,11 +65,8 @@ def _gb(n: float) -> str:
 
 def result_config(args: argparse.Namespace) -> dict:
     """The flags that shape the results, as metrics.json records them (paths as strings)."""
-    return {
-        k: (str(v) if isinstance(v, Path) else v)
-        for k, v in sorted(vars(args).items())
-        if k not in config.NOT_IN_KEY
-    }
+    items = sorted(vars(args).items())
+    return {k: (str(v) if isinstance(v, Path) else v) for k, v in items if k not in config.NOT_IN_KEY}
 
 
 def parse(p: argparse.ArgumentParser, argv=None) -> argparse.Namespace:
@@ -158,12 +155,7 @@ def banner(args: argparse.Namespace) -> None:
     import torch
 
     tier = device_tier(args.device)
-    print(
-        f"ch3.7 Datasets at Scale | seed {args.seed} | device {args.device} ({tier}) "
-        f"| torch {torch.__version__}"
-    )
-    print(
-        "smoke run: tiny configuration, seconds, numbers not meaningful"
-        if args.smoke
-        else expected_wallclock(tier)
-    )
+    head = f"ch3.7 Datasets at Scale | seed {args.seed} | device {args.device} ({tier})"
+    print(f"{head} | torch {torch.__version__}")
+    smoke = "smoke run: tiny configuration, seconds, numbers not meaningful"
+    print(smoke if args.smoke else expected_wallclock(tier))

@@ -36,12 +36,8 @@ DEFAULTS = asdict(CHAPTER)
 SMOKE = dict(
     source_episodes=4, aug_per_demo=2, epochs=30, hidden_dim=64, eval_episodes=8, batch_size=64, device="cpu"
 )
-RESULT_FILES = (
-    "metrics.json",
-    "cross_embodiment.json",
-    "scale_data.png",
-    "scale_data.html",
-    "scale_data.rrd",
+RESULT_FILES = tuple(
+    "metrics.json cross_embodiment.json scale_data.png scale_data.html scale_data.rrd".split()
 )
 # The largest --*pos_sigma (m) and --*yaw_sigma (rad): a kept start lies 0.08..0.26 m from the target
 # (ch37.engine.R_LO, R_HI), so a 10 m std almost never lands one, and a yaw wraps every 6.3 rad;

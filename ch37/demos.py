@@ -13,6 +13,7 @@ import hashlib
 import os
 import sys
 from dataclasses import dataclass
+from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
@@ -46,15 +47,9 @@ def code_digest(names=DATA_CODE) -> str:
     return h.hexdigest()[:12]
 
 
-def _lerobot_version() -> str:
-    from importlib.metadata import version
-
-    return version("lerobot")
-
-
 # Any edit to the files that shape frames, or another lerobot (the writer of its files), changes the
 # version, so a cached set can never outlive the code that made it.
-GENERATOR_VERSION = f"3+{code_digest()}+lerobot{_lerobot_version()}"
+GENERATOR_VERSION = f"3+{code_digest()}+lerobot{version('lerobot')}"
 
 
 @dataclass(frozen=True)
@@ -122,16 +117,10 @@ def generate(
             summary["successes"] += ep["success"]
             yield ep
 
-    write_dataset(
-        out,
-        repo_id=f"local/{emb.name}_demos",
-        fps=m.FPS,
-        robot_type=m.ROBOT_TYPE,
-        task=m.TASK,
-        feats=features(m.STATE_NAMES, m.ACTION_NAMES, video=video, env_state_names=m.ENV_STATE_NAMES),
-        episodes=episodes_iter(),
-        stamp=stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=video),
-    )
+    feats = features(m.STATE_NAMES, m.ACTION_NAMES, video=video, env_state_names=m.ENV_STATE_NAMES)
+    stamp = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=video)
+    how = dict(repo_id=f"local/{emb.name}_demos", fps=m.FPS, robot_type=m.ROBOT_TYPE, task=m.TASK)
+    write_dataset(out, feats=feats, episodes=episodes_iter(), stamp=stamp, **how)
     return summary
 
 
@@ -195,14 +184,11 @@ def _main(emb: Embodiment, argv=None) -> int:
     config.check(a, finite=("noise",))
     if holds_data(a.out):
         raise DataError(f"{a.out} already holds data; pick another --out (nothing was touched)")
-    problem = check_out_path(a.out, "--out") or (check_gl() if a.video else None)
-    if problem:
+    if problem := check_out_path(a.out, "--out") or (check_gl() if a.video else None):
         raise DataError(problem)
     s = generate(emb, a.out, episodes=a.episodes, seed=a.seed, noise=a.noise, video=a.video, quiet=a.quiet)
-    print(
-        f"wrote {s['episodes']} {emb.name} episodes, {s['frames']} frames to {a.out} "
-        f"(expert successes {s['successes']}/{s['episodes']})"
-    )
+    wrote = f"wrote {s['episodes']} {emb.name} episodes, {s['frames']} frames to {a.out}"
+    print(f"{wrote} (expert successes {s['successes']}/{s['episodes']})")
     return 0
 
 

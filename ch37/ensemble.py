@@ -26,15 +26,10 @@ class MLPStack(torch.nn.Module):
         names = sorted({k.rsplit(".", 1)[0] for k in states[0]}, key=int)  # Linear layers' indices
         self.layers = names
         # weight (E, in, out): transposed once so the forward is x @ W, the layout baddbmm wants
-        self.weights = torch.nn.ParameterList(
-            [
-                torch.nn.Parameter(torch.stack([s[f"{n}.weight"].t() for s in states]).contiguous())
-                for n in names
-            ]
-        )
-        self.biases = torch.nn.ParameterList(
-            [torch.nn.Parameter(torch.stack([s[f"{n}.bias"] for s in states]).unsqueeze(1)) for n in names]
-        )
+        weights = [torch.stack([s[f"{n}.weight"].t() for s in states]).contiguous() for n in names]
+        biases = [torch.stack([s[f"{n}.bias"] for s in states]).unsqueeze(1) for n in names]  # (E, 1, out)
+        self.weights = torch.nn.ParameterList(map(torch.nn.Parameter, weights))
+        self.biases = torch.nn.ParameterList(map(torch.nn.Parameter, biases))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:  # (E, B, in) -> (E, B, out)
         last = len(self.weights) - 1

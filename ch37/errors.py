@@ -14,6 +14,7 @@ the data engine), whose entry point is `main(fn)`.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import errno
 import os
 import signal
@@ -44,9 +45,9 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM, raised in the main thread so that cleanup (finally blocks, worker shutdown) runs."""
 
 
-def debug() -> bool:
-    """CH37_DEBUG=1 (or any value but 0/false/no): let every exception show its traceback."""
-    return os.environ.get("CH37_DEBUG", "").strip().lower() not in ("", "0", "false", "no")
+def env_flag(name: str) -> bool:
+    """Whether the environment variable `name` is set to anything but empty, 0, false or no."""
+    return os.environ.get(name, "").strip().lower() not in ("", "0", "false", "no")
 
 
 def one_line(exc: BaseException) -> tuple[int, str] | None:
@@ -59,16 +60,14 @@ def one_line(exc: BaseException) -> tuple[int, str] | None:
         return 2, "error: " + " ".join(str(exc).split())
     if isinstance(exc, OSError) and exc.errno in ENVIRONMENT_ERRNOS:
         where = f"{exc.filename}: " if exc.filename is not None else ""
-        return (
-            2,
-            f"error: {where}{exc.strerror}; {ENVIRONMENT_ERRNOS[exc.errno]}, then run the same command again",
-        )
+        fix = ENVIRONMENT_ERRNOS[exc.errno]
+        return 2, f"error: {where}{exc.strerror}; {fix}, then run the same command again"
     return None
 
 
 def _tell(exc: BaseException) -> int | None:
     """Print `exc`'s one line on stderr and return its exit code; None for a genuine bug (or CH37_DEBUG)."""
-    got = None if debug() else one_line(exc)
+    got = None if env_flag("CH37_DEBUG") else one_line(exc)  # CH37_DEBUG: every traceback shown
     if got is None:
         return None
     print(got[1], file=sys.stderr)
@@ -79,10 +78,6 @@ def _raise_terminated(signum, frame):
     raise Terminated()
 
 
-def _in_notebook() -> bool:
-    return "ipykernel" in sys.modules or hasattr(sys, "ps1")
-
-
 def _exit_now(code: int) -> None:
     """Exit with `code` from inside sys.excepthook: run atexit (worker shutdown), flush, leave."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not interrupt the shutdown
@@ -90,17 +85,16 @@ def _exit_now(code: int) -> None:
         atexit._run_exitfuncs()
     finally:
         for stream in (sys.stdout, sys.stderr):
-            try:
+            with contextlib.suppress(OSError, ValueError):
                 stream.flush()
-            except (OSError, ValueError):
-                pass
         os._exit(code)
 
 
 def guard() -> None:
     """For a linear script: every uncaught problem a user can act on becomes one line and its exit
     code (see the module docstring); SIGTERM is handled like Ctrl-C. A no-op inside a notebook."""
-    if _in_notebook() or threading.current_thread() is not threading.main_thread():
+    in_notebook = "ipykernel" in sys.modules or hasattr(sys, "ps1")
+    if in_notebook or threading.current_thread() is not threading.main_thread():
         return
     previous = sys.excepthook
 

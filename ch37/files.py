@@ -1,21 +1,14 @@
 """Files: output folders claimed, locked and owned file by file; whole files or none.
 
 write_atomic is the one way this project writes a file and dump_json its one JSON writer (stable:
-sorted keys, one-space indent, a final newline). A run's --out is taken first, with
-
-    claim(out, inputs=..., results=..., reuses=..., replaces=...)
-
-before any work: the folder must be usable (creatable, writable, not a file, not inside an input
-dataset, not a dataset itself); lock() makes a second run on the same folder wait until the first
-ends; nothing of the user's may sit where the run will write (a result name, a demo set to reuse
-or replace); what a killed run left is removed; and this program's results of an earlier run are
-cleared, so the folder never mixes two runs. From then on write_atomic into the folder refuses to
-overwrite a file the program did not write and records each file it writes, with its sha256, in
-the folder's stamp (ch37.stamps). The lock is released when the process ends.
+sorted keys, one-space indent, a final newline). A run takes its --out with claim() before any work
+(see there); from then on write_atomic into the folder refuses to overwrite a file the program did
+not write and records each file it writes, with its sha256, in the folder's stamp (ch37.stamps).
 """
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import hashlib
 import json
@@ -44,7 +37,7 @@ except ImportError:  # Windows: no advisory locks here; runs on one folder must 
 
 # What a crashed run of this project can leave beside its target: .NAME.ch37-tmp-PID (a file) and
 # .NAME.ch37-partial-PID (a folder holding our stamp from its first moment, see partial_dir). The
-# "ch37-" token is ours: a user's .NAME.tmp-N or .NAME.old-N never matches (issue 22, item 1).
+# "ch37-" token is ours: a user's .NAME.tmp-N or .NAME.old-N never matches.
 TOKEN = "ch37"
 LEFTOVER = re.compile(rf"^\.(.+)\.{TOKEN}-(tmp|partial)-(\d+)$")
 _CLAIMED: dict[Path, Claim] = {}  # folder (resolved) -> this process's claim on it (write_atomic's check)
@@ -205,10 +198,8 @@ def lock(folder: Path) -> None:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
         holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
-        print(
-            f"waiting: another run (pid {holder}) is writing to {folder}; this one starts when it ends",
-            flush=True,
-        )
+        waiting = f"waiting: another run (pid {holder}) is writing to {folder}"
+        print(f"{waiting}; this one starts when it ends", flush=True)
         fcntl.flock(fd, fcntl.LOCK_EX)
     except OSError as e:
         os.close(fd)
@@ -233,10 +224,8 @@ def unlock(folder: Path) -> None:
 
 def _close_locks_in_child() -> None:  # a forked worker must never keep a run's lock alive
     for fd in _HELD.values():
-        try:
+        with contextlib.suppress(OSError):
             os.close(fd)
-        except OSError:
-            pass
     _HELD.clear()
 
 
@@ -299,8 +288,7 @@ class Claim:
             self.files = {k: v for k, v in (stamp.get("files") or {}).items() if isinstance(v, str)}
             self.pending = {k: v for k, v in (stamp.get("pending") or {}).items() if isinstance(v, str)}
         mine = {name for name in set(self.files) | set(self.pending) if self.is_own(out / name)}
-        others = sorted(mine - set(results))  # another command's results (scale_lab.py's, scale_data.py's)
-        if others:
+        if others := sorted(mine - set(results)):  # another command's (scale_lab.py or scale_data.py)
             raise DataError(
                 f"--out {out} holds another command's results ({names(others)}); pass another --out or move "
                 "them (nothing was changed)"
@@ -329,7 +317,10 @@ def claim(
     replaces: list[Path] = (),
 ) -> Claim:
     """Take `out` for this run; DataError (one line) if anything of the user's is in the way, in which
-    case nothing was created or changed.
+    case nothing was created or changed. The folder must be usable (creatable, writable, not a file,
+    not a dataset); lock() makes a second run on it wait until the first ends (the lock goes with the
+    process); what a killed run left is removed, and this program's results of an earlier run are
+    cleared, so the folder never mixes two runs.
 
     inputs    {flag: path} of datasets the run reads: `out` may not be one of them or inside one
     results   the file names the run will write directly in `out`
@@ -337,8 +328,7 @@ def claim(
     replaces  folders the run will rebuild: each must hold only files this program wrote
     """
     out = Path(out)
-    problem = check_out_path(out)
-    if problem:
+    if problem := check_out_path(out):
         raise DataError(problem)
     for flag, given in (inputs or {}).items():
         if given is not None and out.resolve().is_relative_to(Path(given).resolve()):

@@ -65,9 +65,8 @@ def progress(iterable, *, total: int, desc: str, quiet: bool = False):
     """A tqdm bar on a terminal; silent when quiet or when stderr is not a TTY."""
     from tqdm import tqdm
 
-    return tqdm(
-        iterable, total=total, desc=desc, unit="ep", leave=False, disable=quiet or not sys.stderr.isatty()
-    )
+    quiet = quiet or not sys.stderr.isatty()
+    return tqdm(iterable, total=total, desc=desc, unit="ep", leave=False, disable=quiet)
 
 
 def _pool_init(parent: int, fn, jobs) -> None:
@@ -138,18 +137,8 @@ class LockstepEnvs:
             parent, child = ctx.Pipe()
             # the child closes every parent end it inherits, so its recv() ends when the parent dies
             inherited = [*self.conns, parent]
-            proc = ctx.Process(
-                target=_env_worker,
-                args=(
-                    child,
-                    make_env,
-                    [self.seeds[i] for i in part],
-                    len(self.procs),
-                    os.getpid(),
-                    inherited,
-                ),
-                daemon=True,
-            )
+            args = (child, make_env, [self.seeds[i] for i in part], len(self.procs), os.getpid(), inherited)
+            proc = ctx.Process(target=_env_worker, args=args, daemon=True)
             with _forking():
                 proc.start()
             child.close()
@@ -184,11 +173,8 @@ class LockstepEnvs:
         import numpy as np
 
         row = {int(i): k for k, i in enumerate(idx)}  # env index -> row of `actions`
-        asks = {}  # worker -> [(its local env index, row)]
-        for w, part in enumerate(self.parts):
-            mine = [(j, row[i]) for j, i in enumerate(part) if i in row]
-            if mine:
-                asks[w] = mine
+        mine = {w: [(j, row[i]) for j, i in enumerate(part) if i in row] for w, part in enumerate(self.parts)}
+        asks = {w: m for w, m in mine.items() if m}  # worker -> [(its local env index, row)]
         replies = self._ask(
             {w: ("step", ([j for j, _ in m], actions[[k for _, k in m]])) for w, m in asks.items()}
         )
@@ -202,11 +188,9 @@ class LockstepEnvs:
     def close(self, stop: bool = False) -> None:
         """Ask each worker to end and wait for it; `stop`: kill them now (an exception is in flight)."""
         for conn in self.conns:
-            try:
+            with contextlib.suppress(OSError):  # the worker is already gone
                 if not stop:
                     conn.send(None)
-            except OSError:  # the worker is already gone
-                pass
             conn.close()
         for proc in self.procs:
             if stop:
@@ -245,13 +229,11 @@ def _env_worker(conn, make_env, seeds, rank: int, parent: int, inherited) -> Non
         cpus = sorted(os.sched_getaffinity(0))  # often queue on the core of the process that woke them
         os.sched_setaffinity(0, {cpus[rank % len(cpus)]})
     envs = [make_env() for _ in seeds]
-    try:
+    with contextlib.suppress(EOFError, OSError):  # the parent gone: nothing left to serve
         while (msg := conn.recv()) is not None:
             try:
                 reply = _env_serve(envs, seeds, *msg)
             except Exception as e:  # the caller re-raises it
                 reply = e
             conn.send(reply)
-    except (EOFError, OSError):  # the parent is gone: nothing left to serve
-        pass
     conn.close()

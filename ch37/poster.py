@@ -25,12 +25,7 @@ GROWN_BY = {"resolve": "re-solving", "replay": "replay"}
 DATA_LABEL = {"source": "source only", "augmented": "source + augmented"}
 DATA_VAR = {"source": "var(--src)", "augmented": "var(--aug)"}  # the arms' colours, set in CSS
 BUDGET_ORDER = ("short", "full")
-SHORT = {
-    "fresh": "fresh",
-    "resolve": "re-solve",
-    "replay": "replay",
-    "resolve_fixed": "re-solve, fixed budget",
-}
+SHORT = dict(fresh="fresh", resolve="re-solve", replay="replay", resolve_fixed="re-solve, fixed budget")
 DASH = {"-": {}, "-.": {"stroke_dasharray": "9 4 2 4"}}  # matplotlib line style -> SVG dashes
 QUESTIONS = ("Where the curve bends.", "The exchange rate.", "Data or compute.", "How far from the expert.")
 STAR = '<span aria-hidden="true">&#9733;</span> '  # the default point's legend mark; the SVG has its own
@@ -245,11 +240,9 @@ def _strip(cross: dict) -> str:
         rows.append(
             f'<div class="who"><b>{name}</b> {e["act_dim"]} of {pad} real<small>{e["frames"]:,} frames, mask '
             f"density {e['mask_density']:.3f}</small></div>"
-            + "".join(
-                f'<div class="dim {"real" if d < e["act_dim"] else "pad"}"><small>{d}</small>{names[d]}</div>'
-                for d in range(pad)
-            )
         )
+        for d, kind in enumerate(["real"] * e["act_dim"] + ["pad"] * (pad - e["act_dim"])):
+            rows.append(f'<div class="dim {kind}"><small>{d}</small>{names[d]}</div>')
         said.append(f"<code>{_e(cross['state_index_2_means'][e['name']])}</code> in {name}")
     real = (_sw("var(--real)"), "real action dimension (in the loss)")
     legend = _legend([real, (_sw("#dcdcdc"), "zero padding (mask 0: no loss, no gradient)")])
@@ -273,9 +266,8 @@ def chapter_html(metrics: dict, cross: dict, src_starts, aug_starts, annulus) ->
     run = f"seed {m['seed']}" + (", smoke" if m["smoke"] else "")
     frames = {"source": m["source_frames"], "augmented": m["source_frames"] + m["augmented_frames"]}
     src_sw = (_sw("var(--src)"), f"source starts ({len(src_starts)})")
-    legend_cov = _legend(
-        [src_sw, (_sw("var(--aug)", "sw dot"), f"kept augmented starts ({len(aug_starts)})")]
-    )
+    aug_sw = (_sw("var(--aug)", "sw dot"), f"kept augmented starts ({len(aug_starts)})")
+    legend_cov = _legend([src_sw, aug_sw])
     legend_bars = _legend((_sw(DATA_VAR[d]), f"{DATA_LABEL[d]} ({frames[d]:,} frames)") for d in DATA_COLOURS)
     body = f"""\
 <header>
@@ -481,12 +473,11 @@ def _lab_table(result: dict) -> str:
     for n in result["config"]["n"]:
         rows.append(f"<tr><th>{n}</th>")
         for r in (result["curves"].get(curve, {}).get(str(n)) for curve in LAB_STYLE):
-            kept = "" if r is None or r["demos"] == n else f"<small>{_demos(r['demos'])} demos</small>"
-            rows.append(
-                f"<td><b>{_f3(r['success'])}</b><small>{_ci(r).split(' ', 1)[1]}</small>{kept}</td>"
-                if r
-                else "<td>-</td>"
-            )
+            if r is None:
+                rows.append("<td>-</td>")
+                continue
+            kept = "" if r["demos"] == n else f"<small>{_demos(r['demos'])} demos</small>"
+            rows.append(f"<td><b>{_f3(r['success'])}</b><small>{_ci(r).split(' ', 1)[1]}</small>{kept}</td>")
         rows.append("</tr>")
     return (
         '<h2 id="pts-h">Every point: success, mean over seeds [pooled Wilson 95%]</h2>\n'

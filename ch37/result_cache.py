@@ -9,6 +9,7 @@ folder that cannot be read or written is skipped with one warning line.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -26,8 +27,7 @@ from ch37.stamps import STAMP_NAME
 
 MANIFEST, SUMMARY = "manifest.json", "summary.txt"
 # summary.txt keeps each written file as NUL + its name + NUL (NUL is in no path and no number), so a
-# replay rebuilds exactly the paths under its own --out and touches nothing else (issue 22 item 5:
-# the old "{out}" text replacement turned every "0" into "1" when --out 0 was replayed as --out 1).
+# replay rebuilds exactly the paths under its own --out, whatever --out's name also matches in the text.
 # Part of the key: an entry in an older summary format is never replayed.
 CACHE_FORMAT = "2"
 
@@ -111,14 +111,10 @@ def discard_entry(entry: Path) -> bool:
     """Remove an entry's own files (the ones a cache entry can hold) and the folder if then empty;
     True if the entry is gone."""
     for name in (*RESULT_FILES, SUMMARY, MANIFEST):
-        try:
+        with contextlib.suppress(OSError):
             (entry / name).unlink(missing_ok=True)
-        except OSError:
-            pass
-    try:
+    with contextlib.suppress(OSError):
         entry.rmdir()
-    except OSError:
-        pass
     return not entry.exists()
 
 
@@ -147,10 +143,8 @@ class ResultCache:
         for name, data in got.items():
             if name != SUMMARY:
                 write_atomic(self.out / name, data)
-        print(
-            f"reusing the result of an identical earlier run (same flags and code, cache key {self.key}; "
-            "--no-cache runs it again)"
-        )
+        why = f"same flags and code, cache key {self.key}; --no-cache runs it again"
+        print(f"reusing the result of an identical earlier run ({why})")
         print(summary_for(got[SUMMARY].decode(), self.out), end="")
         return True
 
@@ -182,10 +176,8 @@ class ResultCache:
             (tmp / STAMP_NAME).unlink()  # an entry holds exactly its manifest's files
             if isinstance(read_entry(dst), str):  # a damaged entry for this key: ours to replace
                 discard_entry(dst)
-            try:
+            with contextlib.suppress(OSError):  # a good entry for this key exists (another run stored it)
                 os.rename(tmp, dst)
-            except OSError:  # a good entry for this key exists (another run stored the same result)
-                pass
         except OSError as e:
             _warn(
                 f"could not store this result in the cache {root} ({e.strerror}); the run itself is complete"

@@ -9,6 +9,7 @@ read_json is the project's one JSON reader.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -54,14 +55,8 @@ def is_ours(stamp: dict | None) -> bool:
 
 def file_list(root: Path) -> list[str]:
     """Every file under `root` (relative, sorted), without our stamp and lock."""
-    root = Path(root)
-    out = []
-    for dirpath, _, names in os.walk(root):
-        for name in names:
-            rel = (Path(dirpath) / name).relative_to(root).as_posix()
-            if rel not in (STAMP_NAME, LOCK_NAME):
-                out.append(rel)
-    return sorted(out)
+    found = ((Path(d) / n).relative_to(root).as_posix() for d, _, names in os.walk(root) for n in names)
+    return sorted(rel for rel in found if rel not in (STAMP_NAME, LOCK_NAME))
 
 
 def digests(root: Path) -> dict[str, str]:
@@ -73,12 +68,6 @@ def owned(stamp: dict | None) -> set[str]:
     """The files (relative paths) our stamp says we wrote; none when the stamp is not ours."""
     listed = stamp.get("files") if is_ours(stamp) else None
     return set(listed) if isinstance(listed, dict) else set()
-
-
-def foreign_files(root: Path, stamp: dict | None) -> list[str]:
-    """Files under `root` this program did not write (all of them when the stamp is not ours)."""
-    mine = owned(stamp)
-    return [rel for rel in file_list(root) if rel not in mine]
 
 
 def changed_files(root: Path, stamp: dict) -> list[str]:
@@ -113,8 +102,8 @@ def check_ours(path: Path, kind: str | None = None) -> dict | None:
 def check_replaceable(path: Path) -> None:
     """DataError unless `path` is absent, empty, or holds only files our stamp lists."""
     stamp = check_ours(path)
-    foreign = foreign_files(path, stamp) if stamp else []
-    if foreign:
+    mine = owned(stamp)  # the files not among them are a user's
+    if stamp and (foreign := [rel for rel in file_list(path) if rel not in mine]):
         raise DataError(
             f"{path} must be rebuilt but holds files this program did not write ({names(foreign)}); "
             "move them elsewhere and run the same command again (nothing was changed)"
@@ -131,7 +120,5 @@ def replace_own_dir(path: Path) -> None:
         (path / rel).unlink(missing_ok=True)
     (path / STAMP_NAME).unlink()  # last: a half-cleared folder still says whose files it held
     for dirpath, _, _ in sorted(os.walk(path), key=lambda t: -len(t[0])):  # deepest first
-        try:
-            os.rmdir(dirpath)  # only folders left empty; a folder with anything in it stays
-        except OSError:
-            pass
+        with contextlib.suppress(OSError):  # only folders left empty; a folder with anything in it stays
+            os.rmdir(dirpath)

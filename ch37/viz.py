@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import io
 import math
 from pathlib import Path
@@ -86,14 +87,11 @@ def save_rrd(path: Path, recording_id: str, log) -> Path:
 
 def recording(path: Path, metrics: dict, src_starts, aug_starts, trajectories, annulus) -> Path:
     """A Rerun .rrd: the data-scale curve, block starts over the annulus, some augmented trajectories."""
-    return save_rrd(
-        path,
-        f"seed{metrics['seed']}",
-        lambda rec: _record(rec, metrics, src_starts, aug_starts, trajectories, annulus),
-    )
+    log = functools.partial(_record, metrics, src_starts, aug_starts, trajectories, annulus)
+    return save_rrd(path, f"seed{metrics['seed']}", log)
 
 
-def _record(rec, metrics, src_starts, aug_starts, trajectories, annulus) -> None:
+def _record(metrics, src_starts, aug_starts, trajectories, annulus, rec) -> None:
     import rerun as rr
 
     for arm in metrics["arms"].values():  # success vs frames of data, one curve per budget
@@ -103,9 +101,8 @@ def _record(rec, metrics, src_starts, aug_starts, trajectories, annulus) -> None
         rec.log(f"scale/{arm['budget']}/ci95_high", rr.Scalars(arm["ci95"][1]))
     rec.log("coverage/source", rr.Points2D(src_starts, radii=0.006, colors=[31, 119, 180]), static=True)
     if len(aug_starts):
-        rec.log(
-            "coverage/augmented", rr.Points2D(aug_starts, radii=0.004, colors=[255, 127, 14]), static=True
-        )
+        aug = rr.Points2D(aug_starts, radii=0.004, colors=[255, 127, 14])
+        rec.log("coverage/augmented", aug, static=True)
     r_min, r_max = annulus[:2]
     circle = np.linspace(0, 2 * math.pi, 73)
     rings = [np.stack([r * np.cos(circle), r * np.sin(circle)], 1) for r in (r_min, r_max)]
@@ -114,15 +111,10 @@ def _record(rec, metrics, src_starts, aug_starts, trajectories, annulus) -> None
         s = ep["observation.state"]
         rec.log(f"augmented/{i}/block", rr.LineStrips2D([s[:, 2:4]], colors=[255, 127, 14]), static=True)
         rec.log(f"augmented/{i}/pusher", rr.LineStrips2D([s[:, 0:2]], colors=[44, 160, 44]), static=True)
-    rec.log(
-        "summary",
-        rr.TextDocument(
-            f"coverage cells: source {metrics['coverage']['source']}, union {metrics['coverage']['union']} "
-            f"of {metrics['coverage']['cells']}\n"
-            f"yield {metrics['yield']:.2f} ({metrics['kept']}/{metrics['attempts']})"
-        ),
-        static=True,
-    )
+    cov = metrics["coverage"]
+    text = f"coverage cells: source {cov['source']}, union {cov['union']} of {cov['cells']}\n"
+    text += f"yield {metrics['yield']:.2f} ({metrics['kept']}/{metrics['attempts']})"
+    rec.log("summary", rr.TextDocument(text), static=True)
 
 
 # The Scale Lab (scale_lab.py): success against demos, one line per curve.
@@ -170,15 +162,11 @@ def scale_lab_figure(path: Path, result: dict) -> Path:
     ns = cfg["n"]
     ax.set_xticks(ns, [str(n) for n in ns])
     ax.minorticks_off()
-    ax.set(
-        ylim=(0, 1.02),
-        xlabel="PushT demos trained on (log scale)",
-        ylabel="success rate on held-out starts",
-        title=f"BC success vs demos: mean over seeds {cfg['seeds']}, band = Wilson 95% of "
-        f"{cfg['eval_episodes'] * len(cfg['seeds'])} pooled episodes"
-        + (" (smoke)" if result.get("smoke") else ""),
-    )
-    ax.title.set_fontsize(9)
+    seeds, pooled = cfg["seeds"], cfg["eval_episodes"] * len(cfg["seeds"])
+    title = f"BC success vs demos: mean over seeds {seeds}, band = Wilson 95% of {pooled} pooled episodes"
+    ax.set_ylim(0, 1.02)
+    ax.set(xlabel="PushT demos trained on (log scale)", ylabel="success rate on held-out starts")
+    ax.set_title(title + (" (smoke)" if result.get("smoke") else ""), fontsize=9)
     ax.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
     return save_png(fig, path, dpi=100)

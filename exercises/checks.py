@@ -24,7 +24,7 @@ import yaml
 from ch37 import errors
 from ch37.config import CHAPTER
 
-from .rules import ex3_answer
+from .rules import ARMS, EFFECTS, ex3_answer
 
 ROOT = Path(__file__).resolve().parent.parent
 FILES = {"ex1": "ex1_predict_scale.py", "ex2": "ex2_completion_wrangle.py", "ex3": "ex3_hparam_aug_amount.py"}
@@ -35,14 +35,6 @@ SMOKE_FLAGS = tuple(
     "--source_episodes 1 --epochs 2 --hidden_dim 16 --batch_size 64 --eval_episodes 1 --device cpu".split()
 )
 FULL_FLAGS = ()  # the chapter's defaults: what meta.yaml's bands describe
-# The chapter's 2x2: data {source, augmented} x budget {short, full}; effects are differences of arms.
-ARMS = ("source_short", "augmented_short", "source_full", "augmented_full")
-EFFECTS = {
-    "data_full": ("augmented_full", "source_full"),
-    "data_short": ("augmented_short", "source_short"),
-    "compute_source": ("source_full", "source_short"),
-    "compute_augmented": ("augmented_full", "augmented_short"),
-}
 KEYS = "arms budgets effects scale_effect kept attempts yield augmented_frames source_frames".split()
 ARM_KEYS = ("success", "ci95", "frames", "steps", "final_loss")
 
@@ -67,7 +59,7 @@ def checker(problems):
 
 
 def smoke_mode() -> bool:
-    return os.environ.get("CH37_EXERCISE_SMOKE", "").strip().lower() not in ("", "0", "false", "no")
+    return errors.env_flag("CH37_EXERCISE_SMOKE")
 
 
 @checker
@@ -389,9 +381,8 @@ def run_ex3(say=print) -> None:
     if smoke:
         say("ex3: steps " + ", ".join(step_lines(rates)))
         frames = [runs[k]["augmented_frames"] for k in ks]
-        return say(
-            _smoke_note("ex3", f"keys, ranges, nested sizes (augmented frames {frames}) and equal budgets")
-        )
+        checked = f"keys, ranges, nested sizes (augmented frames {frames}) and equal budgets"
+        return say(_smoke_note("ex3", checked))
     for line in check_ex3_measured(rates, meta["band"], tol := float(meta["plateau_tol"])):
         say("ex3: " + line)
     shape = curve_shape(rates, tol)

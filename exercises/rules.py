@@ -3,6 +3,14 @@
 checks.py judges a learner's curve with the same ex3_answer. A rule given bad input raises ValueError.
 """
 
+# metrics.json's 2x2: data {source, augmented} x budget {short, full}; effects are differences of arms.
+ARMS = ("source_short", "augmented_short", "source_full", "augmented_full")
+EFFECTS = {
+    "data_full": ("augmented_full", "source_full"),
+    "data_short": ("augmented_short", "source_short"),
+    "compute_source": ("source_full", "source_short"),
+    "compute_augmented": ("augmented_full", "augmented_short"),
+}
 PLATEAU_TOL = 0.04  # a step of success smaller than this reads as flat (ex3)
 BAND_MIN_MARGIN = 0.06  # the narrowest half-width a band may have
 

@@ -140,13 +140,7 @@ def reference_run(seeds: dict, aug: dict) -> dict:
 
     seed_part = {"rows": rows(seeds)} | {k: seeds[k] for k in ("mean", "paired", "pooled")} | prov(seeds)
     aug_part = {"seed": aug.get("seed", 0), "rows": rows(aug)} | prov(aug)
-    return {
-        "provisional": provisional,
-        "note": note,
-        "seeds": seed_part,
-        "aug_curve": aug_part,
-        "rules": RULES,
-    }
+    return {"provisional": provisional, "note": note} | dict(seeds=seed_part, aug_curve=aug_part, rules=RULES)
 
 
 def read_sweep(path: Path, kind: str, flag: str) -> dict:
@@ -209,10 +203,8 @@ def replay_section(folder: Path) -> dict | None:
             if kind == "compare":
                 out[kind] = _compare(d)
             else:
-                out[kind] = {
-                    "command": d["command"],
-                    "rows": [{k: r[k] for k in SIGMA_ROW_KEYS} for r in d["rows"]],
-                }
+                rows = [{k: r[k] for k in SIGMA_ROW_KEYS} for r in d["rows"]]
+                out[kind] = {"command": d["command"], "rows": rows}
             out["provisional"] = bool(out.get("provisional") or d.get("smoke"))
         except (OSError, ValueError, KeyError, TypeError) as e:
             raise DataError(
@@ -229,8 +221,7 @@ def read_scale_lab(path: Path) -> dict | None:
     data = _read_json(path, "scale_lab.json", "re-run scale_lab.py")
     if not isinstance(data, dict) or data.get("kind") != "scale_lab":
         raise DataError(f"--scale-lab {rel(path)} is not a scale_lab.json written by scale_lab.py")
-    missing = [k for k in SCALE_LAB_KEYS if k not in data]
-    if missing:
+    if missing := [k for k in SCALE_LAB_KEYS if k not in data]:
         raise DataError(f"{rel(path)} is incomplete: it lacks {', '.join(missing)}; re-run scale_lab.py")
     return data
 
@@ -281,11 +272,8 @@ def main(argv: list[str]) -> int:
     lab, current = read_scale_lab(a.scale_lab), region_hashes(a.script)
     for name, s in (("seed", seeds), ("aug", aug)):
         if stale := ", ".join(drifted(current, s.get("script_region_hashes"))):
-            print(
-                f"warning: the {name} sweep ran a different scale_data.py (regions {stale} changed since); "
-                "re-run it if those changes can move the numbers",
-                file=sys.stderr,
-            )
+            why = f"the {name} sweep ran a different scale_data.py (regions {stale} changed since)"
+            print(f"warning: {why}; re-run it if those changes can move the numbers", file=sys.stderr)
     old = load_yaml(a.meta)
     meta = {k: old.get(k, v) for k, v in META_STATIC.items()} | old
     try:

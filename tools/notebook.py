@@ -98,11 +98,8 @@ def build_notebook(script: Path = SCRIPT) -> str:
         if r.name == "emit":  # after the emit region: the poster it wrote, inline
             cells.append(_cell("code", "poster", POSTER_CELL, ["poster"]))
     kernel = {"display_name": "Python 3 (ipykernel)", "language": "python", "name": "python3"}
-    meta = {
-        "colab": {"provenance": [], "toc_visible": True},
-        "kernelspec": kernel,
-        "language_info": {"name": "python"},
-    }
+    meta = {"colab": {"provenance": [], "toc_visible": True}, "kernelspec": kernel}
+    meta["language_info"] = {"name": "python"}
     nb = {"cells": cells, "metadata": meta, "nbformat": 4, "nbformat_minor": 5}
     # not ch37.files.dump_json: a notebook keeps its text UTF-8 as is, as nbformat writes it
     return json.dumps(nb, indent=1, sort_keys=True, ensure_ascii=False) + "\n"

@@ -39,8 +39,7 @@ def main(argv: list[str]) -> int:
     if not meta.get("region_hashes"):
         print(f"drift: {rel(a.meta)} has no region_hashes; run: python -m tools.regions --write")
         return 1
-    bad = drifted(current, meta["region_hashes"])
-    if bad:
+    if bad := drifted(current, meta["region_hashes"]):
         print(
             f"drift: region(s) {', '.join(bad)} of {rel(a.script)} differ from {rel(a.meta)} "
             "region_hashes; if the change is intended, run: python -m tools.regions --write "

@@ -97,14 +97,12 @@ def arm_data(src: dict, sets: dict) -> dict:
     every, none = slice(None), slice(0)
     rows = {"source": (res, none), "replay": (rep, every), "resolve_matched": (res, matched)}
     rows["resolve_all"] = (res, every)
-    return {
-        arm: (
-            np.concatenate([src["observation.state"], d["observation.state"][m]]),
-            np.concatenate([src["action"], d["action"][m]]),
-            len(np.unique(d["episode_index"][m])),
-        )
-        for arm, (d, m) in rows.items()
-    }
+    out = {}
+    for arm, (d, m) in rows.items():
+        x = np.concatenate([src["observation.state"], d["observation.state"][m]])
+        y = np.concatenate([src["action"], d["action"][m]])
+        out[arm] = (x, y, len(np.unique(d["episode_index"][m])))
+    return out
 
 
 def train_arms(data: dict, seed: int, c: dict, workers: int) -> dict:
@@ -206,13 +204,10 @@ def sigma_plot(path: Path, table: dict) -> Path:
 def compare(a, c: dict, out: Path, prov: dict) -> None:
     rows = []
     for s in range(a.seeds):
-        r = compare_seed(out, s, c, a.workers, a.smoke)
-        rows.append(r)
+        rows.append(r := compare_seed(out, s, c, a.workers, a.smoke))
         rates = " ".join(f"{k} {v['success']:.2f}" for k, v in r["arms"].items())
-        rep = r["modes"]["replay"]
-        print(
-            f"seed {s}: replay {rep['kept']}/{rep['attempts']} kept, {rates} ({r['seconds']} s)", flush=True
-        )
+        rep, took = r["modes"]["replay"], f"({r['seconds']} s)"
+        print(f"seed {s}: replay {rep['kept']}/{rep['attempts']} kept, {rates} {took}", flush=True)
     cmd = f"python -m tools.replay --seeds {a.seeds}" + (" --smoke" if a.smoke else "")
     res = {"kind": "replay_compare", "command": cmd, "rows": rows, **summarize(rows, c["eval_episodes"])}
     f = write_atomic(out / "replay_compare.json", dump_json(round_floats(res | prov, 4)))

@@ -25,12 +25,10 @@ from ch37 import ROOT, errors
 from ch37.config import check
 from ch37.errors import DataError
 from ch37.files import write_atomic
-from exercises.rules import PLATEAU_TOL, ex3_answer
+from exercises.rules import ARMS, EFFECTS, PLATEAU_TOL, ex3_answer
 from tools.common import parser, provenance, rel
 
 SWEEP_OWNED = {"--seed", "--out", "--rerun", "--no-rerun"}
-ARMS = ("source_short", "augmented_short", "source_full", "augmented_full")
-EFFECTS = ("data_full", "data_short", "compute_source", "compute_augmented")
 MEAN_KEYS = (*ARMS, *EFFECTS, "yield", "kept", "coverage_union")
 T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262, 10: 2.228}
 
@@ -66,11 +64,8 @@ def row_of(m: dict, **extra) -> dict:
     a, n = m["arms"], m["config"]["eval_episodes"]
     row = extra | {arm: a[arm]["success"] for arm in ARMS} | {e: round(m["effects"][e], 6) for e in EFFECTS}
     row["delta"] = round(m["scale_effect"], 6)  # the headline: data effect at the full budget
-    row |= {
-        "steps": m["budgets"],
-        "eval_episodes": n,
-        "successes": {k: round(a[k]["success"] * n) for k in ARMS},
-    }
+    row |= {"steps": m["budgets"], "eval_episodes": n}
+    row["successes"] = {k: round(a[k]["success"] * n) for k in ARMS}
     row |= {k: m[k] for k in ("yield", "kept", "attempts")}
     row |= {"coverage_source": m["coverage"]["source"], "coverage_union": m["coverage"]["union"]}
     return row | {"ci95": {arm: a[arm]["ci95"] for arm in ARMS}, "wall_s": m["_wall_s"]}
@@ -78,13 +73,6 @@ def row_of(m: dict, **extra) -> dict:
 
 def mean_row(rows: list[dict]) -> dict:
     return {k: round(sum(r[k] for r in rows) / len(rows), 6) for k in MEAN_KEYS}
-
-
-def wilson(successes: int, n: int) -> list[float]:
-    """bc_recipe.wilson's 95% interval, rounded to 6 places."""
-    from bc_recipe import wilson  # here, not at the top: it loads torch, which the sweep itself never needs
-
-    return [round(v, 6) for v in wilson(successes / n, n)]
 
 
 def paired(rows: list[dict]) -> dict:
@@ -106,11 +94,14 @@ def paired(rows: list[dict]) -> dict:
 
 def pooled(rows: list[dict]) -> dict:
     """Each arm's successes over all seeds' evaluation episodes, with a Wilson 95% interval."""
+    from bc_recipe import wilson  # here, not at the top: it loads torch, which the sweep itself never needs
+
     n = sum(r["eval_episodes"] for r in rows)
     out = {}
     for arm in ARMS:
         k = sum(r["successes"][arm] for r in rows)
-        out[arm] = {"successes": k, "episodes": n, "success": round(k / n, 6), "ci95": wilson(k, n)}
+        ci = [round(v, 6) for v in wilson(k / n, n)]
+        out[arm] = {"successes": k, "episodes": n, "success": round(k / n, 6), "ci95": ci}
     return out
 
 
@@ -182,8 +173,7 @@ def run_all(kind: str, runs: list, script: Path, out_root: Path, flags: list[str
 def sweep(a, flags: list[str], argv: list[str]) -> Path:
     """Run the sweep of the parsed flags `a` (`flags` go to every run), write sweep_seeds.json or
     sweep_aug.json under --out-root, print its table."""
-    bad = sorted({f.split("=")[0] for f in flags} & SWEEP_OWNED)
-    if bad:
+    if bad := sorted({f.split("=")[0] for f in flags} & SWEEP_OWNED):
         raise DataError(f"{', '.join(bad)}: the sweep sets these itself (use --seeds/--aug and --out-root)")
     smoke = "--smoke" in flags
     out_root = ROOT / (a.out_root or ("outputs/sweep-smoke" if smoke else "outputs/sweep"))
@@ -192,10 +182,8 @@ def sweep(a, flags: list[str], argv: list[str]) -> Path:
     rows, metrics = run_all(kind, runs, a.script, out_root, flags)
     varied = {"seed", "aug_per_demo", "full_steps"} if kind == "aug" else {"seed"}  # from run to run
     each = ["--aug_per_demo", "{k}", "[--full_steps {full}]"] if kind == "aug" else []
-    runs_command = "python scale_data.py --seed {seed} --no-rerun --out".split() + [
-        str(out_root / kind / "{run}")
-    ]
-    runs_command += flags + each
+    runs_out = str(out_root / kind / "{run}")
+    runs_command = [*"python scale_data.py --seed {seed} --no-rerun --out".split(), runs_out, *flags, *each]
     first = metrics[0]
     result = {"kind": kind, "smoke": smoke, "command": shlex.join(["python", "-m", "tools.sweep", *argv])}
     result |= {"runs_command": shlex.join(runs_command), **prov, "device": first["config"].get("device")}
