@@ -482,8 +482,9 @@ def remove_shards(out: Path) -> None:
 # ----------------------------------------------------------------------------------------------
 # Statistics over all frames
 # ----------------------------------------------------------------------------------------------
-def column(files, key: str) -> np.ndarray:
-    """One feature over all frames of the parquet `files`, as float64 (frames, dims)."""
+def column(files, key: str, dim: int) -> np.ndarray:
+    """Dimension `dim` of one feature over all frames of the parquet `files`, as float64 (frames, 1):
+    one dimension at a time, so the driver holds 8 bytes a frame whatever the feature's width."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -491,12 +492,11 @@ def column(files, key: str) -> np.ndarray:
     for f in files:
         col = pq.ParquetFile(f).read(columns=[key]).column(key).combine_chunks()
         if pa.types.is_list(col.type) or pa.types.is_fixed_size_list(col.type):
-            parts.append(
-                col.flatten().to_numpy(zero_copy_only=False).astype(np.float64).reshape(len(col), -1)
-            )
+            col = col.flatten().to_numpy(zero_copy_only=False).reshape(len(col), -1)[:, dim]
         else:
-            parts.append(col.to_numpy(zero_copy_only=False).astype(np.float64).reshape(-1, 1))
-    return np.concatenate(parts)
+            col = col.to_numpy(zero_copy_only=False)
+        parts.append(col.astype(np.float64))
+    return np.concatenate(parts).reshape(-1, 1)
 
 
 def frame_stats(x: np.ndarray, names) -> dict:
@@ -529,9 +529,15 @@ def write_frame_stats(root: Path, template: dict | None = None) -> None:
     old = read_json(path) if template is None else template
     files = sorted((root / "data").rglob("*.parquet"))
     columns = set(pq.read_schema(files[0]).names)
-    new = {
-        key: frame_stats(column(files, key), sorted(st)) if key in columns else st for key, st in old.items()
-    }
+    new = {}
+    for key, st in old.items():
+        if key not in columns:
+            new[key] = st
+            continue
+        per_dim = [frame_stats(column(files, key, d), sorted(st)) for d in range(len(st["min"]))]
+        new[key] = {name: [v for part in per_dim for v in part[name]] for name in per_dim[0]}
+        if "count" in new[key]:
+            new[key]["count"] = per_dim[0]["count"]
     path.write_text(json.dumps(new, indent=4, sort_keys=True, ensure_ascii=False))
 
 
