@@ -289,6 +289,7 @@ def merge(out: Path, n_shards: int, run_stamp: dict) -> int:
 # Episode rows per row group of meta/episodes: a fixed count, so the row groups never depend on how
 # the episodes were cut into shards (LeRobot's own writer buffers a few episodes per group).
 EPISODE_ROWS = 1000
+DATA_GROUP_ROWS = 2**16  # frames: a data row group holds whole episodes, at least this many frames
 SHIFTED_STATS = ("min", "max", "mean", "q01", "q10", "q50", "q90", "q99")  # move with their column
 
 
@@ -301,8 +302,9 @@ class _Files:
     where files end never depends on the shards. After chunks_size files the next chunk begins
     (LeRobot's update_chunk_file_indices)."""
 
-    def __init__(self, root: Path, pattern: str, max_bytes: int, chunks_size: int):
+    def __init__(self, root: Path, pattern: str, max_bytes: int, chunks_size: int, group_rows: int = 1):
         self.root, self.pattern, self.max_bytes, self.chunks_size = root, pattern, max_bytes, chunks_size
+        self.group_rows, self.buffer, self.buffered = group_rows, [], 0  # blocks not yet written, their rows
         self.chunk = self.file = self.rows = 0
         self.limit = self.writer = None
 
@@ -318,7 +320,9 @@ class _Files:
         return self.chunk, self.file
 
     def write(self, table) -> None:
-        """Write `table` as one row group into the file place() gave."""
+        """Add the block `table` to the file place() gave; blocks go to disk as row groups of at least
+        group_rows rows (LeRobot writes one per episode: at 10^4 episodes, 10^4 writes and as many
+        metadata entries to parse on every read). Where a group ends depends on the rows alone."""
         import pyarrow.parquet as pq
 
         if self.writer is None:
@@ -327,11 +331,21 @@ class _Files:
             # LeRobot's own settings (io_utils.write_table_one_row_group_per_episode)
             self.writer = pq.ParquetWriter(path, table.schema, compression="snappy", use_dictionary=True)
             self.rows = 0
-        self.writer.write_table(table)
-        self.rows += table.num_rows
+        self.buffer.append(table)
+        self.rows, self.buffered = self.rows + table.num_rows, self.buffered + table.num_rows
+        if self.buffered >= self.group_rows:
+            self._flush()
+
+    def _flush(self) -> None:
+        import pyarrow as pa
+
+        if self.buffer:
+            self.writer.write_table(pa.concat_tables(self.buffer))
+            self.buffer, self.buffered = [], 0
 
     def close(self) -> None:
         if self.writer is not None:
+            self._flush()
             self.writer.close()
             self.writer = None
 
@@ -379,9 +393,9 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
     pass: each set's data and episodes parquet is read once, its episode and frame indices (and the
     episodes table's per-episode index stats) moved by the episodes and frames before it, and written
     into data/chunk-XXX/file-YYY.parquet files of up to the first set's data_files_size_in_mb
-    (`max_bytes` to override; one row group per episode, as LeRobot writes) and meta/episodes files
-    the same way; tasks, info.json and stats.json (exact over all frames, write_frame_stats) once each.
-    No file is written twice. Returns the episodes merged.
+    (`max_bytes` to override; row groups of whole episodes, DATA_GROUP_ROWS frames or more) and
+    meta/episodes files the same way; tasks, info.json and stats.json (exact over all frames,
+    write_frame_stats) once each. No file is written twice. Returns the episodes merged.
 
     What LeRobotDataset reads is what LeRobot's aggregate_datasets + write_frame_stats give for the
     same sets (tests/test_merge.py); only the file layout differs, and it depends on the frames alone."""
@@ -396,7 +410,7 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
         raise RuntimeError("merge_sets merges sets without images or videos")
     max_bytes = max_bytes or info.data_files_size_in_mb * 2**20  # LeRobot's MB are MiB
     chunks_size = chunks_size or info.chunks_size
-    data_out = _Files(dest, DEFAULT_DATA_PATH, max_bytes, chunks_size)
+    data_out = _Files(dest, DEFAULT_DATA_PATH, max_bytes, chunks_size, group_rows=DATA_GROUP_ROWS)
     meta_out = _Files(dest, DEFAULT_EPISODES_PATH, max_bytes, chunks_size)
     n_eps = n_frames = 0
     task, pending = None, []  # episode rows not yet written (fewer than EPISODE_ROWS)
