@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import itertools
 import json
 import platform
 import re
@@ -289,65 +290,69 @@ def merge(out: Path, n_shards: int, run_stamp: dict) -> int:
 # Episode rows per row group of meta/episodes: a fixed count, so the row groups never depend on how
 # the episodes were cut into shards (LeRobot's own writer buffers a few episodes per group).
 EPISODE_ROWS = 1000
-DATA_GROUP_ROWS = 2**16  # frames: a data row group holds whole episodes, at least this many frames
+DATA_GROUP_ROWS = 2**16  # frames per row group of a data file
 SHIFTED_STATS = ("min", "max", "mean", "q01", "q10", "q50", "q90", "q99")  # move with their column
 
 
 class _Files:
     """A series of parquet files `pattern` (chunk, file) under `root`, each written once, in order.
 
-    A file holds at most `limit` rows, where limit = max_bytes / the Arrow size of the first row
-    written (every row here has the same size: fixed-width columns and lists of fixed length), and
-    a block of rows (one row group) never straddles two files. The cut is a rule on row counts, so
-    where files end never depends on the shards. After chunks_size files the next chunk begins
-    (LeRobot's update_chunk_file_indices)."""
+    A file holds at most `limit` rows, where limit = max_bytes / the Arrow size of a row (every row
+    here has the same size: fixed-width columns and lists of fixed length), and a block placed with
+    place() (an episode, or a block of episode rows) never straddles two files. After chunks_size
+    files the next chunk begins (LeRobot's update_chunk_file_indices). Rows go to disk in row groups
+    of group_rows rows (the last of a file shorter); LeRobot writes one per episode, which at 10^4
+    episodes means 10^4 writes and as many metadata entries to parse on every read. Files and row
+    groups are cut by row counts alone, so where they end never depends on the shards."""
 
-    def __init__(self, root: Path, pattern: str, max_bytes: int, chunks_size: int, group_rows: int = 1):
+    def __init__(self, root: Path, pattern: str, max_bytes: int, chunks_size: int, group_rows: int):
         self.root, self.pattern, self.max_bytes, self.chunks_size = root, pattern, max_bytes, chunks_size
-        self.group_rows, self.buffer, self.buffered = group_rows, [], 0  # blocks not yet written, their rows
-        self.chunk = self.file = self.rows = 0
-        self.limit = self.writer = None
+        self.group_rows, self.buffer, self.buffered = group_rows, [], 0  # rows not yet written
+        self.chunk = self.file = self.placed = 0  # rows placed in the current file
+        self.limit = self.writer = self.open_at = None
 
-    def place(self, rows: int, first_row) -> tuple[int, int]:
+    def place(self, rows: int, row_bytes: int) -> tuple[int, int]:
         """Where the next block of `rows` rows goes: (chunk, file), starting a new file if needed."""
         if self.limit is None:
-            self.limit = max(1, self.max_bytes // max(1, first_row.nbytes))
-        if self.writer is not None and self.rows + rows > self.limit:
+            self.limit = max(1, self.max_bytes // max(1, row_bytes))
+        if self.placed and self.placed + rows > self.limit:
             from lerobot.datasets.utils import update_chunk_file_indices
 
-            self.close()
             self.chunk, self.file = update_chunk_file_indices(self.chunk, self.file, self.chunks_size)
+            self.placed = 0
+        self.placed += rows
         return self.chunk, self.file
 
-    def write(self, table) -> None:
-        """Add the block `table` to the file place() gave; blocks go to disk as row groups of at least
-        group_rows rows (LeRobot writes one per episode: at 10^4 episodes, 10^4 writes and as many
-        metadata entries to parse on every read). Where a group ends depends on the rows alone."""
+    def write(self, table, where: tuple[int, int]) -> None:
+        """Append `table` (rows placed in order) to file `where`, the place() they were given."""
         import pyarrow.parquet as pq
 
-        if self.writer is None:
-            path = self.root / self.pattern.format(chunk_index=self.chunk, file_index=self.file)
+        if where != self.open_at:
+            self.close()
+            path = self.root / self.pattern.format(chunk_index=where[0], file_index=where[1])
             path.parent.mkdir(parents=True, exist_ok=True)
             # LeRobot's own settings (io_utils.write_table_one_row_group_per_episode)
             self.writer = pq.ParquetWriter(path, table.schema, compression="snappy", use_dictionary=True)
-            self.rows = 0
+            self.open_at = where
         self.buffer.append(table)
-        self.rows, self.buffered = self.rows + table.num_rows, self.buffered + table.num_rows
-        if self.buffered >= self.group_rows:
-            self._flush()
+        self.buffered += table.num_rows
+        while self.buffered >= self.group_rows:
+            self._flush(self.group_rows)
 
-    def _flush(self) -> None:
+    def _flush(self, rows: int) -> None:
         import pyarrow as pa
 
-        if self.buffer:
-            self.writer.write_table(pa.concat_tables(self.buffer))
-            self.buffer, self.buffered = [], 0
+        table = pa.concat_tables(self.buffer)
+        self.writer.write_table(table.slice(0, rows))
+        rest = table.slice(rows)
+        self.buffer, self.buffered = ([rest] if rest.num_rows else []), rest.num_rows
 
     def close(self) -> None:
         if self.writer is not None:
-            self._flush()
+            if self.buffered:
+                self._flush(self.buffered)
             self.writer.close()
-            self.writer = None
+            self.writer = self.open_at = None
 
 
 def _shifted(table, name: str, by: int, *, fill: bool = False):
@@ -393,9 +398,9 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
     pass: each set's data and episodes parquet is read once, its episode and frame indices (and the
     episodes table's per-episode index stats) moved by the episodes and frames before it, and written
     into data/chunk-XXX/file-YYY.parquet files of up to the first set's data_files_size_in_mb
-    (`max_bytes` to override; row groups of whole episodes, DATA_GROUP_ROWS frames or more) and
-    meta/episodes files the same way; tasks, info.json and stats.json (exact over all frames,
-    write_frame_stats) once each. No file is written twice. Returns the episodes merged.
+    (`max_bytes` to override; row groups of DATA_GROUP_ROWS frames) and meta/episodes files the
+    same way (row groups of EPISODE_ROWS episodes); tasks, info.json and stats.json (exact over all
+    frames, write_frame_stats) once each. No file is written twice. Returns the episodes merged.
 
     What LeRobotDataset reads is what LeRobot's aggregate_datasets + write_frame_stats give for the
     same sets (tests/test_merge.py); only the file layout differs, and it depends on the frames alone."""
@@ -411,7 +416,7 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
     max_bytes = max_bytes or info.data_files_size_in_mb * 2**20  # LeRobot's MB are MiB
     chunks_size = chunks_size or info.chunks_size
     data_out = _Files(dest, DEFAULT_DATA_PATH, max_bytes, chunks_size, group_rows=DATA_GROUP_ROWS)
-    meta_out = _Files(dest, DEFAULT_EPISODES_PATH, max_bytes, chunks_size)
+    meta_out = _Files(dest, DEFAULT_EPISODES_PATH, max_bytes, chunks_size, group_rows=EPISODE_ROWS)
     n_eps = n_frames = 0
     task, pending = None, []  # episode rows not yet written (fewer than EPISODE_ROWS)
 
@@ -419,11 +424,11 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
         nonlocal pending
         table = pa.concat_tables(pending)
         block, rest = table.slice(0, rows), table.slice(rows)
-        chunk, file = meta_out.place(rows, block.slice(0, 1))
+        chunk, file = meta_out.place(rows, block.slice(0, 1).nbytes)
         for name, value in (("meta/episodes/chunk_index", chunk), ("meta/episodes/file_index", file)):
             i = block.schema.get_field_index(name)
             block = block.set_column(i, block.schema.field(i), pa.array([value] * rows, pa.int64()))
-        meta_out.write(block)
+        meta_out.write(block, (chunk, file))
         pending = [rest] if rest.num_rows else []
 
     try:
@@ -434,13 +439,14 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
             if any(t != task for t in tasks):
                 raise RuntimeError(f"{root}: tasks {tasks[0]} differ from {task}; merge_sets takes one task")
             data = _shifted(_shifted(data, "episode_index", n_eps), "index", n_frames)
-            places = []
-            for lo, hi in zip(
-                eps.column("dataset_from_index").to_numpy(), eps.column("dataset_to_index").to_numpy()
-            ):
-                episode = data.slice(lo, hi - lo)
-                places.append(data_out.place(episode.num_rows, episode.slice(0, 1)))
-                data_out.write(episode)
+            lengths = eps.column("dataset_to_index").to_numpy() - eps.column("dataset_from_index").to_numpy()
+            row_bytes = data.slice(0, 1).nbytes
+            places = [data_out.place(int(n), row_bytes) for n in lengths]  # (chunk, file) per episode
+            start = 0
+            for where, run in itertools.groupby(zip(places, lengths, strict=True), key=lambda p: p[0]):
+                rows = int(sum(n for _, n in run))  # consecutive episodes bound for one file: one block
+                data_out.write(data.slice(start, rows), where)
+                start += rows
             shifts = {"episode_index": n_eps, "dataset_from_index": n_frames, "dataset_to_index": n_frames}
             for name, by in (("episode_index", n_eps), ("index", n_frames)):  # aggregate's update_meta_data
                 shifts |= {f"stats/{name}/{stat}": by for stat in SHIFTED_STATS}

@@ -109,7 +109,7 @@ def test_merge_reads_back_as_lerobots_merge(roots, lerobots, tmp_path):
         "meta/episodes/chunk-000/file-000.parquet",
         "meta/tasks.parquet",
     ]
-    # row groups of whole episodes and at least DATA_GROUP_ROWS frames: this small set is one
+    # row groups of DATA_GROUP_ROWS frames: this small set is one
     assert pq.ParquetFile(tmp_path / "set" / files[0]).num_row_groups == 1
 
 
