@@ -306,8 +306,10 @@ def _episode_stats(buf: dict, feats: dict) -> dict:
         x = x.astype(np.result_type(x.dtype, np.float32), copy=False)  # as RunningQuantileStats.update
         n = len(x)
         mean, mean_sq = np.mean(x, axis=0), np.mean(x**2, axis=0)
-        mean += (np.mean(x, axis=0) - mean) * (n / n)  # its running update, kept for equal bits
-        mean_sq += (np.mean(x**2, axis=0) - mean_sq) * (n / n)
+        # its running update with the same batch, mean + (batch mean - mean) * n / n, kept for equal
+        # bits (-0.0 becomes 0.0, inf becomes nan); the batch mean is `mean` itself, not recomputed
+        mean += (mean - mean) * (n / n)
+        mean_sq += (mean_sq - mean_sq) * (n / n)
         std = np.sqrt(np.maximum(0, mean_sq - mean**2))
         out[k] = {"min": None, "max": None, "mean": mean, "std": std, "count": np.array([n])}
         groups.setdefault(x.dtype, []).append((k, x))
@@ -326,11 +328,6 @@ def _episode_stats(buf: dict, feats: dict) -> dict:
             if buf[k].ndim == 1:  # keepdims: (1,) each, as LeRobot reshapes a (T,) column's stats
                 out[k] = {name: v.reshape(1) for name, v in st.items()}
     return out
-
-
-def _feature_stats(data: np.ndarray) -> dict:
-    """get_feature_stats(data, axis=0, keepdims=data.ndim == 1) of one (T,) or (T, D) column."""
-    return _episode_stats({"x": data}, {"x": {"dtype": "float32"}})["x"]
 
 
 def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb: int | None = None) -> None:
