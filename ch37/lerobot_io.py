@@ -29,6 +29,10 @@ IMAGE_SIZE = 96  # px, the optional top-down video is IMAGE_SIZE x IMAGE_SIZE RG
 # writer fills it from observation.state's columns of the same names (each env's ENV_STATE_NAMES);
 # nothing in the chapter reads it, so a set without it is read as before.
 ENV_STATE_KEY = "observation.environment_state"
+# Parquet settings of every file we write. LeRobot writes snappy with dictionary encoding; on this
+# chapter's float columns a dictionary never pays: without it a 321 k-frame data file is written
+# 2.5x and read 3.5x faster, and is 29% smaller (docs/engine.md#speed).
+PARQUET = dict(compression="snappy", use_dictionary=False)
 
 
 def check_hf_cache() -> None:
@@ -378,7 +382,7 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
         path = tmp / info.data_path.format(chunk_index=chunk, file_index=file)
         path.parent.mkdir(parents=True, exist_ok=True)
         table = pa.Table.from_arrays([column(f, parts[f.name]) for f in schema], schema=schema)
-        pq.write_table(table, path, compression="snappy", use_dictionary=True)
+        pq.write_table(table, path, **PARQUET)
 
     rows: dict[str, list] = {}  # the episodes table, column by column
     ep_stats = []
@@ -440,7 +444,7 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
         part["meta/episodes/file_index"] = [m_file] * len(part["length"])
         path = tmp / DEFAULT_EPISODES_PATH.format(chunk_index=m_chunk, file_index=m_file)
         path.parent.mkdir(parents=True, exist_ok=True)
-        pq.write_table(pa.Table.from_pydict(part), path, compression="snappy", use_dictionary=True)
+        pq.write_table(pa.Table.from_pydict(part), path, **PARQUET)
     write_tasks(pd.DataFrame({"task_index": range(1)}, index=pd.Index([task], name="task")), tmp)
     info.total_episodes, info.total_frames, info.total_tasks = n_eps, frames, 1
     info.splits = {"train": f"0:{n_eps}"}

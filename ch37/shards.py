@@ -20,9 +20,10 @@ The merge (merge_sets) reads each shard's data and episodes parquet once, moves 
 frame indices by those before it, and writes every file of the set once: data and meta/episodes
 files of up to LeRobot's 100 MB (cut by row counts, never where a shard ends, so the data files'
 bytes do not depend on --shard_size), tasks, info.json, and stats.json over all frames
-(write_frame_stats). It costs one read and one write per frame, and one more read of each column
-for the exact stats, where LeRobot's aggregate_datasets re-read and rewrote its growing episodes
-file for every shard. LeRobotDataset reads what either writes the same (tests/test_merge.py).
+(ch37.frame_stats, counted as the frames are written). It costs one read and one write per
+frame, and one or two more reads of the numeric columns for the exact quantiles, where LeRobot's
+aggregate_datasets re-read and rewrote its growing episodes file for every shard. LeRobotDataset
+reads what either writes the same (tests/test_merge.py).
 
 A shard is saved into its .partial folder and renamed into place with its stamp inside, so a
 shard folder without the .partial suffix is always whole. The shards are removed once the run is
@@ -56,7 +57,8 @@ from ch37.cli import available_memory
 from ch37.demos import code_digest
 from ch37.errors import DataError
 from ch37.files import LEFTOVER, check_out_path, dump_json, lock, round_floats, unlock, write_atomic
-from ch37.lerobot_io import check_hf_cache, fps_problem, frames_problem, load_arrays, schema_problem
+from ch37.frame_stats import FrameStats, write_frame_stats
+from ch37.lerobot_io import PARQUET, check_hf_cache, fps_problem, frames_problem, load_arrays, schema_problem
 from ch37.seeds import SEED_BLOCK
 from ch37.stamps import (
     LOCK_NAME,
@@ -331,8 +333,7 @@ class _Files:
             self.close()
             path = self.root / self.pattern.format(chunk_index=where[0], file_index=where[1])
             path.parent.mkdir(parents=True, exist_ok=True)
-            # LeRobot's own settings (io_utils.write_table_one_row_group_per_episode)
-            self.writer = pq.ParquetWriter(path, table.schema, compression="snappy", use_dictionary=True)
+            self.writer = pq.ParquetWriter(path, table.schema, **PARQUET)
             self.open_at = where
         self.buffer.append(table)
         self.buffered += table.num_rows
@@ -415,6 +416,8 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
         raise RuntimeError("merge_sets merges sets without images or videos")
     max_bytes = max_bytes or info.data_files_size_in_mb * 2**20  # LeRobot's MB are MiB
     chunks_size = chunks_size or info.chunks_size
+    template = _stats_template(roots)
+    stats = FrameStats({k: sorted(st) for k, st in template.items() if k in info.features})
     data_out = _Files(dest, DEFAULT_DATA_PATH, max_bytes, chunks_size, group_rows=DATA_GROUP_ROWS)
     meta_out = _Files(dest, DEFAULT_EPISODES_PATH, max_bytes, chunks_size, group_rows=EPISODE_ROWS)
     n_eps = n_frames = 0
@@ -447,6 +450,7 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
                 rows = int(sum(n for _, n in run))  # consecutive episodes bound for one file: one block
                 data_out.write(data.slice(start, rows), where)
                 start += rows
+            stats.add(data)  # counted as it is written; the quantiles read back only a few bins
             shifts = {"episode_index": n_eps, "dataset_from_index": n_frames, "dataset_to_index": n_frames}
             for name, by in (("episode_index", n_eps), ("index", n_frames)):  # aggregate's update_meta_data
                 shifts |= {f"stats/{name}/{stat}": by for stat in SHIFTED_STATS}
@@ -475,15 +479,17 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
     info.total_episodes, info.total_frames, info.total_tasks = n_eps, n_frames, len(tasks)
     info.splits = {"train": f"0:{n_eps}"}
     write_info(info, dest)
-    write_frame_stats(dest, _stats_template(roots, data.column_names))
+    write_frame_stats(dest, template, stats)
     return n_eps
 
 
-def _stats_template(roots: list[Path], columns) -> dict:
+def _stats_template(roots: list[Path]) -> dict:
     """The stats.json entries write_frame_stats fills: the first set's keys and stat names; a key that
-    is no data column (none in the engine's sets) gets LeRobot's aggregate of every set's stats."""
+    is no data feature (none in the engine's sets) gets LeRobot's aggregate of every set's stats."""
+    from lerobot.datasets.io_utils import load_info
+
     first = read_json(roots[0] / "meta" / "stats.json")
-    other = [k for k in first if k not in columns]
+    other = [k for k in first if k not in load_info(roots[0]).features]
     if not other:
         return first
     from lerobot.datasets.compute_stats import aggregate_stats
@@ -497,68 +503,6 @@ def _stats_template(roots: list[Path], columns) -> dict:
 def remove_shards(out: Path) -> None:
     """Once the run's stamp says complete: the shards are in the merged set."""
     shutil.rmtree(Path(out) / SHARDS_DIR, ignore_errors=True)
-
-
-# ----------------------------------------------------------------------------------------------
-# Statistics over all frames
-# ----------------------------------------------------------------------------------------------
-def column(files, key: str, dim: int) -> np.ndarray:
-    """Dimension `dim` of one feature over all frames of the parquet `files`, as float64 (frames, 1):
-    one dimension at a time, so the driver holds 8 bytes a frame whatever the feature's width."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    parts = []
-    for f in files:
-        col = pq.ParquetFile(f).read(columns=[key]).column(key).combine_chunks()
-        if pa.types.is_list(col.type) or pa.types.is_fixed_size_list(col.type):
-            col = col.flatten().to_numpy(zero_copy_only=False).reshape(len(col), -1)[:, dim]
-        else:
-            col = col.to_numpy(zero_copy_only=False)
-        parts.append(col.astype(np.float64))
-    return np.concatenate(parts).reshape(-1, 1)
-
-
-def frame_stats(x: np.ndarray, names) -> dict:
-    """LeRobot's stats.json entries for one feature, computed over every frame (x: (frames, dims))."""
-    quantiles = {name: float(name[1:]) / 100 for name in names if re.fullmatch(r"q\d\d", name)}
-    out = {
-        "min": x.min(0),
-        "max": x.max(0),
-        "mean": x.mean(0),
-        "std": x.std(0),
-        **{name: np.quantile(x, q, axis=0) for name, q in quantiles.items()},
-    }
-    stats = {name: [float(v) for v in out[name]] for name in names if name in out}
-    if "count" in names:
-        stats["count"] = [int(len(x))]
-    return stats
-
-
-def write_frame_stats(root: Path, template: dict | None = None) -> None:
-    """Write root/meta/stats.json with every numeric feature's stats over all frames: the entries of
-    `template` (the stats.json there when None), each key that is a data column recomputed.
-
-    LeRobot 0.6.1's aggregate_datasets (and recompute_stats) combine per-episode statistics, and
-    their q01..q99 are averages of per-episode quantiles (lerobot issue 4156), not quantiles of the
-    data; min, max, mean and std are recomputed here too, from the frames, in float64. Keys sorted."""
-    import pyarrow.parquet as pq
-
-    root = Path(root)
-    path = root / "meta" / "stats.json"
-    old = read_json(path) if template is None else template
-    files = sorted((root / "data").rglob("*.parquet"))
-    columns = set(pq.read_schema(files[0]).names)
-    new = {}
-    for key, st in old.items():
-        if key not in columns:
-            new[key] = st
-            continue
-        per_dim = [frame_stats(column(files, key, d), sorted(st)) for d in range(len(st["min"]))]
-        new[key] = {name: [v for part in per_dim for v in part[name]] for name in per_dim[0]}
-        if "count" in new[key]:
-            new[key]["count"] = per_dim[0]["count"]
-    path.write_text(json.dumps(new, indent=4, sort_keys=True, ensure_ascii=False))
 
 
 # ----------------------------------------------------------------------------------------------

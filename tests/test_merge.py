@@ -13,7 +13,7 @@ import pytest
 import torch
 
 import gen_demos_pusht
-from ch37 import engine, shards
+from ch37 import engine, frame_stats, shards
 from ch37.lerobot_io import load_arrays, open_dataset
 from ch37.stamps import read_json
 
@@ -42,7 +42,7 @@ def lerobots(roots, tmp_path_factory):
     out = tmp_path_factory.mktemp("lerobot") / "set"
     names = [f"local/shard-{i:05d}" for i in range(len(roots))]
     aggregate_datasets(names, "local/pusht_aug", roots=roots, aggr_root=out, concatenate_data=False)
-    shards.write_frame_stats(out)
+    frame_stats.write_frame_stats(out)
     return out
 
 
@@ -145,3 +145,42 @@ def test_a_set_out_of_order_is_refused(roots, tmp_path):
     pq.write_table(t.set_column(i, t.schema.field(i), pa.array(t.column(i).to_numpy()[::-1])), f)
     with pytest.raises(RuntimeError, match="episodes in order"):
         shards.merge_sets([roots[1], bad], tmp_path / "set")
+
+
+@pytest.mark.parametrize("collect", [2**14, 16])
+def test_frame_stats_are_numpys_whatever_the_tables(collect, monkeypatch):
+    """FrameStats against numpy on the whole column: quantiles bit for bit, mean and std within
+    1e-12, and the same bits however the frames are cut into tables. Ties, negatives, -0.0, a
+    constant and a repeated-integer column; collect=16 forces the bins to be counted again (two
+    more passes) before any is read out."""
+    monkeypatch.setattr(frame_stats, "COLLECT", collect)
+    rng = np.random.default_rng(0)
+    n = 150_001
+    x = np.concatenate([rng.normal(size=(n // 2, 3)), rng.integers(-3, 4, size=(n - n // 2, 3))])
+    x[::7, 1] = -0.0
+    x = rng.permutation(x).astype(np.float32)
+    table = pa.table(
+        {
+            "a": pa.FixedSizeListArray.from_arrays(pa.array(x.reshape(-1)), 3),
+            "frame": pa.array(np.arange(n) % 61),
+            "task": pa.array(np.zeros(n, np.int64)),
+        }
+    )
+    names = ["count", "max", "mean", "min", "q01", "q10", "q50", "q90", "q99", "std"]
+
+    def stats_of(cuts):
+        st = frame_stats.FrameStats({k: names for k in table.column_names})
+        for lo, hi in zip([0, *cuts], [*cuts, n]):
+            st.add(table.slice(lo, hi - lo))
+        return st.result(lambda keys: (table.slice(i, 40_000).select(keys) for i in range(0, n, 40_000)))
+
+    got = stats_of([5, 70_000, 70_001])
+    assert got == stats_of([]) == stats_of(list(range(1000, n, 1000)))
+    for key in table.column_names:
+        ref = frame_stats.matrix(table.column(key))  # float64 (n, dims), -0.0 as 0.0
+        for name, q in frame_stats.quantile_names(names).items():
+            assert np.quantile(ref, q, axis=0).tolist() == got[key][name], (key, name)
+        assert got[key]["min"] == ref.min(0).tolist() and got[key]["max"] == ref.max(0).tolist()
+        np.testing.assert_allclose(got[key]["mean"], ref.mean(0), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(got[key]["std"], ref.std(0), rtol=1e-12, atol=1e-12)
+        assert got[key]["count"] == [n]
