@@ -48,6 +48,7 @@ from ch37.seeds import MAX_SEED, SEED_BLOCK
 CURVES = ("fresh", "resolve", "replay", "resolve_fixed")
 MODES = ("resolve", "replay")  # the engine modes behind the generated curves
 SOURCES = D.source_episodes  # the seed set every generated curve grows from
+N_DEFAULT = (12, 36, 108, 324, 972)  # the curve's points: total PushT demos
 FIXED_N = SOURCES * (1 + D.aug_per_demo)  # the chapter's default point (108): its steps are the fixed budget
 SMOKE = dict(n=[12, 24, 36], seeds=[0, 1], eval_episodes=4, hidden_dim=32, epochs=5, batch_size=64)
 INTERVAL = "per point: Wilson 95% over its eval starts; per curve: Wilson over all seeds' episodes pooled"
@@ -62,7 +63,7 @@ def parser(smoke: bool = False):
     """The lab's flags; with `smoke`, SMOKE's values are their defaults."""
     p = config.parser(__doc__.split("\n\n")[0])
     flag = p.add_argument
-    flag("--n", type=int, nargs="+", default=[12, 36, 108, 324, 972], help="total demos per point (N)")
+    flag("--n", type=int, nargs="+", default=list(N_DEFAULT), help="total demos per point (N)")
     flag("--seeds", type=int, nargs="+", default=[0, 1, 2], help="each draws disjoint demos and eval starts")
     flag("--eval_episodes", type=int, default=100, help="held-out starts per point; 100: +-0.1 at worst")
     flag("--epochs", type=int, default=D.epochs, help="passes over the resolve set at N: N's step budget")
@@ -127,6 +128,12 @@ def command(a) -> str:
 def per_source(n: int) -> int:
     """Generated demos per source demo at N total demos."""
     return (n - SOURCES) // SOURCES
+
+
+def max_per_source(mode: str, max_n: int) -> int:
+    """Attempts per source demo the lab makes for `mode` when its largest point is max_n: each
+    point's set is the first kept demos of each source (resolve also feeds the fixed-budget point)."""
+    return max(per_source(max_n), per_source(FIXED_N)) if mode == "resolve" else per_source(max_n)
 
 
 def grow(mode: str, seed: int, srcs: dict, per_demo: int, cap: int, pos_sigma: float, yaw_sigma: float):
@@ -331,7 +338,7 @@ def run(a) -> int:
     from ch37.seeds import env_seed
 
     max_n = max(a.n)
-    max_per = {"resolve": max(per_source(max_n), per_source(FIXED_N)), "replay": per_source(max_n)}
+    max_per = {m: max_per_source(m, max_n) for m in MODES}
     fresh_paths = {s: a.out / "demos" / f"pusht_seed{s}_ep{max_n}" for s in a.seeds}
     gen_paths = {
         (m, s): a.out / "demos" / f"pusht_{m}_seed{s}_src{SOURCES}_per{max_per[m]}"

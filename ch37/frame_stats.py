@@ -17,12 +17,13 @@ Here, per dimension of each feature, in float64:
   quantile interpolates between two order statistics (ranks k and k + 1 of the sorted column), and
   those are found by counting: a value's float64 bits, made order-preserving, are a 64-bit key;
   add() counts every key's top BITS bits (65,536 bins per dimension); each later pass over the
-  frames reads out the values of a bin that holds at most COLLECT of them, or counts the next BITS
-  bits of a larger one (a bin whose values are all equal is done at once). At 10^4 demos (321 k
-  frames) one more pass finishes, at 10^5 two.
+  frames reads out the values of a bin that holds at most COLLECT of them, or counts the next
+  REFINE bits of a larger one (a bin whose values are all equal is done at once). At 10^4 demos
+  (321 k frames) one more pass finishes, at 10^5 two.
 
-Memory: the bins (0.5 MB a dimension), one table of frames at a time, and the values of the bins
-read out (at most COLLECT each). -0.0 is counted as 0.0.
+Memory: the bins (0.5 MB a dimension), one table of frames at a time (one feature at a time when
+reading back), and the values of the bins read out (at most COLLECT each): none of it grows with
+the set. -0.0 is counted as 0.0.
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ from pathlib import Path
 import numpy as np
 
 BLOCK = 2**16  # frames per block of the mean/std update
-BITS = 16  # key bits a counting pass resolves: 2**16 bins of 8 bytes per dimension
+BITS = 16  # key bits add() counts: 2**16 bins of 8 bytes per dimension
+REFINE = 8  # key bits a later pass counts in a bin too large to read out (2 KB per bin)
 COLLECT = 2**14  # a bin of at most this many values is read out and sorted (128 KB)
 SIGN = np.uint64(1 << 63)
 
@@ -163,23 +165,23 @@ class FrameStats:
         while bins:
             for b in [b for b in bins if b[2] == 64]:  # a full key: one value
                 found |= {(b[0], b[1], r): value_of(b[3]) for r in bins.pop(b)[1]}
-            if not bins:
-                break
             small = {b: [] for b, (count, _) in bins.items() if count <= COLLECT}  # values read out
-            big = {b: [np.zeros(2**BITS, np.int64), np.inf, -np.inf] for b in bins if b not in small}
+            big = {b: [np.zeros(2**REFINE, np.int64), np.inf, -np.inf] for b in bins if b not in small}
             features = sorted({b[0] for b in bins})
-            for table in reread(features):
-                cols = {key: matrix(table.column(key)) for key in features}
-                k = {(key, j): keys(cols[key][:, j]) for key, j, _, _ in bins}
-                inside = {b: (k[b[:2]] >> (64 - b[2])) == b[3] for b in bins}
-                for b, values in small.items():
-                    values.append(cols[b[0]][inside[b], b[1]])
-                for (key, j, bits, prefix), acc in big.items():
-                    x = cols[key][inside[key, j, bits, prefix], j]
-                    if len(x):  # counts of the next BITS bits, and the bin's min and max
-                        sub = (k[key, j][inside[key, j, bits, prefix]] >> (64 - bits - BITS)) & (2**BITS - 1)
-                        acc[0] += np.bincount(sub.astype(np.intp), minlength=2**BITS)
-                        acc[1], acc[2] = min(acc[1], x.min()), max(acc[2], x.max())
+            for table in reread(features) if bins else ():
+                for key in features:  # one feature's numbers at a time: (rows, dims) float64
+                    x = matrix(table.column(key))
+                    k = {j: keys(x[:, j]) for j in {b[1] for b in bins if b[0] == key}}
+                    for b in (b for b in bins if b[0] == key):
+                        _, j, bits, prefix = b
+                        inside = (k[j] >> (64 - bits)) == prefix
+                        if b in small:
+                            small[b].append(x[inside, j])
+                        elif inside.any():  # counts of the next REFINE bits, the bin's min and max
+                            sub = (k[j][inside] >> (64 - bits - REFINE)) & (2**REFINE - 1)
+                            v = x[inside, j]
+                            big[b][0] += np.bincount(sub.astype(np.intp), minlength=2**REFINE)
+                            big[b][1:] = min(big[b][1], v.min()), max(big[b][2], v.max())
             nxt = {}
             for b, (_, within) in bins.items():
                 key, j, bits, prefix = b
@@ -189,18 +191,19 @@ class FrameStats:
                 elif big[b][1] == big[b][2]:  # every value in the bin is the same
                     found |= {(key, j, r): float(big[b][1]) for r in within}
                 else:
-                    self._place(nxt, key, j, bits + BITS, prefix, big[b][0], within)
+                    self._place(nxt, key, j, bits + REFINE, prefix, big[b][0], within)
             bins = nxt
         return found
 
     @staticmethod
     def _place(bins: dict, key: str, j: int, bits: int, prefix: int, counts, within: dict) -> None:
         """Each rank of `within` ({rank: rank among the values under `prefix`}) into the bin of
-        `counts` (the counts of the next BITS key bits under prefix) that holds it."""
+        `counts` (the counts of the key bits after prefix, up to `bits`) that holds it."""
         cum = np.cumsum(counts)
+        step = int(np.log2(len(counts)))
         for r, i in within.items():
             sub = int(np.searchsorted(cum, i, side="right"))
-            b = (key, j, bits, (prefix << BITS) | sub)
+            b = (key, j, bits, (prefix << step) | sub)
             bins.setdefault(b, (int(counts[sub]), {}))[1][r] = i - (int(cum[sub - 1]) if sub else 0)
 
 

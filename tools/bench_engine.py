@@ -204,7 +204,8 @@ def estimate(rows: list[dict], cores_list=(64, 1024)) -> dict:
             f"Ray's overhead on the generation is the measured ratio to the local pool ({ray_factor:.2f})",
             f"fixed cost (imports, reading the source, starting Ray) as measured here ({fixed:.0f} s)",
             f"the merge runs on the driver alone, linear in demos at {merge_per_demo * 1e3:.2f} ms a demo"
-            " (it places each shard once and reads every frame once for the exact stats)",
+            " (it places each shard once, counts the stats as it writes, and reads the numbers back"
+            " once or twice for the exact quantiles)",
             "shard bytes reach the driver as fast as they are made (~0.4 MB per 100 demos; 10^6: ~4 GB)",
             "yield as measured (about 1.0 for resolve)",
         ],

@@ -48,6 +48,7 @@ POINTS = ("source", "fresh", "resolve")
 # batch 64 on one core. 10 denoising steps at rollout (100 in training).
 CONFIG = dict(horizon=16, n_action_steps=8, n_obs_steps=2, down_dims=(64, 128), num_inference_steps=10)
 BATCH = 64
+LR = 1e-4  # LeRobot's DiffusionConfig.optimizer_lr
 KIND = "lerobot_lab"
 
 
@@ -69,7 +70,7 @@ def point_episodes(point: str, seed: int, cache: Path) -> list[dict]:
         per = scale_lab.per_source(N)
         kept, _, _ = engine.grow(
             srcs,
-            80,
+            scale_lab.max_per_source("resolve", max(scale_lab.N_DEFAULT)),  # the lab's attempts
             mode="resolve",
             seed=seed,
             pos_sigma=DEFAULTS["aug_pos_sigma"],
@@ -152,8 +153,9 @@ def batch_of(frames: dict, s: dict, idx) -> dict:
     return b
 
 
-def train(episodes, steps: int, seed: int, log_every: int = 100, show: bool = False):
-    """LeRobot's diffusion training step on our batches: (policy, pre, post, [(step, mean loss)])."""
+def train(episodes, steps: int, seed: int, lr: float, log_every: int = 100, show: bool = False):
+    """LeRobot's diffusion training step on our batches, its optimizer and schedule presets at peak
+    learning rate `lr`: (policy, pre, post, [(step, mean loss)])."""
     import torch
 
     frames = frame_arrays(episodes)
@@ -162,6 +164,7 @@ def train(episodes, steps: int, seed: int, log_every: int = 100, show: bool = Fa
     }
     policy, pre, post = policy_and_processors(stats, seed)
     cfg = policy.config
+    cfg.optimizer_lr = lr  # read by the optimizer preset
     s = samples([len(e["action"]) for e in episodes], cfg)
     opt = cfg.get_optimizer_preset().build(policy.parameters())
     sched = cfg.get_scheduler_preset().build(opt, steps)
@@ -216,28 +219,29 @@ def rollouts(policy, pre, post, seeds: list[int]) -> list[dict]:
 
 
 def one_run(job) -> dict:
-    """(point, seed, steps, eval_episodes, out): train (or read the model a run with these steps
-    saved), roll out; one JSON under out."""
+    """(point, seed, steps, lr, eval_episodes, out): train (or read the model a run with these
+    steps and lr saved), roll out; one JSON under out."""
     import torch
 
     from ch37.seeds import env_seed
     from tools.lerobot_eval import load_policy
 
-    point, seed, steps, n_eval, out = job
+    point, seed, steps, lr, n_eval, out = job
     torch.set_num_threads(1)
     folder = out / f"{point}_seed{seed}"
     trained = folder / "train.json"
-    if trained.exists() and json.loads(trained.read_text())["steps"] == steps:
+    if trained.exists() and same_run(json.loads(trained.read_text()), steps, lr):
         record = json.loads(trained.read_text())
         policy, pre, post = load_policy(folder / "pretrained_model", "cpu")
     else:
         t0 = time.perf_counter()
         episodes = point_episodes(point, seed, out / "demos")
-        policy, pre, post, curve = train(episodes, steps, seed)
+        policy, pre, post, curve = train(episodes, steps, seed, lr)
         for part in (policy, pre, post):
             part.save_pretrained(folder / "pretrained_model")
         record = {
             "steps": steps,
+            "lr": lr,
             "demos": len(episodes),
             "frames": int(sum(len(e["action"]) for e in episodes)),
             "final_loss": curve[-1][1],
@@ -262,18 +266,24 @@ def one_run(job) -> dict:
     return result
 
 
-def pilot(steps: int, out: Path) -> None:
+def same_run(record: dict, steps: int, lr: float) -> bool:
+    """Whether a saved record was trained with these steps and peak learning rate."""
+    return (record["steps"], record.get("lr", LR)) == (steps, lr)
+
+
+def pilot(steps: int, lr: float, out: Path) -> None:
     """The loss curve of one long run (fresh, N = 108, seed 0), printed and written: the length."""
     import torch
 
     torch.set_num_threads(2)
     t0 = time.perf_counter()
-    _, _, _, curve = train(point_episodes("fresh", 0, out / "demos"), steps, 0, log_every=250, show=True)
+    _, _, _, curve = train(point_episodes("fresh", 0, out / "demos"), steps, 0, lr, log_every=250, show=True)
     write_atomic(
         out / "pilot.json",
         dump_json(
             round_floats(
-                {"kind": KIND, "steps": steps, "loss_curve": curve, "seconds": time.perf_counter() - t0}
+                {"kind": KIND, "steps": steps, "lr": lr, "loss_curve": curve}
+                | {"seconds": time.perf_counter() - t0}
             )
         ),
     )
@@ -312,17 +322,21 @@ def main(argv=None) -> int:
     p.add_argument(
         "--steps", type=int, default=2000, help="gradient steps per run (docs/lerobot.md: the loss curves)"
     )
+    p.add_argument(
+        "--lr", type=float, default=LR, help="peak learning rate (LeRobot's diffusion preset: 1e-4)"
+    )
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="the lab's seeds")
+    p.add_argument("--points", nargs="+", choices=POINTS, default=list(POINTS), help="which points")
     p.add_argument("--eval_episodes", type=int, default=100, help="held-out starts per run (the lab's 100)")
     p.add_argument("--workers", type=int, default=2, help="runs at once, one torch thread each")
     p.add_argument("--pilot", type=int, default=0, help="instead: one run of this many steps, its loss curve")
     p.add_argument("--out", type=Path, default=ROOT / "outputs" / "lerobot_lab", help="results folder")
     a = p.parse_args(argv)
-    if a.steps < 1 or a.workers < 1 or not 1 <= a.eval_episodes <= 1000:
-        raise DataError("--steps and --workers must be >= 1, --eval_episodes in [1, 1000]")
+    if a.steps < 1 or a.workers < 1 or not 1 <= a.eval_episodes <= 1000 or not 0 < a.lr < 1:
+        raise DataError("--steps and --workers must be >= 1, --eval_episodes in [1, 1000], --lr in (0, 1)")
     a.out.mkdir(parents=True, exist_ok=True)
     if a.pilot:
-        pilot(a.pilot, a.out)
+        pilot(a.pilot, a.lr, a.out)
         return 0
     from ch37.parallel import imap
 
@@ -331,16 +345,16 @@ def main(argv=None) -> int:
         if not path.exists():
             return None
         r = json.loads(path.read_text())
-        return r if (r["steps"], r["episodes"]) == (a.steps, a.eval_episodes) else None
+        return r if same_run(r, a.steps, a.lr) and r["episodes"] == a.eval_episodes else None
 
     import scale_lab
 
     results, jobs = [], []
     for s in a.seeds:
         scale_lab.fresh_demos(a.out / "demos" / f"pusht_seed{s}_ep{N}", s, N)  # here, before the workers
-        for point in ("fresh", "resolve", "source"):  # the long ones first
+        for point in sorted(a.points, key=("fresh", "resolve", "source").index):  # the long ones first
             r = done(point, s)
-            results.append(r) if r else jobs.append((point, s, a.steps, a.eval_episodes, a.out))
+            results.append(r) if r else jobs.append((point, s, a.steps, a.lr, a.eval_episodes, a.out))
     for r in imap(one_run, jobs, workers=min(a.workers, max(len(jobs), 1)), ordered=False):
         print(
             f"{r['point']:8s} seed {r['seed']}: {r['successes']}/{r['episodes']} successes, "
@@ -349,10 +363,8 @@ def main(argv=None) -> int:
         )
         results.append(r)
     rows = table(results, a.seeds)
-    write_atomic(
-        a.out / "lerobot_lab.json",
-        dump_json(round_floats({"kind": KIND, "steps": a.steps, "seeds": a.seeds, "table": rows})),
-    )
+    summary = {"kind": KIND, "steps": a.steps, "lr": a.lr, "seeds": a.seeds, "table": rows}
+    write_atomic(a.out / "lerobot_lab.json", dump_json(round_floats(summary)))
     for k, v in rows.items():
         print(k, v)
     return 0
