@@ -433,18 +433,18 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     n_eps = len(ep_stats)
     # The episodes table in files of at most data_files_size_in_mb (as LeRobot splits it): one file
     # up to ~50,000 episodes of this chapter's width (~2 KB a row).
-    row_bytes = pa.Table.from_pydict(rows).nbytes / n_eps
-    per_file = max(1, int(limit // row_bytes))
+    table = pa.Table.from_pydict(rows)
+    per_file = max(1, int(limit // (table.nbytes / n_eps)))
     m_chunk = m_file = 0
     for lo in range(0, n_eps, per_file):
         if lo:
             m_chunk, m_file = update_chunk_file_indices(m_chunk, m_file, info.chunks_size)
-        part = {k: v[lo : lo + per_file] for k, v in rows.items()}
-        part["meta/episodes/chunk_index"] = [m_chunk] * len(part["length"])
-        part["meta/episodes/file_index"] = [m_file] * len(part["length"])
+        part = table.slice(lo, per_file)
+        for name, value in (("meta/episodes/chunk_index", m_chunk), ("meta/episodes/file_index", m_file)):
+            part = part.append_column(name, pa.array([value] * part.num_rows, pa.int64()))
         path = tmp / DEFAULT_EPISODES_PATH.format(chunk_index=m_chunk, file_index=m_file)
         path.parent.mkdir(parents=True, exist_ok=True)
-        pq.write_table(pa.Table.from_pydict(part), path, **PARQUET)
+        pq.write_table(part, path, **PARQUET)
     write_tasks(pd.DataFrame({"task_index": range(1)}, index=pd.Index([task], name="task")), tmp)
     info.total_episodes, info.total_frames, info.total_tasks = n_eps, frames, 1
     info.splits = {"train": f"0:{n_eps}"}
