@@ -42,5 +42,5 @@ DATA_CODE = tuple(
 CODE_FILES = DATA_CODE + tuple(
     "scale_data.py bc_recipe.py gen_demos_pusht.py gen_demos_aloha.py ch37/cli.py ch37/files.py "
     "ch37/parallel.py ch37/stamps.py ch37/viz.py ch37/poster.py ch37/ensemble.py ch37/engine.py "
-    "ch37/shards.py ch37/executors.py ch37/config.py".split()
+    "ch37/shards.py ch37/frame_stats.py ch37/executors.py ch37/config.py".split()
 )

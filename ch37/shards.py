@@ -83,7 +83,7 @@ RUN_NAMES = {STAMP_NAME, LOCK_NAME, REPORT_NAME, SHARDS_DIR, "data", "meta", MER
 SHARD_NAMES = re.compile(r"shard-\d{5}|\.shard-\d{5}\.(partial|scratch)")
 SETTINGS = ("mode", "per_demo", "seed", "pos_sigma", "yaw_sigma", "shard_size")  # a run's flags
 # The engine's own code: a shard made by other code is never mixed into a run.
-ENGINE_VERSION = code_digest(DATA_CODE + ("ch37/engine.py", "ch37/shards.py"))
+ENGINE_VERSION = code_digest(DATA_CODE + ("ch37/engine.py", "ch37/shards.py", "ch37/frame_stats.py"))
 
 
 def versions() -> dict:
