@@ -320,10 +320,10 @@ def table(results: list[dict], seeds: list[int]) -> dict:
 def main(argv=None) -> int:
     p = parser(__doc__, prog="python -m tools.lerobot_lab")
     p.add_argument(
-        "--steps", type=int, default=2000, help="gradient steps per run (docs/lerobot.md: the loss curves)"
+        "--steps", type=int, default=6000, help="gradient steps per run (docs/lerobot.md: the loss curves)"
     )
     p.add_argument(
-        "--lr", type=float, default=LR, help="peak learning rate (LeRobot's diffusion preset: 1e-4)"
+        "--lr", type=float, default=1e-3, help="peak learning rate (docs/lerobot.md; LeRobot's preset: 1e-4)"
     )
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="the lab's seeds")
     p.add_argument("--points", nargs="+", choices=POINTS, default=list(POINTS), help="which points")
