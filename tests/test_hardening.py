@@ -787,6 +787,9 @@ def test_kill_term_and_ctrl_c_leave_nothing_behind_and_the_same_command_continue
                 stdout=stdout,
                 stderr=stderr,
                 start_new_session=True,
+                # as a terminal starts it: a launcher in the background (nohup, `cmd &`) passes SIGINT
+                # ignored, and a Python started so never sees Ctrl-C
+                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
             )
         try:
             # evaluation: after the short budget, the full budget's env workers; augment: the first pool
