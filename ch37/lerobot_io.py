@@ -334,6 +334,61 @@ def _episode_stats(buf: dict, feats: dict) -> dict:
     return out
 
 
+def _episode_columns(e: int, ep: dict, feats, all_feats, *, fps: int, first_frame: int) -> dict:
+    """Episode e's columns as LeRobot's save_episode stacks them: each feature (T,) or (T, D), then
+    timestamp (float64, float32 on disk), frame_index, episode_index, index (from first_frame), task_index."""
+    n = len(ep["action"])
+    buf = {}
+    for k in feats:
+        x = np.asarray(ep[k])
+        if len(x) != n:
+            raise ValueError(f"episode {e}: {k} has {len(x)} frames, action has {n}")
+        buf[k] = x.reshape(n) if all_feats[k]["shape"] == (1,) else x.reshape(n, -1)
+    buf["timestamp"] = np.arange(n) / fps
+    buf["frame_index"] = np.arange(n)
+    buf["episode_index"] = np.full(n, e)
+    buf["index"] = np.arange(first_frame, first_frame + n)
+    buf["task_index"] = np.zeros(n, dtype=np.int64)  # one task per set
+    return buf
+
+
+def _write_data_file(path: Path, schema, parts: dict) -> None:
+    """One data parquet file from {column: [(T,) or (T, D) arrays, episode by episode]}."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    def column(field, arrays: list[np.ndarray]):
+        listed = field.type.num_fields  # a (T, D) feature: a fixed-size list of D per frame
+        flat = pa.array(
+            np.concatenate(arrays).reshape(-1), type=field.type.value_type if listed else field.type
+        )
+        return pa.FixedSizeListArray.from_arrays(flat, type=field.type) if listed else flat
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    table = pa.Table.from_arrays([column(f, parts[f.name]) for f in schema], schema=schema)
+    pq.write_table(table, path, **PARQUET)
+
+
+def _write_episodes_table(root: Path, table, limit: float, chunks_size: int) -> None:
+    """meta/episodes in files of at most `limit` bytes (Arrow size, as LeRobot splits it): one file up
+    to ~50,000 episodes of this chapter's width (~2 KB a row)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    from lerobot.datasets.utils import DEFAULT_EPISODES_PATH, update_chunk_file_indices
+
+    per_file = max(1, int(limit // (table.nbytes / table.num_rows)))
+    chunk = file = 0
+    for lo in range(0, table.num_rows, per_file):
+        if lo:
+            chunk, file = update_chunk_file_indices(chunk, file, chunks_size)
+        part = table.slice(lo, per_file)
+        for name, value in (("meta/episodes/chunk_index", chunk), ("meta/episodes/file_index", file)):
+            part = part.append_column(name, pa.array([value] * part.num_rows, pa.int64()))
+        path = root / DEFAULT_EPISODES_PATH.format(chunk_index=chunk, file_index=file)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        pq.write_table(part, path, **PARQUET)
+
+
 def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb: int | None = None) -> None:
     """Write a LeRobot v3 set (no video) in one pass from the episodes' arrays.
 
@@ -350,7 +405,6 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     """
     import pandas as pd
     import pyarrow as pa
-    import pyarrow.parquet as pq
     from lerobot.datasets.compute_stats import aggregate_stats
     from lerobot.datasets.dataset_metadata import CODEBASE_VERSION
     from lerobot.datasets.feature_utils import (
@@ -359,7 +413,7 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
         validate_frame,
     )
     from lerobot.datasets.io_utils import write_info, write_stats, write_tasks
-    from lerobot.datasets.utils import DEFAULT_EPISODES_PATH, update_chunk_file_indices
+    from lerobot.datasets.utils import update_chunk_file_indices
     from lerobot.utils.constants import DEFAULT_FEATURES
     from lerobot.utils.utils import flatten_dict
 
@@ -371,19 +425,6 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     frame_bytes = sum(np.dtype(f["dtype"]).itemsize * f["shape"][0] for f in all_feats.values())
     limit = info.data_files_size_in_mb * 1024**2  # bytes, LeRobot's DEFAULT_DATA_FILE_SIZE_IN_MB
 
-    def column(field, parts: list[np.ndarray]):
-        flat = pa.array(
-            np.concatenate(parts).reshape(-1),
-            type=field.type.value_type if field.type.num_fields else field.type,
-        )
-        return pa.FixedSizeListArray.from_arrays(flat, type=field.type) if field.type.num_fields else flat
-
-    def write_file(parts: dict, chunk: int, file: int) -> None:
-        path = tmp / info.data_path.format(chunk_index=chunk, file_index=file)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        table = pa.Table.from_arrays([column(f, parts[f.name]) for f in schema], schema=schema)
-        pq.write_table(table, path, **PARQUET)
-
     rows: dict[str, list] = {}  # the episodes table, column by column
     ep_stats = []
     parts = {k: [] for k in all_feats}  # the current data file's columns, episode by episode
@@ -393,21 +434,11 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
         if n == 0:
             raise ValueError(f"episode {e} has no frames")
         validate_frame({k: ep[k][0] for k in feats} | {"task": task}, all_feats)  # LeRobot's messages
-        buf = {}
-        for k in feats:
-            x = np.asarray(ep[k])
-            if len(x) != n:
-                raise ValueError(f"episode {e}: {k} has {len(x)} frames, action has {n}")
-            buf[k] = x.reshape(n) if all_feats[k]["shape"] == (1,) else x.reshape(n, -1)
-        buf["timestamp"] = np.arange(n) / fps  # float64 (T,), as save_episode stacks it; float32 on disk
-        buf["frame_index"] = np.arange(n)
-        buf["episode_index"] = np.full(n, e)
-        buf["index"] = np.arange(frames, frames + n)
-        buf["task_index"] = np.zeros(n, dtype=np.int64)  # one task per set
+        buf = _episode_columns(e, ep, feats, all_feats, fps=fps, first_frame=frames)
         stats = _episode_stats(buf, all_feats)
         ep_stats.append(stats)
         if in_file and (in_file + n) * frame_bytes >= limit:
-            write_file(parts, chunk, file)
+            _write_data_file(tmp / info.data_path.format(chunk_index=chunk, file_index=file), schema, parts)
             parts = {k: [] for k in all_feats}
             chunk, file = update_chunk_file_indices(chunk, file, info.chunks_size)
             in_file = 0
@@ -429,22 +460,9 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     if not ep_stats:
         write_info(info, tmp)
         return
-    write_file(parts, chunk, file)
+    _write_data_file(tmp / info.data_path.format(chunk_index=chunk, file_index=file), schema, parts)
     n_eps = len(ep_stats)
-    # The episodes table in files of at most data_files_size_in_mb (as LeRobot splits it): one file
-    # up to ~50,000 episodes of this chapter's width (~2 KB a row).
-    table = pa.Table.from_pydict(rows)
-    per_file = max(1, int(limit // (table.nbytes / n_eps)))
-    m_chunk = m_file = 0
-    for lo in range(0, n_eps, per_file):
-        if lo:
-            m_chunk, m_file = update_chunk_file_indices(m_chunk, m_file, info.chunks_size)
-        part = table.slice(lo, per_file)
-        for name, value in (("meta/episodes/chunk_index", m_chunk), ("meta/episodes/file_index", m_file)):
-            part = part.append_column(name, pa.array([value] * part.num_rows, pa.int64()))
-        path = tmp / DEFAULT_EPISODES_PATH.format(chunk_index=m_chunk, file_index=m_file)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        pq.write_table(part, path, **PARQUET)
+    _write_episodes_table(tmp, pa.Table.from_pydict(rows), limit, info.chunks_size)
     write_tasks(pd.DataFrame({"task_index": range(1)}, index=pd.Index([task], name="task")), tmp)
     info.total_episodes, info.total_frames, info.total_tasks = n_eps, frames, 1
     info.splits = {"train": f"0:{n_eps}"}

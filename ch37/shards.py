@@ -394,6 +394,29 @@ def _read_set(root: Path) -> tuple:
     return eps, data
 
 
+def _moved_episodes(eps, n_eps: int, n_frames: int, places: list[tuple[int, int]]):
+    """A shard's episodes table as rows of the merged set: episode and frame indices (and their
+    per-episode stats, as aggregate's update_meta_data moves them) shifted by the n_eps episodes and
+    n_frames frames before it; data/chunk_index and data/file_index set to each episode's place."""
+    import pyarrow as pa
+
+    shifts = {"episode_index": n_eps, "dataset_from_index": n_frames, "dataset_to_index": n_frames}
+    for name, by in (("episode_index", n_eps), ("index", n_frames)):
+        shifts |= {f"stats/{name}/{stat}": by for stat in SHIFTED_STATS}
+    for name, by in shifts.items():
+        if name in eps.column_names:
+            eps = _shifted(eps, name, by)
+    for stat in ("std", *SHIFTED_STATS):
+        # aggregate recomputes these from the episode's task ids (the one task: 0), where the
+        # shard's writer estimated quantiles from a histogram (q01 = 4e-16, not 0)
+        if f"stats/task_index/{stat}" in eps.column_names:
+            eps = _shifted(eps, f"stats/task_index/{stat}", 0, fill=True)
+    for j, name in enumerate(("data/chunk_index", "data/file_index")):
+        i = eps.schema.get_field_index(name)
+        eps = eps.set_column(i, eps.schema.field(i), pa.array([p[j] for p in places], pa.int64()))
+    return eps
+
+
 def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, chunks_size=None) -> int:
     """Merge the LeRobot v3 sets `roots` (each of one task, no videos) into the new set `dest`, in one
     pass: each set's data and episodes parquet is read once, its episode and frame indices (and the
@@ -451,21 +474,7 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
                 data_out.write(data.slice(start, rows), where)
                 start += rows
             stats.add(data)  # counted as it is written; the quantiles read back only a few bins
-            shifts = {"episode_index": n_eps, "dataset_from_index": n_frames, "dataset_to_index": n_frames}
-            for name, by in (("episode_index", n_eps), ("index", n_frames)):  # aggregate's update_meta_data
-                shifts |= {f"stats/{name}/{stat}": by for stat in SHIFTED_STATS}
-            for name, by in shifts.items():
-                if name in eps.column_names:
-                    eps = _shifted(eps, name, by)
-            for stat in ("std", *SHIFTED_STATS):
-                # aggregate recomputes these from the episode's task ids (the one task: 0), where the
-                # shard's writer estimated quantiles from a histogram (q01 = 4e-16, not 0)
-                if f"stats/task_index/{stat}" in eps.column_names:
-                    eps = _shifted(eps, f"stats/task_index/{stat}", 0, fill=True)
-            for j, name in enumerate(("data/chunk_index", "data/file_index")):
-                i = eps.schema.get_field_index(name)
-                eps = eps.set_column(i, eps.schema.field(i), pa.array([p[j] for p in places], pa.int64()))
-            pending.append(eps)
+            pending.append(_moved_episodes(eps, n_eps, n_frames, places))
             n_eps, n_frames = n_eps + eps.num_rows, n_frames + data.num_rows
             while sum(t.num_rows for t in pending) >= EPISODE_ROWS:
                 flush(EPISODE_ROWS)
