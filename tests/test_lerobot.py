@@ -162,3 +162,25 @@ def test_lerobot_lab_runs_end_to_end(tmp_path):
     fresh, resolve = (json.loads((tmp_path / f"{k}_seed0.json").read_text()) for k in ("fresh", "resolve"))
     assert (fresh["demos"], resolve["demos"]) == (108, 108) and fresh["frames"] != resolve["frames"]
     assert (tmp_path / "resolve_seed0" / "pretrained_model" / "config.json").is_file()
+
+
+@pytest.mark.slow
+def test_lerobot_lab_checkpoint_rollouts_leave_the_training_as_it_was(grown):
+    """The pilot's rollouts mid-training (--eval_every) do not change the run: the same loss at every
+    step as a run without them, and they do roll out (a check that never ran would pass the first)."""
+    import numpy as np
+
+    from ch37.lerobot_io import load_arrays
+    from tools import lerobot_lab
+
+    a = load_arrays(grown, keys=("observation.state", "action", "episode_index"))
+    episodes = [
+        {k: a[k][a["episode_index"] == e] for k in ("observation.state", "action")}
+        for e in np.unique(a["episode_index"])
+    ]
+    seen = []
+    check = lerobot_lab.rollout_check([7], 2, seen)
+    plain = lerobot_lab.train(episodes, 4, 0, 1e-3, log_every=1)[3]
+    checked = lerobot_lab.train(episodes, 4, 0, 1e-3, log_every=1, check=check)[3]
+    assert [c["step"] for c in seen] == [2, 4] and all(c["successes"] in (0, 1) for c in seen)
+    assert checked == plain and len(plain) == 4

@@ -1,7 +1,8 @@
 """LeRobot's diffusion policy beside the chapter's MLP on three of the Scale Lab's points.
 
     python -m tools.lerobot_lab                          # 3 points x seeds 0..2, 100 held-out starts each
-    python -m tools.lerobot_lab --pilot 8000             # one loss curve (fresh, N = 108, seed 0): the length
+    python -m tools.lerobot_lab --pilot 30000 --eval_every 5000 --points fresh resolve --seeds 0
+                                                         # the length: loss curves, success at checkpoints
     python -m tools.lerobot_lab --steps 30 --seeds 0 --eval_episodes 2 --out /tmp/ll   # seconds: the pipeline
 
 The points and their data are the lab's own (scale_lab.py): `source` (N = 12: episodes 0..11 of the
@@ -153,9 +154,11 @@ def batch_of(frames: dict, s: dict, idx) -> dict:
     return b
 
 
-def train(episodes, steps: int, seed: int, lr: float, log_every: int = 100, show: bool = False):
+def train(episodes, steps: int, seed: int, lr: float, log_every: int = 100, check=None):
     """LeRobot's diffusion training step on our batches, its optimizer and schedule presets at peak
-    learning rate `lr`: (policy, pre, post, [(step, mean loss)])."""
+    learning rate `lr`: (policy, pre, post, [(step, mean loss)]). check(step, policy, pre, post), when
+    given, runs after every step in eval mode; it must leave torch's global RNG as it found it (the
+    training's noise and timesteps come from it), so a checked run trains exactly as an unchecked one."""
     import torch
 
     frames = frame_arrays(episodes)
@@ -182,11 +185,12 @@ def train(episodes, steps: int, seed: int, lr: float, log_every: int = 100, show
         opt.step()
         sched.step()
         window.append(loss.item())
+        if check is not None:
+            check(step, policy.eval(), pre, post)
+            policy.train()
         if step % log_every == 0 or step == steps:
             curve.append((step, float(np.mean(window))))
             window = []
-            if show:
-                print(f"step {step:6d}  loss {curve[-1][1]:.4f}", flush=True)
     return policy.eval(), pre, post, curve
 
 
@@ -271,22 +275,43 @@ def same_run(record: dict, steps: int, lr: float) -> bool:
     return (record["steps"], record.get("lr", LR)) == (steps, lr)
 
 
-def pilot(steps: int, lr: float, out: Path) -> None:
-    """The loss curve of one long run (fresh, N = 108, seed 0), printed and written: the length."""
+def rollout_check(starts: list[int], every: int, record: list, label: str = ""):
+    """A check for train(): every `every` steps (0: never), the policy's success on `starts` appended
+    to `record` (and printed after `label`), torch's global RNG put back as it was."""
     import torch
 
-    torch.set_num_threads(2)
-    t0 = time.perf_counter()
-    _, _, _, curve = train(point_episodes("fresh", 0, out / "demos"), steps, 0, lr, log_every=250, show=True)
-    write_atomic(
-        out / "pilot.json",
-        dump_json(
-            round_floats(
-                {"kind": KIND, "steps": steps, "lr": lr, "loss_curve": curve}
-                | {"seconds": time.perf_counter() - t0}
-            )
-        ),
+    def check(step, policy, pre, post):
+        if every and step % every == 0:
+            rng = torch.get_rng_state()  # the rollouts seed torch; the training goes on as if unchecked
+            k, n = sum(e["success"] for e in rollouts(policy, pre, post, starts)), len(starts)
+            torch.set_rng_state(rng)
+            record.append({"step": step, "successes": k, "success": k / n, "ci95": wilson(k / n, n)})
+            print(f"{label} step {step:6d}: {k}/{n} successes", flush=True)
+
+    return check
+
+
+def pilot(job) -> dict:
+    """(point, seed, steps, lr, eval_every, eval_episodes, out): one long run's loss curve and, every
+    eval_every steps (0: never), its success on the held-out starts, mid-schedule (the learning rate
+    decays to zero at `steps`): how long a run must be. Written to OUT/pilot_{point}_seed{seed}.json."""
+    import torch
+
+    from ch37.seeds import env_seed
+
+    point, seed, steps, lr, every, n_eval, out = job
+    torch.set_num_threads(1)
+    t0, checks = time.perf_counter(), []
+    check = rollout_check(
+        [env_seed(seed, "eval", j) for j in range(n_eval)], every, checks, f"{point:8s} seed {seed}"
     )
+    _, _, _, curve = train(
+        point_episodes(point, seed, out / "demos"), steps, seed, lr, log_every=250, check=check
+    )
+    record = {"kind": KIND, "point": point, "seed": seed, "steps": steps, "lr": lr, "episodes": n_eval}
+    record |= {"loss_curve": curve, "checkpoints": checks, "seconds": time.perf_counter() - t0}
+    write_atomic(out / f"pilot_{point}_seed{seed}.json", dump_json(round_floats(record)))
+    return record
 
 
 def fresh_equivalent(rate: float, r12: float, r108: float) -> float:
@@ -329,16 +354,36 @@ def main(argv=None) -> int:
     p.add_argument("--points", nargs="+", choices=POINTS, default=list(POINTS), help="which points")
     p.add_argument("--eval_episodes", type=int, default=100, help="held-out starts per run (the lab's 100)")
     p.add_argument("--workers", type=int, default=2, help="runs at once, one torch thread each")
-    p.add_argument("--pilot", type=int, default=0, help="instead: one run of this many steps, its loss curve")
+    p.add_argument(
+        "--pilot",
+        type=int,
+        default=0,
+        help="instead: runs of this many steps, their loss curves (the length)",
+    )
+    p.add_argument(
+        "--eval_every", type=int, default=0, help="with --pilot: roll out every this many steps (0: never)"
+    )
     p.add_argument("--out", type=Path, default=ROOT / "outputs" / "lerobot_lab", help="results folder")
     a = p.parse_args(argv)
-    if a.steps < 1 or a.workers < 1 or not 1 <= a.eval_episodes <= 1000 or not 0 < a.lr < 1:
-        raise DataError("--steps and --workers must be >= 1, --eval_episodes in [1, 1000], --lr in (0, 1)")
+    if min(a.steps, a.workers) < 1 or min(a.pilot, a.eval_every) < 0 or not 0 < a.lr < 1:
+        raise DataError("--steps and --workers must be >= 1, --pilot and --eval_every >= 0, --lr in (0, 1)")
+    if not 1 <= a.eval_episodes <= 1000:
+        raise DataError("--eval_episodes must be in [1, 1000]")
     a.out.mkdir(parents=True, exist_ok=True)
-    if a.pilot:
-        pilot(a.pilot, a.lr, a.out)
-        return 0
+    import scale_lab
     from ch37.parallel import imap
+
+    for s in a.seeds:  # the lab's fresh set, made here before the workers that read it
+        scale_lab.fresh_demos(a.out / "demos" / f"pusht_seed{s}_ep{N}", s, N)
+    if a.pilot:
+        jobs = [
+            (p, s, a.pilot, a.lr, a.eval_every, a.eval_episodes, a.out) for p in a.points for s in a.seeds
+        ]
+        for r in imap(pilot, jobs, workers=min(a.workers, len(jobs)), ordered=False):
+            print(
+                f"{r['point']:8s} seed {r['seed']}: loss {r['loss_curve'][-1][1]:.4f}, {r['seconds']:.0f} s"
+            )
+        return 0
 
     def done(point, seed):
         path = a.out / f"{point}_seed{seed}.json"
@@ -347,11 +392,8 @@ def main(argv=None) -> int:
         r = json.loads(path.read_text())
         return r if same_run(r, a.steps, a.lr) and r["episodes"] == a.eval_episodes else None
 
-    import scale_lab
-
     results, jobs = [], []
     for s in a.seeds:
-        scale_lab.fresh_demos(a.out / "demos" / f"pusht_seed{s}_ep{N}", s, N)  # here, before the workers
         for point in sorted(a.points, key=("fresh", "resolve", "source").index):  # the long ones first
             r = done(point, s)
             results.append(r) if r else jobs.append((point, s, a.steps, a.lr, a.eval_episodes, a.out))
