@@ -198,7 +198,6 @@ def main(argv: list[str]) -> int:
     a, extra = p.parse_known_args(argv)  # anything else goes to scale_data.py, e.g. --epochs 100
     t0 = time.perf_counter()
     importlib.import_module("torch")  # here, after the flags: its import time is a phase of the report
-
     import_s = time.perf_counter() - t0
     runs, walls = [], []
     with tempfile.TemporaryDirectory(prefix="ch37-bench-") as tmp:

@@ -82,18 +82,14 @@ def grow(out: Path, mode: str, sources: dict, seed: int, c: dict, workers: int) 
     return row | {"seconds": round(time.perf_counter() - t, 1)}, d
 
 
-def per_source(d: dict) -> dict[int, int]:
-    """{source episode: generated episodes from it} of a kept set."""
-    _, first = np.unique(d["episode_index"], return_index=True)
-    e, n = np.unique(d["aug.source_episode"].reshape(-1)[first], return_counts=True)
-    return {int(a): int(b) for a, b in zip(e, n)}
-
-
 def arm_data(src: dict, sets: dict) -> dict:
     """{arm: (states, actions, generated demos)}: the source demos plus the arm's rows of a grown set.
     Replay keeps fewer, so resolve_matched takes per source demo as many re-solved demos as replay kept."""
     res, rep = sets["resolve"], sets["replay"]
-    matched = engine.first_per_source(res["episode_index"], res["aug.source_episode"], per_source(rep))
+    _, first = np.unique(rep["episode_index"], return_index=True)
+    e, n = np.unique(rep["aug.source_episode"].reshape(-1)[first], return_counts=True)
+    take = dict(zip(e.tolist(), n.tolist()))  # {source episode: demos replay kept from it}
+    matched = engine.first_per_source(res["episode_index"], res["aug.source_episode"], take)
     every, none = slice(None), slice(0)
     rows = {"source": (res, none), "replay": (rep, every), "resolve_matched": (res, matched)}
     rows["resolve_all"] = (res, every)
@@ -249,8 +245,7 @@ def main(argv: list[str]) -> int:
     c = config(a.smoke)
     out = a.out or ROOT / ("outputs/replay-smoke" if a.smoke else "outputs/replay")
     out.mkdir(parents=True, exist_ok=True)
-    prov = {"smoke": a.smoke, "config": c, "pos_sigma": POS_SIGMA, "yaw_sigma": YAW_SIGMA}
-    prov |= provenance(a.script)
+    prov = {"smoke": a.smoke, "config": c, **SIGMAS} | provenance(a.script)
     if a.seeds:
         compare(a, c, out, prov)
     if a.sigma:

@@ -138,16 +138,8 @@ def _print_summary(result: dict, rows: list[dict], kind: str) -> None:
         print(f"curve 0 -> 4 -> 8 at {steps['full']} steps each: {curve} (plateau_tol {PLATEAU_TOL})")
 
 
-def plan(seeds: int | None, aug: list[int] | None) -> tuple[str, list]:
-    """The sweep's kind and its runs: (seed, extra flags, run folder name, row label) each."""
-    if seeds is not None:
-        return "seeds", [(s, [], f"seed{s}", {"seed": s}) for s in range(seeds)]
-    order = sorted(aug, reverse=True)  # the largest k first: the others train for its full budget
-    return "aug", [(0, ["--aug_per_demo", str(k)], f"aug{k}", {"aug_per_demo": k}) for k in order]
-
-
 def run_all(kind: str, runs: list, script: Path, out_root: Path, flags: list[str]) -> tuple[list, list]:
-    """Every run of the plan in turn: (sweep rows, metrics.json of each run)."""
+    """Each run (seed, extra flags, run folder name, row label) in turn: (sweep rows, their metrics)."""
     rows, metrics, full_steps = [], [], []
     for seed, extra, name, label in runs:
         print(f"sweep {kind}: {name} ...", end="", flush=True)
@@ -171,14 +163,17 @@ def run_all(kind: str, runs: list, script: Path, out_root: Path, flags: list[str
 
 
 def sweep(a, flags: list[str], argv: list[str]) -> Path:
-    """Run the sweep of the parsed flags `a` (`flags` go to every run), write sweep_seeds.json or
-    sweep_aug.json under --out-root, print its table."""
+    """Run the sweep of the parsed flags `a` (`flags` go to every run), write and print its table."""
     if bad := sorted({f.split("=")[0] for f in flags} & SWEEP_OWNED):
         raise DataError(f"{', '.join(bad)}: the sweep sets these itself (use --seeds/--aug and --out-root)")
     smoke = "--smoke" in flags
     out_root = ROOT / (a.out_root or ("outputs/sweep-smoke" if smoke else "outputs/sweep"))
     prov = provenance(a.script)
-    kind, runs = plan(a.seeds, a.aug)
+    if a.seeds is not None:
+        kind, runs = "seeds", [(s, [], f"seed{s}", {"seed": s}) for s in range(a.seeds)]
+    else:
+        order = sorted(a.aug, reverse=True)  # the largest k first: the others train for its full budget
+        kind, runs = "aug", [(0, ["--aug_per_demo", str(k)], f"aug{k}", {"aug_per_demo": k}) for k in order]
     rows, metrics = run_all(kind, runs, a.script, out_root, flags)
     varied = {"seed", "aug_per_demo", "full_steps"} if kind == "aug" else {"seed"}  # from run to run
     each = ["--aug_per_demo", "{k}", "[--full_steps {full}]"] if kind == "aug" else []

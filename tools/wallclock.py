@@ -39,8 +39,7 @@ HASH_EXCLUDE = ("device", "workers", "cache")
 
 
 def config_hash(config: dict) -> str:
-    """First 12 hex of sha256 over the run's config (metrics.json "config") as sorted compact JSON,
-    without HASH_EXCLUDE, so the same default configuration hashes the same on every tier."""
+    """First 12 hex of sha256 over metrics.json's "config" less HASH_EXCLUDE, as sorted compact JSON."""
     c = {k: v for k, v in config.items() if k not in HASH_EXCLUDE}
     return hashlib.sha256(json.dumps(c, sort_keys=True, separators=(",", ":")).encode()).hexdigest()[:12]
 
