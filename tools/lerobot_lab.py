@@ -1,7 +1,7 @@
 """LeRobot's diffusion policy beside the chapter's MLP on three of the Scale Lab's points.
 
-    python -m tools.lerobot_lab                          # 3 points x seeds 0..2, 100 held-out starts each
-    python -m tools.lerobot_lab --pilot 30000 --eval_every 5000 --points fresh resolve --seeds 0
+    python -m tools.lerobot_lab                          # 3 points x seeds 0..2, 40,000 steps, 100 starts
+    python -m tools.lerobot_lab --pilot 40000 --eval_every 5000 --points fresh resolve --seeds 0
                                                          # the length: loss curves, success at checkpoints
     python -m tools.lerobot_lab --steps 30 --seeds 0 --eval_episodes 2 --out /tmp/ll   # seconds: the pipeline
 
@@ -345,7 +345,10 @@ def table(results: list[dict], seeds: list[int]) -> dict:
 def main(argv=None) -> int:
     p = parser(__doc__, prog="python -m tools.lerobot_lab")
     p.add_argument(
-        "--steps", type=int, default=6000, help="gradient steps per run (docs/lerobot.md: the loss curves)"
+        "--steps",
+        type=int,
+        default=40000,
+        help="gradient steps per run (docs/lerobot.md: success levels off by 30-40k)",
     )
     p.add_argument(
         "--lr", type=float, default=1e-3, help="peak learning rate (docs/lerobot.md; LeRobot's preset: 1e-4)"
