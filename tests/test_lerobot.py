@@ -179,8 +179,8 @@ def test_lerobot_lab_checkpoint_rollouts_leave_the_training_as_it_was(grown):
         for e in np.unique(a["episode_index"])
     ]
     seen = []
-    check = lerobot_lab.rollout_check([7], 2, seen)
+    check = lerobot_lab.rollout_check([7], seen)
     plain = lerobot_lab.train(episodes, 4, 0, 1e-3, log_every=1)[3]
-    checked = lerobot_lab.train(episodes, 4, 0, 1e-3, log_every=1, check=check)[3]
+    checked = lerobot_lab.train(episodes, 4, 0, 1e-3, log_every=1, check=check, check_every=2)[3]
     assert [c["step"] for c in seen] == [2, 4] and all(c["successes"] in (0, 1) for c in seen)
     assert checked == plain and len(plain) == 4

@@ -35,7 +35,7 @@ import numpy as np
 
 from bc_recipe import wilson
 from ch37 import ROOT
-from ch37.config import DEFAULTS, parser
+from ch37.config import DEFAULTS, check, parser
 from ch37.errors import DataError
 from ch37.errors import main as run
 from ch37.files import dump_json, round_floats, write_atomic
@@ -154,11 +154,12 @@ def batch_of(frames: dict, s: dict, idx) -> dict:
     return b
 
 
-def train(episodes, steps: int, seed: int, lr: float, log_every: int = 100, check=None):
+def train(episodes, steps: int, seed: int, lr: float, log_every: int = 100, check=None, check_every: int = 0):
     """LeRobot's diffusion training step on our batches, its optimizer and schedule presets at peak
-    learning rate `lr`: (policy, pre, post, [(step, mean loss)]). check(step, policy, pre, post), when
-    given, runs after every step in eval mode; it must leave torch's global RNG as it found it (the
-    training's noise and timesteps come from it), so a checked run trains exactly as an unchecked one."""
+    learning rate `lr`: (policy, pre, post, [(step, mean loss)]). check(step, policy, pre, post) runs
+    in eval mode after every check_every-th step (0: never); it must leave torch's global RNG as it
+    found it (the training's noise and timesteps come from it), so a checked run trains as an
+    unchecked one."""
     import torch
 
     frames = frame_arrays(episodes)
@@ -185,7 +186,7 @@ def train(episodes, steps: int, seed: int, lr: float, log_every: int = 100, chec
         opt.step()
         sched.step()
         window.append(loss.item())
-        if check is not None:
+        if check_every and step % check_every == 0:
             check(step, policy.eval(), pre, post)
             policy.train()
         if step % log_every == 0 or step == steps:
@@ -275,18 +276,17 @@ def same_run(record: dict, steps: int, lr: float) -> bool:
     return (record["steps"], record.get("lr", LR)) == (steps, lr)
 
 
-def rollout_check(starts: list[int], every: int, record: list, label: str = ""):
-    """A check for train(): every `every` steps (0: never), the policy's success on `starts` appended
-    to `record` (and printed after `label`), torch's global RNG put back as it was."""
+def rollout_check(starts: list[int], record: list, label: str = ""):
+    """A check for train(): the policy's success on `starts` appended to `record` (and printed after
+    `label`), torch's global RNG put back as it was."""
     import torch
 
     def check(step, policy, pre, post):
-        if every and step % every == 0:
-            rng = torch.get_rng_state()  # the rollouts seed torch; the training goes on as if unchecked
-            k, n = sum(e["success"] for e in rollouts(policy, pre, post, starts)), len(starts)
-            torch.set_rng_state(rng)
-            record.append({"step": step, "successes": k, "success": k / n, "ci95": wilson(k / n, n)})
-            print(f"{label} step {step:6d}: {k}/{n} successes", flush=True)
+        rng = torch.get_rng_state()  # the rollouts seed torch; the training goes on as if unchecked
+        k, n = sum(e["success"] for e in rollouts(policy, pre, post, starts)), len(starts)
+        torch.set_rng_state(rng)
+        record.append({"step": step, "successes": k, "success": k / n, "ci95": wilson(k / n, n)})
+        print(f"{label} step {step:6d}: {k}/{n} successes", flush=True)
 
     return check
 
@@ -302,12 +302,11 @@ def pilot(job) -> dict:
     point, seed, steps, lr, every, n_eval, out = job
     torch.set_num_threads(1)
     t0, checks = time.perf_counter(), []
-    check = rollout_check(
-        [env_seed(seed, "eval", j) for j in range(n_eval)], every, checks, f"{point:8s} seed {seed}"
+    rolls = rollout_check(
+        [env_seed(seed, "eval", j) for j in range(n_eval)], checks, f"{point:8s} seed {seed}"
     )
-    _, _, _, curve = train(
-        point_episodes(point, seed, out / "demos"), steps, seed, lr, log_every=250, check=check
-    )
+    episodes = point_episodes(point, seed, out / "demos")
+    _, _, _, curve = train(episodes, steps, seed, lr, log_every=250, check=rolls, check_every=every)
     record = {"kind": KIND, "point": point, "seed": seed, "steps": steps, "lr": lr, "episodes": n_eval}
     record |= {"loss_curve": curve, "checkpoints": checks, "seconds": time.perf_counter() - t0}
     write_atomic(out / f"pilot_{point}_seed{seed}.json", dump_json(round_floats(record)))
@@ -368,10 +367,15 @@ def main(argv=None) -> int:
     )
     p.add_argument("--out", type=Path, default=ROOT / "outputs" / "lerobot_lab", help="results folder")
     a = p.parse_args(argv)
-    if min(a.steps, a.workers) < 1 or min(a.pilot, a.eval_every) < 0 or not 0 < a.lr < 1:
-        raise DataError("--steps and --workers must be >= 1, --pilot and --eval_every >= 0, --lr in (0, 1)")
-    if not 1 <= a.eval_episodes <= 1000:
-        raise DataError("--eval_episodes must be in [1, 1000]")
+    check(
+        a,
+        positive=("steps", "workers", "eval_episodes"),
+        non_negative=("pilot", "eval_every"),
+        finite=("lr",),
+        at_most={"eval_episodes": 1000},
+    )
+    if a.lr >= 1:
+        raise DataError(f"--lr must be below 1, got {a.lr}")
     a.out.mkdir(parents=True, exist_ok=True)
     import scale_lab
     from ch37.parallel import imap
