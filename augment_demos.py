@@ -45,7 +45,7 @@ def parse(argv=None):
     p.add_argument("--yaw_sigma", type=float, default=sigmas[1], help=f"rad; block yaw noise std {most}")
     p.add_argument(
         "--mode",
-        choices=("resolve", "replay"),  # ch37.engine.MODES (not imported here: --help stays instant)
+        choices=("resolve", "replay"),  # datagen.engine.MODES (not imported here: --help stays instant)
         default="resolve",
         help="resolve: the expert solves each start; replay: the source path transformed into the new "
         "block pose, executed open-loop, kept only on success (MimicGen's move; most attempts fail here)",
@@ -77,7 +77,7 @@ def parse(argv=None):
 
 def main(argv=None) -> int:
     a = parse(argv)
-    from ch37 import shards
+    from datagen import shards
 
     settings = {k: getattr(a, k) for k in shards.SETTINGS}
     r = shards.run(a.src, a.out, settings, workers=a.workers, ray=a.ray, quiet=a.quiet)

@@ -116,9 +116,9 @@ if cache.replay():  # an identical earlier run (same flags, code and data): its 
 # padding never teaches anything, and an embodiment id says which robot a row came from.
 from ch37.demos import ensure_demos  # noqa: E402
 from ch37.files import dump_json, round_floats, write_atomic  # noqa: E402
-from ch37.lerobot_io import load_arrays  # noqa: E402
 from gen_demos_aloha import ALOHA  # noqa: E402
 from gen_demos_pusht import PUSHT  # noqa: E402
+from lerobot_v3.dataset import load_arrays  # noqa: E402
 
 sets = {}
 for emb, given in ((PUSHT, args.pusht_data), (ALOHA, args.aloha_data)):
@@ -231,8 +231,8 @@ write_atomic(args.out / "cross_embodiment.json", dump_json(round_floats(cross, 6
 # keeps its first --aug_per_demo successes in k order, so the set for aug_per_demo=4 is a subset of
 # the set for 8 and the scaling curve compares nested data. --aug_mode replay has no solver: it
 # replays the source path in the new block pose, and the success filter decides what is kept.
-from ch37 import engine  # noqa: E402
 from ch37.parallel import progress  # noqa: E402
+from datagen import engine  # noqa: E402
 
 pusht = sets["pusht"]
 sources = engine.sources(pusht)  # {episode: its frames}; re-solving reads only the first state

@@ -137,8 +137,8 @@ def max_per_source(mode: str, max_n: int) -> int:
 
 
 def grow(mode: str, seed: int, srcs: dict, per_demo: int, cap: int, pos_sigma: float, yaw_sigma: float):
-    """The data engine's set for (mode, seed), in this process (a pure function: see ch37.engine)."""
-    from ch37 import engine
+    """The data engine's set for (mode, seed), in this process (a pure function: see datagen.engine)."""
+    from datagen import engine
 
     how = dict(seed=seed, pos_sigma=pos_sigma, yaw_sigma=yaw_sigma)
     return (mode, seed, *engine.grow(srcs, per_demo, mode=mode, cap=cap, **how))
@@ -158,8 +158,8 @@ def expert_success(seed: int, eval_seeds: list[int]):
 def generate(a, srcs: dict, eval_seeds: dict, gen_paths: dict, max_per: dict):
     """Phase 1: the engine's sets, one task per (mode, seed), written as LeRobot sets and read back;
     the expert's ceiling per seed beside them. Returns (expert wins, generation report, sets)."""
-    from ch37 import engine, executors
-    from ch37.lerobot_io import load_arrays
+    from datagen import engine, executors
+    from lerobot_v3.dataset import load_arrays
 
     cap = {"resolve": engine.ATTEMPTS_PER_KEPT, "replay": a.replay_tries}
     tasks = [(grow, m, s, srcs[s], max_per[m], cap[m], a.pos_sigma, a.yaw_sigma) for m, s in gen_paths]
@@ -210,7 +210,7 @@ class Data:
         """(states, actions, actual demos) of a curve at nominal N."""
         import numpy as np
 
-        from ch37 import engine
+        from datagen import engine
 
         f = self.fresh[s]
         if curve == "fresh" or n == SOURCES:
@@ -255,7 +255,7 @@ class Data:
 
 def train_all(a, points: list, units: dict, eval_seeds: dict) -> dict:
     """Phase 2: one task per distinct run, largest budget first (so the last task is short)."""
-    from ch37 import executors
+    from datagen import executors
 
     hp = {"hidden_dim": a.hidden_dim, "batch_size": a.batch_size, "lr": a.lr}
     order = sorted(units, key=lambda u: (-u[3], u))
@@ -332,10 +332,10 @@ def emit(a, points, results, expert, generation, data, t_start, t_train) -> None
 
 def run(a) -> int:
     t_start = time.perf_counter()
-    from ch37 import engine
     from ch37.files import claim
-    from ch37.lerobot_io import load_arrays
     from ch37.seeds import env_seed
+    from datagen import engine
+    from lerobot_v3.dataset import load_arrays
 
     max_n = max(a.n)
     max_per = {m: max_per_source(m, max_n) for m in MODES}

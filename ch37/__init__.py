@@ -36,11 +36,12 @@ CHAPTER_ID = "ch3.7-scale-data"
 # shapes the frames of a demo set: a set's stamp carries their digest, so a cached set never
 # outlives its code. The whole list keys the result cache.
 DATA_CODE = tuple(
-    "pusht_env.py pusht.xml aloha_env.py aloha.xml scripted_expert.py ch37/demos.py ch37/lerobot_io.py "
+    "pusht_env.py pusht.xml aloha_env.py aloha.xml scripted_expert.py ch37/demos.py lerobot_v3/dataset.py "
     "ch37/seeds.py".split()
 )
 CODE_FILES = DATA_CODE + tuple(
     "scale_data.py bc_recipe.py gen_demos_pusht.py gen_demos_aloha.py ch37/cli.py ch37/files.py "
-    "ch37/parallel.py ch37/stamps.py ch37/viz.py ch37/poster.py ch37/ensemble.py ch37/engine.py "
-    "ch37/shards.py ch37/frame_stats.py ch37/executors.py ch37/config.py".split()
+    "ch37/parallel.py ch37/stamps.py ch37/viz.py ch37/poster.py ch37/ensemble.py datagen/engine.py "
+    "datagen/shards.py lerobot_v3/merge.py lerobot_v3/frame_stats.py datagen/executors.py "
+    "ch37/config.py".split()
 )

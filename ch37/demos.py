@@ -20,7 +20,10 @@ import numpy as np
 
 from ch37 import DATA_CODE, ROOT, config
 from ch37.errors import DataError, run_main
-from ch37.lerobot_io import (
+from ch37.parallel import progress
+from ch37.seeds import MAX_SEED, SEED_BLOCK, env_seed
+from ch37.stamps import MADE_BY, changed_files, holds_data, is_ours, read_stamp, replace_own_dir
+from lerobot_v3.dataset import (
     IMAGE_KEY,
     IMAGE_SIZE,
     features,
@@ -30,9 +33,6 @@ from ch37.lerobot_io import (
     schema_problem,
     write_dataset,
 )
-from ch37.parallel import progress
-from ch37.seeds import MAX_SEED, SEED_BLOCK, env_seed
-from ch37.stamps import MADE_BY, changed_files, holds_data, is_ours, read_stamp, replace_own_dir
 
 if sys.platform.startswith("linux"):  # headless rendering: EGL unless the user chose a GL backend
     os.environ.setdefault("MUJOCO_GL", "egl")

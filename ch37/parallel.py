@@ -1,5 +1,5 @@
 """Parallel execution on forked workers, the project's one pool: imap / parallel_map for independent
-jobs (ch37.executors adds Ray), LockstepEnvs for evaluation physics. Results never depend on the
+jobs (datagen.executors adds Ray), LockstepEnvs for evaluation physics. Results never depend on the
 worker count: every job carries its own seed and every env is its own simulator.
 
 Workers die with the run: each asks the kernel for SIGKILL when its parent dies (Linux prctl

@@ -10,8 +10,9 @@ import pytest
 
 import gen_demos_aloha
 import gen_demos_pusht
-from ch37 import lerobot_io, seeds
+from ch37 import seeds
 from ch37.demos import rollout
+from lerobot_v3 import dataset as lerobot_io
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -132,8 +133,8 @@ def test_bad_flags_one_line(tmp_path, capsys, argv, needle):
 def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
     """A user's set from before observation.environment_state (or from another writer) is read as
     before: the schema check, the lesson's read, the data engine's read and its growth."""
-    from ch37 import engine, shards
     from ch37.demos import ensure_demos
+    from datagen import engine, shards
 
     emb, m = gen_demos_pusht.PUSHT, gen_demos_pusht.PUSHT.env_module
     env = emb.make_env()

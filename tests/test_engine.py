@@ -19,9 +19,9 @@ from conftest import ROOT, run_script, with_fps, with_nan
 import gen_demos_aloha
 import gen_demos_pusht
 import pusht_env
-from ch37 import engine, shards
-from ch37.lerobot_io import load_arrays, open_dataset
 from ch37.stamps import LOCK_NAME, MADE_BY, STAMP_NAME
+from datagen import engine, shards
+from lerobot_v3.dataset import load_arrays, open_dataset
 
 PER_DEMO, SHARD = 4, 2  # 3 sources x 4 = 12 attempts in 6 shards: enough to kill one run mid-way
 SETTINGS = ["--per_demo", str(PER_DEMO), "--shard_size", str(SHARD), "--quiet"]

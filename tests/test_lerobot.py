@@ -111,7 +111,7 @@ def test_lerobot_lab_samples_are_lerobot_datasets_items(grown):
     from lerobot.datasets import EpisodeAwareSampler
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    from ch37.lerobot_io import ENV_STATE_KEY, load_arrays
+    from lerobot_v3.dataset import ENV_STATE_KEY, load_arrays
     from tools import lerobot_lab
 
     info = json.loads((grown / "meta" / "info.json").read_text())
@@ -170,7 +170,7 @@ def test_lerobot_lab_checkpoint_rollouts_leave_the_training_as_it_was(grown):
     step as a run without them, and they do roll out (a check that never ran would pass the first)."""
     import numpy as np
 
-    from ch37.lerobot_io import load_arrays
+    from lerobot_v3.dataset import load_arrays
     from tools import lerobot_lab
 
     a = load_arrays(grown, keys=("observation.state", "action", "episode_index"))

@@ -1,4 +1,4 @@
-"""ch37.shards.merge_sets, the engine's one-pass merge, against the merge it replaced: LeRobot's
+"""lerobot_v3.merge.merge_sets, the engine's one-pass merge, against the merge it replaced: LeRobot's
 aggregate_datasets (one data file per shard) followed by write_frame_stats. The same real shards
 merged both ways must read back the same through LeRobotDataset: features, every column of every
 frame, episode boundaries and per-episode metadata, stats.json. Real MuJoCo shards, real LeRobot."""
@@ -13,9 +13,10 @@ import pytest
 import torch
 
 import gen_demos_pusht
-from ch37 import engine, frame_stats, shards
-from ch37.lerobot_io import load_arrays, open_dataset
 from ch37.stamps import read_json
+from datagen import engine, shards
+from lerobot_v3 import frame_stats, merge
+from lerobot_v3.dataset import load_arrays, open_dataset
 
 CONFIG = {"mode": "resolve", "per_demo": 4, "seed": 0, "pos_sigma": 0.08, "yaw_sigma": 0.5, "shard_size": 5}
 LAYOUT = ("data/chunk_index", "data/file_index", "meta/episodes/chunk_index", "meta/episodes/file_index")
@@ -99,7 +100,7 @@ def assert_same_set(new, old):
 
 
 def test_merge_reads_back_as_lerobots_merge(roots, lerobots, tmp_path):
-    n = shards.merge_sets(roots, tmp_path / "set")
+    n = merge.merge_sets(roots, tmp_path / "set")
     assert n == sum(read_json(r / "meta" / "info.json")["total_episodes"] for r in roots) == 12
     assert_same_set(tmp_path / "set", lerobots)
     # one file each: the set is far below LeRobot's 100 MB per file
@@ -119,9 +120,9 @@ def test_small_files_roll_over_files_and_chunks(roots, lerobots, tmp_path, monke
     own delete_episodes (which follows data/file_index) gives the same set from both."""
     from lerobot.datasets.dataset_tools import delete_episodes
 
-    monkeypatch.setattr(shards, "EPISODE_ROWS", 5)
+    monkeypatch.setattr(merge, "EPISODE_ROWS", 5)
     new = tmp_path / "set"
-    shards.merge_sets(roots, new, max_bytes=4000, chunks_size=2)
+    merge.merge_sets(roots, new, max_bytes=4000, chunks_size=2)
     data = sorted(p.relative_to(new).as_posix() for p in new.glob("data/*/*.parquet"))
     meta = sorted(p.relative_to(new).as_posix() for p in new.glob("meta/episodes/*/*.parquet"))
     assert len(data) >= 6 and "data/chunk-001/file-000.parquet" in data and len(meta) == 3, (data, meta)
@@ -144,7 +145,7 @@ def test_a_set_out_of_order_is_refused(roots, tmp_path):
     i = t.schema.get_field_index("index")
     pq.write_table(t.set_column(i, t.schema.field(i), pa.array(t.column(i).to_numpy()[::-1])), f)
     with pytest.raises(RuntimeError, match="episodes in order"):
-        shards.merge_sets([roots[1], bad], tmp_path / "set")
+        merge.merge_sets([roots[1], bad], tmp_path / "set")
 
 
 @pytest.mark.parametrize("collect", [2**14, 16])

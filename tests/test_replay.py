@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import pusht_env
-from ch37 import engine
 from ch37.demos import rollout
 from ch37.seeds import env_seed
+from datagen import engine
 from scripted_expert import PushTExpert
 
 

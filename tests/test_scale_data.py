@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from conftest import run_script
 
-from ch37 import lerobot_io, stamps
+from ch37 import stamps
 from ch37.seeds import env_seed
+from lerobot_v3 import dataset as lerobot_io
 
 
 def smoke(out, *extra, check=True, cache=False):

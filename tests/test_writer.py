@@ -1,4 +1,4 @@
-"""ch37.lerobot_io.write_dataset's one-pass writer against LeRobot's own per-frame writer (issue 19).
+"""lerobot_v3.dataset.write_dataset's one-pass writer against LeRobot's own per-frame writer (issue 19).
 
 The same episodes go through write_dataset and through LeRobotDataset.create / add_frame /
 save_episode / finalize; both sets are read back with LeRobotDataset and compared feature by
@@ -17,8 +17,8 @@ import pytest
 
 import gen_demos_aloha
 import gen_demos_pusht
-from ch37 import lerobot_io
-from ch37.engine import PROVENANCE, START_NAMES
+from datagen.engine import PROVENANCE, START_NAMES
+from lerobot_v3 import dataset as lerobot_io
 
 TASK = "push the T"
 EDIT = Path(sys.executable).parent / "lerobot-edit-dataset"

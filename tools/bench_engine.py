@@ -31,12 +31,13 @@ import time
 from pathlib import Path
 
 import gen_demos_pusht
-from ch37 import ROOT, engine, errors, shards
+from ch37 import ROOT, errors
 from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
 from ch37.files import dump_json, round_floats, write_atomic
-from ch37.lerobot_io import load_arrays
 from ch37.stamps import is_ours, read_stamp
+from datagen import engine, shards
+from lerobot_v3.dataset import load_arrays
 from tools.common import parser, provenance
 
 SOURCE_EPISODES = DEFAULTS["source_episodes"]

@@ -1,4 +1,4 @@
-"""Seconds to write N PushT demos with ch37.lerobot_io.write_dataset: the one-pass writer vs
+"""Seconds to write N PushT demos with lerobot_v3.dataset.write_dataset: the one-pass writer vs
 LeRobot's per-frame path (what write_dataset did before issue 19), alternating. Asserts nothing.
 
     python -m tools.bench_writer                 # 1,000 demos of 30 frames, 3 rounds, medians
@@ -22,9 +22,10 @@ from pathlib import Path
 import numpy as np
 
 import gen_demos_pusht
-from ch37 import errors, lerobot_io
+from ch37 import errors
 from ch37.config import parser
 from ch37.errors import DataError
+from lerobot_v3 import dataset as lerobot_io
 
 
 def demos(n: int, frames: int, seed: int = 0) -> list[dict]:

@@ -59,7 +59,7 @@ def observation_builder(policy):
     import torch
 
     import pusht_env
-    from ch37.lerobot_io import ENV_STATE_KEY, columns
+    from lerobot_v3.dataset import ENV_STATE_KEY, columns
 
     ours = {
         "observation.state": list(range(pusht_env.OBS_DIM)),

@@ -56,8 +56,8 @@ KIND = "lerobot_lab"
 def point_episodes(point: str, seed: int, cache: Path) -> list[dict]:
     """The lab's data at (point, seed) as episodes: {"observation.state": (T, 10), "action": (T, 2)}."""
     import scale_lab
-    from ch37 import engine
-    from ch37.lerobot_io import load_arrays
+    from datagen import engine
+    from lerobot_v3.dataset import load_arrays
 
     path = cache / f"pusht_seed{seed}_ep{N}"
     scale_lab.fresh_demos(path, seed, N)  # the lab's fresh set (made once, then read)
@@ -115,7 +115,7 @@ def policy_and_processors(stats: dict, seed: int):
     from lerobot.policies.factory import make_pre_post_processors
 
     import pusht_env
-    from ch37.lerobot_io import ENV_STATE_KEY
+    from lerobot_v3.dataset import ENV_STATE_KEY
 
     cfg = DiffusionConfig(
         input_features={
@@ -135,7 +135,7 @@ def policy_and_processors(stats: dict, seed: int):
 def frame_arrays(episodes) -> dict:
     """The set's frames: observation.state (F, 10), its environment_state columns (F, 8), action (F, 2)."""
     import pusht_env
-    from ch37.lerobot_io import ENV_STATE_KEY, columns
+    from lerobot_v3.dataset import ENV_STATE_KEY, columns
 
     x = np.concatenate([e["observation.state"] for e in episodes]).astype(np.float32)
     env_cols = columns(pusht_env.STATE_NAMES, pusht_env.ENV_STATE_NAMES)

@@ -30,15 +30,16 @@ from pathlib import Path
 import numpy as np
 
 import bc_recipe as bc
-from ch37 import ROOT, engine, errors
+from ch37 import ROOT, errors
 from ch37.config import DEFAULTS, SMOKE, check
 from ch37.demos import ensure_demos
 from ch37.errors import DataError
 from ch37.files import dump_json, round_floats, write_atomic
-from ch37.lerobot_io import load_arrays
 from ch37.seeds import env_seed
 from ch37.viz import save_png
+from datagen import engine
 from gen_demos_pusht import PUSHT
+from lerobot_v3.dataset import load_arrays
 from tools.common import parser, provenance, rel
 
 POS_SIGMA, YAW_SIGMA = DEFAULTS["aug_pos_sigma"], DEFAULTS["aug_yaw_sigma"]  # m, rad

@@ -4,8 +4,8 @@
 
 The attempts (source episode e, k) are listed e-major and cut into shards of `shard_size`
 attempts, so a shard's contents depend on the run's settings alone, never on the worker count
-or the executor. A worker makes one shard (ch37.engine.run_attempts on its attempts, then
-ch37.engine.save) and returns its files as bytes; the caller saves them, so a worker on another
+or the executor. A worker makes one shard (datagen.engine.run_attempts on its attempts, then
+datagen.engine.save) and returns its files as bytes; the caller saves them, so a worker on another
 machine needs no shared disk. Layout of a run's folder:
 
     OUT/scale_data_stamp.json          the run's stamp: made_by, kind "engine", its settings, complete
@@ -20,7 +20,7 @@ The merge (merge_sets) reads each shard's data and episodes parquet once, moves 
 frame indices by those before it, and writes every file of the set once: data and meta/episodes
 files of up to LeRobot's 100 MB (cut by row counts, never where a shard ends, so the data files'
 bytes do not depend on --shard_size), tasks, info.json, and stats.json over all frames
-(ch37.frame_stats, counted as the frames are written). It costs one read and one write per
+(lerobot_v3.frame_stats, counted as the frames are written). It costs one read and one write per
 frame, and one or two more reads of the numeric columns for the exact quantiles, where LeRobot's
 aggregate_datasets re-read and rewrote its growing episodes file for every shard. LeRobotDataset
 reads what either writes the same (tests/test_merge.py).
@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import itertools
 import json
 import platform
 import re
@@ -52,13 +51,11 @@ from pathlib import Path
 import numpy as np
 
 import pusht_env
-from ch37 import DATA_CODE, engine, executors
+from ch37 import DATA_CODE
 from ch37.cli import available_memory
 from ch37.demos import code_digest
 from ch37.errors import DataError
 from ch37.files import LEFTOVER, check_out_path, dump_json, lock, round_floats, unlock, write_atomic
-from ch37.frame_stats import FrameStats, write_frame_stats
-from ch37.lerobot_io import PARQUET, check_hf_cache, fps_problem, frames_problem, load_arrays, schema_problem
 from ch37.seeds import SEED_BLOCK
 from ch37.stamps import (
     LOCK_NAME,
@@ -73,17 +70,22 @@ from ch37.stamps import (
     read_json,
     read_stamp,
 )
+from datagen import engine, executors
+from lerobot_v3.dataset import check_hf_cache, fps_problem, frames_problem, load_arrays, schema_problem
+from lerobot_v3.merge import merge_sets
 
 SHARDS_DIR = "shards"
 REPORT_NAME = "generation_report.json"
 MERGE_DIR = ".merged.partial"  # the merge is built here, then its data/ and meta/ are renamed into OUT
 # What a run writes directly in OUT and in OUT/shards (both its own, under its lock); anything else
-# there is the user's, and a resume refuses to start rather than delete it (ch37.shards.foreign).
+# there is the user's, and a resume refuses to start rather than delete it (datagen.shards.foreign).
 RUN_NAMES = {STAMP_NAME, LOCK_NAME, REPORT_NAME, SHARDS_DIR, "data", "meta", MERGE_DIR}
 SHARD_NAMES = re.compile(r"shard-\d{5}|\.shard-\d{5}\.(partial|scratch)")
 SETTINGS = ("mode", "per_demo", "seed", "pos_sigma", "yaw_sigma", "shard_size")  # a run's flags
 # The engine's own code: a shard made by other code is never mixed into a run.
-ENGINE_VERSION = code_digest(DATA_CODE + ("ch37/engine.py", "ch37/shards.py", "ch37/frame_stats.py"))
+ENGINE_VERSION = code_digest(
+    DATA_CODE + ("datagen/engine.py", "datagen/shards.py", "lerobot_v3/merge.py", "lerobot_v3/frame_stats.py")
+)
 
 
 def versions() -> dict:
@@ -289,226 +291,6 @@ def merge(out: Path, n_shards: int, run_stamp: dict) -> int:
     return episodes
 
 
-# Episode rows per row group of meta/episodes: a fixed count, so the row groups never depend on how
-# the episodes were cut into shards (LeRobot's own writer buffers a few episodes per group).
-EPISODE_ROWS = 1000
-DATA_GROUP_ROWS = 2**16  # frames per row group of a data file
-SHIFTED_STATS = ("min", "max", "mean", "q01", "q10", "q50", "q90", "q99")  # move with their column
-
-
-class _Files:
-    """A series of parquet files `pattern` (chunk, file) under `root`, each written once, in order.
-
-    A file holds at most `limit` rows, where limit = max_bytes / the Arrow size of a row (every row
-    here has the same size: fixed-width columns and lists of fixed length), and a block placed with
-    place() (an episode, or a block of episode rows) never straddles two files. After chunks_size
-    files the next chunk begins (LeRobot's update_chunk_file_indices). Rows go to disk in row groups
-    of group_rows rows (the last of a file shorter); LeRobot writes one per episode, which at 10^4
-    episodes means 10^4 writes and as many metadata entries to parse on every read. Files and row
-    groups are cut by row counts alone, so where they end never depends on the shards."""
-
-    def __init__(self, root: Path, pattern: str, max_bytes: int, chunks_size: int, group_rows: int):
-        self.root, self.pattern, self.max_bytes, self.chunks_size = root, pattern, max_bytes, chunks_size
-        self.group_rows, self.buffer, self.buffered = group_rows, [], 0  # rows not yet written
-        self.chunk = self.file = self.placed = 0  # rows placed in the current file
-        self.limit = self.writer = self.open_at = None
-
-    def place(self, rows: int, row_bytes: int) -> tuple[int, int]:
-        """Where the next block of `rows` rows goes: (chunk, file), starting a new file if needed."""
-        if self.limit is None:
-            self.limit = max(1, self.max_bytes // max(1, row_bytes))
-        if self.placed and self.placed + rows > self.limit:
-            from lerobot.datasets.utils import update_chunk_file_indices
-
-            self.chunk, self.file = update_chunk_file_indices(self.chunk, self.file, self.chunks_size)
-            self.placed = 0
-        self.placed += rows
-        return self.chunk, self.file
-
-    def write(self, table, where: tuple[int, int]) -> None:
-        """Append `table` (rows placed in order) to file `where`, the place() they were given."""
-        import pyarrow.parquet as pq
-
-        if where != self.open_at:
-            self.close()
-            path = self.root / self.pattern.format(chunk_index=where[0], file_index=where[1])
-            path.parent.mkdir(parents=True, exist_ok=True)
-            self.writer = pq.ParquetWriter(path, table.schema, **PARQUET)
-            self.open_at = where
-        self.buffer.append(table)
-        self.buffered += table.num_rows
-        while self.buffered >= self.group_rows:
-            self._flush(self.group_rows)
-
-    def _flush(self, rows: int) -> None:
-        import pyarrow as pa
-
-        table = pa.concat_tables(self.buffer)
-        self.writer.write_table(table.slice(0, rows))
-        rest = table.slice(rows)
-        self.buffer, self.buffered = ([rest] if rest.num_rows else []), rest.num_rows
-
-    def close(self) -> None:
-        if self.writer is not None:
-            if self.buffered:
-                self._flush(self.buffered)
-            self.writer.close()
-            self.writer = self.open_at = None
-
-
-def _shifted(table, name: str, by: int, *, fill: bool = False):
-    """`table` with `by` added to its column `name` (int64, or a list<double> of per-episode stats,
-    added in float64 as LeRobot's aggregate does), or every value set to `by` (fill); type kept."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
-    i = table.schema.get_field_index(name)
-    col = table.column(i).combine_chunks()
-    if pa.types.is_list(col.type):
-        by = pa.scalar(float(by), col.type.value_type)
-        values = pc.if_else(True, by, col.values) if fill else pc.add(col.values, by)
-        new = pa.ListArray.from_arrays(col.offsets, values, type=col.type)
-    else:
-        new = pc.add(col, pa.scalar(by, col.type))
-    return table.set_column(i, table.schema.field(i), new)
-
-
-def _read_set(root: Path) -> tuple:
-    """A shard's episodes table and data table (all its parquet files, in order), checked to be a fresh
-    LeRobot v3 set of one task: episodes 0..n-1, frames 0..N-1 in episode order."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    # ParquetFile.read: read_table's dataset path costs ~10x more on a 100-row-group file (95 ms, 10 ms)
-    eps = pa.concat_tables(pq.ParquetFile(f).read() for f in sorted(root.glob("meta/episodes/*/*.parquet")))
-    data = pa.concat_tables(pq.ParquetFile(f).read() for f in sorted(root.glob("data/*/*.parquet")))
-    n = eps.num_rows
-    ep = eps.column("episode_index").to_numpy()
-    lo, hi = eps.column("dataset_from_index").to_numpy(), eps.column("dataset_to_index").to_numpy()
-    length = eps.column("length").to_numpy()
-    ok = (ep == np.arange(n)).all() and lo[0] == 0 and (lo[1:] == hi[:-1]).all() and (hi - lo == length).all()
-    ok = ok and data.num_rows == hi[-1] and (data.column("index").to_numpy() == np.arange(hi[-1])).all()
-    ok = ok and (data.column("task_index").to_numpy() == 0).all()
-    if not ok:
-        raise RuntimeError(f"{root} is not a LeRobot v3 set of one task with episodes in order")
-    return eps, data
-
-
-def _moved_episodes(eps, n_eps: int, n_frames: int, places: list[tuple[int, int]]):
-    """A shard's episodes table as rows of the merged set: episode and frame indices (and their
-    per-episode stats, as aggregate's update_meta_data moves them) shifted by the n_eps episodes and
-    n_frames frames before it; data/chunk_index and data/file_index set to each episode's place."""
-    import pyarrow as pa
-
-    shifts = {"episode_index": n_eps, "dataset_from_index": n_frames, "dataset_to_index": n_frames}
-    for name, by in (("episode_index", n_eps), ("index", n_frames)):
-        shifts |= {f"stats/{name}/{stat}": by for stat in SHIFTED_STATS}
-    for name, by in shifts.items():
-        if name in eps.column_names:
-            eps = _shifted(eps, name, by)
-    for stat in ("std", *SHIFTED_STATS):
-        # aggregate recomputes these from the episode's task ids (the one task: 0), where the
-        # shard's writer estimated quantiles from a histogram (q01 = 4e-16, not 0)
-        if f"stats/task_index/{stat}" in eps.column_names:
-            eps = _shifted(eps, f"stats/task_index/{stat}", 0, fill=True)
-    for j, name in enumerate(("data/chunk_index", "data/file_index")):
-        i = eps.schema.get_field_index(name)
-        eps = eps.set_column(i, eps.schema.field(i), pa.array([p[j] for p in places], pa.int64()))
-    return eps
-
-
-def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, chunks_size=None) -> int:
-    """Merge the LeRobot v3 sets `roots` (each of one task, no videos) into the new set `dest`, in one
-    pass: each set's data and episodes parquet is read once, its episode and frame indices (and the
-    episodes table's per-episode index stats) moved by the episodes and frames before it, and written
-    into data/chunk-XXX/file-YYY.parquet files of up to the first set's data_files_size_in_mb
-    (`max_bytes` to override; row groups of DATA_GROUP_ROWS frames) and meta/episodes files the
-    same way (row groups of EPISODE_ROWS episodes); tasks, info.json and stats.json (exact over all
-    frames, write_frame_stats) once each. No file is written twice. Returns the episodes merged.
-
-    What LeRobotDataset reads is what LeRobot's aggregate_datasets + write_frame_stats give for the
-    same sets (tests/test_merge.py); only the file layout differs, and it depends on the frames alone."""
-    import pandas as pd
-    import pyarrow as pa
-    from lerobot.datasets.io_utils import load_info, write_info, write_tasks
-    from lerobot.datasets.utils import DEFAULT_DATA_PATH, DEFAULT_EPISODES_PATH
-
-    dest = Path(dest)
-    info = load_info(roots[0])
-    if any(ft["dtype"] in ("video", "image") for ft in info.features.values()):
-        raise RuntimeError("merge_sets merges sets without images or videos")
-    max_bytes = max_bytes or info.data_files_size_in_mb * 2**20  # LeRobot's MB are MiB
-    chunks_size = chunks_size or info.chunks_size
-    template = _stats_template(roots)
-    stats = FrameStats({k: sorted(st) for k, st in template.items() if k in info.features})
-    data_out = _Files(dest, DEFAULT_DATA_PATH, max_bytes, chunks_size, group_rows=DATA_GROUP_ROWS)
-    meta_out = _Files(dest, DEFAULT_EPISODES_PATH, max_bytes, chunks_size, group_rows=EPISODE_ROWS)
-    n_eps = n_frames = 0
-    task, pending = None, []  # episode rows not yet written (fewer than EPISODE_ROWS)
-
-    def flush(rows: int) -> None:  # write the first `rows` pending episode rows as one row group
-        nonlocal pending
-        table = pa.concat_tables(pending)
-        block, rest = table.slice(0, rows), table.slice(rows)
-        chunk, file = meta_out.place(rows, block.slice(0, 1).nbytes)
-        for name, value in (("meta/episodes/chunk_index", chunk), ("meta/episodes/file_index", file)):
-            i = block.schema.get_field_index(name)
-            block = block.set_column(i, block.schema.field(i), pa.array([value] * rows, pa.int64()))
-        meta_out.write(block, (chunk, file))
-        pending = [rest] if rest.num_rows else []
-
-    try:
-        for root in roots:
-            eps, data = _read_set(root)
-            tasks = eps.column("tasks").to_pylist()
-            task = task if task is not None else tasks[0]
-            if any(t != task for t in tasks):
-                raise RuntimeError(f"{root}: tasks {tasks[0]} differ from {task}; merge_sets takes one task")
-            data = _shifted(_shifted(data, "episode_index", n_eps), "index", n_frames)
-            lengths = eps.column("dataset_to_index").to_numpy() - eps.column("dataset_from_index").to_numpy()
-            row_bytes = data.slice(0, 1).nbytes
-            places = [data_out.place(int(n), row_bytes) for n in lengths]  # (chunk, file) per episode
-            start = 0
-            for where, run in itertools.groupby(zip(places, lengths, strict=True), key=lambda p: p[0]):
-                rows = int(sum(n for _, n in run))  # consecutive episodes bound for one file: one block
-                data_out.write(data.slice(start, rows), where)
-                start += rows
-            stats.add(data)  # counted as it is written; the quantiles read back only a few bins
-            pending.append(_moved_episodes(eps, n_eps, n_frames, places))
-            n_eps, n_frames = n_eps + eps.num_rows, n_frames + data.num_rows
-            while sum(t.num_rows for t in pending) >= EPISODE_ROWS:
-                flush(EPISODE_ROWS)
-        if pending:
-            flush(sum(t.num_rows for t in pending))
-    finally:
-        data_out.close()
-        meta_out.close()
-    tasks = [task[0]] if task else []
-    write_tasks(pd.DataFrame({"task_index": range(len(tasks))}, index=pd.Index(tasks, name="task")), dest)
-    info.total_episodes, info.total_frames, info.total_tasks = n_eps, n_frames, len(tasks)
-    info.splits = {"train": f"0:{n_eps}"}
-    write_info(info, dest)
-    write_frame_stats(dest, template, stats)
-    return n_eps
-
-
-def _stats_template(roots: list[Path]) -> dict:
-    """The stats.json entries write_frame_stats fills: the first set's keys and stat names; a key that
-    is no data feature (none in the engine's sets) gets LeRobot's aggregate of every set's stats."""
-    from lerobot.datasets.io_utils import load_info
-
-    first = read_json(roots[0] / "meta" / "stats.json")
-    other = [k for k in first if k not in load_info(roots[0]).features]
-    if not other:
-        return first
-    from lerobot.datasets.compute_stats import aggregate_stats
-    from lerobot.datasets.io_utils import load_stats
-    from lerobot.datasets.utils import serialize_dict
-
-    agg = aggregate_stats([{k: v for k, v in load_stats(r).items() if k in other} for r in roots])
-    return first | serialize_dict(agg)
-
-
 def remove_shards(out: Path) -> None:
     """Once the run's stamp says complete: the shards are in the merged set."""
     shutil.rmtree(Path(out) / SHARDS_DIR, ignore_errors=True)
@@ -620,7 +402,7 @@ def report_of(stamps: list[dict], failures_known, base: dict) -> dict:
 
 def run(src: Path, out: Path, settings: dict, *, workers: int, ray: str | None = None, quiet=False) -> dict:
     """Grow `out` from the PushT set `src` with `settings` (SETTINGS) on `workers` local processes or
-    on Ray (ch37.executors.run): a run cut off earlier is finished, its whole shards kept; a complete
+    on Ray (datagen.executors.run): a run cut off earlier is finished, its whole shards kept; a complete
     run is left as it is. A second run on `out` waits for the first. Returns the generation report."""
     t0 = time.perf_counter()
     problem = check_out_path(out)  # a path the file system or pyarrow cannot take, before anything

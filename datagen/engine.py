@@ -5,7 +5,7 @@
 is a pure function of its arguments: attempt k of source episode e draws from its own generator,
 np.random.default_rng([env_seed(seed, "aug", e), k]), and the sim is fully reset at the perturbed
 start, so the result never depends on which process runs it, in what order, or with what else.
-scale_data.py's augment region and augment_demos.py (through ch37.shards) call the same function.
+scale_data.py's augment region and augment_demos.py (through datagen.shards) call the same function.
 
 The three moves of mode "resolve":
   1. perturb   block x, y and pusher x, y get Gaussian noise of pos_sigma (m), block yaw of
@@ -338,8 +338,8 @@ def save(root, kept: list[dict], *, repo_id: str, stamp: dict) -> None:
     """Write kept episodes (with their provenance) to `root` as one LeRobot v3 PushT set under our
     stamp; what was at `root` must be ours (ch37.stamps.replace_own_dir), and nothing is written
     when nothing was kept."""
-    from ch37.lerobot_io import features, write_dataset
     from ch37.stamps import MADE_BY, replace_own_dir
+    from lerobot_v3.dataset import features, write_dataset
 
     replace_own_dir(root)
     if kept:

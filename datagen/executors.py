@@ -1,7 +1,7 @@
 """Where the data engine's shards run: local processes (the default) or Ray. Both yield each task's
 result as soon as it is done, in any order; the caller saves it and drops it, so memory holds a
 few shards, not the run. Which executor ran a shard never changes its bytes: a shard is a pure
-function of its arguments (see ch37.shards)."""
+function of its arguments (see datagen.shards)."""
 
 from __future__ import annotations
 
