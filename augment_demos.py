@@ -8,9 +8,9 @@ set of the kept demos, every frame carrying its provenance (aug.source_episode: 
 aug.start: block x, y, yaw, pusher x, y it was solved from), with generation_report.json beside it.
 
 The same command gives the same bytes with any --workers, with --ray, and after a killed run is
-re-run (finished shards are kept, only the missing ones are made). The engine lives in ch37:
-engine.py (one attempt), shards.py (the run: shards, merge, stats, report), executors.py (local
-processes, Ray).
+re-run (finished shards are kept, only the missing ones are made). The engine lives in datagen/:
+engine.py (one attempt), pusht.py (the PushT task), shards.py (the run: shards, stats, report),
+executors.py (local processes, Ray); the merge in lerobot_v3/merge.py.
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def parse(argv=None):
     p.add_argument("--yaw_sigma", type=float, default=sigmas[1], help=f"rad; block yaw noise std {most}")
     p.add_argument(
         "--mode",
-        choices=("resolve", "replay"),  # datagen.engine.MODES (not imported here: --help stays instant)
+        choices=("resolve", "replay"),  # datagen.Task.modes (not imported here: --help stays instant)
         default="resolve",
         help="resolve: the expert solves each start; replay: the source path transformed into the new "
         "block pose, executed open-loop, kept only on success (MimicGen's move; most attempts fail here)",
@@ -77,10 +77,10 @@ def parse(argv=None):
 
 def main(argv=None) -> int:
     a = parse(argv)
-    from datagen import shards
+    from datagen import TASKS, shards
 
     settings = {k: getattr(a, k) for k in shards.SETTINGS}
-    r = shards.run(a.src, a.out, settings, workers=a.workers, ray=a.ray, quiet=a.quiet)
+    r = shards.run(TASKS["pusht"], a.src, a.out, settings, workers=a.workers, ray=a.ray, quiet=a.quiet)
     print(
         f"augment_demos: {r['attempts']} attempts, {r['kept']} kept (yield {r['yield']:.3f}), "
         f"{r['frames']} frames in {r['seconds']:.1f} s ({r['demos_per_s']:.1f} demos/s) -> {a.out} "

@@ -118,7 +118,7 @@ from ch37.demos import ensure_demos  # noqa: E402
 from ch37.files import dump_json, round_floats, write_atomic  # noqa: E402
 from gen_demos_aloha import ALOHA  # noqa: E402
 from gen_demos_pusht import PUSHT  # noqa: E402
-from lerobot_v3.dataset import load_arrays  # noqa: E402
+from lerobot_v3 import load_arrays  # noqa: E402
 
 sets = {}
 for emb, given in ((PUSHT, args.pusht_data), (ALOHA, args.aloha_data)):
@@ -231,28 +231,29 @@ write_atomic(args.out / "cross_embodiment.json", dump_json(round_floats(cross, 6
 # keeps its first --aug_per_demo successes in k order, so the set for aug_per_demo=4 is a subset of
 # the set for 8 and the scaling curve compares nested data. --aug_mode replay has no solver: it
 # replays the source path in the new block pose, and the success filter decides what is kept.
+import datagen  # noqa: E402  (the data engine: datagen.grow over a task, here datagen.PUSHT)
 from ch37.parallel import progress  # noqa: E402
-from datagen import engine  # noqa: E402
 
 pusht = sets["pusht"]
-sources = engine.sources(pusht)  # {episode: its frames}; re-solving reads only the first state
+sources = datagen.sources(pusht)  # {episode: its frames}; re-solving reads only the first state
 wanted = len(sources) * args.aug_per_demo
 bar = progress(None, total=wanted, desc=f"augment ({args.aug_mode})", quiet=args.smoke)
-# engine.grow makes the moves for every attempt k = 0, 1, ... of each source demo, in rounds, on
+# datagen.grow makes the moves for every attempt k = 0, 1, ... of each source demo, in rounds, on
 # --workers processes (augment_demos.py scales the same engine out):
 #   perturb   the first state: block xy, yaw and pusher xy, drawn from this (demo, k)'s own stream
 #   re-solve  put the simulator there; the noise-free expert solves it in the real physics
 #             (replay: transform the source path into the new block pose, execute it open-loop)
 #   keep      the demo, with its provenance, only if the env reports success (else the reason)
-perturb = dict(seed=args.seed, pos_sigma=args.aug_pos_sigma, yaw_sigma=args.aug_yaw_sigma)  # m, rad
-kept, attempts, failures = engine.grow(
+perturb = datagen.Perturbation(seed=args.seed, pos_sigma=args.aug_pos_sigma, yaw_sigma=args.aug_yaw_sigma)
+kept, attempts, failures = datagen.grow(
+    datagen.PUSHT,  # the task: PushT's env, expert and replay (datagen/pusht.py)
     sources,
     args.aug_per_demo,
+    perturb,  # m, m, rad
     mode=args.aug_mode,
     cap=args.aug_tries,
     workers=args.workers,
     bar=bar,
-    **perturb,
 )
 bar.close()
 yield_ = len(kept) / attempts if attempts else 0.0
@@ -263,9 +264,11 @@ if attempts > len(kept):  # the success filter at work: what it threw away, and 
     why = ", ".join(f"{reason} {n}" for reason, n in failures.items() if n)
     print(f"  the success filter rejected {attempts - len(kept)} of {attempts} attempts: {why}")
 aug_path = args.out / "demos" / cli.aug_dir_name(args.seed, len(sources), args.aug_per_demo, args.aug_mode)
-engine.save(aug_path, kept, repo_id="local/pusht_aug", stamp={"kind": "augmented", "seed": args.seed})
+datagen.save(
+    datagen.PUSHT, aug_path, kept, repo_id="local/pusht_aug", stamp={"kind": "augmented", "seed": args.seed}
+)
 # train on what is on disk: the kept demos read back as any LeRobot user would
-aug = load_arrays(aug_path, keys=engine.KEPT_KEYS) if kept else engine.empty_kept()
+aug = load_arrays(aug_path, keys=datagen.KEPT_KEYS) if kept else datagen.empty_kept(datagen.PUSHT)
 # --- endregion ---
 
 # --- region: measure ---

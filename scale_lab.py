@@ -138,16 +138,16 @@ def max_per_source(mode: str, max_n: int) -> int:
 
 def grow(mode: str, seed: int, srcs: dict, per_demo: int, cap: int, pos_sigma: float, yaw_sigma: float):
     """The data engine's set for (mode, seed), in this process (a pure function: see datagen.engine)."""
-    from datagen import engine
+    import datagen
 
-    how = dict(seed=seed, pos_sigma=pos_sigma, yaw_sigma=yaw_sigma)
-    return (mode, seed, *engine.grow(srcs, per_demo, mode=mode, cap=cap, **how))
+    how = datagen.Perturbation(seed=seed, pos_sigma=pos_sigma, yaw_sigma=yaw_sigma)
+    return (mode, seed, *datagen.grow(datagen.PUSHT, srcs, per_demo, how, mode=mode, cap=cap))
 
 
 def expert_success(seed: int, eval_seeds: list[int]):
     """The noise-free expert's own success on these eval starts: the ceiling a BC policy aims at."""
     import pusht_env
-    from ch37.demos import rollout
+    from datagen import rollout
     from scripted_expert import PushTExpert
 
     env = pusht_env.PushTEnv()
@@ -158,10 +158,11 @@ def expert_success(seed: int, eval_seeds: list[int]):
 def generate(a, srcs: dict, eval_seeds: dict, gen_paths: dict, max_per: dict):
     """Phase 1: the engine's sets, one task per (mode, seed), written as LeRobot sets and read back;
     the expert's ceiling per seed beside them. Returns (expert wins, generation report, sets)."""
-    from datagen import engine, executors
-    from lerobot_v3.dataset import load_arrays
+    import datagen
+    from datagen import executors
+    from lerobot_v3 import load_arrays
 
-    cap = {"resolve": engine.ATTEMPTS_PER_KEPT, "replay": a.replay_tries}
+    cap = {"resolve": datagen.ATTEMPTS_PER_KEPT, "replay": a.replay_tries}
     tasks = [(grow, m, s, srcs[s], max_per[m], cap[m], a.pos_sigma, a.yaw_sigma) for m, s in gen_paths]
     tasks += [(expert_success, s, eval_seeds[s]) for s in a.seeds]  # the long ones first
     expert, generation, generated = {}, {}, {}
@@ -171,12 +172,12 @@ def generate(a, srcs: dict, eval_seeds: dict, gen_paths: dict, max_per: dict):
             continue
         mode, s, kept, attempts, failures = got
         stamp = {"kind": "augmented", "seed": s, "mode": mode}
-        engine.save(gen_paths[(mode, s)], kept, repo_id=f"local/pusht_{mode}", stamp=stamp)
+        datagen.save(datagen.PUSHT, gen_paths[(mode, s)], kept, repo_id=f"local/pusht_{mode}", stamp=stamp)
         g = {"attempts": attempts, "kept": len(kept), "yield": len(kept) / attempts if attempts else 0.0}
         g |= {"failures": failures, "per_demo_wanted": max_per[mode], "cap": cap[mode] * max_per[mode]}
         generation.setdefault(mode, {})[str(s)] = g
         if kept:  # train on what is on disk
-            generated[(mode, s)] = load_arrays(gen_paths[(mode, s)], keys=engine.KEPT_KEYS)
+            generated[(mode, s)] = load_arrays(gen_paths[(mode, s)], keys=datagen.KEPT_KEYS)
     for mode, by_seed in sorted(generation.items()):
         kept_of = ", ".join(f"seed {s} kept {g['kept']}/{g['attempts']}" for s, g in sorted(by_seed.items()))
         print(f"{mode}: {kept_of}")
@@ -210,7 +211,7 @@ class Data:
         """(states, actions, actual demos) of a curve at nominal N."""
         import numpy as np
 
-        from datagen import engine
+        from datagen import first_per_source
 
         f = self.fresh[s]
         if curve == "fresh" or n == SOURCES:
@@ -220,7 +221,7 @@ class Data:
         g = self.generated.get(("resolve" if curve == "resolve_fixed" else curve, s))
         if g is None:
             return f["observation.state"][src], f["action"][src], SOURCES
-        rows = engine.first_per_source(g["episode_index"], g["aug.source_episode"], per_source(n))
+        rows = first_per_source(g["episode_index"], g["aug.source_episode"], per_source(n))
         x = np.concatenate([f["observation.state"][src], g["observation.state"][rows]])
         y = np.concatenate([f["action"][src], g["action"][rows]])
         return x, y, SOURCES + len(np.unique(g["episode_index"][rows]))
@@ -334,8 +335,8 @@ def run(a) -> int:
     t_start = time.perf_counter()
     from ch37.files import claim
     from ch37.seeds import env_seed
-    from datagen import engine
-    from lerobot_v3.dataset import load_arrays
+    from datagen import sources
+    from lerobot_v3 import load_arrays
 
     max_n = max(a.n)
     max_per = {m: max_per_source(m, max_n) for m in MODES}
@@ -357,8 +358,7 @@ def run(a) -> int:
         print(f"fresh demos, seed {s}: {max_n} episodes, {len(fresh[s]['action'])} frames ({how})")
     t0 = time.perf_counter()
     srcs = {
-        s: engine.sources({k: v[fresh[s]["episode_index"] < SOURCES] for k, v in fresh[s].items()})
-        for s in a.seeds
+        s: sources({k: v[fresh[s]["episode_index"] < SOURCES] for k, v in fresh[s].items()}) for s in a.seeds
     }
     expert, generation, generated = generate(a, srcs, eval_seeds, gen_paths, max_per)
     print(f"generated in {time.perf_counter() - t0:.1f} s")

@@ -22,6 +22,7 @@ A command of its own (the data engine, a tool) gets the same guarantees from err
 files.claim (or files.check_out_path), stamps.replace_own_dir and parallel.worker_setup.
 """
 
+import hashlib
 import os
 from pathlib import Path
 
@@ -36,12 +37,21 @@ CHAPTER_ID = "ch3.7-scale-data"
 # shapes the frames of a demo set: a set's stamp carries their digest, so a cached set never
 # outlives its code. The whole list keys the result cache.
 DATA_CODE = tuple(
-    "pusht_env.py pusht.xml aloha_env.py aloha.xml scripted_expert.py ch37/demos.py lerobot_v3/dataset.py "
-    "ch37/seeds.py".split()
+    "pusht_env.py pusht.xml aloha_env.py aloha.xml scripted_expert.py ch37/demos.py datagen/task.py "
+    "lerobot_v3/dataset.py ch37/seeds.py".split()
 )
 CODE_FILES = DATA_CODE + tuple(
     "scale_data.py bc_recipe.py gen_demos_pusht.py gen_demos_aloha.py ch37/cli.py ch37/files.py "
     "ch37/parallel.py ch37/stamps.py ch37/viz.py ch37/poster.py ch37/ensemble.py datagen/engine.py "
+    "datagen/pusht.py "
     "datagen/shards.py lerobot_v3/merge.py lerobot_v3/frame_stats.py datagen/executors.py "
     "ch37/config.py".split()
 )
+
+
+def code_digest(names=DATA_CODE) -> str:
+    """First 12 hex of sha256 over the bytes of `names` (paths from the repository root)."""
+    h = hashlib.sha256()
+    for name in names:
+        h.update((ROOT / name).read_bytes())
+    return h.hexdigest()[:12]

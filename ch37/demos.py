@@ -9,22 +9,20 @@ are `main` with their embodiment; scale_data.py calls `ensure_demos`.
 from __future__ import annotations
 
 import argparse
-import hashlib
+import functools
 import os
 import sys
 from dataclasses import dataclass
 from importlib.metadata import version
 from pathlib import Path
 
-import numpy as np
-
-from ch37 import DATA_CODE, ROOT, config
+from ch37 import code_digest, config
 from ch37.errors import DataError, run_main
 from ch37.parallel import progress
 from ch37.seeds import MAX_SEED, SEED_BLOCK, env_seed
 from ch37.stamps import MADE_BY, changed_files, holds_data, is_ours, read_stamp, replace_own_dir
-from lerobot_v3.dataset import (
-    IMAGE_KEY,
+from datagen import rollout
+from lerobot_v3 import (
     IMAGE_SIZE,
     features,
     fps_problem,
@@ -39,17 +37,11 @@ if sys.platform.startswith("linux"):  # headless rendering: EGL unless the user 
 os.environ.setdefault("SVT_LOG", "1")  # the AV1 encoder's banner: errors only
 
 
-def code_digest(names=DATA_CODE) -> str:
-    """First 12 hex of sha256 over the bytes of `names` (paths from the repository root)."""
-    h = hashlib.sha256()
-    for name in names:
-        h.update((ROOT / name).read_bytes())
-    return h.hexdigest()[:12]
-
-
 # Any edit to the files that shape frames, or another lerobot (the writer of its files), changes the
 # version, so a cached set can never outlive the code that made it.
-GENERATOR_VERSION = f"3+{code_digest()}+lerobot{version('lerobot')}"
+@functools.cache
+def generator_version() -> str:  # computed at the first set made or checked, not at import
+    return f"3+{code_digest()}+lerobot{version('lerobot')}"
 
 
 @dataclass(frozen=True)
@@ -62,35 +54,6 @@ class Embodiment:
 
     def make_env(self):
         return getattr(self.env_module, self.env_class)()
-
-
-def rollout(env, policy, obs, *, render: bool = False) -> dict:
-    """Run `policy` from `obs` (what reset or set_start returned) to the end of the episode.
-
-    Frame t pairs the obs before action t with action t.
-    Returns arrays: observation.state (T, obs_dim) float32, action (T, act_dim) float32,
-    next.success (T, 1) bool, and IMAGE_KEY (T, IMAGE_SIZE, IMAGE_SIZE, 3) uint8 when render is set.
-    """
-    policy.reset()
-    states, actions, succ, frames = [], [], [], []
-    done = False
-    while not done:
-        if render:
-            frames.append(env.render(IMAGE_SIZE))
-        act = policy.act(obs)
-        states.append(obs)
-        actions.append(act)
-        obs, _, done, info = env.step(act)
-        succ.append(bool(info["success"]))
-    ep = {
-        "observation.state": np.asarray(states, np.float32),
-        "action": np.asarray(actions, np.float32),
-        "next.success": np.asarray(succ, bool)[:, None],
-        "success": bool(succ[-1]),
-    }
-    if render:
-        ep[IMAGE_KEY] = np.asarray(frames, np.uint8)
-    return ep
 
 
 def generate(
@@ -133,7 +96,7 @@ def stamp_for(emb: Embodiment, *, episodes: int, seed: int, noise: float, video:
         "seed": int(seed),
         "noise": float(noise),
         "video": bool(video),
-        "generator_version": GENERATOR_VERSION,
+        "generator_version": generator_version(),
     }
 
 

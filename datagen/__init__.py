@@ -1,0 +1,50 @@
+"""The data engine: grow a demo set of any task that implements datagen.task.Task, MimicGen-style.
+
+task       Task (what a task provides: env, start names, perturbation, place, expert, segments,
+           replay, success), Perturbation, Source, Segment, rollout
+pusht      PUSHT: PushT as a task (the only module here that imports pusht_env and its expert)
+engine     one attempt, keep_first, grow, run_attempts, save: task-agnostic
+shards     a run on disk: fixed shards, resume, the generation report, the merge (lerobot_v3)
+executors  where shards run: local processes or Ray (one map over jobs, ch37.parallel.map_jobs)
+
+TASKS maps a task's name to it.
+"""
+
+from datagen.engine import (
+    ATTEMPTS_PER_KEPT,
+    KEPT_KEYS,
+    attempt,
+    attempt_rng,
+    empty_kept,
+    first_per_source,
+    grow,
+    keep_first,
+    run_attempts,
+    save,
+    sources,
+)
+from datagen.pusht import PUSHT
+from datagen.task import Perturbation, Segment, Source, Task, rollout
+
+TASKS = {PUSHT.name: PUSHT}
+
+__all__ = [
+    "ATTEMPTS_PER_KEPT",
+    "KEPT_KEYS",
+    "PUSHT",
+    "TASKS",
+    "Perturbation",
+    "Segment",
+    "Source",
+    "Task",
+    "attempt",
+    "attempt_rng",
+    "empty_kept",
+    "first_per_source",
+    "grow",
+    "keep_first",
+    "rollout",
+    "run_attempts",
+    "save",
+    "sources",
+]

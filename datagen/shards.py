@@ -50,10 +50,8 @@ from pathlib import Path
 
 import numpy as np
 
-import pusht_env
-from ch37 import DATA_CODE
+from ch37 import DATA_CODE, code_digest
 from ch37.cli import available_memory
-from ch37.demos import code_digest
 from ch37.errors import DataError
 from ch37.files import LEFTOVER, check_out_path, dump_json, lock, round_floats, unlock, write_atomic
 from ch37.seeds import SEED_BLOCK
@@ -70,7 +68,8 @@ from ch37.stamps import (
     read_json,
     read_stamp,
 )
-from datagen import engine, executors
+from datagen import TASKS, engine, executors
+from datagen.task import Perturbation, Task
 from lerobot_v3.dataset import check_hf_cache, fps_problem, frames_problem, load_arrays, schema_problem
 from lerobot_v3.merge import merge_sets
 
@@ -82,10 +81,21 @@ MERGE_DIR = ".merged.partial"  # the merge is built here, then its data/ and met
 RUN_NAMES = {STAMP_NAME, LOCK_NAME, REPORT_NAME, SHARDS_DIR, "data", "meta", MERGE_DIR}
 SHARD_NAMES = re.compile(r"shard-\d{5}|\.shard-\d{5}\.(partial|scratch)")
 SETTINGS = ("mode", "per_demo", "seed", "pos_sigma", "yaw_sigma", "shard_size")  # a run's flags
-# The engine's own code: a shard made by other code is never mixed into a run.
-ENGINE_VERSION = code_digest(
-    DATA_CODE + ("datagen/engine.py", "datagen/shards.py", "lerobot_v3/merge.py", "lerobot_v3/frame_stats.py")
-)
+# per_demo here is augment_demos.py's documented flag: attempts per source episode (every one is made);
+# datagen.engine.grow's per_source is the kept demos wanted per source episode.
+
+
+def engine_version() -> str:
+    """A digest of the engine's own code (and the code that shapes frames): a shard made by other code
+    is never mixed into a run. Computed when a run starts, not at import."""
+    files = (
+        "datagen/engine.py",
+        "datagen/pusht.py",
+        "datagen/shards.py",
+        "lerobot_v3/merge.py",
+        "lerobot_v3/frame_stats.py",
+    )
+    return code_digest(DATA_CODE + files)
 
 
 def versions() -> dict:
@@ -149,8 +159,9 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
     Returns {"files": {relative path: bytes}, "stamp": the shard's stamp}. The stamp holds the
     counts the report needs (attempts, kept, failures by reason, per source, episode lengths) and
     seconds_write, the seconds the worker spent writing the set and reading it back."""
-    how = {k: config[k] for k in ("seed", "pos_sigma", "yaw_sigma", "mode")}
-    results = engine.run_attempts(sources, jobs, workers=1, **how)
+    task = TASKS[config["task"]]
+    how = Perturbation(config["seed"], config["pos_sigma"], config["yaw_sigma"])
+    results = engine.run_attempts(task, sources, jobs, how, mode=config["mode"], workers=1)
     kept = [r for r in results if not isinstance(r, str)]
     per_source = {}  # source episode -> [attempts, kept]
     for (e, _), r in zip(jobs, results):
@@ -174,7 +185,7 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
     t0 = time.perf_counter()
     with _scratch(scratch, index) as tmp:
         root = tmp / "set"
-        engine.save(root, kept, repo_id="local/pusht_aug_shard", stamp=stamp)
+        engine.save(task, root, kept, repo_id=f"local/{task.name}_aug_shard", stamp=stamp)
         files = {
             p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
         }
@@ -299,22 +310,23 @@ def remove_shards(out: Path) -> None:
 # ----------------------------------------------------------------------------------------------
 # The run: its checks, its plan (resumed where a run stopped), its report
 # ----------------------------------------------------------------------------------------------
-def read_source(src: Path) -> dict:
-    """The source set's columns, or DataError with one line saying what is wrong with it."""
+def read_source(task: Task, src: Path) -> dict:
+    """The source set's columns (a set of `task`), or DataError with one line saying what is wrong with it."""
     import datasets
     import pyarrow.parquet as pq
 
+    m, title = task.env_module, task.title
     if not src.is_dir():
-        raise DataError(f"--src {src} is not a folder; make a PushT set with gen_demos_pusht.py")
-    problem = schema_problem(src, pusht_env.OBS_DIM, pusht_env.ACT_DIM)
+        raise DataError(f"--src {src} is not a folder; make a {title} set with {task.generator}")
+    problem = schema_problem(src, m.OBS_DIM, m.ACT_DIM)
     if problem:
-        raise DataError(f"--src {problem} (a PushT set has state [10] and action [2])")
+        raise DataError(f"--src {problem} (a {title} set has state [{m.OBS_DIM}] and action [{m.ACT_DIM}])")
     feats = read_json(src / "meta" / "info.json")["features"]
-    for key, want in (("observation.state", pusht_env.STATE_NAMES), ("action", pusht_env.ACTION_NAMES)):
+    for key, want in (("observation.state", m.STATE_NAMES), ("action", m.ACTION_NAMES)):
         names = feats[key].get("names")
         if names is not None and list(names) != list(want):
-            raise DataError(f"--src {src}: {key} names {names} are not PushT's {list(want)}")
-    problem = fps_problem(src, pusht_env.FPS)
+            raise DataError(f"--src {src}: {key} names {names} are not {title}'s {list(want)}")
+    problem = fps_problem(src, m.FPS)
     if problem:
         raise DataError(f"--src {problem}")
     for f in sorted(src.glob("data/*/*.parquet")) + sorted(src.glob("meta/episodes/*/*.parquet")):
@@ -400,8 +412,10 @@ def report_of(stamps: list[dict], failures_known, base: dict) -> dict:
     }
 
 
-def run(src: Path, out: Path, settings: dict, *, workers: int, ray: str | None = None, quiet=False) -> dict:
-    """Grow `out` from the PushT set `src` with `settings` (SETTINGS) on `workers` local processes or
+def run(
+    task: Task, src: Path, out: Path, settings: dict, *, workers: int, ray: str | None = None, quiet=False
+) -> dict:
+    """Grow `out` from the set `src` of `task` with `settings` (SETTINGS) on `workers` local processes or
     on Ray (datagen.executors.run): a run cut off earlier is finished, its whole shards kept; a complete
     run is left as it is. A second run on `out` waits for the first. Returns the generation report."""
     t0 = time.perf_counter()
@@ -409,12 +423,13 @@ def run(src: Path, out: Path, settings: dict, *, workers: int, ray: str | None =
     if problem:
         raise DataError(problem)
     check_out(out, src)  # before reading the source: a folder that is not ours is refused at once
-    arrays = read_source(src)
+    arrays = read_source(task, src)
     n_sources = len(np.unique(arrays["episode_index"]))
     problem = plan_memory_problem(n_sources, settings["per_demo"], available_memory())
     if problem:
         raise DataError(problem)
-    config = settings | {"source": source_identity(arrays), "engine": ENGINE_VERSION, "versions": versions()}
+    config = settings | {"task": task.name, "source": source_identity(arrays), "engine": engine_version()}
+    config["versions"] = versions()
     check_out(out, src, config)  # every refusal comes before anything is created
     out.mkdir(parents=True, exist_ok=True)
     lock(out)
@@ -466,9 +481,10 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
     vers = {"python": platform.python_version(), **config["versions"]}
     if ray is not None:
         vers["ray"] = version("ray")
+    task = config["task"]
     report = report_of(
         [done[i] for i in range(len(shards))],
-        engine.FAILURES[config["mode"]],
+        TASKS[task].failures[config["mode"]],
         {
             "source": {"path": str(src.resolve()), **config["source"]},
             "settings": {k: config[k] for k in SETTINGS},
@@ -483,7 +499,10 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
             "demos_per_s": made / seconds,
             "command": " ".join(shlex.quote(x) for x in [Path(sys.executable).name, *sys.argv]),
             "versions": vers,
-            "dataset": {"episodes": merged, "load": f"LeRobotDataset('local/pusht_aug', root='{out}')"},
+            "dataset": {
+                "episodes": merged,
+                "load": f"LeRobotDataset('local/{config['task']}_aug', root='{out}')",
+            },
         },
     )
     assert report["kept"] == merged, (report["kept"], merged)

@@ -11,7 +11,7 @@ import pytest
 import gen_demos_aloha
 import gen_demos_pusht
 from ch37 import seeds
-from ch37.demos import rollout
+from datagen import rollout
 from lerobot_v3 import dataset as lerobot_io
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -134,7 +134,7 @@ def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
     """A user's set from before observation.environment_state (or from another writer) is read as
     before: the schema check, the lesson's read, the data engine's read and its growth."""
     from ch37.demos import ensure_demos
-    from datagen import engine, shards
+    from datagen import PUSHT, Perturbation, engine, shards
 
     emb, m = gen_demos_pusht.PUSHT, gen_demos_pusht.PUSHT.env_module
     env = emb.make_env()
@@ -157,9 +157,9 @@ def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
     assert how == "your own set, used as given"
     d = lerobot_io.load_arrays(old)
     assert d["observation.state"].tobytes() == b"".join(ep["observation.state"].tobytes() for ep in eps)
-    src = shards.read_source(old)
-    kept = engine.attempt(engine.sources(src)[0], 0, seed=0, pos_sigma=0.0, yaw_sigma=0.0)
+    src = shards.read_source(PUSHT, old)
+    kept = engine.attempt(PUSHT, engine.sources(src)[0], 0, Perturbation(0, 0.0, 0.0))
     assert not isinstance(kept, str)  # the unperturbed start re-solved
-    engine.save(tmp_path / "grown", [kept], repo_id="local/grown", stamp={})
+    engine.save(PUSHT, tmp_path / "grown", [kept], repo_id="local/grown", stamp={})
     grown = lerobot_io.load_arrays(tmp_path / "grown", keys=("observation.state", lerobot_io.ENV_STATE_KEY))
     assert grown[lerobot_io.ENV_STATE_KEY].tobytes() == grown["observation.state"][:, 2:].tobytes()

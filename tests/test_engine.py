@@ -20,7 +20,7 @@ import gen_demos_aloha
 import gen_demos_pusht
 import pusht_env
 from ch37.stamps import LOCK_NAME, MADE_BY, STAMP_NAME
-from datagen import engine, shards
+from datagen import PUSHT, Perturbation, engine, pusht, shards
 from lerobot_v3.dataset import load_arrays, open_dataset
 
 PER_DEMO, SHARD = 4, 2  # 3 sources x 4 = 12 attempts in 6 shards: enough to kill one run mid-way
@@ -61,11 +61,11 @@ def reference(src, tmp_path_factory):
 # ----------------------------------------------------------------------------------------------
 def test_attempt_is_a_pure_function_with_provenance(src):
     sources = engine.sources(load_arrays(src))
-    kw = dict(seed=0, pos_sigma=0.08, yaw_sigma=0.5)
-    a = engine.attempt(sources[1], 2, env=pusht_env.PushTEnv(), **kw)
+    how = Perturbation(seed=0, pos_sigma=0.08, yaw_sigma=0.5)
+    a = engine.attempt(PUSHT, sources[1], 2, how, env=pusht_env.PushTEnv())
     shared = pusht_env.PushTEnv()
-    engine.attempt(sources[0], 0, env=shared, **kw)  # another attempt first, on the same simulator
-    b = engine.attempt(sources[1], 2, env=shared, **kw)
+    engine.attempt(PUSHT, sources[0], 0, how, env=shared)  # another attempt first, on the same simulator
+    b = engine.attempt(PUSHT, sources[1], 2, how, env=shared)
     assert not isinstance(a, str) and a["success"]
     assert all(a[k].tobytes() == b[k].tobytes() for k in ("observation.state", "action", "aug.start"))
     n = len(a["action"])
@@ -75,11 +75,11 @@ def test_attempt_is_a_pure_function_with_provenance(src):
     # the first frame is the simulator placed at the recorded start, and the start differs from the source's
     env = pusht_env.PushTEnv()
     first = env.set_start(
-        *engine.perturbed_start(sources[1].states[0], engine.attempt_rng(0, 1, 2), 0.08, 0.5)
+        *pusht.perturbed_start(sources[1].states[0], engine.attempt_rng(0, 1, 2), 0.08, 0.5)
     )
     assert a["observation.state"][0].tobytes() == first.tobytes()
     assert np.abs(start[:2] - sources[1].states[0][2:4]).max() > 1e-4
-    other_k = engine.attempt(sources[1], 3, **kw)
+    other_k = engine.attempt(PUSHT, sources[1], 3, how)
     assert other_k["aug.start"][0].tobytes() != start.tobytes()
 
 
@@ -87,16 +87,16 @@ def test_perturbed_starts_stay_on_the_band_and_clear_of_the_block():
     rng = np.random.default_rng(0)
     state = np.array([0.3, 0.3, 0.15, 0.0, 0.0, 1.0, 0, 0, 0, 1], np.float32)
     for _ in range(200):
-        bx, by, yaw, px, py = engine.perturbed_start(state, rng, 0.08, 0.5)
-        assert engine.R_LO <= math.hypot(bx, by) <= engine.R_HI and -math.pi <= yaw <= math.pi
+        bx, by, yaw, px, py = pusht.perturbed_start(state, rng, 0.08, 0.5)
+        assert pusht.R_LO <= math.hypot(bx, by) <= pusht.R_HI and -math.pi <= yaw <= math.pi
         assert max(abs(px), abs(py)) <= pusht_env.PUSHER_HALF
         assert pusht_env.pusher_clear(bx, by, yaw, px, py)
 
 
 def test_an_impossible_perturbation_is_a_reason_not_a_demo(src):
     sources = engine.sources(load_arrays(src))
-    assert engine.attempt(sources[0], 0, seed=0, pos_sigma=5.0, yaw_sigma=0.5) == "no_valid_start"
-    assert "no_valid_start" in engine.FAILURES["resolve"]
+    assert engine.attempt(PUSHT, sources[0], 0, Perturbation(0, 5.0, 0.5)) == "no_valid_start"
+    assert "no_valid_start" in PUSHT.failures["resolve"]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -105,9 +105,7 @@ def test_an_impossible_perturbation_is_a_reason_not_a_demo(src):
 def test_run_writes_the_attempts_in_order_loadable_with_provenance(src, reference):
     sources = engine.sources(load_arrays(src))
     want = [
-        engine.attempt(sources[e], k, seed=0, pos_sigma=0.08, yaw_sigma=0.5)
-        for e in range(3)
-        for k in range(4)
+        engine.attempt(PUSHT, sources[e], k, Perturbation(0, 0.08, 0.5)) for e in range(3) for k in range(4)
     ]
     want = [w for w in want if not isinstance(w, str)]
     keys = ("observation.state", "action", "episode_index", "aug.start", "aug.source_episode")

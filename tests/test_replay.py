@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 import pusht_env
-from ch37.demos import rollout
 from ch37.seeds import env_seed
-from datagen import engine
+from datagen import PUSHT, Perturbation, Source, engine, pusht, rollout
 from scripted_expert import PushTExpert
 
 
@@ -18,14 +17,14 @@ def test_transform_identity_returns_the_path():
     rng = np.random.default_rng(0)
     pts, vel = rng.normal(size=(20, 2)), rng.normal(size=(20, 2))
     pose = (0.13, -0.07, 2.1)
-    moved, turned = engine.transform_segment(pts, vel, pose, pose)
+    moved, turned = pusht.transform_segment(pts, vel, pose, pose)
     np.testing.assert_allclose(moved, pts, atol=1e-12)
     np.testing.assert_allclose(turned, vel, atol=1e-12)
 
 
 def test_transform_rotation_about_the_object():
     # object at the origin turned by +90 degrees: a point 1 m ahead of it goes to 1 m to its left
-    moved, turned = engine.transform_segment(
+    moved, turned = pusht.transform_segment(
         [[1.0, 0.0], [0.0, 2.0]], [[0.5, 0.0]], (0, 0, 0), (0, 0, math.pi / 2)
     )
     np.testing.assert_allclose(moved, [[0.0, 1.0], [-2.0, 0.0]], atol=1e-12)
@@ -33,7 +32,7 @@ def test_transform_rotation_about_the_object():
 
 
 def test_transform_translation_moves_points_not_velocities():
-    moved, turned = engine.transform_segment([[1.5, 2.0]], [[0.3, -0.4]], (1.0, 2.0, 0.0), (3.0, -1.0, 0.0))
+    moved, turned = pusht.transform_segment([[1.5, 2.0]], [[0.3, -0.4]], (1.0, 2.0, 0.0), (3.0, -1.0, 0.0))
     np.testing.assert_allclose(moved, [[3.5, -1.0]], atol=1e-12)
     np.testing.assert_allclose(turned, [[0.3, -0.4]], atol=1e-12)
 
@@ -43,9 +42,9 @@ def test_transform_keeps_the_path_rigid_relative_to_the_object():
     rng = np.random.default_rng(1)
     pts = rng.normal(size=(30, 2))
     src, new = (0.2, -0.1, 0.7), (-0.3, 0.25, -2.4)
-    moved, _ = engine.transform_segment(pts, np.zeros_like(pts), src, new)
-    off_src = (pts - src[:2]) @ engine.rotation(-src[2]).T
-    off_new = (moved - new[:2]) @ engine.rotation(-new[2]).T
+    moved, _ = pusht.transform_segment(pts, np.zeros_like(pts), src, new)
+    off_src = (pts - src[:2]) @ pusht.rotation(-src[2]).T
+    off_new = (moved - new[:2]) @ pusht.rotation(-new[2]).T
     np.testing.assert_allclose(off_new, off_src, atol=1e-12)
     d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
     np.testing.assert_allclose(np.linalg.norm(moved[:, None] - moved[None], axis=-1), d, atol=1e-12)
@@ -59,15 +58,15 @@ def env():
 def expert_source(env, i):
     """Source demo i of seed 0, rolled out from the start its first (float32) frame describes."""
     obs = env.reset(env_seed(0, "demo", i))
-    start = tuple(float(v) for v in engine.block_pose(obs)) + (float(obs[0]), float(obs[1]))
+    start = tuple(float(v) for v in pusht.block_pose(obs)) + (float(obs[0]), float(obs[1]))
     ep = rollout(env, PushTExpert(noise=0.0), env.set_start(*start))
     assert ep["success"]
-    return engine.Source(i, ep["observation.state"], ep["action"]), start
+    return Source(i, ep["observation.state"], ep["action"]), start
 
 
 def test_identity_replay_reproduces_the_source(env):
     source, start = expert_source(env, 0)
-    ep, why = engine.replay(env, start, source)
+    ep, why = pusht.replay(env, start, source)
     assert why is None and ep["success"]
     assert len(ep["action"]) == len(source.actions)  # no approach: the pusher is on the first waypoint
     np.testing.assert_allclose(ep["observation.state"], source.states, atol=1e-6)
@@ -79,7 +78,7 @@ def test_a_moved_block_makes_the_replay_miss_and_names_why(env):
     would be; the filter rejects it and says it ran to its end off target."""
     source, start = expert_source(env, 0)
     shifted = (start[0] + 0.06, start[1], start[2], start[3] + 0.06, start[4])
-    ep, why = engine.replay(env, shifted, source)
+    ep, why = pusht.replay(env, shifted, source)
     assert not ep["success"]
     assert why == "finished_off_target"
     assert math.hypot(*env.block_pose[:2]) > pusht_env.SUCCESS_POS_TOL
@@ -90,15 +89,15 @@ def test_kept_replays_hold_the_actions_actually_executed(env):
     recorded start reproduces its frames and its success (the approach included)."""
     source, _ = expert_source(env, 1)
     results = [
-        engine.attempt(source, k, seed=0, pos_sigma=0.004, yaw_sigma=0.02, mode="replay", env=env)
+        engine.attempt(PUSHT, source, k, Perturbation(0, 0.004, 0.02), mode="replay", env=env)
         for k in range(12)
     ]
     kept = [r for r in results if not isinstance(r, str)]
     assert kept, results
-    assert all(r in engine.FAILURES["replay"] for r in results if isinstance(r, str))
+    assert all(r in PUSHT.failures["replay"] for r in results if isinstance(r, str))
     k = next(k for k, r in enumerate(results) if not isinstance(r, str))
     ep = results[k]
-    start = engine.perturbed_start(source.states[0], engine.attempt_rng(0, source.episode, k), 0.004, 0.02)
+    start = pusht.perturbed_start(source.states[0], engine.attempt_rng(0, source.episode, k), 0.004, 0.02)
     np.testing.assert_allclose(ep["aug.start"][0], start, atol=1e-6)  # the provenance names this start
     obs = env.set_start(*start)
     assert len(ep["action"]) > 0
@@ -113,10 +112,7 @@ def test_replay_rejects_most_attempts_at_the_chapter_sigmas(env):
     than the re-solving expert (which keeps every one of these)."""
     source, _ = expert_source(env, 2)
     modes = {
-        m: [
-            engine.attempt(source, k, seed=0, pos_sigma=0.08, yaw_sigma=0.5, mode=m, env=env)
-            for k in range(10)
-        ]
+        m: [engine.attempt(PUSHT, source, k, Perturbation(0, 0.08, 0.5), mode=m, env=env) for k in range(10)]
         for m in ("resolve", "replay")
     }
     assert all(not isinstance(r, str) for r in modes["resolve"])
@@ -193,7 +189,7 @@ def test_scale_data_replay_names_its_mode_and_what_the_filter_rejected(tmp_path)
     assert m["aug_mode"] == "replay" and m["config"]["aug_mode"] == "replay"
     assert m["yield"] < 1 and m["attempts"] > m["kept"]
     assert sum(m["augment_failures"].values()) == m["attempts"] - m["kept"]
-    assert set(m["augment_failures"]) == set(engine.FAILURES["replay"])
+    assert set(m["augment_failures"]) == set(PUSHT.failures["replay"])
     assert f"the success filter rejected {m['attempts'] - m['kept']} of {m['attempts']}" in p.stdout
     assert (tmp_path / "run" / "demos" / "pusht_aug_seed0_src4_k2_replay").is_dir() or m["kept"] == 0
 

@@ -17,8 +17,11 @@ import pytest
 
 import gen_demos_aloha
 import gen_demos_pusht
-from datagen.engine import PROVENANCE, START_NAMES
+from datagen import PUSHT, engine
+from datagen.pusht import START_NAMES
 from lerobot_v3 import dataset as lerobot_io
+
+PROVENANCE = engine.provenance(PUSHT)
 
 TASK = "push the T"
 EDIT = Path(sys.executable).parent / "lerobot-edit-dataset"

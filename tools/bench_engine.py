@@ -36,7 +36,7 @@ from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
 from ch37.files import dump_json, round_floats, write_atomic
 from ch37.stamps import is_ours, read_stamp
-from datagen import engine, shards
+from datagen import PUSHT, Perturbation, engine, shards
 from lerobot_v3.dataset import load_arrays
 from tools.common import parser, provenance
 
@@ -164,16 +164,16 @@ def per_demo_costs(src: Path, n: int = 100) -> dict:
     """Where one core's time per kept demo goes, in this process: the re-solve vs LeRobot's write."""
     sources = engine.sources(load_arrays(src))
     jobs = [(e, k) for k in range(n) for e in sources][:n]
-    kw = dict(seed=0, pos_sigma=DEFAULTS["aug_pos_sigma"], yaw_sigma=DEFAULTS["aug_yaw_sigma"])
-    engine.attempt(sources[jobs[0][0]], 10**6, **kw)  # warm up
+    how = Perturbation(seed=0, pos_sigma=DEFAULTS["aug_pos_sigma"], yaw_sigma=DEFAULTS["aug_yaw_sigma"])
+    engine.attempt(PUSHT, sources[jobs[0][0]], 10**6, how)  # warm up
     t0 = time.perf_counter()
-    eps = [engine.attempt(sources[e], k, **kw) for e, k in jobs]
+    eps = [engine.attempt(PUSHT, sources[e], k, how) for e, k in jobs]
     t1 = time.perf_counter()
     eps = [ep for ep in eps if not isinstance(ep, str)]
     with tempfile.TemporaryDirectory() as tmp:  # the engine's own writer, whatever columns it adds
-        engine.save(Path(tmp) / "warm", eps[:2], repo_id="local/x", stamp={})
+        engine.save(PUSHT, Path(tmp) / "warm", eps[:2], repo_id="local/x", stamp={})
         t2 = time.perf_counter()
-        engine.save(Path(tmp) / "set", eps, repo_id="local/x", stamp={})
+        engine.save(PUSHT, Path(tmp) / "set", eps, repo_id="local/x", stamp={})
         t3 = time.perf_counter()
     return {
         "attempts": n,

@@ -21,6 +21,7 @@ import gen_demos_aloha
 import gen_demos_pusht
 from ch37 import demos, errors
 from ch37.config import check, parser
+from datagen import rollout
 
 NOISE = {"pusht": 0.08, "aloha": 0.05}  # the noisy-expert levels the success targets are stated at
 
@@ -39,7 +40,7 @@ def steps_per_second(emb, n: int = 3000) -> float:
 def expert_record(emb, starts: int, noise: float) -> tuple[int, float]:
     env, wins, lengths = emb.make_env(), 0, []
     for s in range(starts):
-        ep = demos.rollout(env, emb.expert_class(noise=noise, seed=s), env.reset(s))
+        ep = rollout(env, emb.expert_class(noise=noise, seed=s), env.reset(s))
         wins += ep["success"]
         lengths.append(len(ep["action"]))
     return wins, statistics.median(lengths)

@@ -55,9 +55,9 @@ KIND = "lerobot_lab"
 
 def point_episodes(point: str, seed: int, cache: Path) -> list[dict]:
     """The lab's data at (point, seed) as episodes: {"observation.state": (T, 10), "action": (T, 2)}."""
+    import datagen
     import scale_lab
-    from datagen import engine
-    from lerobot_v3.dataset import load_arrays
+    from lerobot_v3 import load_arrays
 
     path = cache / f"pusht_seed{seed}_ep{N}"
     scale_lab.fresh_demos(path, seed, N)  # the lab's fresh set (made once, then read)
@@ -67,15 +67,14 @@ def point_episodes(point: str, seed: int, cache: Path) -> list[dict]:
         for e in range(N if point == "fresh" else SOURCES)
     ]
     if point == "resolve":  # the lab's nested prefix: its largest per-source count, then the first 8
-        srcs = engine.sources({k: v[f["episode_index"] < SOURCES] for k, v in f.items()})
+        srcs = datagen.sources({k: v[f["episode_index"] < SOURCES] for k, v in f.items()})
         per = scale_lab.per_source(N)
-        kept, _, _ = engine.grow(
+        kept, _, _ = datagen.grow(
+            datagen.PUSHT,
             srcs,
             scale_lab.max_per_source("resolve", max(scale_lab.N_DEFAULT)),  # the lab's attempts
+            datagen.Perturbation(seed, DEFAULTS["aug_pos_sigma"], DEFAULTS["aug_yaw_sigma"]),
             mode="resolve",
-            seed=seed,
-            pos_sigma=DEFAULTS["aug_pos_sigma"],
-            yaw_sigma=DEFAULTS["aug_yaw_sigma"],
         )
         taken: dict[int, int] = {}  # kept is in (source, k) order: the first `per` of each source
         for ep in kept:

@@ -4,7 +4,7 @@
     python -m tools.replay --sigma 0.5 1 2     yields as the perturbation grows -> OUT/replay_sigma.json, .png
     python -m tools.replay --smoke --seeds 2   seconds; numbers not meaningful (OUT = outputs/replay-smoke)
 
---seeds: for each seed, the chapter's source demos are grown both ways with engine.grow (the chapter's
+--seeds: for each seed, the chapter's source demos are grown both ways with datagen.grow (the chapter's
 kept demos per source demo and attempts per wanted demo; re-solve keeps every attempt, replay what its
 success filter passes). Where the yields differ the re-solved set is cut to the replayed set's count
 per source demo (its first kept ones in attempt order), so the two "matched" arms hold the same number
@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 import bc_recipe as bc
+import datagen
 from ch37 import ROOT, errors
 from ch37.config import DEFAULTS, SMOKE, check
 from ch37.demos import ensure_demos
@@ -37,7 +38,6 @@ from ch37.errors import DataError
 from ch37.files import dump_json, round_floats, write_atomic
 from ch37.seeds import env_seed
 from ch37.viz import save_png
-from datagen import engine
 from gen_demos_pusht import PUSHT
 from lerobot_v3.dataset import load_arrays
 from tools.common import parser, provenance, rel
@@ -69,12 +69,16 @@ def grow(out: Path, mode: str, sources: dict, seed: int, c: dict, workers: int) 
     """The kept set of `mode` written under OUT/demos and read back (training reads what is on disk),
     and its row: attempts, yield, failures by reason, start coverage."""
     t = time.perf_counter()
-    how = dict(mode=mode, cap=c["tries"], workers=workers, seed=seed, **SIGMAS)
-    kept, attempts, failures = engine.grow(sources, c["per_demo"], **how)
+    how = datagen.Perturbation(seed=seed, **SIGMAS)
+    kept, attempts, failures = datagen.grow(
+        datagen.PUSHT, sources, c["per_demo"], how, mode=mode, cap=c["tries"], workers=workers
+    )
     name = f"pusht_seed{seed}_{mode}_k{c['per_demo']}"
     path = out / "demos" / name
-    engine.save(path, kept, repo_id=f"local/{name}", stamp={"kind": "augmented", "seed": seed})
-    d = load_arrays(path, keys=engine.KEPT_KEYS) if kept else engine.empty_kept()
+    datagen.save(
+        datagen.PUSHT, path, kept, repo_id=f"local/{name}", stamp={"kind": "augmented", "seed": seed}
+    )
+    d = load_arrays(path, keys=datagen.KEPT_KEYS) if kept else datagen.empty_kept(datagen.PUSHT)
     _, first = np.unique(d["episode_index"], return_index=True)
     cells, outside = bc.cells(d["aug.start"][first, :2])
     row = {"attempts": attempts, "kept": len(kept), "wanted": len(sources) * c["per_demo"]}
@@ -90,7 +94,7 @@ def arm_data(src: dict, sets: dict) -> dict:
     _, first = np.unique(rep["episode_index"], return_index=True)
     e, n = np.unique(rep["aug.source_episode"].reshape(-1)[first], return_counts=True)
     take = dict(zip(e.tolist(), n.tolist()))  # {source episode: demos replay kept from it}
-    matched = engine.first_per_source(res["episode_index"], res["aug.source_episode"], take)
+    matched = datagen.first_per_source(res["episode_index"], res["aug.source_episode"], take)
     every, none = slice(None), slice(0)
     rows = {"source": (res, none), "replay": (rep, every), "resolve_matched": (res, matched)}
     rows["resolve_all"] = (res, every)
@@ -124,7 +128,7 @@ def compare_seed(out: Path, seed: int, c: dict, workers: int, quiet: bool) -> di
     """One seed: both modes grown from its source demos, then the four arms trained and evaluated."""
     t0 = time.perf_counter()
     src = source_set(out, seed, c["source_episodes"], quiet)
-    sources = engine.sources(src)
+    sources = datagen.sources(src)
     row, sets = {"seed": seed, "modes": {}}, {}
     for mode in MODES:
         row["modes"][mode], sets[mode] = grow(out, mode, sources, seed, c, workers)
@@ -160,15 +164,17 @@ def sigma_row(srcs: dict, m: float, mode: str, attempts: int, workers: int) -> d
     results, shift = [], []  # shift: m, from each kept start's block to its source start's
     for s, sources in srcs.items():
         jobs = [(e, k) for e in sources for k in range(attempts)]
-        how = dict(seed=s, pos_sigma=m * POS_SIGMA, yaw_sigma=m * YAW_SIGMA, mode=mode, workers=workers)
-        results += (got := engine.run_attempts(sources, jobs, **how))
+        how = datagen.Perturbation(seed=s, pos_sigma=m * POS_SIGMA, yaw_sigma=m * YAW_SIGMA)
+        results += (
+            got := datagen.run_attempts(datagen.PUSHT, sources, jobs, how, mode=mode, workers=workers)
+        )
         for (e, _), r in zip(jobs, got):
             if not isinstance(r, str):
                 shift.append(math.hypot(*(r["aug.start"][0][:2] - sources[e].states[0][2:4])))
     n, kept = len(results), len(shift)
     row = {"multiplier": m, "pos_sigma": m * POS_SIGMA, "yaw_sigma": m * YAW_SIGMA, "mode": mode}
     row |= {"attempts": n, "kept": kept, "yield": kept / n, "ci95": bc.wilson(kept / n, n)}
-    row["failures"] = {why: results.count(why) for why in engine.FAILURES[mode]}
+    row["failures"] = {why: results.count(why) for why in datagen.PUSHT.failures[mode]}
     stats = {"median": np.median, "max": np.max}
     row["kept_block_shift_m"] = {k: float(f(shift)) if shift else None for k, f in stats.items()}
     return row | {"seconds": round(time.perf_counter() - t, 1)}
@@ -213,7 +219,7 @@ def compare(a, c: dict, out: Path, prov: dict) -> None:
 
 def sigma(a, c: dict, out: Path, prov: dict) -> None:
     seeds = list(range(a.sigma_seeds))
-    srcs = {s: engine.sources(source_set(out, s, c["source_episodes"], a.smoke)) for s in seeds}
+    srcs = {s: datagen.sources(source_set(out, s, c["source_episodes"], a.smoke)) for s in seeds}
     rows = []
     for m in sorted(a.sigma):
         for mode in MODES:

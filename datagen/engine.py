@@ -1,0 +1,202 @@
+"""The data engine's unit of work, for any task (datagen.task.Task): one attempt = perturb a source
+start, re-solve or replay it, keep it if it succeeds.
+
+    attempt(task, source, k, how, mode="resolve") -> a kept episode or a reason
+
+is a pure function of its arguments: attempt k of source episode e draws from its own generator,
+np.random.default_rng([env_seed(seed, "aug", e), k]), and the sim is fully reset at the perturbed
+start (task.place), so the result never depends on which process runs it, in what order, or with
+what else. scale_data.py's augment region and augment_demos.py (through datagen.shards) call the
+same function. The modes' moves are the task's (datagen.task, datagen.pusht); the kept episode
+carries its provenance on every frame: aug.source_episode and aug.start (the start it was made from).
+
+keep_first(...) grows a set the MimicGen way: attempts k = 0, 1, 2, ... per source demo until
+per_source of them are kept (or cap x per_source were tried); the kept set is the first per_source
+successes in k order, whatever batches the attempts ran in. grow() is keep_first over run_attempts.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ch37.parallel import parallel_map
+from ch37.seeds import env_seed
+from datagen.task import Perturbation, Source, Task
+
+__all__ = [
+    "ATTEMPTS_PER_KEPT",
+    "KEPT_KEYS",
+    "attempt",
+    "attempt_rng",
+    "empty_kept",
+    "first_per_source",
+    "grow",
+    "keep_first",
+    "provenance",
+    "run_attempts",
+    "save",
+    "sources",
+]
+
+KEPT_KEYS = ("observation.state", "action", "episode_index", "aug.source_episode", "aug.start")
+ATTEMPTS_PER_KEPT = 10  # keep_first gives up on a source demo after this many attempts per wanted demo
+
+
+def provenance(task: Task) -> dict:
+    """The LeRobot features stored on every frame of a kept episode of `task`."""
+    return {
+        "aug.source_episode": {"dtype": "int64", "shape": (1,), "names": None},
+        "aug.start": {"dtype": "float32", "shape": (len(task.start_names),), "names": list(task.start_names)},
+    }
+
+
+def sources(arrays: dict) -> dict[int, Source]:
+    """{episode index: Source} from load_arrays' columns (observation.state, action, episode_index)."""
+    out = {}
+    for e in np.unique(arrays["episode_index"]):
+        rows = np.flatnonzero(arrays["episode_index"] == e)
+        out[int(e)] = Source(int(e), arrays["observation.state"][rows], arrays["action"][rows])
+    return out
+
+
+def attempt_rng(seed: int, episode: int, k: int) -> np.random.Generator:
+    """The generator of attempt k of source episode `episode`: its own stream, whatever else runs."""
+    return np.random.default_rng([env_seed(seed, "aug", episode), k])
+
+
+def empty_kept(task: Task) -> dict:
+    """KEPT_KEYS' columns of a set of `task` with no episode, for a run that kept none."""
+    m = task.env_module
+    widths = {"observation.state": m.OBS_DIM, "action": m.ACT_DIM, "aug.start": len(task.start_names)}
+    out = {k: np.zeros((0, w), np.float32) for k, w in widths.items()}
+    return out | {"episode_index": np.zeros(0, np.int64), "aug.source_episode": np.zeros((0, 1), np.int64)}
+
+
+_ENVS: dict[str, object] = {}  # task name -> this process's simulator, fully reset by place() per attempt
+
+
+def attempt(task: Task, source: Source, k: int, how: Perturbation, *, mode: str = "resolve", env=None):
+    """Attempt k from `source`: a kept episode (arrays per frame, with provenance) or a failure reason."""
+    if env is None:
+        env = _ENVS.get(task.name) or _ENVS.setdefault(task.name, task.make_env())
+    got = task.run_mode(mode, source, attempt_rng(how.seed, source.episode, k), how, env)
+    if isinstance(got, str):
+        return got
+    ep, start = got
+    n = len(ep["action"])
+    ep["aug.source_episode"] = np.full((n, 1), source.episode, np.int64)  # provenance, on every frame
+    ep["aug.start"] = np.tile(np.float32(start), (n, 1))
+    return ep
+
+
+def keep_first(episodes, per_source: int, run_jobs, *, reasons, cap: int = ATTEMPTS_PER_KEPT):
+    """The first `per_source` kept attempts (k = 0, 1, ...) of each source episode, the MimicGen way.
+
+    run_jobs([(episode, k), ...]) -> [attempt result, ...] in the same order (any executor).
+    Attempts run in rounds: k < per_source first, then, for an episode still short, more k's sized by
+    its yield so far. Whatever the rounds, the kept set is the first per_source successes in k order
+    and `attempts` counts k's up to the last one kept (all cap x per_source when an episode falls
+    short), so kept, attempts and failures are pure functions of the arguments.
+    Returns (kept episodes in (episode, k) order, attempts, {reason: count} over counted attempts).
+    """
+    limit = cap * per_source
+    done = {e: [] for e in episodes}  # episode -> results for k = 0, 1, ... in order
+    while True:
+        jobs = []
+        for e, got in done.items():
+            n_kept = sum(not isinstance(r, str) for r in got)
+            if n_kept >= per_source or len(got) >= limit:
+                continue
+            rate = max(n_kept / len(got), 1 / cap) if got else 1.0
+            more = min(math.ceil((per_source - n_kept) / rate), limit - len(got))
+            jobs += [(e, k) for k in range(len(got), len(got) + more)]
+        if not jobs:
+            break
+        for (e, _), r in zip(jobs, run_jobs(jobs)):
+            done[e].append(r)
+    kept, attempts, failures = [], 0, dict.fromkeys(reasons, 0)
+    for got in done.values():
+        n = 0
+        for r in got:
+            if n == per_source:
+                break  # attempted in a round, but beyond the last one this episode keeps: not counted
+            attempts += 1
+            if isinstance(r, str):
+                failures[r] += 1
+            else:
+                kept.append(r)
+                n += 1
+    return kept, attempts, failures
+
+
+def first_per_source(episode_index, source_episode, take) -> np.ndarray:
+    """Row mask of a kept set: the first `take` episodes (in episode order) of each source demo.
+
+    episode_index (N,) and source_episode (N,) or (N, 1) are the set's columns (aug.source_episode);
+    take is one count for every source demo, or {source episode: count} (absent: 0). Because
+    keep_first keeps in attempt order, this is the set keep_first would have kept with that count."""
+    ep, first = np.unique(episode_index, return_index=True)
+    src = np.asarray(source_episode).reshape(-1)[first]  # each episode's source demo
+    rank = np.zeros(len(ep), int)  # its place among its source demo's episodes
+    for e in np.unique(src):
+        rank[src == e] = np.arange((src == e).sum())
+    limit = np.array([take.get(int(e), 0) for e in src]) if isinstance(take, dict) else take
+    return np.isin(episode_index, ep[rank < limit])
+
+
+def run_attempts(task: Task, sources: dict, jobs, how: Perturbation, *, mode="resolve", workers=1, bar=None):
+    """[attempt(task, sources[e], k, how, mode=mode) for (e, k) in jobs], in order, on `workers` processes."""
+
+    def one(job):
+        e, k = job
+        return attempt(task, sources[e], k, how, mode=mode)
+
+    return parallel_map(one, jobs, workers=workers, bar=bar)
+
+
+def grow(
+    task: Task,
+    sources: dict,
+    per_source: int,
+    how: Perturbation,
+    *,
+    mode="resolve",
+    cap=ATTEMPTS_PER_KEPT,
+    workers=1,
+    bar=None,
+):
+    """The engine's one entry: the first `per_source` kept attempts of every source demo (keep_first),
+    attempted in `mode` with the perturbation `how` on `workers` processes.
+    Returns (kept episodes in (episode, k) order, attempts, {reason: count})."""
+    return keep_first(
+        sorted(sources),
+        per_source,
+        lambda jobs: run_attempts(task, sources, jobs, how, mode=mode, workers=workers, bar=bar),
+        reasons=task.failures[mode],
+        cap=cap,
+    )
+
+
+def save(task: Task, root, kept: list[dict], *, repo_id: str, stamp: dict) -> None:
+    """Write kept episodes (with their provenance) to `root` as one LeRobot v3 set of `task` under our
+    stamp; what was at `root` must be ours (ch37.stamps.replace_own_dir), and nothing is written
+    when nothing was kept."""
+    from ch37.stamps import MADE_BY, replace_own_dir
+    from lerobot_v3 import features, write_dataset
+
+    replace_own_dir(root)
+    if kept:
+        m = task.env_module
+        feats = features(m.STATE_NAMES, m.ACTION_NAMES, provenance(task), env_state_names=m.ENV_STATE_NAMES)
+        write_dataset(
+            root,
+            repo_id=repo_id,
+            fps=m.FPS,
+            robot_type=m.ROBOT_TYPE,
+            task=m.TASK,
+            feats=feats,
+            episodes=kept,
+            stamp={"made_by": MADE_BY} | stamp,
+        )

@@ -1,0 +1,163 @@
+"""What a task gives the data engine: MimicGen's env interface, made small.
+
+The engine (datagen.engine: one attempt, keep_first; datagen.shards: the run, its shards, report and
+merge) knows no task. Everything about one task lives in one module named for it (datagen/pusht.py
+today), and only that module imports its env and its expert. A task is an instance of a Task
+subclass; it provides
+
+    name, title, generator
+                         the task's key ("pusht"), its name in messages, the command that
+                         makes a source set of it
+    start_names          the names of a start's numbers, in the order
+                         place() takes them (stored on every kept frame as aug.start)
+    env_module           the env's module: STATE_NAMES, ACTION_NAMES, ENV_STATE_NAMES, FPS, ROBOT_TYPE,
+                         TASK (what a LeRobot set of this task records), OBS_DIM, ACT_DIM
+    make_env()           a new simulator (one per worker process; place() fully resets it)
+    perturb(state, rng, perturbation)
+                         a start near the source's first observation `state`, drawn from `rng`, or
+                         None when no valid draw was found (reason "no_valid_start")
+    place(env, start)    the simulator put at `start` with fresh counters; returns the observation
+    expert()             the noise-free expert that re-solves a placed start
+    object_pose(state)   the pose of the object the task is about, from an observation (the source
+                         demo nearest a new start is chosen by it: MimicGen's nearest selection)
+    segments(source)     the source demo cut into segments, each relative to one object frame
+                         (Segment); replay re-expresses each in the new start's frame
+    replay(env, start, source)
+                         the source's segments re-expressed for `start` and executed open-loop:
+                         (episode, None) on success, else (episode, reason)
+    success(env)         whether the env reports the task done
+    failures             {mode: every reason an attempt of that mode can return}
+
+A mode is a method name: "resolve" (perturb, re-solve with the expert, keep on success) and
+"replay" (perturb, replay the transformed source, keep on success) are defined here once for every
+task from the parts above. An executor that steps many attempts in lockstep decides through the
+same parts (place, expert, success) over a batch.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from lerobot_v3 import IMAGE_KEY, IMAGE_SIZE
+
+__all__ = ["Perturbation", "Segment", "Source", "Task", "rollout"]
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """How far a start is moved: every kept attempt's draw depends on these and (episode, k) alone."""
+
+    seed: int  # >= 0; seeds draw disjoint perturbations (datagen.engine.attempt_rng)
+    pos_sigma: float  # m; std of the object's and the robot's xy moves
+    yaw_sigma: float  # rad; std of the object's yaw move
+
+
+@dataclass(frozen=True)
+class Source:
+    """One source demo: its episode index in the source set and its frames, in order."""
+
+    episode: int
+    states: np.ndarray  # (T, obs_dim) observation.state; resolve reads only the first row
+    actions: np.ndarray  # (T, act_dim) action; kept for modes that reuse the source path
+
+
+@dataclass(frozen=True)
+class Segment:
+    """Frames [start, stop) of a source demo, made relative to the object at `pose` (x m, y m, yaw rad)."""
+
+    start: int
+    stop: int
+    pose: tuple[float, float, float]
+
+
+def rollout(env, policy, obs, *, render: bool = False) -> dict:
+    """Run `policy` from `obs` (what reset or set_start returned) to the end of the episode.
+
+    Frame t pairs the obs before action t with action t.
+    Returns arrays: observation.state (T, obs_dim) float32, action (T, act_dim) float32,
+    next.success (T, 1) bool, and IMAGE_KEY (T, IMAGE_SIZE, IMAGE_SIZE, 3) uint8 when render is set.
+    """
+    policy.reset()
+    states, actions, succ, frames = [], [], [], []
+    done = False
+    while not done:
+        if render:
+            frames.append(env.render(IMAGE_SIZE))
+        act = policy.act(obs)
+        states.append(obs)
+        actions.append(act)
+        obs, _, done, info = env.step(act)
+        succ.append(bool(info["success"]))
+    ep = {
+        "observation.state": np.asarray(states, np.float32),
+        "action": np.asarray(actions, np.float32),
+        "next.success": np.asarray(succ, bool)[:, None],
+        "success": bool(succ[-1]),
+    }
+    if render:
+        ep[IMAGE_KEY] = np.asarray(frames, np.uint8)
+    return ep
+
+
+class Task:
+    """The parts a task provides (see the module docstring); the modes are built from them here."""
+
+    name: str  # "pusht": the key in datagen.TASKS, recorded in a run's settings
+    title: str  # "PushT": how messages name it
+    generator: str  # the command that makes a source set of this task ("gen_demos_pusht.py")
+    start_names: tuple[str, ...]
+    env_module: object
+    failures: dict[str, tuple[str, ...]]
+
+    def make_env(self):
+        raise NotImplementedError
+
+    def perturb(self, first_state, rng, how: Perturbation):
+        raise NotImplementedError
+
+    def place(self, env, start):
+        raise NotImplementedError
+
+    def expert(self):
+        raise NotImplementedError
+
+    def object_pose(self, state) -> np.ndarray:
+        raise NotImplementedError
+
+    def segments(self, source: Source) -> list[Segment]:
+        raise NotImplementedError
+
+    def replay(self, env, start, source: Source) -> tuple[dict, str | None]:
+        raise NotImplementedError
+
+    def success(self, env) -> bool:
+        raise NotImplementedError
+
+    # ---- the modes, the same for every task ----
+    def resolve(self, source: Source, rng, how: Perturbation, env):
+        """1. perturb the source's first state, 2. re-solve with the expert, 3. keep only on success."""
+        start = self.perturb(source.states[0], rng, how)
+        if start is None:
+            return "no_valid_start"
+        ep = rollout(env, self.expert(), self.place(env, start))
+        if not ep["success"]:
+            return "expert_failed"
+        return ep, start
+
+    def replay_mode(self, source: Source, rng, how: Perturbation, env):
+        """1. perturb (the same draw as resolve), 2. replay the transformed source, 3. keep on success."""
+        start = self.perturb(source.states[0], rng, how)
+        if start is None:
+            return "no_valid_start"
+        ep, why = self.replay(env, start, source)
+        return why or (ep, start)
+
+    def run_mode(self, mode: str, source: Source, rng, how: Perturbation, env):
+        """(episode, start) for a kept attempt of `mode`, else the reason it was not kept."""
+        return {"resolve": self.resolve, "replay": self.replay_mode}[mode](source, rng, how, env)
+
+    @property
+    def modes(self) -> tuple[str, ...]:
+        return tuple(self.failures)
