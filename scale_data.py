@@ -95,7 +95,9 @@ flag(
     help="processes for re-solves and evaluation physics (default: cores); same results",
 )
 args = cli.parse(p)  # every flag checked here: a bad one is one line and exit 2, before any heavy import
-cli.claim_out(args)  # --out usable and locked, nothing of yours in the way, our old results there cleared
+claim = cli.claim_out(
+    args
+)  # --out usable and locked, nothing of yours in the way, our old results there cleared
 
 import torch  # noqa: E402  (after the checks, so --help and flag errors are instant)
 
@@ -105,7 +107,7 @@ torch.manual_seed(args.seed)
 if args.smoke:  # tiny matrices: a second thread only adds overhead, and 1 is the same everywhere
     torch.set_num_threads(1)
 cli.banner(args)
-cache = result_cache.ResultCache(args)
+cache = result_cache.ResultCache(args, claim)
 if cache.replay():  # an identical earlier run (same flags, code and data): its outputs are now in --out
     sys.exit(0)
 # --- endregion ---
@@ -115,7 +117,7 @@ if cache.replay():  # an identical earlier run (same flags, code and data): its 
 # command share no scale), actions are zero-padded to the widest robot (6) with a mask so the
 # padding never teaches anything, and an embodiment id says which robot a row came from.
 from ch37.demos import ensure_demos  # noqa: E402
-from ch37.files import dump_json, round_floats, write_atomic  # noqa: E402
+from ch37.ownership import dump_json, round_floats, write_atomic  # noqa: E402
 from gen_demos_aloha import ALOHA  # noqa: E402
 from gen_demos_pusht import PUSHT  # noqa: E402
 from lerobot_v3 import load_arrays  # noqa: E402
@@ -221,7 +223,7 @@ cross = {
     "padded_dim_max_grad": pad_grad,
     "quantiles": "q01/q99 over all frames; LeRobot's meta/stats.json averages per-episode quantiles instead",
 }
-write_atomic(args.out / "cross_embodiment.json", dump_json(round_floats(cross, 6)))
+write_atomic(args.out / "cross_embodiment.json", dump_json(round_floats(cross, 6)), claim)
 # --- endregion ---
 
 # --- region: augment ---
@@ -343,20 +345,22 @@ metrics = {
     "coverage": {"cells": bc.RINGS * bc.SECTORS, "source": len(c_src), "augmented": len(c_aug),
                  "union": len(c_src | c_aug), "outside_annulus": {"source": out_src, "augmented": out_aug}},
 }  # fmt: skip
-metrics_path = write_atomic(args.out / "metrics.json", dump_json(round_floats(metrics, 6)))
+metrics_path = write_atomic(args.out / "metrics.json", dump_json(round_floats(metrics, 6)), claim)
 written = [args.out / "cross_embodiment.json", metrics_path]
 from ch37 import poster, viz  # noqa: E402  (the drawing code: PNG, HTML poster, Rerun; not the lesson)
 
-written.append(viz.figure(args.out / "scale_data.png", src_starts, aug_starts, metrics, bc.ANNULUS))
+written.append(viz.figure(args.out / "scale_data.png", src_starts, aug_starts, metrics, bc.ANNULUS, claim))
 written.append(
-    poster.chapter(args.out / "scale_data.html", metrics, cross, src_starts, aug_starts, bc.ANNULUS)
+    poster.chapter(args.out / "scale_data.html", metrics, cross, src_starts, aug_starts, bc.ANNULUS, claim)
 )
 if args.rerun:
     shown = [  # a few augmented trajectories
         {"observation.state": aug["observation.state"][aug["episode_index"] == e]}
         for e in aug["episode_index"][first_rows[:8]]
     ]
-    rrd = viz.recording(args.out / "scale_data.rrd", metrics, src_starts, aug_starts, shown, bc.ANNULUS)
+    rrd = viz.recording(
+        args.out / "scale_data.rrd", metrics, src_starts, aug_starts, shown, bc.ANNULUS, claim
+    )
     written.append(rrd)
 rate = {name: arm["success"] for name, arm in arms.items()}
 opens = {".json": "JSON", ".png": "open as an image", ".html": "any browser", ".rrd": "open with: rerun {}"}

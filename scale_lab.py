@@ -293,10 +293,11 @@ def curves_of(a, points: list) -> dict:
     return curves
 
 
-def emit(a, points, results, expert, generation, data, t_start, t_train) -> None:
-    """scale_lab.json (sorted, rounded, atomic), the figure and the recording, and the curves printed."""
+def emit(a, own, points, results, expert, generation, data, t_start, t_train) -> None:
+    """scale_lab.json (sorted, rounded, atomic), the figure and the recording, and the curves printed;
+    `own` is the run's Claim on --out (ch37.ownership.claim), every write recorded in it."""
     from ch37 import poster, viz
-    from ch37.files import dump_json, round_floats, write_atomic
+    from ch37.ownership import dump_json, round_floats, write_atomic
 
     for p in points:
         p.update(results[p.pop("unit")])
@@ -320,11 +321,11 @@ def emit(a, points, results, expert, generation, data, t_start, t_train) -> None
         },
         6,
     )
-    written = [write_atomic(a.out / "scale_lab.json", dump_json(result))]
-    written.append(viz.scale_lab_figure(a.out / "scale_lab.png", result))
-    written.append(poster.lab(a.out / "scale_lab.html", result))
+    written = [write_atomic(a.out / "scale_lab.json", dump_json(result), own)]
+    written.append(viz.scale_lab_figure(a.out / "scale_lab.png", result, own))
+    written.append(poster.lab(a.out / "scale_lab.html", result, own))
     if a.rerun:
-        written.append(viz.scale_lab_recording(a.out / "scale_lab.rrd", result))
+        written.append(viz.scale_lab_recording(a.out / "scale_lab.rrd", result, own))
     print(f"expert ceiling {e_mean:.2f}; success by N (mean over seeds):")
     for curve, rows in curves.items():
         print(f"  {curve:13s} " + "  ".join(f"{n}: {r['success']:.2f}" for n, r in rows.items()))
@@ -333,7 +334,7 @@ def emit(a, points, results, expert, generation, data, t_start, t_train) -> None
 
 def run(a) -> int:
     t_start = time.perf_counter()
-    from ch37.files import claim
+    from ch37.ownership import claim
     from ch37.seeds import env_seed
     from datagen import sources
     from lerobot_v3 import load_arrays
@@ -347,7 +348,7 @@ def run(a) -> int:
         for s in a.seeds
         if max_per[m] > 0
     }
-    claim(a.out, results=RESULTS, reuses=list(fresh_paths.values()), replaces=list(gen_paths.values()))
+    own = claim(a.out, results=RESULTS, reuses=list(fresh_paths.values()), replaces=list(gen_paths.values()))
     where = "local processes" if a.ray is None else f"ray {a.ray}"
     print(f"scale lab: N {a.n}, seeds {a.seeds}, {a.eval_episodes} eval starts, on {where} ({a.workers})")
     eval_seeds = {s: [env_seed(s, "eval", j) for j in range(a.eval_episodes)] for s in a.seeds}
@@ -367,7 +368,7 @@ def run(a) -> int:
     t0 = time.perf_counter()
     results = train_all(a, points, units, eval_seeds)
     t_train = time.perf_counter() - t0
-    emit(a, points, results, expert, generation, data, t_start, t_train)
+    emit(a, own, points, results, expert, generation, data, t_start, t_train)
     return 0
 
 

@@ -1,25 +1,24 @@
-"""The plumbing of chapter 3.7: what scale_data.py imports but does not teach, one concern per module.
+"""The plumbing and presentation of chapter 3.7: what scale_data.py imports but does not teach, one
+concern per module. The LeRobot v3 format is the package lerobot_v3, the data engine datagen.
 
-errors        DataError, guard() / run_main() / main(): one line and an exit code (2, 130 on Ctrl-C)
-files         claim(): an output folder checked up front, locked, owned file by file; write_atomic,
-              dump_json: whole files or none, no leftovers
-config        the chapter's defaults and smoke settings, the one flag parser and checker
-cli           scale_data.py's flag limits, claim_out, device choice, the tier banner
-lerobot_io    LeRobot v3 read/write: features, write_dataset, load_arrays, schema checks
-seeds         env_seed: demos, augmentation and evaluation never share a start
-stamps        ownership stamps: only files this project wrote are ever deleted or rewritten; read_json
-demos         demo sets: rollout, generation, the private demo cache
-parallel      parallel_map over forked workers, LockstepEnvs for evaluation physics; workers die with the run
-engine        one augmentation attempt: perturb a source start, re-solve or replay it, keep it on success
-shards        a data-engine run on disk: fixed shards (LeRobot sets with stamps), merge, stats over frames
-executors     where the shards run: local processes or Ray
-ensemble      several MLPs as one module: the arms of a training budget side by side
-result_cache  reuse a finished run whose flags and code match; entries verified by checksum
-viz           the PNG figures and the Rerun recordings (the chapter's and the Scale Lab's)
-poster        the self-contained HTML posters (scale_data.html, scale_lab.html): inline SVG, no script
+plumbing (imported by the engine and the tools; none of it imports datagen)
+  errors        DataError, guard() / run_main() / main(): one line and an exit code (2, 130 on Ctrl-C)
+  ownership     claim(): an output folder checked up front, locked, owned file by file (the Claim passed
+                to every write); stamps; write_atomic, publish_dir, dump_json, read_json: whole or none
+  process       process hygiene: workers die with the run, stop signals around a fork, core and memory limits
+  parallel      parallel_map / imap over forked workers, LockstepEnvs for evaluation physics
+  seeds         env_seed: demos, augmentation and evaluation never share a start
+  ensemble      several MLPs as one module: the arms of a training budget side by side
+presentation and flags (the lesson's and the tools'; never imported by datagen or lerobot_v3)
+  config        the chapter's defaults and smoke settings, the one flag parser and checker
+  cli           scale_data.py's flag limits, claim_out, device choice, the tier banner
+  demos         demo sets: generation (gen_demos_*.py) and the private demo cache
+  result_cache  reuse a finished run whose flags and code match; entries verified by checksum
+  viz           the PNG figures and the Rerun recordings (the chapter's and the Scale Lab's)
+  poster        the self-contained HTML posters (scale_data.html, scale_lab.html): inline SVG, no script
 
 A command of its own (the data engine, a tool) gets the same guarantees from errors.run_main,
-files.claim (or files.check_out_path), stamps.replace_own_dir and parallel.worker_setup.
+ownership.claim (or ownership.check_out_path), ownership.replace_own_dir and process.worker_setup.
 """
 
 import hashlib
@@ -32,6 +31,25 @@ os.environ["HF_HUB_OFFLINE"] = os.environ["HF_DATASETS_OFFLINE"] = "1"
 
 ROOT = Path(__file__).resolve().parent.parent  # the repository root: scale_data.py, the envs, meta.yaml
 CHAPTER_ID = "ch3.7-scale-data"
+__all__ = [  # the face: the modules above, and the repository's root and code lists
+    "cli",
+    "config",
+    "demos",
+    "ensemble",
+    "errors",
+    "ownership",
+    "parallel",
+    "poster",
+    "process",
+    "result_cache",
+    "seeds",
+    "viz",
+    "CHAPTER_ID",
+    "CODE_FILES",
+    "DATA_CODE",
+    "ROOT",
+    "code_digest",
+]
 
 # Every file whose bytes can change a result, in one list (paths from ROOT). The first group
 # shapes the frames of a demo set: a set's stamp carries their digest, so a cached set never

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from ch37 import ROOT, config
 from ch37.errors import DataError
+from ch37.process import available_memory, max_workers
 from ch37.seeds import MAX_SEED, SEED_BLOCK
 
 # wallclock.csv's tiers: two CPU-side ones, then GPUs matched by a substring of the device name.
@@ -24,24 +25,6 @@ AT_MOST = {"seed": MAX_SEED, "source_episodes": SEED_BLOCK, "eval_episodes": SEE
 AT_MOST.update(aug_pos_sigma=config.SIGMA_MAX, aug_yaw_sigma=config.SIGMA_MAX)
 PUSHT_MAX_STEPS, ALOHA_MAX_STEPS = 300, 400  # pusht_env.MAX_STEPS, aloha_env.MAX_STEPS (not imported: slow)
 ENV_BYTES = 1 << 20  # one evaluation env (a MuJoCo model and data): about 0.6 MB measured
-
-
-def max_workers() -> int:
-    return max(8, 4 * (os.cpu_count() or 1))
-
-
-def available_memory() -> int | None:
-    """Bytes of RAM available now (Linux MemAvailable, else total physical memory), None if unknown."""
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):
-        return None
 
 
 def memory_estimate(args: argparse.Namespace) -> dict[str, int]:
@@ -101,9 +84,9 @@ def aug_dir_name(seed, n_sources, per_demo, mode: str) -> str:
 
 
 def claim_out(args: argparse.Namespace):
-    """--out taken for this run before any work (ch37.files.claim): usable, locked against a second
+    """--out taken for this run before any work (ch37.ownership.claim): usable, locked against a second
     run, nothing of yours where this run writes, this program's earlier results there cleared."""
-    from ch37.files import claim
+    from ch37.ownership import claim
 
     demos = Path(args.out) / "demos"
     reuses = [

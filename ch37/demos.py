@@ -18,10 +18,10 @@ from pathlib import Path
 
 from ch37 import code_digest, config
 from ch37.errors import DataError, run_main
+from ch37.ownership import MADE_BY, changed_files, holds_data, is_ours, read_stamp, replace_own_dir
 from ch37.parallel import progress
 from ch37.seeds import MAX_SEED, SEED_BLOCK, env_seed
-from ch37.stamps import MADE_BY, changed_files, holds_data, is_ours, read_stamp, replace_own_dir
-from datagen import rollout
+from datagen import rollout, write_dataset
 from lerobot_v3 import (
     IMAGE_SIZE,
     features,
@@ -29,7 +29,6 @@ from lerobot_v3 import (
     frames_problem,
     load_arrays,
     schema_problem,
-    write_dataset,
 )
 
 if sys.platform.startswith("linux"):  # headless rendering: EGL unless the user chose a GL backend
@@ -123,7 +122,7 @@ def main(emb: Embodiment, argv=None) -> int:
 
 
 def _main(emb: Embodiment, argv=None) -> int:
-    from ch37.files import check_out_path
+    from ch37.ownership import check_out_path
 
     p = config.parser(f"Generate {emb.name} expert demos as a local LeRobot v3 dataset.")
     p.add_argument("--episodes", type=int, default=50, help="number of episodes to roll out (default 50)")

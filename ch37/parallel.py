@@ -2,63 +2,19 @@
 jobs (datagen.executors adds Ray), LockstepEnvs for evaluation physics. Results never depend on the
 worker count: every job carries its own seed and every env is its own simulator.
 
-Workers die with the run: each asks the kernel for SIGKILL when its parent dies (Linux prctl
-PR_SET_PDEATHSIG; elsewhere a thread watching the parent pid), an env worker also stops at the end
-of its pipe, and Ctrl-C is the parent's alone (workers ignore SIGINT; the parent stops them), so an
-interrupted run prints one line, not a traceback from every process.
+Workers die with the run (ch37.process: worker_setup, forking), an env worker also stops at the end
+of its pipe, so an interrupted run prints one line, not a traceback from every process.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
-import signal
 import sys
-import threading
+
+from ch37.process import forking, worker_setup
 
 _FORKED_WORK: tuple = ()  # (fn, jobs) in a pool worker, set by its initializer
-_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
-
-
-@contextlib.contextmanager
-def _forking():
-    """Block SIGINT/SIGTERM while forking: a child is born with them blocked and unblocks them only
-    after its own handlers are set (worker_setup), so a Ctrl-C at that moment never reaches the
-    parent's Python handler in the child. Pending signals reach the parent when the block ends."""
-    can_mask = hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS) if can_mask else None
-    try:
-        yield
-    finally:
-        if can_mask:
-            signal.pthread_sigmask(signal.SIG_SETMASK, old)
-
-
-def _die_with(parent: int) -> None:
-    if sys.platform.startswith("linux"):
-        import ctypes
-
-        PR_SET_PDEATHSIG = 1
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    else:  # no parent-death signal: a thread polls the parent's pid
-
-        def watch():
-            while os.getppid() == parent:
-                threading.Event().wait(1.0)
-            os._exit(1)
-
-        threading.Thread(target=watch, daemon=True).start()
-    if os.getppid() != parent:  # the parent died before the request above took effect
-        os._exit(1)
-
-
-def worker_setup(parent: int) -> None:
-    """First call in a forked worker: die with `parent`, leave Ctrl-C to it, end quietly on SIGTERM."""
-    _die_with(parent)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    if hasattr(signal, "pthread_sigmask"):
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
 
 
 def progress(iterable, *, total: int, desc: str, quiet: bool = False):
@@ -91,7 +47,7 @@ def imap(fn, jobs: list, *, workers: int, ordered: bool = True, chunksize: int |
     if workers <= 1 or len(jobs) <= 1 or "fork" not in mp.get_all_start_methods():
         yield from map(fn, jobs)
         return
-    with _forking():
+    with forking():
         pool = mp.get_context("fork").Pool(
             min(workers, len(jobs)), initializer=_pool_init, initargs=(os.getpid(), fn, jobs)
         )
@@ -139,7 +95,7 @@ class LockstepEnvs:
             inherited = [*self.conns, parent]
             args = (child, make_env, [self.seeds[i] for i in part], len(self.procs), os.getpid(), inherited)
             proc = ctx.Process(target=_env_worker, args=args, daemon=True)
-            with _forking():
+            with forking():
                 proc.start()
             child.close()
             self.conns.append(parent)

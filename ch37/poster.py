@@ -16,7 +16,7 @@ import json
 import math
 from pathlib import Path
 
-from ch37.files import dump_json, round_floats, write_atomic
+from ch37.ownership import dump_json, round_floats, write_atomic
 from ch37.viz import DATA_COLOURS, LAB_DEFAULT, LAB_STYLE
 
 HEX = {"tab:blue": "#1f77b4", "tab:orange": "#ff7f0e", "tab:green": "#2ca02c", "tab:red": "#d62728"}
@@ -309,9 +309,9 @@ batch order: the data is the only difference. Intervals are Wilson 95% over {n_e
     return _doc(f"Datasets at Scale, {run}: {rates}", body, note, cfg)
 
 
-def chapter(path: Path, metrics: dict, cross: dict, src_starts, aug_starts, annulus) -> Path:
+def chapter(path: Path, metrics: dict, cross: dict, src_starts, aug_starts, annulus, claim=None) -> Path:
     """Write scale_data.html (see chapter_html), whole or not at all; returns its path."""
-    return write_atomic(Path(path), chapter_html(metrics, cross, src_starts, aug_starts, annulus))
+    return write_atomic(Path(path), chapter_html(metrics, cross, src_starts, aug_starts, annulus), claim)
 
 
 # --- scale_lab.html --------------------------------------------------------------------------------
@@ -533,6 +533,6 @@ N = {cfg["fixed_n"]}'s steps; the others take {cfg["epochs"]} epochs of the re-s
     return _doc(f"Scale Lab: success against demos (seeds {cfg['seeds']})", body, note, cfg)
 
 
-def lab(path: Path, result: dict) -> Path:
+def lab(path: Path, result: dict, claim=None) -> Path:
     """Write scale_lab.html (see lab_html), whole or not at all; returns its path."""
-    return write_atomic(Path(path), lab_html(result))
+    return write_atomic(Path(path), lab_html(result), claim)

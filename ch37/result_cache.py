@@ -22,8 +22,15 @@ from pathlib import Path
 from ch37 import CODE_FILES, ROOT
 from ch37.config import NOT_IN_KEY, RESULT_FILES
 from ch37.errors import DataError
-from ch37.files import claimed, dump_json, partial_dir, sha256_bytes, sweep_leftovers, temp_path, write_atomic
-from ch37.stamps import STAMP_NAME
+from ch37.ownership import (
+    STAMP_NAME,
+    dump_json,
+    partial_dir,
+    sha256_bytes,
+    sweep_leftovers,
+    temp_path,
+    write_atomic,
+)
 
 MANIFEST, SUMMARY = "manifest.json", "summary.txt"
 # summary.txt keeps each written file as NUL + its name + NUL (NUL is in no path and no number), so a
@@ -121,8 +128,8 @@ def discard_entry(entry: Path) -> bool:
 class ResultCache:
     """One run's entry: `replay()` in setup (True: the outputs are in place, stop), `store()` in emit."""
 
-    def __init__(self, args) -> None:
-        self.enabled, self.out = args.cache, Path(args.out)
+    def __init__(self, args, claim=None) -> None:
+        self.enabled, self.out, self.claim = args.cache, Path(args.out), claim  # claim: the run's, on --out
         self.key = result_key(vars(args))
 
     def replay(self) -> bool:
@@ -142,7 +149,7 @@ class ResultCache:
         self.out.mkdir(parents=True, exist_ok=True)
         for name, data in got.items():
             if name != SUMMARY:
-                write_atomic(self.out / name, data)
+                write_atomic(self.out / name, data, self.claim)
         why = f"same flags and code, cache key {self.key}; --no-cache runs it again"
         print(f"reusing the result of an identical earlier run ({why})")
         print(summary_for(got[SUMMARY].decode(), self.out), end="")
@@ -150,7 +157,7 @@ class ResultCache:
 
     def store(self, written: list[Path], summary: str) -> None:
         """Keep exactly the files this run wrote (`written`, inside --out) and its summary."""
-        claim = claimed(self.out)
+        claim = self.claim
         names = [Path(p).name for p in written]
         if claim is not None and not set(names) <= claim.written:
             _warn(

@@ -9,23 +9,24 @@ from pathlib import Path
 
 import numpy as np
 
-from ch37.files import place, temp_path, write_atomic
+from ch37.ownership import place, temp_path, write_atomic
 
 DATA_COLOURS = {"source": "tab:blue", "augmented": "tab:orange"}
 RERUN_APP_ID = "ch3_7_scale_data"  # letters, digits and underscores: accepted by Rerun as is
 
 
-def save_png(fig, path: Path, dpi=None) -> Path:
-    """A matplotlib figure to `path` as PNG, atomically (whole file or none); the figure is closed."""
+def save_png(fig, path: Path, dpi=None, claim=None) -> Path:
+    """A matplotlib figure to `path` as PNG, atomically (whole file or none; recorded in `claim`, the
+    run's ch37.ownership.Claim on the folder, when given); the figure is closed."""
     import matplotlib.pyplot as plt
 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi)
     plt.close(fig)
-    return write_atomic(path, buf.getvalue())
+    return write_atomic(path, buf.getvalue(), claim)
 
 
-def figure(path: Path, src_starts, aug_starts, metrics: dict, annulus) -> Path:
+def figure(path: Path, src_starts, aug_starts, metrics: dict, annulus, claim=None) -> Path:
     """Coverage map of block starts over the spawn annulus + the 2x2's success bars with 95% intervals."""
     import matplotlib
 
@@ -65,11 +66,11 @@ def figure(path: Path, src_starts, aug_starts, metrics: dict, annulus) -> Path:
     )
     ax1.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
-    return save_png(fig, path, dpi=100)
+    return save_png(fig, path, dpi=100, claim=claim)
 
 
-def save_rrd(path: Path, recording_id: str, log) -> Path:
-    """A Rerun recording to `path`, whole or not at all (ch37.files.place): log(rec) fills it."""
+def save_rrd(path: Path, recording_id: str, log, claim=None) -> Path:
+    """A Rerun recording to `path`, whole or not at all (ch37.ownership.place): log(rec) fills it."""
     import rerun as rr
 
     rec = rr.RecordingStream(RERUN_APP_ID, recording_id=recording_id)
@@ -82,13 +83,13 @@ def save_rrd(path: Path, recording_id: str, log) -> Path:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
-    return place(tmp, path)
+    return place(tmp, path, claim)
 
 
-def recording(path: Path, metrics: dict, src_starts, aug_starts, trajectories, annulus) -> Path:
+def recording(path: Path, metrics: dict, src_starts, aug_starts, trajectories, annulus, claim=None) -> Path:
     """A Rerun .rrd: the data-scale curve, block starts over the annulus, some augmented trajectories."""
     log = functools.partial(_record, metrics, src_starts, aug_starts, trajectories, annulus)
-    return save_rrd(path, f"seed{metrics['seed']}", log)
+    return save_rrd(path, f"seed{metrics['seed']}", log, claim)
 
 
 def _record(metrics, src_starts, aug_starts, trajectories, annulus, rec) -> None:
@@ -137,7 +138,7 @@ def _lab_rows(result: dict, curve: str):
     return demos, rate, lo, hi
 
 
-def scale_lab_figure(path: Path, result: dict) -> Path:
+def scale_lab_figure(path: Path, result: dict, claim=None) -> Path:
     """Success vs demos (log x), one line per curve with its pooled 95% band, the chapter's default
     point marked and the expert's own success as the ceiling."""
     import matplotlib
@@ -169,10 +170,10 @@ def scale_lab_figure(path: Path, result: dict) -> Path:
     ax.set_title(title + (" (smoke)" if result.get("smoke") else ""), fontsize=9)
     ax.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
-    return save_png(fig, path, dpi=100)
+    return save_png(fig, path, dpi=100, claim=claim)
 
 
-def scale_lab_recording(path: Path, result: dict) -> Path:
+def scale_lab_recording(path: Path, result: dict, claim=None) -> Path:
     """The Scale Lab's curves as Rerun scalars on a "demos" timeline (scale_lab/CURVE/success, ci95_*)."""
     import rerun as rr
 
@@ -187,4 +188,4 @@ def scale_lab_recording(path: Path, result: dict) -> Path:
         text = rr.TextDocument(f"{result['command']}\n{result['interval']}")
         rec.log("scale_lab/summary", text, static=True)
 
-    return save_rrd(path, "scale_lab", log)
+    return save_rrd(path, "scale_lab", log, claim)

@@ -1,7 +1,7 @@
 """The data engine: grow a demo set of any task that implements datagen.task.Task, MimicGen-style.
 
 task       Task (what a task provides: env, start names, perturbation, place, expert, segments,
-           replay, success), Perturbation, Source, Segment, rollout
+           replay, success), Perturbation, Source, Segment, rollout, write_dataset (a stamped set)
 pusht      PUSHT: PushT as a task (the only module here that imports pusht_env and its expert)
 engine     one attempt, keep_first, grow, run_attempts, save: task-agnostic
 shards     a run on disk: fixed shards, resume, the generation report, the merge (lerobot_v3)
@@ -24,7 +24,7 @@ from datagen.engine import (
     sources,
 )
 from datagen.pusht import PUSHT
-from datagen.task import Perturbation, Segment, Source, Task, rollout
+from datagen.task import Perturbation, Segment, Source, Task, rollout, write_dataset
 
 TASKS = {PUSHT.name: PUSHT}
 
@@ -47,4 +47,5 @@ __all__ = [
     "run_attempts",
     "save",
     "sources",
+    "write_dataset",
 ]

@@ -181,10 +181,11 @@ def grow(
 
 def save(task: Task, root, kept: list[dict], *, repo_id: str, stamp: dict) -> None:
     """Write kept episodes (with their provenance) to `root` as one LeRobot v3 set of `task` under our
-    stamp; what was at `root` must be ours (ch37.stamps.replace_own_dir), and nothing is written
+    stamp; what was at `root` must be ours (ch37.ownership.replace_own_dir), and nothing is written
     when nothing was kept."""
-    from ch37.stamps import MADE_BY, replace_own_dir
-    from lerobot_v3 import features, write_dataset
+    from ch37.ownership import MADE_BY, replace_own_dir
+    from datagen.task import write_dataset
+    from lerobot_v3 import features
 
     replace_own_dir(root)
     if kept:

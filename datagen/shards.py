@@ -9,7 +9,7 @@ datagen.engine.save) and returns its files as bytes; the caller saves them, so a
 machine needs no shared disk. Layout of a run's folder:
 
     OUT/scale_data_stamp.json          the run's stamp: made_by, kind "engine", its settings, complete
-    OUT/.scale_data.lock               held while a run writes OUT (ch37.files.lock)
+    OUT/.scale_data.lock               held while a run writes OUT (ch37.ownership.lock)
     OUT/shards/shard-00007/            a finished shard: a LeRobot v3 set and its stamp (counts)
     OUT/shards/.shard-00007.partial/   a shard being saved; discarded by the next run
     OUT/shards/.shard-00007.scratch/   a worker's scratch for a shard (local executors)
@@ -51,23 +51,29 @@ from pathlib import Path
 import numpy as np
 
 from ch37 import DATA_CODE, code_digest
-from ch37.cli import available_memory
 from ch37.errors import DataError
-from ch37.files import LEFTOVER, check_out_path, dump_json, lock, round_floats, unlock, write_atomic
-from ch37.seeds import SEED_BLOCK
-from ch37.stamps import (
+from ch37.ownership import (
+    LEFTOVER,
     LOCK_NAME,
     MADE_BY,
     STAMP_NAME,
     changed_files,
     check_ours,
+    check_out_path,
     digests,
+    dump_json,
     file_list,
     is_ours,
+    lock,
     names,
     read_json,
     read_stamp,
+    round_floats,
+    unlock,
+    write_atomic,
 )
+from ch37.process import available_memory
+from ch37.seeds import SEED_BLOCK
 from datagen import TASKS, engine, executors
 from datagen.task import Perturbation, Task
 from lerobot_v3.dataset import check_hf_cache, fps_problem, frames_problem, load_arrays, schema_problem

@@ -37,12 +37,14 @@ same parts (place, expert, success) over a batch.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from lerobot_v3 import IMAGE_KEY, IMAGE_SIZE
+from ch37.ownership import publish_dir
+from lerobot_v3 import IMAGE_KEY, IMAGE_SIZE, write_set
 
-__all__ = ["Perturbation", "Segment", "Source", "Task", "rollout"]
+__all__ = ["Perturbation", "Segment", "Source", "Task", "rollout", "write_dataset"]
 
 
 @dataclass(frozen=True)
@@ -70,6 +72,16 @@ class Segment:
     start: int
     stop: int
     pose: tuple[float, float, float]
+
+
+def write_dataset(
+    out: Path, *, repo_id: str, fps: int, robot_type: str, task: str, feats: dict, episodes, stamp: dict
+) -> None:
+    """Write `episodes` as a LeRobot v3 set (lerobot_v3.write_set) to the new folder `out`, whole or not
+    at all, under our stamp listing every file with its sha256 (ch37.ownership.publish_dir)."""
+    how = dict(repo_id=repo_id, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes)
+    with publish_dir(out, stamp) as tmp:
+        write_set(tmp, **how)
 
 
 def rollout(env, policy, obs, *, render: bool = False) -> dict:

@@ -22,7 +22,7 @@ from lerobot_v3.dataset import (
     load_arrays,
     open_dataset,
     schema_problem,
-    write_dataset,
+    write_set,
 )
 from lerobot_v3.merge import merge_sets
 
@@ -39,5 +39,5 @@ __all__ = [
     "merge_sets",
     "open_dataset",
     "schema_problem",
-    "write_dataset",
+    "write_set",
 ]

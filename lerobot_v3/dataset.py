@@ -1,7 +1,7 @@
 """LeRobot v3 read and write for the chapter's demo sets: features, write_dataset, load_arrays.
 
-Everything here is a pure function of its arguments: no clock, no global RNG. A set is written
-whole into a sibling temp folder and renamed into place, with the stamp (ch37.stamps) beside it.
+Everything here is a pure function of its arguments: no clock, no global RNG. The format only:
+where a set is published and who owns it is the caller's (datagen.write_dataset, ch37.ownership).
 """
 
 from __future__ import annotations
@@ -11,14 +11,12 @@ import functools
 import json
 import logging
 import math
-import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from ch37.errors import DataError
-from ch37.files import dump_json, partial_dir, sweep_leftovers, temp_path
-from ch37.stamps import STAMP_NAME, digests, holds_data
 
 # torchcodec needs system FFmpeg libraries and prints long tracebacks when they are missing;
 # pyav ships its own FFmpeg, so every dataset here is read and written through pyav.
@@ -47,9 +45,8 @@ def check_hf_cache() -> None:
 def _probe_cache(cache: Path) -> None:  # once per folder and process: every read and write calls it
     try:
         cache.mkdir(parents=True, exist_ok=True)
-        probe = temp_path(cache / "probe")
-        probe.write_bytes(b"")
-        probe.unlink()
+        with tempfile.NamedTemporaryFile(dir=cache, prefix=".probe-"):
+            pass
     except OSError as e:
         raise DataError(
             f"the Hugging Face cache {cache} cannot be written ({e.strerror}); set HF_HOME to a folder "
@@ -134,10 +131,12 @@ def _fast_fingerprints():
         arrow_dataset.generate_fingerprint = saved
 
 
-def write_dataset(
-    out: Path, *, repo_id: str, fps: int, robot_type: str, task: str, feats: dict, episodes, stamp: dict
+def write_set(
+    root: Path, *, repo_id: str, fps: int, robot_type: str, task: str, feats: dict, episodes
 ) -> None:
-    """Write `episodes` (an iterable of dicts of per-frame arrays keyed like `feats`) to `out`.
+    """Write `episodes` (an iterable of dicts of per-frame arrays keyed like `feats`) as a LeRobot v3
+    set in the new folder `root` (it must not exist). Whole-or-absent publication, stamps and the
+    folder's ownership are the caller's (datagen.write_dataset builds it beside its target).
 
     ENV_STATE_KEY, when `feats` has it and an episode does not, is taken from the episode's
     observation.state columns of the same names (see features).
@@ -148,53 +147,28 @@ def write_dataset(
     equal frame by frame (tests/test_writer.py), without its per-frame and per-episode costs.
     A set with a video (or any other) feature goes through LeRobot's own path (_write_lerobot):
     encoding mp4 is LeRobot's job.
-
-    The set is built in a sibling temp directory (ch37.files.partial_dir) and renamed into place, so
-    an interrupted run never leaves a half-written set at `out`; what a killed run left for `out` is
-    removed here, and nothing else beside it. `out` must not
-    hold data. The stamp lists every file of the set with its sha256 (ch37.stamps).
     """
-    out = Path(out)
-    if holds_data(out):
-        raise DataError(f"{out} already holds data; pick another --out or remove it yourself")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    sweep_leftovers(out.parent, out.name)  # a killed run's partial `out` only: the parent is not ours
+    root = Path(root)
     episodes = _with_env_state(episodes, feats)
-    work = partial_dir(out)  # .NAME.ch37-partial-PID, our stamp inside; the set is written in work/set
-    tmp = work / "set"
-    try:
-        if all(f["dtype"] in _DIRECT_DTYPES and len(f["shape"]) == 1 for f in feats.values()):
-            _write_direct(tmp, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes)
-        else:
-            _write_lerobot(
-                tmp,
-                repo_id=repo_id,
-                fps=fps,
-                robot_type=robot_type,
-                task=task,
-                feats=feats,
-                episodes=episodes,
-            )
-        stats = (
-            tmp / "meta" / "stats.json"
-        )  # lerobot orders its keys by string hash; sorted, equal sets are equal bytes
-        if stats.exists():
-            stats.write_text(
-                json.dumps(json.loads(stats.read_text()), indent=4, sort_keys=True, ensure_ascii=False)
-            )
-        (tmp / STAMP_NAME).write_text(dump_json(dict(stamp, files=digests(tmp))))
-        try:
-            if out.exists():
-                out.rmdir()  # empty directory (holds_data checked above)
-            tmp.rename(out)
-        except OSError as e:  # ENOTEMPTY/EEXIST: another process wrote `out` meanwhile
-            if not holds_data(out):
-                raise
-            raise DataError(
-                f"{out} was written by another run at the same time; run the same command again"
-            ) from e
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
+    if all(f["dtype"] in _DIRECT_DTYPES and len(f["shape"]) == 1 for f in feats.values()):
+        _write_direct(root, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes)
+    else:
+        _write_lerobot(
+            root,
+            repo_id=repo_id,
+            fps=fps,
+            robot_type=robot_type,
+            task=task,
+            feats=feats,
+            episodes=episodes,
+        )
+    stats = (
+        root / "meta" / "stats.json"
+    )  # lerobot orders its keys by string hash; sorted, equal sets are equal bytes
+    if stats.exists():
+        stats.write_text(
+            json.dumps(json.loads(stats.read_text()), indent=4, sort_keys=True, ensure_ascii=False)
+        )
 
 
 # Feature dtypes _write_direct writes as plain Arrow columns (a scalar for shape (1,), else a

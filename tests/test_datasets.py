@@ -11,7 +11,7 @@ import pytest
 import gen_demos_aloha
 import gen_demos_pusht
 from ch37 import seeds
-from datagen import rollout
+from datagen import rollout, write_dataset
 from lerobot_v3 import dataset as lerobot_io
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -142,7 +142,7 @@ def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
         rollout(env, emb.expert_class(noise=0.0), env.reset(seeds.env_seed(0, "demo", i))) for i in range(2)
     ]
     old = tmp_path / "old"
-    lerobot_io.write_dataset(
+    write_dataset(
         old,
         repo_id="local/old",
         fps=m.FPS,

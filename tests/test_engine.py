@@ -19,7 +19,7 @@ from conftest import ROOT, run_script, with_fps, with_nan
 import gen_demos_aloha
 import gen_demos_pusht
 import pusht_env
-from ch37.stamps import LOCK_NAME, MADE_BY, STAMP_NAME
+from ch37.ownership import LOCK_NAME, MADE_BY, STAMP_NAME
 from datagen import PUSHT, Perturbation, engine, pusht, shards
 from lerobot_v3.dataset import load_arrays, open_dataset
 

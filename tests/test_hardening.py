@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from conftest import with_fps, with_nan
 
-from ch37 import files, result_cache, stamps
+from ch37 import ownership, result_cache
 
 ROOT = Path(__file__).resolve().parent.parent
 SD = ("scale_data.py", "--smoke", "--seed", "0", "--no-rerun")  # + --out, + --no-cache where it matters
@@ -76,7 +76,7 @@ def user_set(ref, tmp, name="mine", which="pusht", stamped=False) -> Path:
     dst = tmp / name
     shutil.copytree(ref[which], dst)
     if not stamped:
-        (dst / stamps.STAMP_NAME).unlink()
+        (dst / ownership.STAMP_NAME).unlink()
     return dst
 
 
@@ -100,8 +100,8 @@ def _stale_own_set_with_notes(tmp, ref):
     out = tmp / "o"
     dst = out / "demos" / "pusht_seed0_ep4"
     shutil.copytree(ref["pusht"], dst)
-    stamp = json.loads((dst / stamps.STAMP_NAME).read_text())
-    (dst / stamps.STAMP_NAME).write_text(json.dumps(dict(stamp, episodes=2)))
+    stamp = json.loads((dst / ownership.STAMP_NAME).read_text())
+    (dst / ownership.STAMP_NAME).write_text(json.dumps(dict(stamp, episodes=2)))
     (dst / "my_annotations.txt").write_text("hours of labelling\n")
     return [*SD, "--no-cache", "--out", out], [dst / "my_annotations.txt"], None
 
@@ -131,8 +131,8 @@ def _user_set_edited(edit):  # issue 22 item 11 and the fps question: a user set
 
 def _unfinished_engine_run(tmp, ref):
     mine = user_set(ref, tmp)
-    stamp = {"made_by": stamps.MADE_BY, "kind": "engine", "config": {}, "complete": False}
-    (mine / stamps.STAMP_NAME).write_text(json.dumps(stamp))
+    stamp = {"made_by": ownership.MADE_BY, "kind": "engine", "config": {}, "complete": False}
+    (mine / ownership.STAMP_NAME).write_text(json.dumps(stamp))
     return [*SD, "--no-cache", "--out", tmp / "o", "--pusht_data", mine], [mine], None
 
 
@@ -428,7 +428,7 @@ def test_bad_input_is_one_line_and_nothing_is_touched(ref, tmp_path, make, code,
     assert snapshot(protect) == before  # the user's files, byte for byte
     # a refused run wrote nothing: at most the folder it claimed, with its lock and empty stamp
     new = {x for x in set(tmp_path.rglob("*")) - listing if not x.is_dir()}
-    assert {x.name for x in new} <= {stamps.LOCK_NAME, stamps.STAMP_NAME}, sorted(map(str, new))
+    assert {x.name for x in new} <= {ownership.LOCK_NAME, ownership.STAMP_NAME}, sorted(map(str, new))
 
 
 def test_the_table_is_big_enough():
@@ -515,12 +515,12 @@ def test_cache_stores_only_what_this_run_wrote(tmp_path, monkeypatch):
     """A stray scale_data.rrd in --out (another seed's) never enters the cache."""
     monkeypatch.setenv("CH37_CACHE_DIR", str(tmp_path / "cache"))
     out = tmp_path / "out"
-    claim = files.claim(out, results=result_cache.RESULT_FILES)
+    claim = ownership.claim(out, results=result_cache.RESULT_FILES)
     try:
-        files.write_atomic(out / "metrics.json", "{}\n")
+        ownership.write_atomic(out / "metrics.json", "{}\n", claim)
         (out / "scale_data.rrd").write_bytes(b"another seed's recording")
         cache = result_cache.ResultCache.__new__(result_cache.ResultCache)
-        cache.enabled, cache.out, cache.key = True, out, "k" * 24
+        cache.enabled, cache.out, cache.key, cache.claim = True, out, "k" * 24, claim
         cache.store([out / "metrics.json", out / "scale_data.rrd"], "summary\n")
         assert not (tmp_path / "cache" / cache.key).exists()
         cache.store([out / "metrics.json"], "summary\n")
@@ -547,7 +547,7 @@ def test_an_engine_output_is_a_pusht_set_like_any_other(ref, tmp_path):
         "--quiet",
     )
     assert p.returncode == 0, p.stdout + p.stderr
-    assert json.loads((eng / stamps.STAMP_NAME).read_text())["kind"] == "engine"
+    assert json.loads((eng / ownership.STAMP_NAME).read_text())["kind"] == "engine"
     before = snapshot([eng])
     p = run(*SD, "--no-cache", "--out", tmp_path / "o", "--pusht_data", eng)
     assert p.returncode == 0 and p.stderr.strip() == "", p.stdout[-2000:] + p.stderr
@@ -596,17 +596,17 @@ def test_one_commands_results_are_never_cleared_by_another(tmp_path, theirs, com
     """Issue 22 #2: results of another command in --out (ours, so not a user's file) stop the run with
     one line naming them; nothing is deleted."""
     out = tmp_path / "out"
-    c = files.claim(out, results=theirs)  # as that command's run leaves them: written under its claim
+    c = ownership.claim(out, results=theirs)  # as that command's run leaves them: written under its claim
     for name in theirs:
-        files.write_atomic(out / name, f"{name} of a finished run\n")
+        ownership.write_atomic(out / name, f"{name} of a finished run\n", c)
     c.release()
     before = snapshot([out])
     p = run(*command, "--out", out, env=env_for(tmp_path / "cache"))
     err = p.stderr.strip().splitlines()
     assert p.returncode == 2 and len(err) == 1 and "Traceback" not in p.stderr, p.stderr
     assert "another command's results" in err[0] and theirs[0] in err[0]
-    assert {k: v for k, v in snapshot([out]).items() if not k.endswith(stamps.LOCK_NAME)} == {
-        k: v for k, v in before.items() if not k.endswith(stamps.LOCK_NAME)
+    assert {k: v for k, v in snapshot([out]).items() if not k.endswith(ownership.LOCK_NAME)} == {
+        k: v for k, v in before.items() if not k.endswith(ownership.LOCK_NAME)
     }
 
 
@@ -614,23 +614,23 @@ def test_claimed_out_refuses_a_foreign_file_and_clears_only_its_own(tmp_path):
     from ch37.errors import DataError
 
     out = tmp_path / "out"
-    claim = files.claim(out, results=("metrics.json", "b.json"))
-    files.write_atomic(out / "metrics.json", "1\n")
+    claim = ownership.claim(out, results=("metrics.json", "b.json"))
+    ownership.write_atomic(out / "metrics.json", "1\n", claim)
     (out / "b.json").write_text("user's\n")
     with pytest.raises(DataError, match="b.json was not written by this program"):
-        files.write_atomic(out / "b.json", "2\n")
+        ownership.write_atomic(out / "b.json", "2\n", claim)
     assert (out / "b.json").read_text() == "user's\n"
     claim.release()
     (out / "metrics.json").write_text("edited by the user\n")  # ours once, changed since: theirs now
     with pytest.raises(DataError, match="metrics.json was not written by this program"):
-        files.claim(out, results=("metrics.json",))
+        ownership.claim(out, results=("metrics.json",))
     (out / "metrics.json").unlink()
     (out / "b.json").unlink()
-    claim = files.claim(out, results=("metrics.json",))
-    files.write_atomic(out / "metrics.json", "3\n")
+    claim = ownership.claim(out, results=("metrics.json",))
+    ownership.write_atomic(out / "metrics.json", "3\n", claim)
     (out / "notes.txt").write_text("kept\n")
     claim.release()
-    claim = files.claim(out, results=("metrics.json",))  # the next run clears its own old result only
+    claim = ownership.claim(out, results=("metrics.json",))  # the next run clears its own old result only
     assert not (out / "metrics.json").exists() and (out / "notes.txt").read_text() == "kept\n"
     claim.release()
 
@@ -639,13 +639,13 @@ def test_replace_own_dir_deletes_only_listed_files(ref, tmp_path):
     from ch37.errors import DataError
 
     mine = user_set(ref, tmp_path, stamped=True)
-    stamps.replace_own_dir(mine)
+    ownership.replace_own_dir(mine)
     assert not mine.exists()
     mine = user_set(ref, tmp_path, name="m2", stamped=True)
     (mine / "data" / "extra.txt").write_text("x")
     with pytest.raises(DataError, match=r"did not write \(data/extra.txt\)"):
-        stamps.replace_own_dir(mine)
-    assert (mine / "data" / "extra.txt").read_text() == "x" and (mine / stamps.STAMP_NAME).exists()
+        ownership.replace_own_dir(mine)
+    assert (mine / "data" / "extra.txt").read_text() == "x" and (mine / ownership.STAMP_NAME).exists()
 
 
 def test_leftovers_of_dead_processes_are_swept_and_live_ones_kept(tmp_path):
@@ -653,9 +653,9 @@ def test_leftovers_of_dead_processes_are_swept_and_live_ones_kept(tmp_path):
         [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True
     )
     gone, alive = int(dead.stdout), os.getppid()
-    (tmp_path / f".set.ch37-partial-{gone}").mkdir()  # ours: our stamp inside (files.partial_dir)
-    ours = json.dumps({"made_by": stamps.MADE_BY, "kind": "partial"})
-    (tmp_path / f".set.ch37-partial-{gone}" / stamps.STAMP_NAME).write_text(ours)
+    (tmp_path / f".set.ch37-partial-{gone}").mkdir()  # ours: our stamp inside (ownership.partial_dir)
+    ours = json.dumps({"made_by": ownership.MADE_BY, "kind": "partial"})
+    (tmp_path / f".set.ch37-partial-{gone}" / ownership.STAMP_NAME).write_text(ours)
     (tmp_path / f".set.ch37-partial-{gone}" / "x").write_text("half")
     (tmp_path / f".empty.ch37-partial-{gone}").mkdir()  # cut off before its stamp: nothing to lose
     (tmp_path / f".metrics.json.ch37-tmp-{gone}").write_text("half")
@@ -664,10 +664,10 @@ def test_leftovers_of_dead_processes_are_swept_and_live_ones_kept(tmp_path):
     for name in users:  # a user's, whatever the name looks like: no file or folder of ours says so
         (tmp_path / name).write_text("user's") if "partial" not in name else (tmp_path / name).mkdir()
     (tmp_path / f".project.partial-{gone}").mkdir()
-    (tmp_path / f".project.partial-{gone}" / stamps.STAMP_NAME).write_text('{"made_by": "me"}')
+    (tmp_path / f".project.partial-{gone}" / ownership.STAMP_NAME).write_text('{"made_by": "me"}')
     (tmp_path / f".mine.ch37-partial-{gone}" / "draft.txt").write_text("user's")
     kept = sorted([*users, f".metrics.json.ch37-tmp-{alive}", f".project.partial-{gone}"])
-    assert sorted(files.sweep_leftovers(tmp_path)) == sorted(
+    assert sorted(ownership.sweep_leftovers(tmp_path)) == sorted(
         [f".empty.ch37-partial-{gone}", f".metrics.json.ch37-tmp-{gone}", f".set.ch37-partial-{gone}"]
     )
     assert sorted(p.name for p in tmp_path.iterdir()) == kept
@@ -815,7 +815,7 @@ def test_kill_term_and_ctrl_c_leave_nothing_behind_and_the_same_command_continue
     p = subprocess.run(cmd, cwd=ROOT, env=env_for(), capture_output=True, text=True, timeout=300)
     assert p.returncode == 0 and p.stderr.strip() == "", p.stdout + p.stderr
     assert (out / "metrics.json").read_bytes() == ref["metrics"]
-    assert not [x for x in out.rglob(".*") if x.name != stamps.LOCK_NAME]  # no temp file, no partial set
+    assert not [x for x in out.rglob(".*") if x.name != ownership.LOCK_NAME]  # no temp file, no partial set
 
 
 @pytest.fixture

@@ -13,7 +13,7 @@ import pytest
 import torch
 
 import gen_demos_pusht
-from ch37.stamps import read_json
+from ch37.ownership import read_json
 from datagen import engine, shards
 from lerobot_v3 import frame_stats, merge
 from lerobot_v3.dataset import load_arrays, open_dataset

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import run_script
 
-from ch37 import stamps
+from ch37 import ownership
 from ch37.seeds import env_seed
 from lerobot_v3 import dataset as lerobot_io
 
@@ -179,7 +179,7 @@ def test_user_dataset_is_used_as_given_and_never_touched(runs, tmp_path):
     (src,) = (runs["a"][0] / "demos").glob("pusht_seed0_*")
     mine = tmp_path / "my_pusht"
     shutil.copytree(src, mine)
-    (mine / stamps.STAMP_NAME).unlink()  # the user's own set: no stamp of ours
+    (mine / ownership.STAMP_NAME).unlink()  # the user's own set: no stamp of ours
     before = tree_digest(mine)
     p = smoke(tmp_path / "o", "--pusht_data", mine)
     assert "used as given" in p.stdout
@@ -190,7 +190,7 @@ def test_mismatching_user_dataset_is_refused_untouched(runs, tmp_path):
     (aloha,) = (runs["a"][0] / "demos").glob("aloha_seed0_*")
     mine = tmp_path / "wrong"
     shutil.copytree(aloha, mine)
-    (mine / stamps.STAMP_NAME).unlink()
+    (mine / ownership.STAMP_NAME).unlink()
     before = tree_digest(mine)
     p = smoke(tmp_path / "o", "--pusht_data", mine, check=False)
     assert p.returncode == 2 and "action" in p.stderr and len(p.stderr.strip().splitlines()) == 1
@@ -219,12 +219,12 @@ def test_foreign_directory_at_cache_path_is_refused_untouched(tmp_path):
 def test_stale_set_we_made_is_rebuilt(runs, tmp_path):
     shutil.copytree(runs["a"][0] / "demos", tmp_path / "demos")
     (root,) = (tmp_path / "demos").glob("pusht_seed0_*")
-    stamp = json.loads((root / stamps.STAMP_NAME).read_text())
+    stamp = json.loads((root / ownership.STAMP_NAME).read_text())
     stamp["generator_version"] = -1
-    (root / stamps.STAMP_NAME).write_text(json.dumps(stamp))
+    (root / ownership.STAMP_NAME).write_text(json.dumps(stamp))
     p = smoke(tmp_path)
     assert "generated" in p.stdout
-    assert json.loads((root / stamps.STAMP_NAME).read_text())["generator_version"] != -1
+    assert json.loads((root / ownership.STAMP_NAME).read_text())["generator_version"] != -1
     assert (tmp_path / "metrics.json").read_bytes() == (runs["a"][0] / "metrics.json").read_bytes()
 
 

@@ -17,7 +17,7 @@ import pytest
 
 import gen_demos_aloha
 import gen_demos_pusht
-from datagen import PUSHT, engine
+from datagen import PUSHT, engine, write_dataset
 from datagen.pusht import START_NAMES
 from lerobot_v3 import dataset as lerobot_io
 
@@ -57,7 +57,7 @@ def aloha_case():
 
 
 def write_ours(root, feats, eps):
-    lerobot_io.write_dataset(
+    write_dataset(
         root, repo_id="local/ours", fps=10, robot_type="r", task=TASK, feats=feats, episodes=eps, stamp={}
     )
 

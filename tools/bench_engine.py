@@ -34,8 +34,7 @@ import gen_demos_pusht
 from ch37 import ROOT, errors
 from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
-from ch37.files import dump_json, round_floats, write_atomic
-from ch37.stamps import is_ours, read_stamp
+from ch37.ownership import dump_json, is_ours, read_stamp, round_floats, write_atomic
 from datagen import PUSHT, Perturbation, engine, shards
 from lerobot_v3.dataset import load_arrays
 from tools.common import parser, provenance

@@ -25,6 +25,7 @@ import gen_demos_pusht
 from ch37 import errors
 from ch37.config import parser
 from ch37.errors import DataError
+from datagen import write_dataset
 from lerobot_v3 import dataset as lerobot_io
 
 
@@ -56,7 +57,7 @@ def write_seconds(eps: list[dict], root: Path) -> float:
     m = gen_demos_pusht.PUSHT.env_module
     feats = lerobot_io.features(m.STATE_NAMES, m.ACTION_NAMES, env_state_names=m.ENV_STATE_NAMES)
     t = time.perf_counter()
-    lerobot_io.write_dataset(
+    write_dataset(
         root,
         repo_id="local/bench",
         fps=m.FPS,

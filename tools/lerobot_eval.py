@@ -26,7 +26,7 @@ from bc_recipe import wilson  # the lesson's 95% interval
 from ch37.config import parser
 from ch37.errors import DataError
 from ch37.errors import main as run
-from ch37.files import dump_json, round_floats, write_atomic
+from ch37.ownership import dump_json, round_floats, write_atomic
 from ch37.seeds import MAX_SEED, SEED_BLOCK
 
 KIND = "lerobot_eval"  # marks the JSON as this tool's, so a re-run may replace it and nothing else

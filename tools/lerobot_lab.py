@@ -38,7 +38,7 @@ from ch37 import ROOT
 from ch37.config import DEFAULTS, check, parser
 from ch37.errors import DataError
 from ch37.errors import main as run
-from ch37.files import dump_json, round_floats, write_atomic
+from ch37.ownership import dump_json, round_floats, write_atomic
 
 SOURCES = DEFAULTS["source_episodes"]  # 12
 N = 108  # the lab's point where the MLP's exchange rate is 0.65

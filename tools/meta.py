@@ -22,7 +22,7 @@ import yaml
 
 from ch37 import CHAPTER_ID, ROOT, errors
 from ch37.errors import DataError
-from ch37.files import write_atomic
+from ch37.ownership import write_atomic
 from exercises.rules import RULES, derive_checks
 from tools.common import META, drifted, parser, region_hashes, rel
 

@@ -16,7 +16,7 @@ import re
 from pathlib import Path
 
 from ch37 import errors
-from ch37.files import write_atomic
+from ch37.ownership import write_atomic
 from tools.common import NOTEBOOK, SCRIPT, module_docstring, parse_regions, parser, rel, supports_flag
 
 INSTALL_CELL = """\
@@ -101,7 +101,7 @@ def build_notebook(script: Path = SCRIPT) -> str:
     meta = {"colab": {"provenance": [], "toc_visible": True}, "kernelspec": kernel}
     meta["language_info"] = {"name": "python"}
     nb = {"cells": cells, "metadata": meta, "nbformat": 4, "nbformat_minor": 5}
-    # not ch37.files.dump_json: a notebook keeps its text UTF-8 as is, as nbformat writes it
+    # not ch37.ownership.dump_json: a notebook keeps its text UTF-8 as is, as nbformat writes it
     return json.dumps(nb, indent=1, sort_keys=True, ensure_ascii=False) + "\n"
 
 

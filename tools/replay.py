@@ -35,7 +35,7 @@ from ch37 import ROOT, errors
 from ch37.config import DEFAULTS, SMOKE, check
 from ch37.demos import ensure_demos
 from ch37.errors import DataError
-from ch37.files import dump_json, round_floats, write_atomic
+from ch37.ownership import dump_json, round_floats, write_atomic
 from ch37.seeds import env_seed
 from ch37.viz import save_png
 from gen_demos_pusht import PUSHT

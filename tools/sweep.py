@@ -24,7 +24,7 @@ from pathlib import Path
 from ch37 import ROOT, errors
 from ch37.config import check
 from ch37.errors import DataError
-from ch37.files import write_atomic
+from ch37.ownership import write_atomic
 from exercises.rules import ARMS, EFFECTS, PLATEAU_TOL, ex3_answer
 from tools.common import parser, provenance, rel
 
@@ -189,7 +189,7 @@ def sweep(a, flags: list[str], argv: list[str]) -> Path:
     else:
         result |= {"seed": 0, "full_steps": rows[-1]["steps"]["full"]}
     path = out_root / f"sweep_{kind}.json"
-    # not ch37.files.dump_json: its sorted keys would reorder the rows that tools.meta copies into meta.yaml
+    # not ownership.dump_json: its sorted keys would reorder the rows that tools.meta copies into meta.yaml
     write_atomic(path, json.dumps(result, indent=1) + "\n")
     _print_summary(result, rows, kind)
     if smoke:

@@ -30,7 +30,7 @@ from pathlib import Path
 from ch37 import CHAPTER_ID, ROOT, errors
 from ch37.cli import TIERS, device_tier
 from ch37.errors import DataError
-from ch37.files import write_atomic
+from ch37.ownership import write_atomic
 from tools.common import WALLCLOCK, parser, rel, supports_flag
 
 WALLCLOCK_FIELDS = ("chapter", "tier", "minutes", "config_hash", "date", "status")

@@ -1,9 +1,16 @@
-"""Files: output folders claimed, locked and owned file by file; whole files or none.
+"""Ownership: output folders claimed, locked and owned file by file; whole files or none.
 
-write_atomic is the one way this project writes a file and dump_json its one JSON writer (stable:
-sorted keys, one-space indent, a final newline). A run takes its --out with claim() before any work
-(see there); from then on write_atomic into the folder refuses to overwrite a file the program did
-not write and records each file it writes, with its sha256, in the folder's stamp (ch37.stamps).
+The project's one ownership model. A stamp (STAMP_NAME, written with dump_json) says who made a
+folder and lists every file it wrote there with its sha256 ("files"); the program deletes or
+overwrites only files its stamp lists, and a folder without our stamp, or holding files the stamp
+does not list (a user's notes beside a demo set), is refused with one line and left as it was.
+
+write_atomic is the one way this project writes a file, dump_json its one JSON writer (stable:
+sorted keys, one-space indent, a final newline) and read_json its one JSON reader. A run takes its
+--out with claim() before any work and passes the Claim it gets to every write into that folder
+(write_atomic(path, data, claim=c)): the write then refuses to overwrite a file the program did not
+write and records the file, with its sha256, in the folder's stamp. publish_dir builds a folder
+beside its target (our stamp inside from its first moment) and renames it into place whole.
 """
 
 from __future__ import annotations
@@ -18,17 +25,6 @@ import shutil
 from pathlib import Path
 
 from ch37.errors import DataError
-from ch37.stamps import (
-    LOCK_NAME,
-    MADE_BY,
-    STAMP_NAME,
-    check_ours,
-    check_replaceable,
-    is_ours,
-    names,
-    read_stamp,
-    sha256_file,
-)
 
 try:
     import fcntl
@@ -40,8 +36,114 @@ except ImportError:  # Windows: no advisory locks here; runs on one folder must 
 # "ch37-" token is ours: a user's .NAME.tmp-N or .NAME.old-N never matches.
 TOKEN = "ch37"
 LEFTOVER = re.compile(rf"^\.(.+)\.{TOKEN}-(tmp|partial)-(\d+)$")
-_CLAIMED: dict[Path, Claim] = {}  # folder (resolved) -> this process's claim on it (write_atomic's check)
 _HELD: dict[Path, int] = {}  # folder (resolved) -> the descriptor of its lock file, held by this process
+
+
+STAMP_NAME = "scale_data_stamp.json"  # written by this project into every folder it fills
+MADE_BY = "ch3.7-scale-data"  # the stamp's "made_by": only files under such a stamp may ever be deleted
+LOCK_NAME = ".scale_data.lock"  # ch37.ownership.lock's file: the pid of the run writing the folder
+
+
+def sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def read_json(path: Path):
+    """The JSON value in `path`, or None when it is missing or not JSON."""
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+
+
+def holds_data(path: Path) -> bool:
+    """Whether `path` is a file or a folder holding anything besides our lock file."""
+    path = Path(path)
+    return path.exists() and (not path.is_dir() or any(p.name != LOCK_NAME for p in path.iterdir()))
+
+
+def read_stamp(root: Path) -> dict | None:
+    stamp = read_json(Path(root) / STAMP_NAME)
+    return stamp if isinstance(stamp, dict) else None
+
+
+def is_ours(stamp: dict | None) -> bool:
+    return stamp is not None and stamp.get("made_by") == MADE_BY
+
+
+def file_list(root: Path) -> list[str]:
+    """Every file under `root` (relative, sorted), without our stamp and lock."""
+    found = ((Path(d) / n).relative_to(root).as_posix() for d, _, names in os.walk(root) for n in names)
+    return sorted(rel for rel in found if rel not in (STAMP_NAME, LOCK_NAME))
+
+
+def digests(root: Path) -> dict[str, str]:
+    """{relative path: sha256} of every file under `root`: the "files" entry of a stamp."""
+    return {rel: sha256_file(Path(root) / rel) for rel in file_list(root)}
+
+
+def owned(stamp: dict | None) -> set[str]:
+    """The files (relative paths) our stamp says we wrote; none when the stamp is not ours."""
+    listed = stamp.get("files") if is_ours(stamp) else None
+    return set(listed) if isinstance(listed, dict) else set()
+
+
+def changed_files(root: Path, stamp: dict) -> list[str]:
+    """Files our stamp lists that are missing or whose bytes differ from what was written."""
+    bad = []
+    for rel, digest in sorted((stamp.get("files") or {}).items()):
+        p = Path(root) / rel
+        try:
+            if sha256_file(p) != digest:
+                bad.append(rel)
+        except OSError:
+            bad.append(rel)
+    return bad
+
+
+def names(files: list[str], n: int = 3) -> str:
+    return ", ".join(files[:n]) + (f" and {len(files) - n} more" if len(files) > n else "")
+
+
+def check_ours(path: Path, kind: str | None = None) -> dict | None:
+    """None if `path` is absent or empty, else its stamp; DataError unless it is a folder under our
+    stamp (of `kind`, when given)."""
+    path = Path(path)
+    if not holds_data(path):
+        return None
+    stamp = read_stamp(path) if path.is_dir() else None
+    if not is_ours(stamp) or kind not in (None, stamp.get("kind")):
+        raise DataError(f"{path} holds data this program did not make; move it or pass another --out")
+    return stamp
+
+
+def check_replaceable(path: Path) -> None:
+    """DataError unless `path` is absent, empty, or holds only files our stamp lists."""
+    stamp = check_ours(path)
+    mine = owned(stamp)  # the files not among them are a user's
+    if stamp and (foreign := [rel for rel in file_list(path) if rel not in mine]):
+        raise DataError(
+            f"{path} must be rebuilt but holds files this program did not write ({names(foreign)}); "
+            "move them elsewhere and run the same command again (nothing was changed)"
+        )
+
+
+def replace_own_dir(path: Path) -> None:
+    """Clear `path` for rewriting if every file in it is one this program wrote; refuse otherwise."""
+    path = Path(path)
+    check_replaceable(path)
+    if not holds_data(path):
+        return
+    for rel in sorted(owned(read_stamp(path)), reverse=True):
+        (path / rel).unlink(missing_ok=True)
+    (path / STAMP_NAME).unlink()  # last: a half-cleared folder still says whose files it held
+    for dirpath, _, _ in sorted(os.walk(path), key=lambda t: -len(t[0])):  # deepest first
+        with contextlib.suppress(OSError):  # only folders left empty; a folder with anything in it stays
+            os.rmdir(dirpath)
 
 
 def sha256_bytes(data: bytes) -> str:
@@ -63,11 +165,12 @@ def round_floats(obj, digits: int = 4):
     return obj
 
 
-def place(tmp: Path, path: Path) -> Path:
-    """Rename the finished file `tmp` onto `path` (same folder); in a claimed folder, only over a file
-    of ours, and recorded in its stamp. `tmp` is removed if anything goes wrong."""
+def place(tmp: Path, path: Path, claim: Claim | None = None) -> Path:
+    """Rename the finished file `tmp` onto `path` (same folder); when `path` lies directly in the folder
+    of `claim`, only over a file of ours, and recorded in its stamp. `tmp` is removed if anything
+    goes wrong."""
     path = Path(path)
-    owner = _CLAIMED.get(path.parent.resolve())
+    owner = claim if claim is not None and claim.out.resolve() == path.parent.resolve() else None
     try:
         digest = sha256_file(tmp) if owner else None
         if owner:
@@ -100,9 +203,40 @@ def partial_dir(path: Path) -> Path:
     return tmp
 
 
-def write_atomic(path: Path, data: str | bytes) -> Path:
+@contextlib.contextmanager
+def publish_dir(out: Path, stamp: dict):
+    """Build the new folder `out` whole or not at all: yields a folder to fill (in a sibling partial
+    folder marked as ours, partial_dir), then writes our stamp into it, listing every file with its
+    sha256, and renames it onto `out`. `out` must not hold data; what a killed run left for `out` is
+    removed here, and nothing else beside it. An interrupted build never leaves a half folder."""
+    out = Path(out)
+    if holds_data(out):
+        raise DataError(f"{out} already holds data; pick another --out or remove it yourself")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    sweep_leftovers(out.parent, out.name)  # a killed run's partial `out` only: the parent is not ours
+    work = partial_dir(out)  # .NAME.ch37-partial-PID, our stamp inside; the folder is built in work/set
+    tmp = work / "set"
+    try:
+        yield tmp
+        (tmp / STAMP_NAME).write_text(dump_json(dict(stamp, files=digests(tmp))))
+        try:
+            if out.exists():
+                out.rmdir()  # empty directory (holds_data checked above)
+            tmp.rename(out)
+        except OSError as e:  # ENOTEMPTY/EEXIST: another process wrote `out` meanwhile
+            if not holds_data(out):
+                raise
+            raise DataError(
+                f"{out} was written by another run at the same time; run the same command again"
+            ) from e
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def write_atomic(path: Path, data: str | bytes, claim: Claim | None = None) -> Path:
     """Write `data` to `path` through a temp file in the same folder and a rename: a reader sees the
-    old file or the new one, never half of one. Creates the parent folder."""
+    old file or the new one, never half of one. Creates the parent folder. With the `claim` on the
+    folder (claim()), a file not ours is never overwritten and the write is recorded (place)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = temp_path(path)
@@ -111,7 +245,7 @@ def write_atomic(path: Path, data: str | bytes) -> Path:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
-    return place(tmp, path)
+    return place(tmp, path, claim)
 
 
 def pid_alive(pid: int) -> bool:
@@ -304,7 +438,6 @@ class Claim:
 
     def release(self) -> None:
         """Give the folder back (the lock too); the process ending does the same."""
-        _CLAIMED.pop(self.out.resolve(), None)
         unlock(self.out)
 
 
@@ -355,9 +488,4 @@ def claim(
     except BaseException:
         c.release()
         raise
-    _CLAIMED[out.resolve()] = c
     return c
-
-
-def claimed(out: Path) -> Claim | None:
-    return _CLAIMED.get(Path(out).resolve())
