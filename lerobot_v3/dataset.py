@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ch37.errors import DataError
+from lerobot_v3.chunks import ChunkRoller, rows_below, rows_within
 
 # torchcodec needs system FFmpeg libraries and prints long tracebacks when they are missing;
 # pyav ships its own FFmpeg, so every dataset here is read and written through pyav.
@@ -348,14 +349,13 @@ def _write_episodes_table(root: Path, table, limit: float, chunks_size: int) -> 
     to ~50,000 episodes of this chapter's width (~2 KB a row)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
-    from lerobot.datasets.utils import DEFAULT_EPISODES_PATH, update_chunk_file_indices
+    from lerobot.datasets.utils import DEFAULT_EPISODES_PATH
 
-    per_file = max(1, int(limit // (table.nbytes / table.num_rows)))
-    chunk = file = 0
+    per_file = rows_within(limit, table.nbytes / table.num_rows)
+    roller = ChunkRoller(per_file, chunks_size)
     for lo in range(0, table.num_rows, per_file):
-        if lo:
-            chunk, file = update_chunk_file_indices(chunk, file, chunks_size)
         part = table.slice(lo, per_file)
+        chunk, file = roller.place(part.num_rows)
         for name, value in (("meta/episodes/chunk_index", chunk), ("meta/episodes/file_index", file)):
             part = part.append_column(name, pa.array([value] * part.num_rows, pa.int64()))
         path = root / DEFAULT_EPISODES_PATH.format(chunk_index=chunk, file_index=file)
@@ -387,7 +387,6 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
         validate_frame,
     )
     from lerobot.datasets.io_utils import write_info, write_stats, write_tasks
-    from lerobot.datasets.utils import update_chunk_file_indices
     from lerobot.utils.constants import DEFAULT_FEATURES
     from lerobot.utils.utils import flatten_dict
 
@@ -402,7 +401,8 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     rows: dict[str, list] = {}  # the episodes table, column by column
     ep_stats = []
     parts = {k: [] for k in all_feats}  # the current data file's columns, episode by episode
-    chunk = file = frames = in_file = 0
+    roller = ChunkRoller(rows_below(limit, frame_bytes), info.chunks_size)  # LeRobot's rule for data files
+    chunk = file = frames = 0
     for e, ep in enumerate(episodes):
         n = len(ep["action"])
         if n == 0:
@@ -411,11 +411,10 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
         buf = _episode_columns(e, ep, feats, all_feats, fps=fps, first_frame=frames)
         stats = _episode_stats(buf, all_feats)
         ep_stats.append(stats)
-        if in_file and (in_file + n) * frame_bytes >= limit:
+        if (where := roller.place(n)) != (chunk, file):  # this episode starts the next file
             _write_data_file(tmp / info.data_path.format(chunk_index=chunk, file_index=file), schema, parts)
             parts = {k: [] for k in all_feats}
-            chunk, file = update_chunk_file_indices(chunk, file, info.chunks_size)
-            in_file = 0
+            chunk, file = where
         for k, x in buf.items():
             parts[k].append(x.astype(np.float32) if k == "timestamp" else x)
         row = {
@@ -430,7 +429,6 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
         for k, v in row.items():
             rows.setdefault(k, []).append(v)
         frames += n
-        in_file += n
     if not ep_stats:
         write_info(info, tmp)
         return

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lerobot_v3.chunks import ChunkRoller, rows_within
 from lerobot_v3.dataset import PARQUET
 from lerobot_v3.frame_stats import FrameStats, write_frame_stats
 
@@ -32,28 +33,22 @@ class _Files:
     A file holds at most `limit` rows, where limit = max_bytes / the Arrow size of a row (every row
     here has the same size: fixed-width columns and lists of fixed length), and a block placed with
     place() (an episode, or a block of episode rows) never straddles two files. After chunks_size
-    files the next chunk begins (LeRobot's update_chunk_file_indices). Rows go to disk in row groups
-    of group_rows rows (the last of a file shorter); LeRobot writes one per episode, which at 10^4
-    episodes means 10^4 writes and as many metadata entries to parse on every read. Files and row
-    groups are cut by row counts alone, so where they end never depends on the shards."""
+    files the next chunk begins (lerobot_v3.chunks.ChunkRoller, the writer's rule too). Rows go to
+    disk in row groups of group_rows rows (the last of a file shorter); LeRobot writes one per
+    episode, which at 10^4 episodes means 10^4 writes and as many metadata entries to parse on every
+    read. Files and row groups are cut by row counts alone, so where they end never depends on the
+    shards."""
 
     def __init__(self, root: Path, pattern: str, max_bytes: int, chunks_size: int, group_rows: int):
         self.root, self.pattern, self.max_bytes, self.chunks_size = root, pattern, max_bytes, chunks_size
         self.group_rows, self.buffer, self.buffered = group_rows, [], 0  # rows not yet written
-        self.chunk = self.file = self.placed = 0  # rows placed in the current file
-        self.limit = self.writer = self.open_at = None
+        self.roller = self.writer = self.open_at = None
 
     def place(self, rows: int, row_bytes: int) -> tuple[int, int]:
         """Where the next block of `rows` rows goes: (chunk, file), starting a new file if needed."""
-        if self.limit is None:
-            self.limit = max(1, self.max_bytes // max(1, row_bytes))
-        if self.placed and self.placed + rows > self.limit:
-            from lerobot.datasets.utils import update_chunk_file_indices
-
-            self.chunk, self.file = update_chunk_file_indices(self.chunk, self.file, self.chunks_size)
-            self.placed = 0
-        self.placed += rows
-        return self.chunk, self.file
+        if self.roller is None:  # every row here has the first row's size
+            self.roller = ChunkRoller(rows_within(self.max_bytes, row_bytes), self.chunks_size)
+        return self.roller.place(rows)
 
     def write(self, table, where: tuple[int, int]) -> None:
         """Append `table` (rows placed in order) to file `where`, the place() they were given."""
