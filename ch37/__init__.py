@@ -45,25 +45,17 @@ __all__ = [  # the face: the modules above, and the repository's root and code l
     "seeds",
     "viz",
     "CHAPTER_ID",
-    "CODE_FILES",
     "DATA_CODE",
     "ROOT",
     "code_digest",
 ]
 
-# Every file whose bytes can change a result, in one list (paths from ROOT). The first group
-# shapes the frames of a demo set: a set's stamp carries their digest, so a cached set never
-# outlives its code. The whole list keys the result cache.
+# The files that shape the frames of a demo set (paths from ROOT): a set's stamp carries their digest
+# (ch37.demos.generator_version), so a cached set never outlives its code; the engine adds its own
+# (datagen.shards.engine_version). The result cache needs no list: it records what a run imported.
 DATA_CODE = tuple(
     "pusht_env.py pusht.xml aloha_env.py aloha.xml scripted_expert.py ch37/demos.py datagen/task.py "
-    "lerobot_v3/dataset.py ch37/seeds.py".split()
-)
-CODE_FILES = DATA_CODE + tuple(
-    "scale_data.py bc_recipe.py gen_demos_pusht.py gen_demos_aloha.py ch37/cli.py ch37/files.py "
-    "ch37/parallel.py ch37/stamps.py ch37/viz.py ch37/poster.py ch37/ensemble.py datagen/engine.py "
-    "datagen/pusht.py "
-    "datagen/shards.py lerobot_v3/merge.py lerobot_v3/frame_stats.py datagen/executors.py "
-    "ch37/config.py".split()
+    "lerobot_v3/dataset.py lerobot_v3/chunks.py ch37/seeds.py".split()
 )
 
 

@@ -1,9 +1,12 @@
-"""The result cache: a finished run is reused when its flags, every file that shapes it, the
-package versions and the user's own data all match (ch37.CODE_FILES lists the files).
+"""The result cache: a finished run is reused when its flags, the package versions and the user's own
+data (the key), and every project file the run imported (recorded in the entry) all match.
 
-An entry holds exactly the files its run wrote into --out, its summary, and a manifest with the
-sha256 of each. A replay verifies every file before copying any; an entry that fails is discarded
-(one warning line) and the run computes the result again. The cache never breaks a run: a cache
+An entry holds exactly the files its run wrote into --out, its summary, the sha256 of every project
+file the run had loaded when it finished (code.json: each module under the repository, the model
+files an env names), and a manifest with the sha256 of each. An entry whose code differs from the
+files here now is stale: it is not replayed, and the run's own result replaces it. A replay verifies
+every file before copying any; an entry that fails is discarded (one warning line) and the run
+computes the result again. The cache never breaks a run: a cache
 folder that cannot be read or written is skipped with one warning line.
 """
 
@@ -19,7 +22,7 @@ import sys
 from importlib.metadata import version
 from pathlib import Path
 
-from ch37 import CODE_FILES, ROOT
+from ch37 import ROOT
 from ch37.config import NOT_IN_KEY, RESULT_FILES
 from ch37.errors import DataError
 from ch37.ownership import (
@@ -32,11 +35,12 @@ from ch37.ownership import (
     write_atomic,
 )
 
-MANIFEST, SUMMARY = "manifest.json", "summary.txt"
+MANIFEST, SUMMARY, CODE = "manifest.json", "summary.txt", "code.json"
+SKIP = (".venv", "tests", "outputs")  # under ROOT, never the code of a result
 # summary.txt keeps each written file as NUL + its name + NUL (NUL is in no path and no number), so a
 # replay rebuilds exactly the paths under its own --out, whatever --out's name also matches in the text.
 # Part of the key: an entry in an older summary format is never replayed.
-CACHE_FORMAT = "2"
+CACHE_FORMAT = "3"  # 3: the code recorded per entry (code.json), not in the key
 
 
 def cache_root() -> Path:
@@ -56,20 +60,56 @@ def _tree_digest(h, path: Path) -> None:
 
 
 def result_key(config: dict) -> str:
-    """sha256 of the configuration, the code that shapes the result, package versions and user data."""
+    """sha256 of the configuration, package versions and user data (the code is checked per entry)."""
     h = hashlib.sha256(
         json.dumps({k: str(v) for k, v in config.items() if k not in NOT_IN_KEY}, sort_keys=True).encode()
     )
     h.update(f"cache format {CACHE_FORMAT}".encode())
-    for name in CODE_FILES:
-        h.update(name.encode())
-        h.update((ROOT / name).read_bytes())
     for pkg in ("torch", "lerobot", "mujoco", "numpy"):
         h.update(f"{pkg}=={version(pkg)}".encode())
     for key in ("pusht_data", "aloha_data"):  # a user's own set: its bytes are part of the input
         if config.get(key):
             _tree_digest(h, Path(config[key]))
     return h.hexdigest()[:24]
+
+
+def code_files() -> dict[str, str]:
+    """{path from ROOT: sha256} of the project files loaded in this process: the file of every imported
+    module under the repository (its virtualenv and tests aside) and the model file an env module
+    names (XML_PATH). Read when a run ends, so it is what that run actually imported."""
+
+    def ours(f) -> str | None:  # path from ROOT of a project file, else None
+        p = Path(f).resolve() if isinstance(f, (str, Path)) else None
+        if p and p.is_file() and p.is_relative_to(ROOT) and p.relative_to(ROOT).parts[0] not in SKIP:
+            return p.relative_to(ROOT).as_posix()
+        return None
+
+    found = set()
+    for module in list(sys.modules.values()):
+        if rel := ours(getattr(module, "__file__", None)):  # only our modules are asked for XML_PATH
+            found |= {rel} | ({xml} if (xml := ours(module.__dict__.get("XML_PATH"))) else set())
+    return {rel: sha256_bytes((ROOT / rel).read_bytes()) for rel in sorted(found)}
+
+
+def recorded_code(entry: dict[str, bytes]):
+    """The code an entry's run recorded (code_files()), taken out of `entry` (read_entry's result)."""
+    try:
+        return json.loads(entry.pop(CODE, b"null"))
+    except ValueError:
+        return None
+
+
+def stale_code(recorded) -> bool:
+    """Whether the code an entry recorded (code_files() of its run) differs from the files here now."""
+    if not isinstance(recorded, dict) or not recorded:
+        return True
+    for rel, digest in recorded.items():
+        try:
+            if sha256_bytes((ROOT / rel).read_bytes()) != digest:
+                return True
+        except OSError:
+            return True
+    return False
 
 
 def _warn(msg: str) -> None:
@@ -86,7 +126,7 @@ def read_entry(entry: Path) -> dict[str, bytes] | str | None:
             return f"its {MANIFEST} is incomplete"
         out = {}
         for name, digest in manifest.items():
-            if Path(name).name != name or name not in (*RESULT_FILES, SUMMARY):
+            if Path(name).name != name or name not in (*RESULT_FILES, SUMMARY, CODE):
                 return f"its {MANIFEST} names an unexpected file {name!r}"
             data = (entry / name).read_bytes()
             if sha256_bytes(data) != digest:
@@ -117,7 +157,7 @@ def summary_for(template: str, out: Path) -> str:
 def discard_entry(entry: Path) -> bool:
     """Remove an entry's own files (the ones a cache entry can hold) and the folder if then empty;
     True if the entry is gone."""
-    for name in (*RESULT_FILES, SUMMARY, MANIFEST):
+    for name in (*RESULT_FILES, SUMMARY, CODE, MANIFEST):
         with contextlib.suppress(OSError):
             (entry / name).unlink(missing_ok=True)
     with contextlib.suppress(OSError):
@@ -145,6 +185,9 @@ class ResultCache:
             gone = discard_entry(entry)
             what = "discarded" if gone else "it could not be removed (remove it yourself)"
             _warn(f"the cached result {entry} was damaged ({got}); {what}; computing it again")
+            return False
+        if stale_code(recorded_code(got)):  # made by other code than this: ours to replace
+            discard_entry(entry)
             return False
         self.out.mkdir(parents=True, exist_ok=True)
         for name, data in got.items():
@@ -176,12 +219,16 @@ class ResultCache:
                 data = Path(path).read_bytes()
                 (tmp / name).write_bytes(data)
                 manifest[name] = sha256_bytes(data)
+            code = dump_json(code_files()).encode()  # every project file this run imported, at its end
+            (tmp / CODE).write_bytes(code)
+            manifest[CODE] = sha256_bytes(code)
             text = summary_template(summary, written).encode()
             (tmp / SUMMARY).write_bytes(text)
             manifest[SUMMARY] = sha256_bytes(text)
             (tmp / MANIFEST).write_text(dump_json(manifest))
             (tmp / STAMP_NAME).unlink()  # an entry holds exactly its manifest's files
-            if isinstance(read_entry(dst), str):  # a damaged entry for this key: ours to replace
+            old = read_entry(dst)
+            if isinstance(old, str) or (old and stale_code(recorded_code(old))):  # damaged or stale: ours
                 discard_entry(dst)
             with contextlib.suppress(OSError):  # a good entry for this key exists (another run stored it)
                 os.rename(tmp, dst)

@@ -277,45 +277,49 @@ def test_result_key_changes_with_every_input():
         assert result_cache.result_key(dict(base, **{field: value})) != k, field
 
 
-def test_result_key_changes_with_every_code_file(tmp_path, monkeypatch):
+def test_a_cached_result_goes_stale_when_any_imported_file_changes(tmp_path, monkeypatch):
+    """The cache records every project file the run imported (code_files): an edit to any one of them
+    makes the entry stale, so it is never replayed."""
+    from ch37 import result_cache
+
+    recorded = result_cache.code_files()
+    for name in recorded:
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(result_cache.ROOT / name, tmp_path / name)
+    monkeypatch.setattr(result_cache, "ROOT", tmp_path)
+    assert not result_cache.stale_code(recorded)
+    stale = 0
+    for name in recorded:
+        saved = (tmp_path / name).read_bytes()
+        (tmp_path / name).write_bytes(saved + b"\n")
+        stale += result_cache.stale_code(recorded)
+        (tmp_path / name).write_bytes(saved)
+    assert stale == len(recorded) and not result_cache.stale_code(recorded)
+    (tmp_path / next(iter(recorded))).unlink()  # a file gone is a change too
+    assert result_cache.stale_code(recorded)
+
+
+def test_code_files_hold_every_file_the_lesson_imports():
+    """Whatever the lesson imports from the three packages, the envs and the experts (and the model
+    files the envs load) is in the code a cache entry records, with no list to keep by hand."""
+    import importlib
+
     import ch37
     from ch37 import result_cache
 
-    for name in ch37.CODE_FILES:
-        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(ch37.ROOT / name, tmp_path / name)
-    monkeypatch.setattr(result_cache, "ROOT", tmp_path)
-    config = {"seed": 0, "epochs": 500}
-    keys = {result_cache.result_key(config)}
-    for name in ch37.CODE_FILES:
-        with open(tmp_path / name, "a") as f:
-            f.write("\n")
-        keys.add(result_cache.result_key(config))
-    assert len(keys) == len(ch37.CODE_FILES) + 1
-
-
-def test_code_files_list_every_file_that_shapes_a_result():
-    """A new module in ch37/ or a new lesson file must join ch37.CODE_FILES, or the cache could
-    replay a result the new code would not give."""
-    import ch37
-
-    lesson = {
-        "scale_data.py",
-        "pusht_env.py",
-        "pusht.xml",
-        "aloha_env.py",
-        "aloha.xml",
-        "scripted_expert.py",
-        "gen_demos_pusht.py",
-        "gen_demos_aloha.py",
-    }
-    shaping = {f"ch37/{p.name}" for p in (ch37.ROOT / "ch37").glob("*.py")} - {
-        "ch37/__init__.py",
-        "ch37/errors.py",
-        "ch37/result_cache.py",
-    }  # these never change a number
-    assert lesson | shaping <= set(ch37.CODE_FILES)
-    assert set(ch37.DATA_CODE) <= set(ch37.CODE_FILES)
+    lesson = {"pusht_env.py", "pusht.xml", "aloha_env.py", "aloha.xml", "scripted_expert.py", "bc_recipe.py"}
+    lesson |= {"gen_demos_pusht.py", "gen_demos_aloha.py"}
+    for name in (p[: -len(".py")] for p in lesson if p.endswith(".py")):
+        importlib.import_module(name)
+    packages = set()
+    for pkg in ("ch37", "lerobot_v3", "datagen"):
+        for path in sorted((ch37.ROOT / pkg).glob("*.py")):
+            importlib.import_module(pkg if path.stem == "__init__" else f"{pkg}.{path.stem}")
+            packages.add(f"{pkg}/{path.name}")
+    got = set(result_cache.code_files())
+    assert lesson | packages <= got, sorted((lesson | packages) - got)
+    assert set(ch37.DATA_CODE) <= got
+    assert not any(name.startswith(("tests/", ".venv/")) for name in got)
 
 
 @pytest.mark.parametrize("workers", [1, 3])
