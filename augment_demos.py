@@ -9,8 +9,8 @@ aug.start: block x, y, yaw, pusher x, y it was solved from), with generation_rep
 
 The same command gives the same bytes with any --workers, with --ray, and after a killed run is
 re-run (finished shards are kept, only the missing ones are made). The engine lives in datagen/:
-engine.py (one attempt), pusht.py (the PushT task), shards.py (the run: shards, stats, report),
-executors.py (local processes, Ray); the merge in lerobot_v3/merge.py.
+engine.py (one attempt), pusht.py (the PushT task), shards.py (the run: shards, stats, report);
+the merge in lerobot_v3/merge.py, local processes or Ray in ch37.parallel.map_jobs.
 """
 
 from __future__ import annotations

@@ -158,15 +158,17 @@ def expert_success(seed: int, eval_seeds: list[int]):
 def generate(a, srcs: dict, eval_seeds: dict, gen_paths: dict, max_per: dict):
     """Phase 1: the engine's sets, one task per (mode, seed), written as LeRobot sets and read back;
     the expert's ceiling per seed beside them. Returns (expert wins, generation report, sets)."""
+    import operator
+
     import datagen
-    from datagen import executors
+    from ch37.parallel import map_jobs
     from lerobot_v3 import load_arrays
 
     cap = {"resolve": datagen.ATTEMPTS_PER_KEPT, "replay": a.replay_tries}
     tasks = [(grow, m, s, srcs[s], max_per[m], cap[m], a.pos_sigma, a.yaw_sigma) for m, s in gen_paths]
     tasks += [(expert_success, s, eval_seeds[s]) for s in a.seeds]  # the long ones first
     expert, generation, generated = {}, {}, {}
-    for got in executors.run(lambda fn, *args: fn(*args), tasks, workers=a.workers, ray=a.ray):
+    for got in map_jobs(operator.call, tasks, workers=a.workers, ray=a.ray, ordered=False, star=True):
         if got[0] == "expert":
             expert[got[1]] = got[2]
             continue
@@ -256,14 +258,15 @@ class Data:
 
 def train_all(a, points: list, units: dict, eval_seeds: dict) -> dict:
     """Phase 2: one task per distinct run, largest budget first (so the last task is short)."""
-    from datagen import executors
+    from ch37.parallel import map_jobs
 
     hp = {"hidden_dim": a.hidden_dim, "batch_size": a.batch_size, "lr": a.lr}
     order = sorted(units, key=lambda u: (-u[3], u))
     tasks = [(u, units[u][0], units[u][1], u[3], u[2], eval_seeds[u[2]], hp) for u in order]
     print(f"training: {len(points)} points, {len(tasks)} distinct runs, {sum(u[3] for u in order):,} steps")
     results = {}
-    for i, (u, r) in enumerate(executors.run(train_point, tasks, workers=a.workers, ray=a.ray), 1):
+    jobs = map_jobs(train_point, tasks, workers=a.workers, ray=a.ray, ordered=False, star=True)
+    for i, (u, r) in enumerate(jobs, 1):
         results[tuple(u)] = r
         names = ", ".join(f"{p['curve']} N={p['n']}" for p in points if p["unit"] == u)
         done = f"success {r['success']:.2f} ({r['seconds']:.1f} s)"

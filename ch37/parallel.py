@@ -1,5 +1,5 @@
-"""Parallel execution on forked workers, the project's one pool: imap / parallel_map for independent
-jobs (datagen.executors adds Ray), LockstepEnvs for evaluation physics. Results never depend on the
+"""Parallel execution, the project's one map over jobs and one pool: map_jobs for independent jobs
+(forked local processes or Ray), LockstepEnvs for evaluation physics. Results never depend on the
 worker count: every job carries its own seed and every env is its own simulator.
 
 Workers die with the run (ch37.process: worker_setup, forking), an env worker also stops at the end
@@ -12,6 +12,8 @@ import contextlib
 import os
 import sys
 
+from ch37 import ROOT
+from ch37.errors import DataError
 from ch37.process import forking, worker_setup
 
 _FORKED_WORK: tuple = ()  # (fn, jobs) in a pool worker, set by its initializer
@@ -36,7 +38,7 @@ def _run_job(i: int):
     return fn(jobs[i])
 
 
-def imap(fn, jobs: list, *, workers: int, ordered: bool = True, chunksize: int | None = None):
+def _imap(fn, jobs: list, *, workers: int, ordered: bool = True, chunksize: int | None = None):
     """fn(job) for each job, yielded as they finish (in job order when `ordered`), on `workers` forked
     processes; in this process without fork or with one worker. The results never depend on `workers`:
     every job carries its own seed. `fn` reaches the workers through fork, not pickling, so a function
@@ -56,15 +58,26 @@ def imap(fn, jobs: list, *, workers: int, ordered: bool = True, chunksize: int |
         yield from get(_run_job, range(len(jobs)), chunksize=chunksize or max(1, len(jobs) // (4 * workers)))
 
 
-def parallel_map(fn, jobs: list, *, workers: int, bar=None) -> list:
-    """[fn(j) for j in jobs], in order, on `workers` forked processes (see imap); `bar` (a tqdm bar,
-    or None) advances once per job and is left open for the caller to close."""
-    out = []
-    for r in imap(fn, jobs, workers=workers):
-        out.append(r)
+def map_jobs(
+    fn, jobs, *, workers: int, ray: str | None = None, ordered=True, star=False, bar=None, timing=None
+):
+    """The project's one map over jobs: fn(job) (fn(*job) when `star`) for each job, yielded as they
+    finish, in job order when `ordered`. On `workers` forked local processes when `ray` is None (fn
+    reaches them through fork, so a function of a script or a notebook works), else on Ray ("local": a
+    private local Ray with `workers` CPUs; an address: that cluster; always completion order).
+    `bar` (a tqdm bar, or None) advances once per job and is left open for the caller to close;
+    `timing`, if given, receives "start_s": Ray's start or join. The results never depend on the
+    executor or the worker count: every job carries its own seed."""
+    call = (lambda job: fn(*job)) if star else fn
+    if ray is None:
+        got = _imap(call, jobs, workers=workers, ordered=ordered, chunksize=None if ordered else 1)
+    else:
+        tasks = list(jobs) if star else [(job,) for job in jobs]
+        got = _run_ray(fn, tasks, address=None if ray == "local" else ray, workers=workers, timing=timing)
+    for r in got:
         if bar is not None:
             bar.update()
-    return out
+        yield r
 
 
 class LockstepEnvs:
@@ -193,3 +206,81 @@ def _env_worker(conn, make_env, seeds, rank: int, parent: int, inherited) -> Non
                 reply = e
             conn.send(reply)
     conn.close()
+
+
+@contextlib.contextmanager
+def _stderr_silenced():
+    """File descriptor 2 to /dev/null for a while: Ray's C++ client logs a warning per retry straight
+    to it when a cluster cannot be joined; the one-line error after it says what happened."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 2)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
+def _start_ray(address: str | None, workers: int):
+    """Start a private local Ray (address None: `workers` CPUs, no dashboard) or join a cluster.
+
+    Joining ships this repository to the cluster's workers as their working directory; they need
+    the same Python packages (pip install the project with its `ray` extra on every node)."""
+    try:
+        import ray
+    except ImportError:
+        raise DataError("--ray needs Ray: pip install -e '.[ray]' (or pip install ray)") from None
+    import logging
+
+    common = dict(include_dashboard=False, logging_level=logging.ERROR, log_to_driver=False)
+    try:
+        if address is None:  # "local": always a new instance, never a cluster that happens to run here
+            # its workers inherit this environment: the repository on their path (a runtime_env
+            # would start a second pool of workers, seconds more on a small machine)
+            saved = os.environ.get("PYTHONPATH")
+            os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), saved]))
+            try:
+                ray.init(address="local", num_cpus=workers, **common)
+            finally:
+                if saved is None:
+                    os.environ.pop("PYTHONPATH")
+                else:
+                    os.environ["PYTHONPATH"] = saved
+        else:
+            excludes = [".git", ".venv", "outputs", "*.ipynb", "tests"]
+            with _stderr_silenced():
+                ray.init(
+                    address=address, runtime_env={"working_dir": str(ROOT), "excludes": excludes}, **common
+                )
+    except (ConnectionError, RuntimeError, ValueError) as e:
+        why = (str(e).strip().splitlines() or [type(e).__name__])[0]
+        hint = (
+            "" if address is None else " (is it running? a cluster with token auth needs RAY_AUTH_MODE=token)"
+        )
+        raise DataError(f"could not {'start' if address is None else 'join'} Ray{hint}: {why}") from None
+    return ray
+
+
+def _run_ray(fn, tasks: list, *, address: str | None, workers: int, timing: dict | None = None):
+    """fn(*args) for each args in `tasks` as Ray tasks of one CPU each, at most 2 per CPU in flight.
+    `timing`, if given, receives "start_s": the seconds Ray took to start or join."""
+    import time
+
+    t0 = time.perf_counter()
+    ray = _start_ray(address, workers)
+    if timing is not None:
+        timing["start_s"] = time.perf_counter() - t0
+    try:
+        remote = ray.remote(num_cpus=1, max_retries=0)(fn)
+        window = max(2, 2 * int(ray.cluster_resources().get("CPU", workers)))
+        todo, pending = list(tasks), []
+        while todo or pending:
+            while todo and len(pending) < window:
+                pending.append(remote.remote(*todo.pop(0)))
+            done, pending = ray.wait(pending, num_returns=1)
+            yield ray.get(done[0])
+    finally:
+        ray.shutdown()

@@ -4,8 +4,8 @@ task       Task (what a task provides: env, start names, perturbation, place, ex
            replay, success), Perturbation, Source, Segment, rollout, write_dataset (a stamped set)
 pusht      PUSHT: PushT as a task (the only module here that imports pusht_env and its expert)
 engine     one attempt, keep_first, grow, run_attempts, save: task-agnostic
-shards     a run on disk: fixed shards, resume, the generation report, the merge (lerobot_v3)
-executors  where shards run: local processes or Ray (one map over jobs, ch37.parallel.map_jobs)
+shards     a run on disk: fixed shards on local processes or Ray (ch37.parallel.map_jobs), resume,
+           the generation report, the merge (lerobot_v3.merge_sets)
 
 TASKS maps a task's name to it.
 """

@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from ch37.parallel import parallel_map
+from ch37.parallel import map_jobs
 from ch37.seeds import env_seed
 from datagen.task import Perturbation, Source, Task
 
@@ -153,7 +153,7 @@ def run_attempts(task: Task, sources: dict, jobs, how: Perturbation, *, mode="re
         e, k = job
         return attempt(task, sources[e], k, how, mode=mode)
 
-    return parallel_map(one, jobs, workers=workers, bar=bar)
+    return list(map_jobs(one, jobs, workers=workers, bar=bar))
 
 
 def grow(

@@ -72,9 +72,10 @@ from ch37.ownership import (
     unlock,
     write_atomic,
 )
+from ch37.parallel import map_jobs
 from ch37.process import available_memory
 from ch37.seeds import SEED_BLOCK
-from datagen import TASKS, engine, executors
+from datagen import TASKS, engine
 from datagen.task import Perturbation, Task
 from lerobot_v3.dataset import check_hf_cache, fps_problem, frames_problem, load_arrays, schema_problem
 from lerobot_v3.merge import merge_sets
@@ -422,7 +423,7 @@ def run(
     task: Task, src: Path, out: Path, settings: dict, *, workers: int, ray: str | None = None, quiet=False
 ) -> dict:
     """Grow `out` from the set `src` of `task` with `settings` (SETTINGS) on `workers` local processes or
-    on Ray (datagen.executors.run): a run cut off earlier is finished, its whole shards kept; a complete
+    on Ray (ch37.parallel.map_jobs): a run cut off earlier is finished, its whole shards kept; a complete
     run is left as it is. A second run on `out` waits for the first. Returns the generation report."""
     t0 = time.perf_counter()
     problem = check_out_path(out)  # a path the file system or pyarrow cannot take, before anything
@@ -478,7 +479,8 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
         executor = f"local processes ({min(workers, len(tasks))})"
     else:
         executor = f"ray {f'local, {workers} CPUs' if ray == 'local' else ray}"
-    results = executors.run(make_shard, tasks, workers=workers, ray=ray, timing=timing) if tasks else []
+    how = dict(workers=workers, ray=ray, ordered=False, star=True, timing=timing)
+    results = map_jobs(make_shard, tasks, **how) if tasks else []
     t_gen = time.perf_counter()
     made = _collect(out, results, done, config["versions"], total=sum(map(len, shards)), quiet=quiet)
     t_merge = time.perf_counter()

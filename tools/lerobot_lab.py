@@ -377,7 +377,7 @@ def main(argv=None) -> int:
         raise DataError(f"--lr must be below 1, got {a.lr}")
     a.out.mkdir(parents=True, exist_ok=True)
     import scale_lab
-    from ch37.parallel import imap
+    from ch37.parallel import map_jobs
 
     for s in a.seeds:  # the lab's fresh set, made here before the workers that read it
         scale_lab.fresh_demos(a.out / "demos" / f"pusht_seed{s}_ep{N}", s, N)
@@ -385,7 +385,7 @@ def main(argv=None) -> int:
         jobs = [
             (p, s, a.pilot, a.lr, a.eval_every, a.eval_episodes, a.out) for p in a.points for s in a.seeds
         ]
-        for r in imap(pilot, jobs, workers=min(a.workers, len(jobs)), ordered=False):
+        for r in map_jobs(pilot, jobs, workers=min(a.workers, len(jobs)), ordered=False):
             print(
                 f"{r['point']:8s} seed {r['seed']}: loss {r['loss_curve'][-1][1]:.4f}, {r['seconds']:.0f} s"
             )
@@ -403,7 +403,7 @@ def main(argv=None) -> int:
         for point in sorted(a.points, key=("fresh", "resolve", "source").index):  # the long ones first
             r = done(point, s)
             results.append(r) if r else jobs.append((point, s, a.steps, a.lr, a.eval_episodes, a.out))
-    for r in imap(one_run, jobs, workers=min(a.workers, max(len(jobs), 1)), ordered=False):
+    for r in map_jobs(one_run, jobs, workers=min(a.workers, max(len(jobs), 1)), ordered=False):
         print(
             f"{r['point']:8s} seed {r['seed']}: {r['successes']}/{r['episodes']} successes, "
             f"loss {r['final_loss']:.4f}, train {r['seconds_train']:.0f} s, eval {r['seconds_eval']:.0f} s",
