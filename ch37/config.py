@@ -40,7 +40,7 @@ RESULT_FILES = tuple(
     "metrics.json cross_embodiment.json scale_data.png scale_data.html scale_data.rrd".split()
 )
 # The largest --*pos_sigma (m) and --*yaw_sigma (rad): a kept start lies 0.08..0.26 m from the target
-# (datagen.engine.R_LO, R_HI), so a 10 m std almost never lands one, and a yaw wraps every 6.3 rad;
+# (datagen.pusht.R_LO, R_HI), so a 10 m std almost never lands one, and a yaw wraps every 6.3 rad;
 # beyond that a value can only waste attempts, and 1e308 overflows the angle to inf (math domain error).
 SIGMA_MAX = 10.0
 NOT_IN_KEY = ("out", "cache", "workers")  # where results go and how fast they come never change them

@@ -58,7 +58,7 @@ META_STATIC = {
                 "path": "mimicgen/utils/pose_utils.py",
                 "symbol": "transform_source_data_segment_using_object_pose",
                 "why": "how MimicGen moves a source end-effector segment into the new object's frame; "
-                "datagen.engine.transform_segment is its planar (SE(2)) analog, used by --aug_mode replay; "
+                "datagen.pusht.transform_segment is its planar (SE(2)) analog, used by --aug_mode replay; "
                 "the chapter's default re-solves with its expert, because it owns one for any start",
             },
             {
