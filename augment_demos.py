@@ -21,7 +21,7 @@ from pathlib import Path
 from ch37 import config, errors
 from ch37.seeds import MAX_SEED, SEED_BLOCK
 
-SHARD_SIZE = 100  # attempts per shard: ~0.4 MB of parquet, a few seconds of one core
+SHARD_SIZE = 100  # attempts per shard: a small parquet set, seconds of one core (docs/engine.md)
 
 
 def parse(argv=None):

@@ -24,7 +24,7 @@ FINITE = ("aug_pos_sigma", "aug_yaw_sigma", "lr")
 AT_MOST = {"seed": MAX_SEED, "source_episodes": SEED_BLOCK, "eval_episodes": SEED_BLOCK, "lr": 1.0}
 AT_MOST.update(aug_pos_sigma=config.SIGMA_MAX, aug_yaw_sigma=config.SIGMA_MAX)
 PUSHT_MAX_STEPS, ALOHA_MAX_STEPS = 300, 400  # pusht_env.MAX_STEPS, aloha_env.MAX_STEPS (not imported: slow)
-ENV_BYTES = 1 << 20  # one evaluation env (a MuJoCo model and data): about 0.6 MB measured
+ENV_BYTES = 1 << 20  # one evaluation env (a MuJoCo model and data), rounded up (docs/engine.md, figures)
 
 
 def memory_estimate(args: argparse.Namespace) -> dict[str, int]:

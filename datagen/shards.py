@@ -129,8 +129,8 @@ def run_key(config: dict) -> str:
     return hashlib.sha256(json.dumps(config, sort_keys=True).encode()).hexdigest()[:16]
 
 
-# Memory the plan holds per attempt: its (e, k) tuple and slot, measured ~100 B (tracemalloc: 97 MB
-# for plan(range(10), 100000, 100)), doubled for the shard tasks and results that follow it.
+# Memory the plan holds per attempt (bytes): its (e, k) tuple and slot, about 100 B measured (docs/engine.md,
+# "Figures behind constants"), doubled for the shard tasks and results that follow it.
 ATTEMPT_BYTES = 200
 
 

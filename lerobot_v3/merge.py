@@ -104,7 +104,8 @@ def _read_set(root: Path) -> tuple:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    # ParquetFile.read: read_table's dataset path costs ~10x more on a 100-row-group file (95 ms, 10 ms)
+    # ParquetFile.read, not read_table: its dataset path costs far more on a file of many row groups
+    # (docs/engine.md, "Figures behind constants")
     eps = pa.concat_tables(pq.ParquetFile(f).read() for f in sorted(root.glob("meta/episodes/*/*.parquet")))
     data = pa.concat_tables(pq.ParquetFile(f).read() for f in sorted(root.glob("data/*/*.parquet")))
     n = eps.num_rows

@@ -10,7 +10,10 @@
     python -m tools.bench [--smoke]              where the time of one run goes
     python -m tools.bench_envs                   speed and competence of the envs and their experts
     python -m tools.bench_engine                 the data engine: demos/s local vs Ray, peak memory
+    python -m tools.bench_writer                 the one-pass LeRobot v3 writer vs LeRobot's per-frame path
     python -m tools.lerobot_eval --policy P      a LeRobot checkpoint on the lesson's held-out PushT starts
+    python -m tools.lerobot_lab [FLAGS]          LeRobot's own policies trained on the lab's data points
+    (tools.common holds what they share: the parser, regions, provenance)
 
 Exit codes: 0 ok, 1 a check failed (drift, a stale notebook), 2 bad input (one `error:` line).
 """
