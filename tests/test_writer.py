@@ -263,3 +263,16 @@ def test_one_pass_writer_splits_files_as_lerobot_names_them(tmp_path):
         rows = pq.read_table(split / a.meta.get_data_file_path(e)).column("episode_index").to_numpy()
         assert (rows == e).sum() == a.meta.episodes[e]["length"]
     assert a[len(a) - 1]["index"] == len(b) - 1
+
+
+def test_one_chunk_rule_for_every_file_of_the_layout():
+    """lerobot_v3.chunks: a block never straddles files, a file takes rows up to its limit, the next
+    chunk starts after chunks_size files; the writer's byte rule (a new file once rows x size >= the
+    limit) and the merge's (rows within the limit) as row counts."""
+    from lerobot_v3.chunks import ChunkRoller, rows_below, rows_within
+
+    roll = ChunkRoller(3, chunks_size=2)
+    got = [roll.place(n) for n in (2, 1, 1, 5, 1, 3)]
+    assert got == [(0, 0), (0, 0), (0, 1), (1, 0), (1, 1), (2, 0)]
+    assert rows_below(100, 10) == 9 and rows_below(101, 10) == 10 and rows_below(5, 10) == 0
+    assert rows_within(100, 10) == 10 and rows_within(109, 10) == 10 and rows_within(5, 10) == 1
