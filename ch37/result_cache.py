@@ -91,11 +91,11 @@ def code_files() -> dict[str, str]:
     return {rel: sha256_bytes((ROOT / rel).read_bytes()) for rel in sorted(found)}
 
 
-def recorded_code(entry: dict[str, bytes]):
-    """The code an entry's run recorded (code_files()), taken out of `entry` (read_entry's result)."""
+def recorded_code(entry: Path):
+    """The code the run of `entry` recorded (its code_files()), None if it has none."""
     try:
-        return json.loads(entry.pop(CODE, b"null"))
-    except ValueError:
+        return json.loads((Path(entry) / CODE).read_text())
+    except (OSError, ValueError):
         return None
 
 
@@ -132,6 +132,7 @@ def read_entry(entry: Path) -> dict[str, bytes] | str | None:
             if sha256_bytes(data) != digest:
                 return f"{name} fails its checksum"
             out[name] = data
+        out.pop(CODE, None)  # checked like the rest; read again by recorded_code
         return out
     except FileNotFoundError as e:
         return f"{Path(e.filename).name} is missing"
@@ -186,7 +187,7 @@ class ResultCache:
             what = "discarded" if gone else "it could not be removed (remove it yourself)"
             _warn(f"the cached result {entry} was damaged ({got}); {what}; computing it again")
             return False
-        if stale_code(recorded_code(got)):  # made by other code than this: ours to replace
+        if stale_code(recorded_code(entry)):  # made by other code than this: ours to replace
             discard_entry(entry)
             return False
         self.out.mkdir(parents=True, exist_ok=True)
@@ -228,7 +229,7 @@ class ResultCache:
             (tmp / MANIFEST).write_text(dump_json(manifest))
             (tmp / STAMP_NAME).unlink()  # an entry holds exactly its manifest's files
             old = read_entry(dst)
-            if isinstance(old, str) or (old and stale_code(recorded_code(old))):  # damaged or stale: ours
+            if isinstance(old, str) or (old and stale_code(recorded_code(dst))):  # damaged or stale: ours
                 discard_entry(dst)
             with contextlib.suppress(OSError):  # a good entry for this key exists (another run stored it)
                 os.rename(tmp, dst)
