@@ -75,11 +75,21 @@ class Segment:
 
 
 def write_dataset(
-    out: Path, *, repo_id: str, fps: int, robot_type: str, task: str, feats: dict, episodes, stamp: dict
+    out: Path,
+    *,
+    repo_id: str,
+    fps: int,
+    robot_type: str,
+    task: str,
+    feats: dict,
+    episodes,
+    stamp: dict,
+    **how,
 ) -> None:
     """Write `episodes` as a LeRobot v3 set (lerobot_v3.write_set) to the new folder `out`, whole or not
-    at all, under our stamp listing every file with its sha256 (ch37.ownership.publish_dir)."""
-    how = dict(repo_id=repo_id, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes)
+    at all, under our stamp listing every file with its sha256 (ch37.ownership.publish_dir). `how`:
+    write_set's other options (per_frame)."""
+    how |= dict(repo_id=repo_id, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes)
     with publish_dir(out, stamp) as tmp:
         write_set(tmp, **how)
 

@@ -132,7 +132,7 @@ def _fast_fingerprints():
 
 
 def write_set(
-    root: Path, *, repo_id: str, fps: int, robot_type: str, task: str, feats: dict, episodes
+    root: Path, *, repo_id: str, fps: int, robot_type: str, task: str, feats: dict, episodes, per_frame=False
 ) -> None:
     """Write `episodes` (an iterable of dicts of per-frame arrays keyed like `feats`) as a LeRobot v3
     set in the new folder `root` (it must not exist). Whole-or-absent publication, stamps and the
@@ -146,11 +146,11 @@ def write_set(
     per-frame path (LeRobotDataset.create / add_frame / save_episode / finalize) writes, read back
     equal frame by frame (tests/test_writer.py), without its per-frame and per-episode costs.
     A set with a video (or any other) feature goes through LeRobot's own path (_write_lerobot):
-    encoding mp4 is LeRobot's job.
+    encoding mp4 is LeRobot's job. per_frame: every set through LeRobot's path (a benchmark's baseline).
     """
     root = Path(root)
     episodes = _with_env_state(episodes, feats)
-    if all(f["dtype"] in _DIRECT_DTYPES and len(f["shape"]) == 1 for f in feats.values()):
+    if not per_frame and all(f["dtype"] in _DIRECT_DTYPES and len(f["shape"]) == 1 for f in feats.values()):
         _write_direct(root, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes)
     else:
         _write_lerobot(

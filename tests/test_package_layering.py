@@ -116,6 +116,25 @@ def test_nothing_imports_a_private_name_across_a_package():
                 continue
             private = [p for p in [*mod.split(".")[1:], what or ""] if p.startswith("_") and p != "__init__"]
             assert not private, f"{path.relative_to(ROOT)}:{line} imports {mod}.{what}"
+        # nor reaches one through a module it imported from another package: mod._name
+        aliases = {}
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                for a in node.names:
+                    if f"{node.module}.{a.name}" in MODULES and package_of(node.module) != package_of(name):
+                        aliases[a.asname or a.name] = node.module
+            elif isinstance(node, ast.Import):
+                for a in node.names:
+                    if a.name in MODULES and package_of(a.name) != package_of(name):
+                        aliases[a.asname or a.name.split(".")[0]] = a.name
+        for node in ast.walk(ast.parse(path.read_text())):
+            if (
+                isinstance(node, ast.Attribute)
+                and isinstance(node.value, ast.Name)
+                and node.value.id in aliases
+            ):
+                private = node.attr.startswith("_") and not node.attr.startswith("__")
+                assert not private, f"{path.relative_to(ROOT)}:{node.lineno} uses {node.value.id}.{node.attr}"
 
 
 def test_no_import_cycles_and_no_arrow_back_up():

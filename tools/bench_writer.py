@@ -6,13 +6,11 @@ LeRobot's per-frame path (what write_dataset did before issue 19), alternating. 
 
 The demos are synthetic float32 arrays of the PushT set's features (gen_demos_pusht.py's, with
 observation.environment_state filled from the state), so the time is the writer's alone. The
-LeRobot path is taken through the same write_dataset (folder, stamp, rename) with the direct
-path switched off.
+LeRobot path is taken through the same write_dataset (folder, stamp, rename) with per_frame=True.
 """
 
 from __future__ import annotations
 
-import contextlib
 import shutil
 import statistics
 import tempfile
@@ -26,7 +24,7 @@ from ch37 import errors
 from ch37.config import parser
 from ch37.errors import DataError
 from datagen import write_dataset
-from lerobot_v3 import dataset as lerobot_io
+from lerobot_v3 import features
 
 
 def demos(n: int, frames: int, seed: int = 0) -> list[dict]:
@@ -42,20 +40,10 @@ def demos(n: int, frames: int, seed: int = 0) -> list[dict]:
     ]
 
 
-@contextlib.contextmanager
-def lerobot_path():
-    """write_dataset with every feature sent to LeRobot's per-frame path."""
-    saved = lerobot_io._DIRECT_DTYPES
-    lerobot_io._DIRECT_DTYPES = set()
-    try:
-        yield
-    finally:
-        lerobot_io._DIRECT_DTYPES = saved
-
-
-def write_seconds(eps: list[dict], root: Path) -> float:
+def write_seconds(eps: list[dict], root: Path, per_frame: bool = False) -> float:
+    """Seconds to write `eps` with write_dataset (per_frame: every feature through LeRobot's path)."""
     m = gen_demos_pusht.PUSHT.env_module
-    feats = lerobot_io.features(m.STATE_NAMES, m.ACTION_NAMES, env_state_names=m.ENV_STATE_NAMES)
+    feats = features(m.STATE_NAMES, m.ACTION_NAMES, env_state_names=m.ENV_STATE_NAMES)
     t = time.perf_counter()
     write_dataset(
         root,
@@ -66,6 +54,7 @@ def write_seconds(eps: list[dict], root: Path) -> float:
         feats=feats,
         episodes=eps,
         stamp={},
+        per_frame=per_frame,
     )
     seconds = time.perf_counter() - t
     shutil.rmtree(root)
@@ -85,8 +74,7 @@ def main(argv: list[str]) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         write_seconds(eps[:2], Path(tmp) / "warm")  # imports and caches, not timed
         for r in range(args.rounds):
-            with lerobot_path():
-                times["lerobot"].append(write_seconds(eps, Path(tmp) / f"lerobot{r}"))
+            times["lerobot"].append(write_seconds(eps, Path(tmp) / f"lerobot{r}", per_frame=True))
             times["direct"].append(write_seconds(eps, Path(tmp) / f"direct{r}"))
             print(
                 f"round {r}: lerobot {times['lerobot'][-1]:.2f} s, direct {times['direct'][-1]:.2f} s",
