@@ -9,14 +9,15 @@ commands), fps 10; names and units in aloha_env.py. Callable from Python as main
 import sys
 
 import aloha_env
-from ch37 import demos
+import gen_demos
+from datagen import demos
 from scripted_expert import AlohaExpert
 
 ALOHA = demos.Embodiment("aloha", aloha_env, "AlohaCubeEnv", AlohaExpert, default_noise=0.0)
 
 
 def main(argv=None) -> int:
-    return demos.main(ALOHA, argv)
+    return gen_demos.main(ALOHA, argv)
 
 
 if __name__ == "__main__":

@@ -8,15 +8,16 @@ units in pusht_env.py. Callable from Python as main(argv).
 
 import sys
 
+import gen_demos
 import pusht_env
-from ch37 import demos
+from datagen import demos
 from scripted_expert import PushTExpert
 
 PUSHT = demos.Embodiment("pusht", pusht_env, "PushTEnv", PushTExpert, default_noise=0.0)
 
 
 def main(argv=None) -> int:
-    return demos.main(PUSHT, argv)
+    return gen_demos.main(PUSHT, argv)
 
 
 if __name__ == "__main__":

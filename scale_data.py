@@ -116,8 +116,8 @@ if cache.replay():  # an identical earlier run (same flags, code and data): its 
 # Pool two robots' demos. Each keeps its own statistics (a PushT velocity and an ALOHA grip
 # command share no scale), actions are zero-padded to the widest robot (6) with a mask so the
 # padding never teaches anything, and an embodiment id says which robot a row came from.
-from ch37.demos import ensure_demos  # noqa: E402
 from ch37.ownership import dump_json, round_floats, write_atomic  # noqa: E402
+from datagen import ensure_demos  # noqa: E402
 from gen_demos_aloha import ALOHA  # noqa: E402
 from gen_demos_pusht import PUSHT  # noqa: E402
 from lerobot_v3 import load_arrays  # noqa: E402

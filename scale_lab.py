@@ -377,7 +377,7 @@ def run(a) -> int:
 
 def fresh_demos(path: Path, seed: int, episodes: int) -> str:
     """Episodes 0..episodes-1 of the chapter's PushT demo generator at `seed` (its private cache)."""
-    from ch37.demos import ensure_demos
+    from datagen import ensure_demos
     from gen_demos_pusht import PUSHT
 
     return ensure_demos(

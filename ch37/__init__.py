@@ -1,7 +1,8 @@
 """The plumbing and presentation of chapter 3.7: what scale_data.py imports but does not teach, one
-concern per module. The LeRobot v3 format is the package lerobot_v3, the data engine datagen.
+concern per module. The LeRobot v3 format is the package lerobot_v3; the data engine and the demo sets
+are datagen. ch37 is the floor: none of its modules imports either.
 
-plumbing (imported by the engine and the tools; none of it imports datagen)
+plumbing (imported by the engine, the format's error type included, and the tools)
   errors        DataError, guard() / run_main() / main(): one line and an exit code (2, 130 on Ctrl-C)
   ownership     claim(): an output folder checked up front, locked, owned file by file (the Claim passed
                 to every write); stamps; write_atomic, publish_dir, dump_json, read_json: whole or none
@@ -12,7 +13,6 @@ plumbing (imported by the engine and the tools; none of it imports datagen)
 presentation and flags (the lesson's and the tools'; never imported by datagen or lerobot_v3)
   config        the chapter's defaults and smoke settings, the one flag parser and checker
   cli           scale_data.py's flag limits, claim_out, device choice, the tier banner
-  demos         demo sets: generation (gen_demos_*.py) and the private demo cache
   result_cache  reuse a finished run whose flags and code match; entries verified by checksum
   viz           the PNG figures and the Rerun recordings (the chapter's and the Scale Lab's)
   poster        the self-contained HTML posters (scale_data.html, scale_lab.html): inline SVG, no script
@@ -34,7 +34,6 @@ CHAPTER_ID = "ch3.7-scale-data"
 __all__ = [  # the face: the modules above, and the repository's root and code lists
     "cli",
     "config",
-    "demos",
     "ensemble",
     "errors",
     "ownership",
@@ -51,10 +50,10 @@ __all__ = [  # the face: the modules above, and the repository's root and code l
 ]
 
 # The files that shape the frames of a demo set (paths from ROOT): a set's stamp carries their digest
-# (ch37.demos.generator_version), so a cached set never outlives its code; the engine adds its own
+# (datagen.demos.generator_version), so a cached set never outlives its code; the engine adds its own
 # (datagen.shards.engine_version). The result cache needs no list: it records what a run imported.
 DATA_CODE = tuple(
-    "pusht_env.py pusht.xml aloha_env.py aloha.xml scripted_expert.py ch37/demos.py datagen/task.py "
+    "pusht_env.py pusht.xml aloha_env.py aloha.xml scripted_expert.py datagen/demos.py datagen/task.py "
     "lerobot_v3/dataset.py lerobot_v3/chunks.py ch37/seeds.py".split()
 )
 

@@ -2,6 +2,7 @@
 
 task       Task (what a task provides: env, start names, perturbation, place, expert, segments,
            replay, success), Perturbation, Source, Segment, rollout, write_dataset (a stamped set)
+demos      expert demo sets: Embodiment, generate, ensure_demos (the chapter's private demo cache)
 pusht      PUSHT: PushT as a task (the only module here that imports pusht_env and its expert)
 engine     one attempt, keep_first, grow, run_attempts, save: task-agnostic
 shards     a run on disk: fixed shards on local processes or Ray (ch37.parallel.map_jobs), resume,
@@ -10,6 +11,7 @@ shards     a run on disk: fixed shards on local processes or Ray (ch37.parallel.
 TASKS maps a task's name to it.
 """
 
+from datagen.demos import Embodiment, check_gl, ensure_demos, generate
 from datagen.engine import (
     ATTEMPTS_PER_KEPT,
     KEPT_KEYS,
@@ -30,6 +32,7 @@ TASKS = {PUSHT.name: PUSHT}
 
 __all__ = [
     "ATTEMPTS_PER_KEPT",
+    "Embodiment",
     "KEPT_KEYS",
     "PUSHT",
     "TASKS",
@@ -39,8 +42,11 @@ __all__ = [
     "Task",
     "attempt",
     "attempt_rng",
+    "check_gl",
     "empty_kept",
+    "ensure_demos",
     "first_per_source",
+    "generate",
     "grow",
     "keep_first",
     "rollout",

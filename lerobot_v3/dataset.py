@@ -470,7 +470,7 @@ def load_arrays(root: Path, keys=("observation.state", "action", "episode_index"
         datasets_log.setLevel(level)
 
 
-# A user's set must suit the env it feeds, checked where it is read (ch37.demos.ensure_demos for
+# A user's set must suit the env it feeds, checked where it is read (datagen.demos.ensure_demos for
 # scale_data.py, datagen.shards.read_source for augment_demos.py): fps_problem before loading (LeRobot
 # may refuse a set whose timestamps do not fit its fps), frames_problem on the loaded arrays.
 def fps_problem(root: Path, fps: int) -> str | None:

@@ -133,8 +133,7 @@ def test_bad_flags_one_line(tmp_path, capsys, argv, needle):
 def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
     """A user's set from before observation.environment_state (or from another writer) is read as
     before: the schema check, the lesson's read, the data engine's read and its growth."""
-    from ch37.demos import ensure_demos
-    from datagen import PUSHT, Perturbation, engine, shards
+    from datagen import PUSHT, Perturbation, engine, ensure_demos, shards
 
     emb, m = gen_demos_pusht.PUSHT, gen_demos_pusht.PUSHT.env_module
     env = emb.make_env()

@@ -137,7 +137,7 @@ def test_one_pass_writer_reads_back_as_lerobots_own(tmp_path, case):
 def test_one_pass_writer_is_deterministic_and_empty_as_before(tmp_path):
     feats, eps = pusht_case()
     write_ours(tmp_path / "a", feats, eps)
-    write_ours(tmp_path / "b", feats, iter(eps))  # a generator, as ch37.demos passes
+    write_ours(tmp_path / "b", feats, iter(eps))  # a generator, as datagen.demos passes
     files = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a").rglob("*") if p.is_file())
     assert files == sorted(p.relative_to(tmp_path / "b") for p in (tmp_path / "b").rglob("*") if p.is_file())
     for f in files:

@@ -92,8 +92,7 @@ class RegionClock:
 def run_once(script: Path, argv: list[str]) -> dict:
     """Run `script` with `argv` in this process; {phase: seconds}, the calls inside them, and facts."""
     import bc_recipe
-    from ch37 import demos
-    from datagen import engine
+    from datagen import demos, engine
     from lerobot_v3 import dataset as lerobot_io
 
     inner: dict[str, float] = {}  # calls inside the regions: "of which" lines

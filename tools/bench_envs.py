@@ -19,9 +19,9 @@ import numpy as np
 
 import gen_demos_aloha
 import gen_demos_pusht
-from ch37 import demos, errors
+from ch37 import errors
 from ch37.config import check, parser
-from datagen import rollout
+from datagen import demos, rollout
 
 NOISE = {"pusht": 0.08, "aloha": 0.05}  # the noisy-expert levels the success targets are stated at
 

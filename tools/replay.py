@@ -33,11 +33,11 @@ import bc_recipe as bc
 import datagen
 from ch37 import ROOT, errors
 from ch37.config import DEFAULTS, SMOKE, check
-from ch37.demos import ensure_demos
 from ch37.errors import DataError
 from ch37.ownership import dump_json, round_floats, write_atomic
 from ch37.seeds import env_seed
 from ch37.viz import save_png
+from datagen import ensure_demos
 from gen_demos_pusht import PUSHT
 from lerobot_v3.dataset import load_arrays
 from tools.common import parser, provenance, rel
