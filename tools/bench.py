@@ -92,8 +92,9 @@ class RegionClock:
 def run_once(script: Path, argv: list[str]) -> dict:
     """Run `script` with `argv` in this process; {phase: seconds}, the calls inside them, and facts."""
     import bc_recipe
-    from datagen import demos, engine
-    from lerobot_v3 import dataset as lerobot_io
+    import datagen
+    import lerobot_v3
+    from datagen import engine, task
 
     inner: dict[str, float] = {}  # calls inside the regions: "of which" lines
     facts: dict = {"train_steps": {}, "train_rows": {}}
@@ -121,9 +122,9 @@ def run_once(script: Path, argv: list[str]) -> dict:
         return arm
 
     patches = [  # (module, name, phase): the script looks these up on their module when it calls them
-        (demos, "ensure_demos", "demo generation (or cache check)"),
-        (lerobot_io, "load_arrays", "load LeRobot sets (all three)"),
-        (lerobot_io, "write_dataset", "write augmented LeRobot set"),
+        (datagen, "ensure_demos", "demo generation (or cache check)"),  # the faces the lesson imports
+        (lerobot_v3, "load_arrays", "load LeRobot sets (all three)"),
+        (task, "write_dataset", "write augmented LeRobot set"),  # datagen.save looks it up there
         (engine, "run_attempts", "augmentation attempts"),
         (bc_recipe, "evaluate", "rollouts (all arms)"),
         (bc_recipe, "train", "train"),
