@@ -264,6 +264,11 @@ def _start_ray(address: str | None, workers: int):
     return ray
 
 
+def _apply(fn, *args):
+    """fn(*args): the one function Ray runs, so `fn` may be any picklable callable (operator.call too)."""
+    return fn(*args)
+
+
 def _run_ray(fn, tasks: list, *, address: str | None, workers: int, timing: dict | None = None):
     """fn(*args) for each args in `tasks` as Ray tasks of one CPU each, at most 2 per CPU in flight.
     `timing`, if given, receives "start_s": the seconds Ray took to start or join."""
@@ -274,12 +279,12 @@ def _run_ray(fn, tasks: list, *, address: str | None, workers: int, timing: dict
     if timing is not None:
         timing["start_s"] = time.perf_counter() - t0
     try:
-        remote = ray.remote(num_cpus=1, max_retries=0)(fn)
+        remote = ray.remote(num_cpus=1, max_retries=0)(_apply)  # any picklable fn, a builtin too
         window = max(2, 2 * int(ray.cluster_resources().get("CPU", workers)))
         todo, pending = list(tasks), []
         while todo or pending:
             while todo and len(pending) < window:
-                pending.append(remote.remote(*todo.pop(0)))
+                pending.append(remote.remote(fn, *todo.pop(0)))
             done, pending = ray.wait(pending, num_returns=1)
             yield ray.get(done[0])
     finally:
