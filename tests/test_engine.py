@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT, run_script, with_fps, with_nan
+from conftest import ROOT, run_script, with_fps, with_nan, with_value
 
 import gen_demos_aloha
 import gen_demos_pusht
@@ -167,29 +167,19 @@ def test_two_workers_same_bytes(src, reference, tmp_path):
     assert tree(tmp_path / "w2") == tree(reference)
 
 
-def test_shard_size_changes_no_frame_byte(src, reference, tmp_path):
-    """The merge cuts files by row counts, never where a shard ends: shards of 5 attempts (3 shards,
-    not 6) give the same data/ files, tasks, info.json and stats.json, byte for byte. The episodes
-    table differs only in the index and episode_index stats LeRobot estimated inside each shard (a
-    histogram's quantiles of shard-local values, then shifted, as aggregate_datasets does)."""
-    import pandas as pd
-
-    out = tmp_path / "s5"
-    augment("--src", src, "--out", out, "--workers", "1", "--per_demo", str(PER_DEMO), "--shard_size", "5")
-    assert json.loads((out / shards.REPORT_NAME).read_text())["shards"]["total"] == 3
-    got, want = tree(out), tree(reference)
-    assert got.keys() == want.keys()
-    same = [
-        k
-        for k in got
-        if k.startswith("data/") or k in ("meta/info.json", "meta/stats.json", "meta/tasks.parquet")
-    ]
-    assert len(same) >= 4 and all(got[k] == want[k] for k in same), [k for k in same if got[k] != want[k]]
-    ea, eb = (pd.read_parquet(root / "meta/episodes/chunk-000/file-000.parquet") for root in (out, reference))
-    assert list(ea.columns) == list(eb.columns)
-    for key in ea.columns:
-        if not key.startswith(("stats/index/", "stats/episode_index/")):
-            assert ea[key].astype(str).equals(eb[key].astype(str)), key
+def test_shard_size_changes_no_byte(src, reference, tmp_path):
+    """Issue 31 #5: the merge cuts files by row counts, never where a shard ends, and computes each
+    episode's index and episode_index stats from its final indices: shards of 7 attempts (2 shards,
+    not 6) give the same data/ and meta/ files, byte for byte, meta/episodes included."""
+    out = tmp_path / "s7"
+    augment("--src", src, "--out", out, "--workers", "1", "--per_demo", str(PER_DEMO), "--shard_size", "7")
+    assert json.loads((out / shards.REPORT_NAME).read_text())["shards"]["total"] == 2
+    got, want = (
+        tree(out, skip=(shards.REPORT_NAME, STAMP_NAME)),
+        tree(reference, skip=(shards.REPORT_NAME, STAMP_NAME)),
+    )
+    assert got.keys() == want.keys() and any(k.startswith("meta/episodes/") for k in got)
+    assert [k for k in got if got[k] != want[k]] == []
 
 
 def test_local_ray_same_bytes(src, reference, tmp_path):
@@ -273,6 +263,17 @@ def _edited(edit):  # issue 22 item 11 and the fps question: a copy of the good 
     return make
 
 
+def _without_index_columns(root):
+    """The set's meta/episodes table without the columns that say where each episode's frames are."""
+    import pyarrow.parquet as pq
+
+    for f in (root / "meta" / "episodes").rglob("*.parquet"):
+        t = pq.read_table(f)
+        drop = ["dataset_from_index", "dataset_to_index", "data/chunk_index", "data/file_index"]
+        pq.write_table(t.drop_columns(drop), f)
+    return root
+
+
 def _aloha(tmp, src):
     out = tmp / "aloha"
     assert gen_demos_aloha.main(["--episodes", "1", "--out", str(out), "--quiet"]) == 0
@@ -317,6 +318,15 @@ BAD = [  # (id, make src or None (the good one), make out or None (a new folder)
         [],
         "recorded at 50 fps, but the env steps at 10",
     ),
+    # issue 31 #6: values outside the env's documented ranges, an episodes table without its index columns
+    (
+        "block_x_beyond_the_walls",
+        _edited(lambda p: with_value(p, "observation.state", 0, 2, 1e30)),
+        None,
+        [],
+        "observation.state block_x (index 2) is 1e+30 in 1 frames, the first at row 0",
+    ),
+    ("episodes_without_index_columns", _edited(_without_index_columns), None, [], "dataset_from_index"),
     ("out_holds_user_data", None, _user_out, [], "did not make"),
     ("out_other_settings", None, _other_settings_out, [], "other settings"),
     ("out_is_a_demo_set", None, _demo_set_out, [], "did not make"),
@@ -478,3 +488,21 @@ def test_resume_remakes_damaged_shards_byte_identical(src, reference, tmp_path):
     assert tree(out) == tree(reference)  # every data/ and meta/ file, byte for byte
     rep = json.loads((out / shards.REPORT_NAME).read_text())
     assert rep["shards"]["reused"] == len(done) - 2 and rep["attempts"] == 12
+
+
+def test_a_stamp_whose_counts_disagree_with_its_files_is_a_damaged_shard(src, reference, tmp_path):
+    """Issue 31 #2: one more "kept" in a finished shard's stamp (its files untouched, valid JSON) is
+    caught against the shard's own files: the resume says the shard is damaged, remakes it and ends
+    byte-identical to an uninterrupted run, where it stopped with an AssertionError (and kept doing so)."""
+    out = tmp_path / "o"
+    done = _killed_after(src, out, 2)
+    path = out / shards.SHARDS_DIR / done[0] / STAMP_NAME
+    stamp = json.loads(path.read_text())
+    path.write_text(json.dumps(stamp | {"kept": stamp["kept"] + 1}))
+    p = augment("--src", src, "--out", out, "--workers", "1", *SETTINGS, check=False)
+    assert p.returncode == 0 and "Traceback" not in p.stdout + p.stderr, p.stdout + p.stderr
+    lines = [x for x in p.stdout.splitlines() if "is damaged" in x]
+    assert len(lines) == 1 and done[0][-5:] in lines[0] and "making it again" in lines[0], p.stdout
+    assert tree(out) == tree(reference)
+    rep = json.loads((out / shards.REPORT_NAME).read_text())
+    assert rep["kept"] == json.loads((reference / shards.REPORT_NAME).read_text())["kept"]
