@@ -36,8 +36,10 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import io
 import itertools
 import json
+import os
 import platform
 import re
 import shlex
@@ -124,6 +126,23 @@ def plan_memory_problem(n_sources: int, per_demo: int, free: int | None) -> str 
         f"--per_demo {per_demo:,} x {n_sources} source episodes = {attempts:,} attempts need about "
         f"{attempts * ATTEMPT_BYTES / 2**30:,.1f} GB of memory to plan, more than the "
         f"{free / 2**30:,.1f} GB available here; lower --per_demo (or run it in parts with --seed)"
+    )
+
+
+# A shard folder holds 6 files (a data and an episodes parquet, info.json, stats.json, tasks.parquet,
+# its stamp); the merge opens each shard's, so beyond a few thousand files --shard_size costs time.
+FILES_PER_SHARD, MANY_FILES = 6, 5000
+
+
+def many_files_note(n_shards: int, attempts: int, shard_size: int, out: Path) -> str | None:
+    """One line when the plan would leave more than MANY_FILES files under OUT/shards, else None."""
+    files = n_shards * FILES_PER_SHARD
+    if files <= MANY_FILES:
+        return None
+    return (
+        f"note: --shard_size {shard_size} cuts {attempts:,} attempts into {n_shards:,} shards: up to "
+        f"{files:,} files under {Path(out) / SHARDS_DIR} until the merge, which reads each shard's; "
+        "a larger --shard_size (default 100) makes fewer (a new --out: it is part of the settings)"
     )
 
 
@@ -239,9 +258,41 @@ def foreign(out: Path, stamp: dict) -> list[str]:
     return bad
 
 
-def finished(out: Path, config: dict, n_shards: int) -> dict[int, dict]:
-    """{shard index: stamp} of the whole shards of this run whose files still have the sha256 their
-    stamp records; the rest of shards/ is removed (a damaged shard with one printed line).
+def stamp_problem(path: Path, stamp: dict, jobs, reasons) -> str | None:
+    """None if a shard stamp's own fields agree with the shard's files and its place in the plan, else
+    what disagrees. The run's report is built from these fields, so each is checked: attempts and the
+    attempts per source against the shard's `jobs`; kept and frames against its info.json (whose
+    sha256 the stamp's files check); failures (of `reasons`) + kept = attempts; the episode lengths'
+    histogram against kept and frames; kept per source within its attempts, summing to kept."""
+    info = read_json(path / "meta" / "info.json") if (path / "meta" / "info.json").exists() else {}
+    try:
+        failures = {str(k): int(v) for k, v in stamp["failures"].items()}
+        lengths = {int(n): int(c) for n, c in stamp["lengths"].items()}
+        per_source = {str(e): (int(a), int(k)) for e, (a, k) in stamp["per_source"].items()}
+        attempts, kept, frames = (stamp[k] for k in ("attempts", "kept", "frames"))
+        ok = (
+            attempts == len(jobs)
+            and kept == info.get("total_episodes", 0)
+            and frames == info.get("total_frames", 0)
+            and set(failures) <= set(reasons)
+            and min(failures.values(), default=0) >= 0
+            and sum(failures.values()) + kept == attempts
+            and min([*lengths, *lengths.values()], default=1) > 0
+            and sum(lengths.values()) == kept
+            and sum(n * c for n, c in lengths.items()) == frames
+            and {e: a for e, (a, _) in per_source.items()} == dict(Counter(str(e) for e, _ in jobs))
+            and all(0 <= k <= a for a, k in per_source.values())
+            and sum(k for _, k in per_source.values()) == kept
+        )
+    except (AttributeError, KeyError, TypeError, ValueError):  # a field missing or of the wrong kind
+        ok = False
+    return None if ok else "its stamp's counts disagree with its files"
+
+
+def finished(out: Path, config: dict, shards: list) -> dict[int, dict]:
+    """{shard index: stamp} of the whole shards of this run (`shards`: its plan) whose files still have
+    the sha256 their stamp records and whose stamp's counts agree with them (stamp_problem); the rest of
+    shards/ is removed (a damaged shard with one printed line).
 
     Only called on a run folder of `config` that foreign() found clean: all under shards/ is ours."""
     root = Path(out) / SHARDS_DIR
@@ -252,12 +303,14 @@ def finished(out: Path, config: dict, n_shards: int) -> dict[int, dict]:
     for path in sorted(root.iterdir()):
         m = re.fullmatch(r"shard-(\d{5})", path.name)
         stamp = read_stamp(path) if m else None
-        if is_ours(stamp) and stamp.get("run") == key and int(m.group(1)) < n_shards:
+        if is_ours(stamp) and stamp.get("run") == key and int(m.group(1)) < len(shards):
             damaged = changed_files(path, stamp)  # its files against the sha256 its stamp recorded
-            if not damaged:
+            why = f"{names(damaged)} differs from its stamp" if damaged else None
+            why = why or stamp_problem(path, stamp, shards[int(m.group(1))], engine.FAILURES[config["mode"]])
+            if not why:
                 done[int(m.group(1))] = stamp
                 continue
-            print(f"shard {m.group(1)} is damaged ({names(damaged)} differs from its stamp); making it again")
+            print(f"shard {m.group(1)} is damaged ({why}); making it again")
             shutil.rmtree(path)
         else:
             shutil.rmtree(path)  # a shard cut off mid-save, one from other settings, a killed scratch
@@ -293,7 +346,7 @@ def merge(out: Path, n_shards: int, run_stamp: dict) -> int:
 # the episodes were cut into shards (LeRobot's own writer buffers a few episodes per group).
 EPISODE_ROWS = 1000
 DATA_GROUP_ROWS = 2**16  # frames per row group of a data file
-SHIFTED_STATS = ("min", "max", "mean", "q01", "q10", "q50", "q90", "q99")  # move with their column
+SHIFTED_STATS = ("min", "max", "mean", "q01", "q10", "q50", "q90", "q99")  # a column's stats but std, count
 
 
 class _Files:
@@ -311,7 +364,7 @@ class _Files:
         self.root, self.pattern, self.max_bytes, self.chunks_size = root, pattern, max_bytes, chunks_size
         self.group_rows, self.buffer, self.buffered = group_rows, [], 0  # rows not yet written
         self.chunk = self.file = self.placed = 0  # rows placed in the current file
-        self.limit = self.writer = self.open_at = None
+        self.limit = self.writer = self.open_at = self.path = None
 
     def place(self, rows: int, row_bytes: int) -> tuple[int, int]:
         """Where the next block of `rows` rows goes: (chunk, file), starting a new file if needed."""
@@ -331,9 +384,10 @@ class _Files:
 
         if where != self.open_at:
             self.close()
-            path = self.root / self.pattern.format(chunk_index=where[0], file_index=where[1])
-            path.parent.mkdir(parents=True, exist_ok=True)
-            self.writer = pq.ParquetWriter(path, table.schema, **PARQUET)
+            self.path = self.root / self.pattern.format(chunk_index=where[0], file_index=where[1])
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            with _naming(self.path):
+                self.writer = pq.ParquetWriter(self.path, table.schema, **PARQUET)
             self.open_at = where
         self.buffer.append(table)
         self.buffered += table.num_rows
@@ -344,16 +398,42 @@ class _Files:
         import pyarrow as pa
 
         table = pa.concat_tables(self.buffer)
-        self.writer.write_table(table.slice(0, rows))
+        with _naming(self.path):
+            self.writer.write_table(table.slice(0, rows))
         rest = table.slice(rows)
         self.buffer, self.buffered = ([rest] if rest.num_rows else []), rest.num_rows
 
     def close(self) -> None:
+        """Write what is buffered and close the file; on any failure the file is closed all the same
+        (abort), so no writer is left open to fail again when it is collected."""
         if self.writer is not None:
-            if self.buffered:
-                self._flush(self.buffered)
-            self.writer.close()
-            self.writer = self.open_at = None
+            try:
+                if self.buffered:
+                    self._flush(self.buffered)
+                with _naming(self.path):
+                    self.writer.close()
+            finally:
+                self.abort()
+
+    def abort(self) -> None:
+        """Close the open file without writing what is buffered (after an error; a no-op when closed)."""
+        writer, self.writer, self.open_at, self.buffer, self.buffered = self.writer, None, None, [], 0
+        if writer is not None and writer.is_open:
+            with contextlib.suppress(Exception):  # the first error is the one reported
+                writer.close()
+            writer.is_open = False  # ParquetWriter.__del__ would close it again, and print that failure
+
+
+@contextlib.contextmanager
+def _naming(path: Path):
+    """An OSError inside (pyarrow's carry no file name: "Error writing bytes to file") re-raised with
+    `path` as its file name and the plain message of its errno, so the one error line says where."""
+    try:
+        yield
+    except OSError as e:
+        if e.errno is None or e.filename is not None:
+            raise
+        raise OSError(e.errno, os.strerror(e.errno), str(path)) from e
 
 
 def _shifted(table, name: str, by: int, *, fill: bool = False):
@@ -394,15 +474,39 @@ def _read_set(root: Path) -> tuple:
     return eps, data
 
 
+def _index_stats(eps, n_eps: int, n_frames: int) -> dict:
+    """{stats/episode_index/STAT, stats/index/STAT: values, one per episode} of a shard's episodes as
+    rows of the merged set, computed from their final indices (episode n_eps + j, frames n_frames +
+    dataset_from_index ..) exactly as the shard's writer computes them (ch37.lerobot_io._episode_stats,
+    compute_episode_stats bit for bit). Shifting the shard's own stats instead (aggregate's way) left
+    them depending on where the shards were cut: the quantiles are read off a histogram whose bins
+    follow the values, and the std of large indices loses digits (q50 of index off by up to 0.0124)."""
+    from ch37.lerobot_io import _episode_stats
+
+    feats = {"episode_index": {"dtype": "int64"}, "index": {"dtype": "int64"}}
+    lo = eps.column("dataset_from_index").to_numpy() + n_frames
+    hi = eps.column("dataset_to_index").to_numpy() + n_frames
+    out: dict[str, list] = {}
+    for j in range(eps.num_rows):
+        buf = {"episode_index": np.full(hi[j] - lo[j], n_eps + j), "index": np.arange(lo[j], hi[j])}
+        for name, stats in _episode_stats(buf, feats).items():
+            for stat, v in stats.items():
+                out.setdefault(f"stats/{name}/{stat}", []).append(v.tolist())
+    return out
+
+
 def _moved_episodes(eps, n_eps: int, n_frames: int, places: list[tuple[int, int]]):
-    """A shard's episodes table as rows of the merged set: episode and frame indices (and their
-    per-episode stats, as aggregate's update_meta_data moves them) shifted by the n_eps episodes and
-    n_frames frames before it; data/chunk_index and data/file_index set to each episode's place."""
+    """A shard's episodes table as rows of the merged set: episode and frame indices shifted by the
+    n_eps episodes and n_frames frames before it, their per-episode stats computed from the final
+    indices (_index_stats), so no byte depends on --shard_size; data/chunk_index and data/file_index
+    set to each episode's place."""
     import pyarrow as pa
 
     shifts = {"episode_index": n_eps, "dataset_from_index": n_frames, "dataset_to_index": n_frames}
-    for name, by in (("episode_index", n_eps), ("index", n_frames)):
-        shifts |= {f"stats/{name}/{stat}": by for stat in SHIFTED_STATS}
+    for name, values in _index_stats(eps, n_eps, n_frames).items():
+        if name in eps.column_names:
+            i = eps.schema.get_field_index(name)
+            eps = eps.set_column(i, eps.schema.field(i), pa.array(values, eps.schema.field(i).type))
     for name, by in shifts.items():
         if name in eps.column_names:
             eps = _shifted(eps, name, by)
@@ -430,8 +534,8 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
     same sets (tests/test_merge.py); only the file layout differs, and it depends on the frames alone."""
     import pandas as pd
     import pyarrow as pa
-    from lerobot.datasets.io_utils import load_info, write_info, write_tasks
-    from lerobot.datasets.utils import DEFAULT_DATA_PATH, DEFAULT_EPISODES_PATH
+    from lerobot.datasets.io_utils import load_info, write_info
+    from lerobot.datasets.utils import DEFAULT_DATA_PATH, DEFAULT_EPISODES_PATH, DEFAULT_TASKS_PATH
 
     dest = Path(dest)
     info = load_info(roots[0])
@@ -480,11 +584,17 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
                 flush(EPISODE_ROWS)
         if pending:
             flush(sum(t.num_rows for t in pending))
-    finally:
         data_out.close()
         meta_out.close()
+    finally:
+        data_out.abort()  # after an error: the open files closed without their buffers (else no-ops)
+        meta_out.abort()
     tasks = [task[0]] if task else []
-    write_tasks(pd.DataFrame({"task_index": range(len(tasks))}, index=pd.Index(tasks, name="task")), dest)
+    table = pd.DataFrame({"task_index": range(len(tasks))}, index=pd.Index(tasks, name="task"))
+    buf = io.BytesIO()  # LeRobot's write_tasks (to_parquet) into memory: its writer cannot be left open
+    table.to_parquet(buf)
+    (dest / DEFAULT_TASKS_PATH).parent.mkdir(parents=True, exist_ok=True)
+    (dest / DEFAULT_TASKS_PATH).write_bytes(buf.getvalue())
     info.total_episodes, info.total_frames, info.total_tasks = n_eps, n_frames, len(tasks)
     info.splits = {"train": f"0:{n_eps}"}
     write_info(info, dest)
@@ -517,6 +627,33 @@ def remove_shards(out: Path) -> None:
 # ----------------------------------------------------------------------------------------------
 # The run: its checks, its plan (resumed where a run stopped), its report
 # ----------------------------------------------------------------------------------------------
+# The ranges pusht_env.py documents for its state (STATE_NAMES order): positions inside the walls (m),
+# sines and cosines in [-1, 1], the fixed target (0, 0, sin 0, cos 1). A value outside is no PushT
+# state: its attempts could only fail (a block at 1e30 m is no valid start).
+_W = pusht_env.WALL_INNER
+STATE_RANGES = dict(
+    zip(pusht_env.STATE_NAMES, [(-_W, _W)] * 4 + [(-1.0, 1.0)] * 2 + [(0.0, 0.0)] * 3 + [(1.0, 1.0)])
+)
+# The episodes table's columns that say where each episode's frames are (LeRobot v3)
+EPISODE_COLUMNS = ("episode_index", "length", "dataset_from_index", "dataset_to_index")
+EPISODE_COLUMNS += ("data/chunk_index", "data/file_index")
+
+
+def state_range_problem(src: Path, states: np.ndarray) -> str | None:
+    """None if every state (N, 10) lies in STATE_RANGES (1e-6 of slack: float32 rounding), else the
+    first state dimension outside, how many frames and the first row."""
+    for i, (name, (lo, hi)) in enumerate(STATE_RANGES.items()):
+        bad = (states[:, i] < lo - 1e-6) | (states[:, i] > hi + 1e-6)
+        if bad.any():
+            row = int(np.argmax(bad))
+            return (
+                f"--src {src}: observation.state {name} (index {i}) is {float(states[row, i]):g} in "
+                f"{int(bad.sum())} frames, the first at row {row}; pusht_env.py's range for it is "
+                f"[{lo:g}, {hi:g}]: this is not a PushT state"
+            )
+    return None
+
+
 def read_source(src: Path) -> dict:
     """The source set's columns, or DataError with one line saying what is wrong with it."""
     import datasets
@@ -537,11 +674,21 @@ def read_source(src: Path) -> dict:
         raise DataError(f"--src {problem}")
     for f in sorted(src.glob("data/*/*.parquet")) + sorted(src.glob("meta/episodes/*/*.parquet")):
         try:
-            pq.read_metadata(f)
+            schema = pq.read_schema(f)
         except Exception as e:  # pyarrow's errors for a broken file vary by what is broken
             raise DataError(
                 f"--src {src}: {f.relative_to(src)} is not a readable parquet file ({e})"
             ) from None
+        missing = (
+            [c for c in EPISODE_COLUMNS if c not in schema.names]
+            if f.relative_to(src).parts[1] == "episodes"
+            else []
+        )
+        if missing:
+            raise DataError(
+                f"--src {src}: {f.relative_to(src)} lacks the columns {', '.join(missing)} (a LeRobot v3 "
+                "episodes table says where each episode's frames are); regenerate or repair the set"
+            )
     datasets.logging.set_verbosity(datasets.logging.CRITICAL)  # a failure below is our one line, not a log
     check_hf_cache()  # a cache we cannot write is named as the cause, not the set
     try:
@@ -556,6 +703,9 @@ def read_source(src: Path) -> dict:
     problem = frames_problem(src, arrays)
     if problem:
         raise DataError(f"--src {problem}")
+    problem = state_range_problem(src, arrays["observation.state"])
+    if problem:
+        raise DataError(problem)
     if arrays["episode_index"].max() >= SEED_BLOCK:
         raise DataError(f"--src {src}: episode indices must be below {SEED_BLOCK:,} (the seed block)")
     return arrays
@@ -660,8 +810,11 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
     run_stamp = {"made_by": MADE_BY, "kind": "engine", "config": config, "complete": False}
     write_atomic(out / STAMP_NAME, dump_json(run_stamp))  # the folder is ours from here on
     shards = plan(sources, config["per_demo"], config["shard_size"])
-    done = finished(out, config, len(shards))
+    done = finished(out, config, shards)
     todo = [i for i in range(len(shards)) if i not in done]
+    note = many_files_note(len(shards), sum(map(len, shards)), config["shard_size"], out) if todo else None
+    if note:
+        print(note, flush=True)
     scratch = None if ray not in (None, "local") else str(out / SHARDS_DIR)  # this machine's disk
     (out / SHARDS_DIR).mkdir(exist_ok=True)
     tasks = [
@@ -698,7 +851,8 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
             "seconds_merge": time.perf_counter() - t_merge,
             # worker seconds (summed over the shards made by this run) inside seconds_generate
             "seconds_write": sum(done[i].get("seconds_write", 0.0) for i in todo),
-            "demos_per_s": made / seconds,
+            "kept_this_run": made,  # the rest of "kept" was made by an earlier run (its shards reused)
+            "demos_per_s": made / seconds,  # this run's: the demos it made over its seconds
             "command": " ".join(shlex.quote(x) for x in [Path(sys.executable).name, *sys.argv]),
             "versions": vers,
             "dataset": {"episodes": merged, "load": f"LeRobotDataset('local/pusht_aug', root='{out}')"},

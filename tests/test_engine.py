@@ -191,6 +191,37 @@ def test_local_ray_same_bytes(src, reference, tmp_path):
     assert "Traceback" not in p.stderr
 
 
+RAY_CRASH = """
+import os, sys, time
+from ch37 import executors
+
+def fn(i):
+    if i == 1:
+        os._exit(1)  # the worker dies, as on a lost node
+    return i
+
+try:
+    for r in executors.run(fn, [(0,), (1,), (2,)], workers=2, ray="local"):
+        print("result", r, flush=True)
+except Exception as e:
+    print("failed", type(e).__name__, flush=True)
+time.sleep(2)  # Ray's message thread printed its lines in this time
+"""
+
+
+def test_ray_cluster_messages_stay_off_stdout():
+    """Issue 31 #7: a Ray worker lost mid-run reaches the run as its task's exception; Ray's driver
+    printed its raylet message ("(raylet) A worker died ...", 1 long line per loss, ~20 for a node)
+    to our stdout as well, whatever log_to_driver said."""
+    p = subprocess.run(
+        [sys.executable, "-c", RAY_CRASH], cwd=ROOT, capture_output=True, text=True, timeout=300
+    )
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.strip().splitlines()
+    assert lines and lines[-1] == "failed WorkerCrashedError", p.stdout
+    assert all(x.startswith(("result ", "failed ")) for x in lines), p.stdout
+
+
 def test_killed_run_is_finished_by_the_same_command(src, reference, tmp_path):
     out = tmp_path / "killed"
     cmd = [sys.executable, str(ROOT / "augment_demos.py"), "--src", str(src), "--out", str(out)]
@@ -210,11 +241,15 @@ def test_killed_run_is_finished_by_the_same_command(src, reference, tmp_path):
     if "shard-00004" not in done:  # (one worker makes the shards in order; the kill came early)
         (out / shards.SHARDS_DIR / "shard-00004").mkdir()
         (out / shards.SHARDS_DIR / "shard-00004" / "junk.parquet").write_bytes(b"half a file")
-    augment(*cmd[2:])
+    p = augment(*cmd[2:])
     assert tree(out) == tree(reference)
     rep = json.loads((out / shards.REPORT_NAME).read_text())
     assert rep["shards"]["reused"] == len(done) and rep["shards"]["made_this_run"] == 6 - len(done)
     assert rep["attempts"] == 12  # the report covers the whole run, reused shards included
+    # issue 31 #7: the summary says what this run made (its rate is over that) and what it resumed
+    made = rep["kept_this_run"]
+    resumed = rep["kept"] - made
+    assert f"{made} made now in " in p.stdout and f"{resumed} resumed from {len(done)} shards" in p.stdout
     again = augment(*cmd[2:])  # a finished run: nothing to do, nothing changed
     assert "already complete" in again.stdout and tree(out) == tree(reference)
 
@@ -345,6 +380,14 @@ BAD = [  # (id, make src or None (the good one), make out or None (a new folder)
     ("pos_sigma_huge", None, None, ["--pos_sigma", "11"], "--pos_sigma must be at most 10"),
     ("mode_unknown", None, None, ["--mode", "teleport"], "--mode"),
 ]
+
+
+def test_a_shard_size_that_leaves_thousands_of_files_says_so():
+    """Issue 31 #7: --shard_size 1 with 3,000 attempts kept ~18,000 files under shards/ without a word."""
+    assert shards.many_files_note(30, 3000, 100, Path("big")) is None  # the default: 180 files
+    note = shards.many_files_note(3000, 3000, 1, Path("big"))
+    assert note.startswith("note: --shard_size 1 cuts 3,000 attempts into 3,000 shards: up to 18,000 files")
+    assert "\n" not in note
 
 
 def test_a_plan_beyond_memory_is_one_line():
