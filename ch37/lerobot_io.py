@@ -275,9 +275,19 @@ def _quantiles(x: np.ndarray):
     idx = first - 1 + ((ew <= v[..., None]) & (win <= bins - 1)).sum(axis=-1)
     ok = ((first == 1) | (ew[..., 0] <= v)) & ((first + 8 >= bins - 1) | (ew[..., 8] > v))
     if not ok.all():
-        row = edge(np.broadcast_to(np.arange(1, bins), (1, dims, bins - 1)))[0]  # (D, 4999)
-        for qi, d in zip(*np.nonzero(~ok), strict=True):
-            idx[qi, d] = (row[d] <= v[qi, d]).sum()
+        # Edges rise with k (a rounded k * step + start), so the count of edges 1..4999 <= v is the
+        # first k whose edge is not <= v, less one: found by bisection for the pairs the window
+        # missed (a near-constant column, whose bins are finer than its values' float spacing, so
+        # many edges round to one value), ~13 edges a pair where the whole row took 4,999.
+        qi, d = np.nonzero(~ok)
+        vv, lo_k, hi_k = v[qi, d], np.ones(len(qi), np.int64), np.full(len(qi), bins, np.int64)
+        while (lo_k < hi_k).any():
+            mid = (lo_k + hi_k) // 2  # < bins: edge(mid) is one of edges 1..4999
+            kk = mid.astype(start.dtype)
+            e = np.where(flat[d], (kk / bins) * delta[d] + start[d], kk * step[d] + start[d])
+            above = ~(e <= vv)  # not `e > vv`: a NaN counts no edge, as the row's sum did
+            hi_k, lo_k = np.where(above, mid, hi_k), np.where(above, lo_k, mid + 1)
+        idx[qi, d] = lo_k - 1
     e0, e1 = edge(idx[..., None])[..., 0], edge(idx[..., None] + 1)[..., 0]
     below = (srt[None] < e0[:, None]).sum(axis=1)  # (Q, D) values below the bin ...
     upto = np.where(idx < bins - 1, (srt[None] < e1[:, None]).sum(axis=1), n)  # ... and up to its top

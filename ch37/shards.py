@@ -480,19 +480,50 @@ def _index_stats(eps, n_eps: int, n_frames: int) -> dict:
     dataset_from_index ..) exactly as the shard's writer computes them (ch37.lerobot_io._episode_stats,
     compute_episode_stats bit for bit). Shifting the shard's own stats instead (aggregate's way) left
     them depending on where the shards were cut: the quantiles are read off a histogram whose bins
-    follow the values, and the std of large indices loses digits (q50 of index off by up to 0.0124)."""
-    from ch37.lerobot_io import _episode_stats
+    follow the values.
 
-    feats = {"episode_index": {"dtype": "int64"}, "index": {"dtype": "int64"}}
+    _episode_stats' float operations, on all episodes of one length at once, an episode per column:
+    _quantiles works column by column, and a mean over a row of the (episodes, frames) array sums in
+    the order of a (frames, 1) column's (tests/test_engine.py checks them equal to _episode_stats)."""
+    from ch37.lerobot_io import _episode_stats, _quantiles
+
     lo = eps.column("dataset_from_index").to_numpy() + n_frames
-    hi = eps.column("dataset_to_index").to_numpy() + n_frames
-    out: dict[str, list] = {}
-    for j in range(eps.num_rows):
-        buf = {"episode_index": np.full(hi[j] - lo[j], n_eps + j), "index": np.arange(lo[j], hi[j])}
-        for name, stats in _episode_stats(buf, feats).items():
-            for stat, v in stats.items():
-                out.setdefault(f"stats/{name}/{stat}", []).append(v.tolist())
-    return out
+    lengths = eps.column("dataset_to_index").to_numpy() + n_frames - lo
+    cols: dict[str, np.ndarray] = {}  # column -> (episodes,) values
+
+    def put(key: str, js, values) -> None:  # float64 as the episodes table stores them, counts int64
+        kind = np.int64 if key.endswith("/count") else np.float64
+        cols.setdefault(key, np.zeros(len(lengths), kind))[js] = values
+
+    for n in np.unique(lengths):
+        js = np.nonzero(lengths == n)[0]
+        if n < 2:  # LeRobot's own code for an episode of one frame
+            feats = {"episode_index": {"dtype": "int64"}, "index": {"dtype": "int64"}}
+            for j in js:
+                buf = {"episode_index": np.full(n, n_eps + j), "index": np.arange(lo[j], lo[j] + n)}
+                for name, st in _episode_stats(buf, feats).items():
+                    for k, v in st.items():
+                        put(f"stats/{name}/{k}", [j], v)
+            continue
+        values = {  # (frames, episodes) in float64, as _episode_stats casts int64
+            "episode_index": np.repeat((n_eps + js)[None, :], n, axis=0).astype(np.float64),
+            "index": (lo[js][None, :] + np.arange(n)[:, None]).astype(np.float64),
+        }
+        for name, x in values.items():
+            xt = np.ascontiguousarray(x.T)  # a row per episode: each mean sums one contiguous row
+            mean, mean_sq = np.mean(xt, axis=1), np.mean(xt**2, axis=1)
+            mean += (mean - mean) * (n / n)  # as _episode_stats (its running update, for equal bits)
+            mean_sq += (mean_sq - mean_sq) * (n / n)
+            st = {
+                "mean": mean,
+                "std": np.sqrt(np.maximum(0, mean_sq - mean**2)),
+                "count": np.full(len(js), n),
+            }
+            st["min"], st["max"], qs = _quantiles(x)
+            st |= {key: np.where(plain, e0, inside) for key, e0, inside, plain in qs}
+            for k, v in st.items():
+                put(f"stats/{name}/{k}", js, v)
+    return {k: v.reshape(-1, 1).tolist() for k, v in cols.items()}  # each a list of one, as LeRobot's
 
 
 def _moved_episodes(eps, n_eps: int, n_frames: int, places: list[tuple[int, int]]):
