@@ -182,6 +182,28 @@ def test_shard_size_changes_no_byte(src, reference, tmp_path):
     assert [k for k in got if got[k] != want[k]] == []
 
 
+def test_merged_index_stats_equal_the_writers_own():
+    """Issue 31 #5: the merge's per-episode stats of index and episode_index, computed for all episodes
+    of one length at once, equal _episode_stats (LeRobot's compute_episode_stats bit for bit) on each
+    episode's final indices: lengths 1-300, indices up to 10^12."""
+    import pyarrow as pa
+
+    from ch37.lerobot_io import _episode_stats
+
+    lengths = np.r_[1, 2, 300, np.random.default_rng(0).integers(1, 300, 60)]
+    hi = np.cumsum(lengths)
+    eps = pa.table({"dataset_from_index": hi - lengths, "dataset_to_index": hi})
+    feats = {"episode_index": {"dtype": "int64"}, "index": {"dtype": "int64"}}
+    for n_eps, n_frames in ((0, 0), (99_990, 3_200_000), (999_999_000, 10**12)):
+        got = shards._index_stats(eps, n_eps, n_frames)
+        for j, (lo, n) in enumerate(zip(hi - lengths + n_frames, lengths, strict=True)):
+            buf = {"episode_index": np.full(n, n_eps + j), "index": np.arange(lo, lo + n)}
+            for name, st in _episode_stats(buf, feats).items():
+                for k, v in st.items():
+                    want = np.asarray(v, np.int64 if k == "count" else np.float64).tolist()
+                    assert got[f"stats/{name}/{k}"][j] == want, (n_eps, j, name, k)
+
+
 def test_local_ray_same_bytes(src, reference, tmp_path):
     """A real Ray started by the command on this machine (2 CPUs) and shut down at its end."""
     p = augment("--src", src, "--out", tmp_path / "ray", "--ray", "--workers", "2", *SETTINGS)
