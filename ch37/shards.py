@@ -39,7 +39,6 @@ import hashlib
 import io
 import itertools
 import json
-import os
 import platform
 import re
 import shlex
@@ -60,7 +59,16 @@ from ch37.demos import code_digest
 from ch37.errors import DataError
 from ch37.files import LEFTOVER, check_out_path, dump_json, lock, round_floats, unlock, write_atomic
 from ch37.frame_stats import FrameStats, write_frame_stats
-from ch37.lerobot_io import PARQUET, check_hf_cache, fps_problem, frames_problem, load_arrays, schema_problem
+from ch37.lerobot_io import (
+    PARQUET,
+    check_hf_cache,
+    close_quietly,
+    fps_problem,
+    frames_problem,
+    load_arrays,
+    naming,
+    schema_problem,
+)
 from ch37.seeds import SEED_BLOCK
 from ch37.stamps import (
     LOCK_NAME,
@@ -386,7 +394,7 @@ class _Files:
             self.close()
             self.path = self.root / self.pattern.format(chunk_index=where[0], file_index=where[1])
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            with _naming(self.path):
+            with naming(self.path):
                 self.writer = pq.ParquetWriter(self.path, table.schema, **PARQUET)
             self.open_at = where
         self.buffer.append(table)
@@ -398,7 +406,7 @@ class _Files:
         import pyarrow as pa
 
         table = pa.concat_tables(self.buffer)
-        with _naming(self.path):
+        with naming(self.path):
             self.writer.write_table(table.slice(0, rows))
         rest = table.slice(rows)
         self.buffer, self.buffered = ([rest] if rest.num_rows else []), rest.num_rows
@@ -410,7 +418,7 @@ class _Files:
             try:
                 if self.buffered:
                     self._flush(self.buffered)
-                with _naming(self.path):
+                with naming(self.path):
                     self.writer.close()
             finally:
                 self.abort()
@@ -418,22 +426,7 @@ class _Files:
     def abort(self) -> None:
         """Close the open file without writing what is buffered (after an error; a no-op when closed)."""
         writer, self.writer, self.open_at, self.buffer, self.buffered = self.writer, None, None, [], 0
-        if writer is not None and writer.is_open:
-            with contextlib.suppress(Exception):  # the first error is the one reported
-                writer.close()
-            writer.is_open = False  # ParquetWriter.__del__ would close it again, and print that failure
-
-
-@contextlib.contextmanager
-def _naming(path: Path):
-    """An OSError inside (pyarrow's carry no file name: "Error writing bytes to file") re-raised with
-    `path` as its file name and the plain message of its errno, so the one error line says where."""
-    try:
-        yield
-    except OSError as e:
-        if e.errno is None or e.filename is not None:
-            raise
-        raise OSError(e.errno, os.strerror(e.errno), str(path)) from e
+        close_quietly(writer)
 
 
 def _shifted(table, name: str, by: int, *, fill: bool = False):

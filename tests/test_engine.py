@@ -240,8 +240,8 @@ def test_ray_cluster_messages_stay_off_stdout():
     )
     assert p.returncode == 0, p.stderr
     lines = p.stdout.strip().splitlines()
-    assert lines and lines[-1] == "failed WorkerCrashedError", p.stdout
-    assert all(x.startswith(("result ", "failed ")) for x in lines), p.stdout
+    assert lines and lines[-1].startswith("failed "), p.stdout  # the task's exception reached the run
+    assert all(x.startswith(("result ", "failed ")) for x in lines), p.stdout  # and nothing of Ray's
 
 
 def test_killed_run_is_finished_by_the_same_command(src, reference, tmp_path):
