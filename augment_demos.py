@@ -81,10 +81,13 @@ def main(argv=None) -> int:
 
     settings = {k: getattr(a, k) for k in shards.SETTINGS}
     r = shards.run(TASKS["pusht"], a.src, a.out, settings, workers=a.workers, ray=a.ray, quiet=a.quiet)
+    made, reused = r.get("kept_this_run", r["kept"]), r["shards"]["reused"]
+    rate = f" in {r['seconds']:.1f} s ({r['demos_per_s']:.1f} demos/s)"
+    if reused:  # a resumed run: what it made now (and its rate) apart from what an earlier run made
+        rate = f"; {made} made now{rate}, {r['kept'] - made} resumed from {reused} shards of an earlier run"
     print(
         f"augment_demos: {r['attempts']} attempts, {r['kept']} kept (yield {r['yield']:.3f}), "
-        f"{r['frames']} frames in {r['seconds']:.1f} s ({r['demos_per_s']:.1f} demos/s) -> {a.out} "
-        f"(LeRobot v3; report {a.out / shards.REPORT_NAME})"
+        f"{r['frames']} frames{rate} -> {a.out} (LeRobot v3; report {a.out / shards.REPORT_NAME})"
     )
     return 0
 

@@ -69,20 +69,30 @@ def parser(description: str, prog: str | None = None) -> argparse.ArgumentParser
     return Parser(prog=prog, description=description, formatter_class=fmt, allow_abbrev=False)
 
 
+def _values(args, name) -> list:
+    """The flag's values: a flag of several (nargs="+") is checked value by value."""
+    v = getattr(args, name)
+    return list(v) if isinstance(v, (list, tuple)) else [v]
+
+
 def check(args, *, positive=(), non_negative=(), finite=(), at_most=None) -> None:
     """DataError (one line) for the first flag of `args` out of its range: `positive` and
-    `non_negative` integers, `finite` non-negative numbers (lr: positive), and {flag: its maximum}."""
+    `non_negative` integers, `finite` non-negative numbers (lr: positive), and {flag: its maximum}.
+    A flag that takes several values (nargs="+") is checked value by value."""
     for name in positive:
-        if getattr(args, name) <= 0:
-            raise DataError(f"--{name} must be a positive integer, got {getattr(args, name)}")
+        for v in _values(args, name):
+            if v <= 0:
+                raise DataError(f"--{name} must be a positive integer, got {v}")
     for name in non_negative:
-        if getattr(args, name) < 0:
-            raise DataError(f"--{name} must be >= 0, got {getattr(args, name)}")
+        for v in _values(args, name):
+            if v < 0:
+                raise DataError(f"--{name} must be >= 0, got {v}")
     for name in finite:
-        v = getattr(args, name)
-        if not math.isfinite(v) or v < 0 or (name == "lr" and v == 0):
-            kind = "positive" if name == "lr" else "non-negative"
-            raise DataError(f"--{name} must be a finite {kind} number, got {v}")
+        for v in _values(args, name):
+            if not math.isfinite(v) or v < 0 or (name == "lr" and v == 0):
+                kind = "positive" if name == "lr" else "non-negative"
+                raise DataError(f"--{name} must be a finite {kind} number, got {v}")
     for name, most in (at_most or {}).items():
-        if getattr(args, name) > most:
-            raise DataError(f"--{name} must be at most {most}, got {getattr(args, name)}")
+        for v in _values(args, name):
+            if v > most:
+                raise DataError(f"--{name} must be at most {most}, got {v}")

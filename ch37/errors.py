@@ -32,6 +32,7 @@ ENVIRONMENT_ERRNOS = {
     errno.EPERM: _WRITABLE,
     errno.ENOTDIR: "a part of the path is a file, not a folder: fix the path",
     errno.EISDIR: "a folder is where a file should be: fix the path",
+    errno.EEXIST: "a file is where a folder should be: fix the path",
     errno.ENAMETOOLONG: "use a shorter path",
     errno.EMFILE: "raise the open-file limit (ulimit -n)",
 }

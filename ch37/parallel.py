@@ -261,7 +261,20 @@ def _start_ray(address: str | None, workers: int):
             "" if address is None else " (is it running? a cluster with token auth needs RAY_AUTH_MODE=token)"
         )
         raise DataError(f"could not {'start' if address is None else 'join'} Ray{hint}: {why}") from None
+    _quiet_raylet_messages()
     return ray
+
+
+def _quiet_raylet_messages() -> None:
+    """Keep Ray's cluster messages off our stdout. Whatever log_to_driver says, a Ray driver starts a
+    thread that prints every raylet error message to stdout (ray._private.worker.listen_error_messages
+    -> print_to_stdstream; a lost node is about 20 lines amid the run's own output). With log_to_driver
+    off that thread is the function's only caller, so it is replaced by one that drops the messages; a
+    failure they describe reaches the run as the failed task's exception (its one error line)."""
+    with contextlib.suppress(ImportError, AttributeError):
+        import ray._private.worker as ray_worker
+
+        ray_worker.print_to_stdstream = lambda data, ignore_prefix=False: None
 
 
 def _apply(fn, *args):

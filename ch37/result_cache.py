@@ -120,6 +120,10 @@ def read_entry(entry: Path) -> dict[str, bytes] | str | None:
     """{name: bytes} of a verified entry; None if there is no entry; else why it is bad (one phrase)."""
     if not entry.exists():
         return None
+    if (
+        entry.is_symlink() or not entry.is_dir()
+    ):  # the cache writes real folders; it never reads through a link
+        return "it is a link or a file, not a folder this cache wrote"
     try:
         manifest = json.loads((entry / MANIFEST).read_text())
         if not isinstance(manifest, dict) or SUMMARY not in manifest or "metrics.json" not in manifest:
@@ -155,10 +159,26 @@ def summary_for(template: str, out: Path) -> str:
     return "".join(str(out / part) if i % 2 else part for i, part in enumerate(parts))
 
 
+def _recorded(entry: Path) -> list[str]:
+    """The files a damaged entry's manifest records (of the names an entry can hold), and the manifest;
+    with no whole manifest, the names an entry can hold (store() puts nothing else in one)."""
+    allowed = (*RESULT_FILES, SUMMARY, CODE)
+    try:
+        manifest = json.loads((entry / MANIFEST).read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        manifest = None
+    if not isinstance(manifest, dict) or SUMMARY not in manifest or "metrics.json" not in manifest:
+        return [*allowed, MANIFEST]  # not a manifest store() wrote: what it records is unknown
+    return [name for name in allowed if name in manifest] + [MANIFEST]
+
+
 def discard_entry(entry: Path) -> bool:
-    """Remove an entry's own files (the ones a cache entry can hold) and the folder if then empty;
-    True if the entry is gone."""
-    for name in (*RESULT_FILES, SUMMARY, CODE, MANIFEST):
+    """Remove the files a damaged entry recorded (_recorded) and the folder if then empty; True if the
+    entry is gone. Never through a link: an entry that is a link (or a file) is left as it is, and a
+    recorded name that is a link loses the link alone (Path.unlink never follows one)."""
+    if entry.is_symlink() or not entry.is_dir():
+        return False
+    for name in _recorded(entry):
         with contextlib.suppress(OSError):
             (entry / name).unlink(missing_ok=True)
     with contextlib.suppress(OSError):
@@ -184,7 +204,12 @@ class ResultCache:
             return False
         if isinstance(got, str):
             gone = discard_entry(entry)
-            what = "discarded" if gone else "it could not be removed (remove it yourself)"
+            if gone:
+                what = "discarded"
+            elif entry.is_symlink() or not entry.is_dir():
+                what = "left as it is (remove it yourself if it is not yours)"
+            else:
+                what = "it could not be removed (remove it yourself)"
             _warn(f"the cached result {entry} was damaged ({got}); {what}; computing it again")
             return False
         if stale_code(recorded_code(entry)):  # made by other code than this: ours to replace

@@ -30,6 +30,13 @@ __all__ = ["PUSHT", "PushT", "START_NAMES", "block_pose", "perturbed_start", "ro
 R_LO, R_HI = 0.08, 0.26  # m; the block is kept on a band slightly wider than the spawn annulus
 TRIES = 100  # perturbation draws per attempt before giving up with "no_valid_start"
 START_NAMES = ("block_x", "block_y", "block_yaw", "pusher_x", "pusher_y")  # what env.set_start takes
+# The ranges pusht_env.py documents for its state (STATE_NAMES order): positions inside the walls (m),
+# sines and cosines in [-1, 1], the fixed target (0, 0, sin 0, cos 1). A value outside is no PushT
+# state: its attempts could only fail (a block at 1e30 m is no valid start).
+_W = pusht_env.WALL_INNER
+STATE_RANGES = dict(
+    zip(pusht_env.STATE_NAMES, [(-_W, _W)] * 4 + [(-1.0, 1.0)] * 2 + [(0.0, 0.0)] * 3 + [(1.0, 1.0)])
+)
 
 
 def perturbed_start(first_state, rng, pos_sigma: float, yaw_sigma: float, tries: int = TRIES):
@@ -146,6 +153,7 @@ class PushT(Task):
     name, title, generator = "pusht", "PushT", "gen_demos_pusht.py"
     start_names = START_NAMES
     env_module = pusht_env
+    state_ranges = STATE_RANGES
     failures = {  # every reason a mode can return
         "resolve": ("expert_failed", "no_valid_start"),
         "replay": (

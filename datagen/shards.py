@@ -146,6 +146,23 @@ def plan_memory_problem(n_sources: int, per_demo: int, free: int | None) -> str 
     )
 
 
+# A shard folder holds 6 files (a data and an episodes parquet, info.json, stats.json, tasks.parquet,
+# its stamp); the merge opens each shard's, so beyond a few thousand files --shard_size costs time.
+FILES_PER_SHARD, MANY_FILES = 6, 5000
+
+
+def many_files_note(n_shards: int, attempts: int, shard_size: int, out: Path) -> str | None:
+    """One line when the plan would leave more than MANY_FILES files under OUT/shards, else None."""
+    files = n_shards * FILES_PER_SHARD
+    if files <= MANY_FILES:
+        return None
+    return (
+        f"note: --shard_size {shard_size} cuts {attempts:,} attempts into {n_shards:,} shards: up to "
+        f"{files:,} files under {Path(out) / SHARDS_DIR} until the merge, which reads each shard's; "
+        "a larger --shard_size (default 100) makes fewer (a new --out: it is part of the settings)"
+    )
+
+
 def plan(episodes, per_demo: int, shard_size: int) -> list[list[tuple[int, int]]]:
     """The attempts (e, k), e-major, cut into shards of shard_size (the last may be shorter)."""
     jobs = [(int(e), k) for e in episodes for k in range(per_demo)]
@@ -259,9 +276,41 @@ def foreign(out: Path, stamp: dict) -> list[str]:
     return bad
 
 
-def finished(out: Path, config: dict, n_shards: int) -> dict[int, dict]:
-    """{shard index: stamp} of the whole shards of this run whose files still have the sha256 their
-    stamp records; the rest of shards/ is removed (a damaged shard with one printed line).
+def stamp_problem(path: Path, stamp: dict, jobs, reasons) -> str | None:
+    """None if a shard stamp's own fields agree with the shard's files and its place in the plan, else
+    what disagrees. The run's report is built from these fields, so each is checked: attempts and the
+    attempts per source against the shard's `jobs`; kept and frames against its info.json (whose
+    sha256 the stamp's files check); failures (of `reasons`) + kept = attempts; the episode lengths'
+    histogram against kept and frames; kept per source within its attempts, summing to kept."""
+    info = read_json(path / "meta" / "info.json") if (path / "meta" / "info.json").exists() else {}
+    try:
+        failures = {str(k): int(v) for k, v in stamp["failures"].items()}
+        lengths = {int(n): int(c) for n, c in stamp["lengths"].items()}
+        per_source = {str(e): (int(a), int(k)) for e, (a, k) in stamp["per_source"].items()}
+        attempts, kept, frames = (stamp[k] for k in ("attempts", "kept", "frames"))
+        ok = (
+            attempts == len(jobs)
+            and kept == info.get("total_episodes", 0)
+            and frames == info.get("total_frames", 0)
+            and set(failures) <= set(reasons)
+            and min(failures.values(), default=0) >= 0
+            and sum(failures.values()) + kept == attempts
+            and min([*lengths, *lengths.values()], default=1) > 0
+            and sum(lengths.values()) == kept
+            and sum(n * c for n, c in lengths.items()) == frames
+            and {e: a for e, (a, _) in per_source.items()} == dict(Counter(str(e) for e, _ in jobs))
+            and all(0 <= k <= a for a, k in per_source.values())
+            and sum(k for _, k in per_source.values()) == kept
+        )
+    except (AttributeError, KeyError, TypeError, ValueError):  # a field missing or of the wrong kind
+        ok = False
+    return None if ok else "its stamp's counts disagree with its files"
+
+
+def finished(out: Path, config: dict, shards: list) -> dict[int, dict]:
+    """{shard index: stamp} of the whole shards of this run (`shards`: its plan) whose files still have
+    the sha256 their stamp records and whose stamp's counts agree with them (stamp_problem); the rest of
+    shards/ is removed (a damaged shard with one printed line).
 
     Only called on a run folder of `config` that foreign() found clean: all under shards/ is ours."""
     root = Path(out) / SHARDS_DIR
@@ -272,12 +321,16 @@ def finished(out: Path, config: dict, n_shards: int) -> dict[int, dict]:
     for path in sorted(root.iterdir()):
         m = re.fullmatch(r"shard-(\d{5})", path.name)
         stamp = read_stamp(path) if m else None
-        if is_ours(stamp) and stamp.get("run") == key and int(m.group(1)) < n_shards:
+        if is_ours(stamp) and stamp.get("run") == key and int(m.group(1)) < len(shards):
             damaged = changed_files(path, stamp)  # its files against the sha256 its stamp recorded
-            if not damaged:
+            why = f"{names(damaged)} differs from its stamp" if damaged else None
+            why = why or stamp_problem(
+                path, stamp, shards[int(m.group(1))], TASKS[config["task"]].failures[config["mode"]]
+            )
+            if not why:
                 done[int(m.group(1))] = stamp
                 continue
-            print(f"shard {m.group(1)} is damaged ({names(damaged)} differs from its stamp); making it again")
+            print(f"shard {m.group(1)} is damaged ({why}); making it again")
             shutil.rmtree(path)
         else:
             shutil.rmtree(path)  # a shard cut off mid-save, one from other settings, a killed scratch
@@ -317,6 +370,27 @@ def remove_shards(out: Path) -> None:
 # ----------------------------------------------------------------------------------------------
 # The run: its checks, its plan (resumed where a run stopped), its report
 # ----------------------------------------------------------------------------------------------
+# The episodes table's columns that say where each episode's frames are (LeRobot v3)
+EPISODE_COLUMNS = ("episode_index", "length", "dataset_from_index", "dataset_to_index")
+EPISODE_COLUMNS += ("data/chunk_index", "data/file_index")
+
+
+def state_range_problem(task: Task, src: Path, states: np.ndarray) -> str | None:
+    """None if every state (N, obs_dim) lies in the task's documented ranges (task.state_ranges, 1e-6
+    of slack: float32 rounding), else the first state dimension outside, how many frames and the
+    first row. A value outside is no state of the task: its attempts could only fail."""
+    for i, (name, (lo, hi)) in enumerate(task.state_ranges.items()):
+        bad = (states[:, i] < lo - 1e-6) | (states[:, i] > hi + 1e-6)
+        if bad.any():
+            row = int(np.argmax(bad))
+            return (
+                f"--src {src}: observation.state {name} (index {i}) is {float(states[row, i]):g} in "
+                f"{int(bad.sum())} frames, the first at row {row}; the {task.title} env's range for it is "
+                f"[{lo:g}, {hi:g}]: this is not a {task.title} state"
+            )
+    return None
+
+
 def read_source(task: Task, src: Path) -> dict:
     """The source set's columns (a set of `task`), or DataError with one line saying what is wrong with it."""
     import datasets
@@ -338,11 +412,21 @@ def read_source(task: Task, src: Path) -> dict:
         raise DataError(f"--src {problem}")
     for f in sorted(src.glob("data/*/*.parquet")) + sorted(src.glob("meta/episodes/*/*.parquet")):
         try:
-            pq.read_metadata(f)
+            schema = pq.read_schema(f)
         except Exception as e:  # pyarrow's errors for a broken file vary by what is broken
             raise DataError(
                 f"--src {src}: {f.relative_to(src)} is not a readable parquet file ({e})"
             ) from None
+        missing = (
+            [c for c in EPISODE_COLUMNS if c not in schema.names]
+            if f.relative_to(src).parts[1] == "episodes"
+            else []
+        )
+        if missing:
+            raise DataError(
+                f"--src {src}: {f.relative_to(src)} lacks the columns {', '.join(missing)} (a LeRobot v3 "
+                "episodes table says where each episode's frames are); regenerate or repair the set"
+            )
     datasets.logging.set_verbosity(datasets.logging.CRITICAL)  # a failure below is our one line, not a log
     check_hf_cache()  # a cache we cannot write is named as the cause, not the set
     try:
@@ -357,6 +441,9 @@ def read_source(task: Task, src: Path) -> dict:
     problem = frames_problem(src, arrays)
     if problem:
         raise DataError(f"--src {problem}")
+    problem = state_range_problem(task, src, arrays["observation.state"])
+    if problem:
+        raise DataError(problem)
     if arrays["episode_index"].max() >= SEED_BLOCK:
         raise DataError(f"--src {src}: episode indices must be below {SEED_BLOCK:,} (the seed block)")
     return arrays
@@ -464,8 +551,11 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
     run_stamp = {"made_by": MADE_BY, "kind": "engine", "config": config, "complete": False}
     write_atomic(out / STAMP_NAME, dump_json(run_stamp))  # the folder is ours from here on
     shards = plan(sources, config["per_demo"], config["shard_size"])
-    done = finished(out, config, len(shards))
+    done = finished(out, config, shards)
     todo = [i for i in range(len(shards)) if i not in done]
+    note = many_files_note(len(shards), sum(map(len, shards)), config["shard_size"], out) if todo else None
+    if note:
+        print(note, flush=True)
     scratch = None if ray not in (None, "local") else str(out / SHARDS_DIR)  # this machine's disk
     (out / SHARDS_DIR).mkdir(exist_ok=True)
     tasks = [
@@ -504,7 +594,8 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
             "seconds_merge": time.perf_counter() - t_merge,
             # worker seconds (summed over the shards made by this run) inside seconds_generate
             "seconds_write": sum(done[i].get("seconds_write", 0.0) for i in todo),
-            "demos_per_s": made / seconds,
+            "kept_this_run": made,  # the rest of "kept" was made by an earlier run (its shards reused)
+            "demos_per_s": made / seconds,  # this run's: the demos it made over its seconds
             "command": " ".join(shlex.quote(x) for x in [Path(sys.executable).name, *sys.argv]),
             "versions": vers,
             "dataset": {

@@ -10,6 +10,7 @@ subclass; it provides
                          makes a source set of it
     start_names          the names of a start's numbers, in the order
                          place() takes them (stored on every kept frame as aug.start)
+    state_ranges         {state name: (low, high)} as the env documents them: a source outside is refused
     env_module           the env's module: STATE_NAMES, ACTION_NAMES, ENV_STATE_NAMES, FPS, ROBOT_TYPE,
                          TASK (what a LeRobot set of this task records), OBS_DIM, ACT_DIM
     make_env()           a new simulator (one per worker process; place() fully resets it)
@@ -130,6 +131,7 @@ class Task:
     title: str  # "PushT": how messages name it
     generator: str  # the command that makes a source set of this task ("gen_demos_pusht.py")
     start_names: tuple[str, ...]
+    state_ranges: dict[str, tuple[float, float]]
     env_module: object
     failures: dict[str, tuple[str, ...]]
 

@@ -11,6 +11,7 @@ import functools
 import json
 import logging
 import math
+import os
 import tempfile
 from pathlib import Path
 
@@ -249,9 +250,19 @@ def _quantiles(x: np.ndarray):
     idx = first - 1 + ((ew <= v[..., None]) & (win <= bins - 1)).sum(axis=-1)
     ok = ((first == 1) | (ew[..., 0] <= v)) & ((first + 8 >= bins - 1) | (ew[..., 8] > v))
     if not ok.all():
-        row = edge(np.broadcast_to(np.arange(1, bins), (1, dims, bins - 1)))[0]  # (D, 4999)
-        for qi, d in zip(*np.nonzero(~ok), strict=True):
-            idx[qi, d] = (row[d] <= v[qi, d]).sum()
+        # Edges rise with k (a rounded k * step + start), so the count of edges 1..4999 <= v is the
+        # first k whose edge is not <= v, less one: found by bisection for the pairs the window
+        # missed (a near-constant column, whose bins are finer than its values' float spacing, so
+        # many edges round to one value), ~13 edges a pair where the whole row took 4,999.
+        qi, d = np.nonzero(~ok)
+        vv, lo_k, hi_k = v[qi, d], np.ones(len(qi), np.int64), np.full(len(qi), bins, np.int64)
+        while (lo_k < hi_k).any():
+            mid = (lo_k + hi_k) // 2  # < bins: edge(mid) is one of edges 1..4999
+            kk = mid.astype(start.dtype)
+            e = np.where(flat[d], (kk / bins) * delta[d] + start[d], kk * step[d] + start[d])
+            above = ~(e <= vv)  # not `e > vv`: a NaN counts no edge, as the row's sum did
+            hi_k, lo_k = np.where(above, mid, hi_k), np.where(above, lo_k, mid + 1)
+        idx[qi, d] = lo_k - 1
     e0, e1 = edge(idx[..., None])[..., 0], edge(idx[..., None] + 1)[..., 0]
     below = (srt[None] < e0[:, None]).sum(axis=1)  # (Q, D) values below the bin ...
     upto = np.where(idx < bins - 1, (srt[None] < e1[:, None]).sum(axis=1), n)  # ... and up to its top
@@ -326,10 +337,45 @@ def _episode_columns(e: int, ep: dict, feats, all_feats, *, fps: int, first_fram
     return buf
 
 
+@contextlib.contextmanager
+def naming(path: Path):
+    """An OSError inside (pyarrow's carry no file name: "Error writing bytes to file") re-raised with
+    `path` as its file name and the plain message of its errno, so the one error line says where."""
+    try:
+        yield
+    except OSError as e:
+        if e.errno is None or e.filename is not None:
+            raise
+        raise OSError(e.errno, os.strerror(e.errno), str(path)) from e
+
+
+def close_quietly(writer) -> None:
+    """Close a pyarrow ParquetWriter after an error, without a second one: its close fails again on a
+    full disk, and a writer left open retries (and prints the failure) when it is collected."""
+    if writer is not None and writer.is_open:
+        with contextlib.suppress(Exception):  # the first error is the one reported
+            writer.close()
+        writer.is_open = False
+
+
+def write_parquet(table, path: Path) -> None:
+    """pq.write_table(table, path, **PARQUET) (the same bytes), its writer closed on every path and a
+    failure's OSError naming `path` (naming)."""
+    import pyarrow.parquet as pq
+
+    writer = None
+    try:
+        with naming(path):
+            writer = pq.ParquetWriter(path, table.schema, **PARQUET)
+            writer.write_table(table)
+            writer.close()
+    finally:
+        close_quietly(writer)
+
+
 def _write_data_file(path: Path, schema, parts: dict) -> None:
     """One data parquet file from {column: [(T,) or (T, D) arrays, episode by episode]}."""
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
     def column(field, arrays: list[np.ndarray]):
         listed = field.type.num_fields  # a (T, D) feature: a fixed-size list of D per frame
@@ -339,15 +385,13 @@ def _write_data_file(path: Path, schema, parts: dict) -> None:
         return pa.FixedSizeListArray.from_arrays(flat, type=field.type) if listed else flat
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    table = pa.Table.from_arrays([column(f, parts[f.name]) for f in schema], schema=schema)
-    pq.write_table(table, path, **PARQUET)
+    write_parquet(pa.Table.from_arrays([column(f, parts[f.name]) for f in schema], schema=schema), path)
 
 
 def _write_episodes_table(root: Path, table, limit: float, chunks_size: int) -> None:
     """meta/episodes in files of at most `limit` bytes (Arrow size, as LeRobot splits it): one file up
     to ~50,000 episodes of this chapter's width (~2 KB a row)."""
     import pyarrow as pa
-    import pyarrow.parquet as pq
     from lerobot.datasets.utils import DEFAULT_EPISODES_PATH
 
     per_file = rows_within(limit, table.nbytes / table.num_rows)
@@ -359,7 +403,7 @@ def _write_episodes_table(root: Path, table, limit: float, chunks_size: int) -> 
             part = part.append_column(name, pa.array([value] * part.num_rows, pa.int64()))
         path = root / DEFAULT_EPISODES_PATH.format(chunk_index=chunk, file_index=file)
         path.parent.mkdir(parents=True, exist_ok=True)
-        pq.write_table(part, path, **PARQUET)
+        write_parquet(part, path)
 
 
 def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb: int | None = None) -> None:

@@ -10,6 +10,7 @@ LeRobot's aggregate_datasets writes for the same sets (tests/test_merge.py).
 
 from __future__ import annotations
 
+import io
 import itertools
 import json
 from pathlib import Path
@@ -17,14 +18,14 @@ from pathlib import Path
 import numpy as np
 
 from lerobot_v3.chunks import ChunkRoller, rows_within
-from lerobot_v3.dataset import PARQUET
+from lerobot_v3.dataset import PARQUET, close_quietly, naming
 from lerobot_v3.frame_stats import FrameStats, write_frame_stats
 
 # Episode rows per row group of meta/episodes: a fixed count, so the row groups never depend on how
 # the episodes were cut into shards (LeRobot's own writer buffers a few episodes per group).
 EPISODE_ROWS = 1000
 DATA_GROUP_ROWS = 2**16  # frames per row group of a data file
-SHIFTED_STATS = ("min", "max", "mean", "q01", "q10", "q50", "q90", "q99")  # move with their column
+SHIFTED_STATS = ("min", "max", "mean", "q01", "q10", "q50", "q90", "q99")  # a column's stats but std, count
 
 
 class _Files:
@@ -42,7 +43,7 @@ class _Files:
     def __init__(self, root: Path, pattern: str, max_bytes: int, chunks_size: int, group_rows: int):
         self.root, self.pattern, self.max_bytes, self.chunks_size = root, pattern, max_bytes, chunks_size
         self.group_rows, self.buffer, self.buffered = group_rows, [], 0  # rows not yet written
-        self.roller = self.writer = self.open_at = None
+        self.roller = self.writer = self.open_at = self.path = None
 
     def place(self, rows: int, row_bytes: int) -> tuple[int, int]:
         """Where the next block of `rows` rows goes: (chunk, file), starting a new file if needed."""
@@ -56,9 +57,10 @@ class _Files:
 
         if where != self.open_at:
             self.close()
-            path = self.root / self.pattern.format(chunk_index=where[0], file_index=where[1])
-            path.parent.mkdir(parents=True, exist_ok=True)
-            self.writer = pq.ParquetWriter(path, table.schema, **PARQUET)
+            self.path = self.root / self.pattern.format(chunk_index=where[0], file_index=where[1])
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            with naming(self.path):
+                self.writer = pq.ParquetWriter(self.path, table.schema, **PARQUET)
             self.open_at = where
         self.buffer.append(table)
         self.buffered += table.num_rows
@@ -69,16 +71,27 @@ class _Files:
         import pyarrow as pa
 
         table = pa.concat_tables(self.buffer)
-        self.writer.write_table(table.slice(0, rows))
+        with naming(self.path):
+            self.writer.write_table(table.slice(0, rows))
         rest = table.slice(rows)
         self.buffer, self.buffered = ([rest] if rest.num_rows else []), rest.num_rows
 
     def close(self) -> None:
+        """Write what is buffered and close the file; on any failure the file is closed all the same
+        (abort), so no writer is left open to fail again when it is collected."""
         if self.writer is not None:
-            if self.buffered:
-                self._flush(self.buffered)
-            self.writer.close()
-            self.writer = self.open_at = None
+            try:
+                if self.buffered:
+                    self._flush(self.buffered)
+                with naming(self.path):
+                    self.writer.close()
+            finally:
+                self.abort()
+
+    def abort(self) -> None:
+        """Close the open file without writing what is buffered (after an error; a no-op when closed)."""
+        writer, self.writer, self.open_at, self.buffer, self.buffered = self.writer, None, None, [], 0
+        close_quietly(writer)
 
 
 def _shifted(table, name: str, by: int, *, fill: bool = False):
@@ -120,15 +133,70 @@ def _read_set(root: Path) -> tuple:
     return eps, data
 
 
+def _index_stats(eps, n_eps: int, n_frames: int) -> dict:
+    """{stats/episode_index/STAT, stats/index/STAT: values, one per episode} of a shard's episodes as
+    rows of the merged set, computed from their final indices (episode n_eps + j, frames n_frames +
+    dataset_from_index ..) exactly as the shard's writer computes them (lerobot_v3.dataset._episode_stats,
+    compute_episode_stats bit for bit). Shifting the shard's own stats instead (aggregate's way) left
+    them depending on where the shards were cut: the quantiles are read off a histogram whose bins
+    follow the values.
+
+    _episode_stats' float operations, on all episodes of one length at once, an episode per column:
+    _quantiles works column by column, and a mean over a row of the (episodes, frames) array sums in
+    the order of a (frames, 1) column's (tests/test_engine.py checks them equal to _episode_stats)."""
+    from lerobot_v3.dataset import _episode_stats, _quantiles
+
+    lo = eps.column("dataset_from_index").to_numpy() + n_frames
+    lengths = eps.column("dataset_to_index").to_numpy() + n_frames - lo
+    cols: dict[str, np.ndarray] = {}  # column -> (episodes,) values
+
+    def put(key: str, js, values) -> None:  # float64 as the episodes table stores them, counts int64
+        kind = np.int64 if key.endswith("/count") else np.float64
+        cols.setdefault(key, np.zeros(len(lengths), kind))[js] = values
+
+    for n in np.unique(lengths):
+        js = np.nonzero(lengths == n)[0]
+        if n < 2:  # LeRobot's own code for an episode of one frame
+            feats = {"episode_index": {"dtype": "int64"}, "index": {"dtype": "int64"}}
+            for j in js:
+                buf = {"episode_index": np.full(n, n_eps + j), "index": np.arange(lo[j], lo[j] + n)}
+                for name, st in _episode_stats(buf, feats).items():
+                    for k, v in st.items():
+                        put(f"stats/{name}/{k}", [j], v)
+            continue
+        values = {  # (frames, episodes) in float64, as _episode_stats casts int64
+            "episode_index": np.repeat((n_eps + js)[None, :], n, axis=0).astype(np.float64),
+            "index": (lo[js][None, :] + np.arange(n)[:, None]).astype(np.float64),
+        }
+        for name, x in values.items():
+            xt = np.ascontiguousarray(x.T)  # a row per episode: each mean sums one contiguous row
+            mean, mean_sq = np.mean(xt, axis=1), np.mean(xt**2, axis=1)
+            mean += (mean - mean) * (n / n)  # as _episode_stats (its running update, for equal bits)
+            mean_sq += (mean_sq - mean_sq) * (n / n)
+            st = {
+                "mean": mean,
+                "std": np.sqrt(np.maximum(0, mean_sq - mean**2)),
+                "count": np.full(len(js), n),
+            }
+            st["min"], st["max"], qs = _quantiles(x)
+            st |= {key: np.where(plain, e0, inside) for key, e0, inside, plain in qs}
+            for k, v in st.items():
+                put(f"stats/{name}/{k}", js, v)
+    return {k: v.reshape(-1, 1).tolist() for k, v in cols.items()}  # each a list of one, as LeRobot's
+
+
 def _moved_episodes(eps, n_eps: int, n_frames: int, places: list[tuple[int, int]]):
-    """A shard's episodes table as rows of the merged set: episode and frame indices (and their
-    per-episode stats, as aggregate's update_meta_data moves them) shifted by the n_eps episodes and
-    n_frames frames before it; data/chunk_index and data/file_index set to each episode's place."""
+    """A shard's episodes table as rows of the merged set: episode and frame indices shifted by the
+    n_eps episodes and n_frames frames before it, their per-episode stats computed from the final
+    indices (_index_stats), so no byte depends on --shard_size; data/chunk_index and data/file_index
+    set to each episode's place."""
     import pyarrow as pa
 
     shifts = {"episode_index": n_eps, "dataset_from_index": n_frames, "dataset_to_index": n_frames}
-    for name, by in (("episode_index", n_eps), ("index", n_frames)):
-        shifts |= {f"stats/{name}/{stat}": by for stat in SHIFTED_STATS}
+    for name, values in _index_stats(eps, n_eps, n_frames).items():
+        if name in eps.column_names:
+            i = eps.schema.get_field_index(name)
+            eps = eps.set_column(i, eps.schema.field(i), pa.array(values, eps.schema.field(i).type))
     for name, by in shifts.items():
         if name in eps.column_names:
             eps = _shifted(eps, name, by)
@@ -156,8 +224,8 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
     same sets (tests/test_merge.py); only the file layout differs, and it depends on the frames alone."""
     import pandas as pd
     import pyarrow as pa
-    from lerobot.datasets.io_utils import load_info, write_info, write_tasks
-    from lerobot.datasets.utils import DEFAULT_DATA_PATH, DEFAULT_EPISODES_PATH
+    from lerobot.datasets.io_utils import load_info, write_info
+    from lerobot.datasets.utils import DEFAULT_DATA_PATH, DEFAULT_EPISODES_PATH, DEFAULT_TASKS_PATH
 
     dest = Path(dest)
     info = load_info(roots[0])
@@ -206,11 +274,17 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
                 flush(EPISODE_ROWS)
         if pending:
             flush(sum(t.num_rows for t in pending))
-    finally:
         data_out.close()
         meta_out.close()
+    finally:
+        data_out.abort()  # after an error: the open files closed without their buffers (else no-ops)
+        meta_out.abort()
     tasks = [task[0]] if task else []
-    write_tasks(pd.DataFrame({"task_index": range(len(tasks))}, index=pd.Index(tasks, name="task")), dest)
+    table = pd.DataFrame({"task_index": range(len(tasks))}, index=pd.Index(tasks, name="task"))
+    buf = io.BytesIO()  # LeRobot's write_tasks (to_parquet) into memory: its writer cannot be left open
+    table.to_parquet(buf)
+    (dest / DEFAULT_TASKS_PATH).parent.mkdir(parents=True, exist_ok=True)
+    (dest / DEFAULT_TASKS_PATH).write_bytes(buf.getvalue())
     info.total_episodes, info.total_frames, info.total_tasks = n_eps, n_frames, len(tasks)
     info.splits = {"train": f"0:{n_eps}"}
     write_info(info, dest)

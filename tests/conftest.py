@@ -31,15 +31,20 @@ def root():
 
 def with_nan(root: Path, key: str = "action", row: int = 3) -> Path:
     """Put a NaN into `key` at `row` of the set's first data parquet, schema and metadata kept."""
+    return with_value(root, key, row, 0, float("nan"))
+
+
+def with_value(root: Path, key: str, row: int, col: int, value: float) -> Path:
+    """Set `key`[row][col] of the set's first data parquet to `value`, schema and metadata kept."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     f = sorted((root / "data").rglob("*.parquet"))[0]
     t = pq.read_table(f)
     values = t[key].to_pylist()
-    values[row] = [float("nan")] + values[row][1:]
-    col = t.schema.get_field_index(key)
-    pq.write_table(t.set_column(col, t.schema.field(key), pa.array(values, t.schema.field(key).type)), f)
+    values[row][col] = value
+    i = t.schema.get_field_index(key)
+    pq.write_table(t.set_column(i, t.schema.field(key), pa.array(values, t.schema.field(key).type)), f)
     return root
 
 

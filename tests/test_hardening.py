@@ -396,6 +396,23 @@ CASES = [
         2,
         "is not a readable JSON sweep file",
     ),
+    # issue 31 #4: the LeRobot lab's flags go through the one checker, its --out through the one error path
+    (
+        "lab-seeds-negative",
+        lambda tmp, ref: (["-m", "tools.lerobot_lab", "--seeds", "-1", "--out", tmp / "ll"], [], None),
+        2,
+        "--seeds must be >= 0, got -1",
+    ),
+    (
+        "lab-out-is-a-file",
+        lambda tmp, ref: (
+            ["-m", "tools.lerobot_lab", "--seeds", "0", "--out", _file(tmp)],
+            [tmp / "afile"],
+            None,
+        ),
+        2,
+        "afile is a file, not a folder",
+    ),
     # an unusable Hugging Face cache is named as the cause, not the (good) data set (issue 22, item 13)
     (
         "hf-home-is-a-file",
@@ -509,6 +526,45 @@ def test_damaged_cache_entries_are_refused_before_anything_is_copied(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and why in err[0] and "discarded" in err[0]
     assert not (tmp_path / "out").exists() and not copy.exists()
+
+
+def test_discarding_a_cache_entry_never_follows_a_link_and_deletes_only_what_it_recorded(
+    ref, tmp_path, monkeypatch, capsys
+):
+    """Issue 31 #1: an entry folder replaced by a link to a user's folder holding files of an entry's
+    names is left as it is, the user's files byte-identical (the discard unlinked them through the
+    link); in a real entry whose manifest fails, only the files its manifest lists go."""
+    (entry,) = [d for d in ref["cache"].iterdir() if d.is_dir()]
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    for name in ("metrics.json", "scale_data.html", result_cache.SUMMARY):
+        (mine / name).write_text(f"my own {name}\n")
+    monkeypatch.setenv("CH37_CACHE_DIR", str(tmp_path / "cache"))
+    (tmp_path / "cache").mkdir()
+    (tmp_path / "cache" / entry.name).symlink_to(mine, target_is_directory=True)
+    before = snapshot([mine])
+    cache = result_cache.ResultCache.__new__(result_cache.ResultCache)
+    cache.enabled, cache.out, cache.key = True, tmp_path / "out", entry.name
+    assert cache.replay() is False
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is a link" in err[0] and "left as it is" in err[0], err
+    assert snapshot([mine]) == before and (tmp_path / "cache" / entry.name).is_symlink()
+    # a real entry: a damaged metrics.json (listed) goes, a scale_data.html it never recorded stays
+    (tmp_path / "cache" / entry.name).unlink()
+    copy = tmp_path / "cache" / entry.name
+    shutil.copytree(entry, copy)
+    listed = json.loads((copy / result_cache.MANIFEST).read_text())
+    assert "scale_data.html" in listed  # the smoke run's entry records its poster: drop it from the manifest
+    (copy / result_cache.MANIFEST).write_text(
+        json.dumps({k: v for k, v in listed.items() if k != "scale_data.html"})
+    )
+    (copy / "scale_data.html").write_text("the user's page\n")
+    _corrupt(copy / "metrics.json", 10)
+    assert cache.replay() is False
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "fails its checksum" in err[0], err
+    assert sorted(p.name for p in copy.iterdir()) == ["scale_data.html"]
+    assert (copy / "scale_data.html").read_text() == "the user's page\n"
 
 
 def test_cache_stores_only_what_this_run_wrote(tmp_path, monkeypatch):
@@ -855,6 +911,54 @@ def test_a_full_disk_under_the_engine_is_one_line(ref, small_disk, free):
     user.unlink()  # space again: the same command finishes
     p = run(*cmd, "--workers", "1")
     assert p.returncode == 0, p.stderr
+
+
+@linux_only
+def test_a_full_disk_during_the_merge_is_one_line_naming_the_file(ref, tmp_path):
+    """Issue 31 #3: the shards fit, the merged set does not (an 8 MB tmpfs filled to 64 KB free after
+    every shard is made): exactly one `error:` line naming where, exit 2, nothing else on stderr (no
+    writer left open to complain at exit), the user's file untouched; with space, the same command
+    finishes with the bytes of an uninterrupted run."""
+    mnt = tmp_path / "disk"
+    mnt.mkdir()
+    if subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=8m", "tmpfs", str(mnt)], capture_output=True
+    ).returncode:
+        pytest.skip("cannot mount a tmpfs here (needs root)")
+    try:
+        out = mnt / "aug"
+        argv = ["augment_demos.py", "--src", ref["pusht"], "--per_demo", "10", "--shard_size", "2", "--quiet"]
+        argv += ["--workers", "2", "--out"]
+        full = run(*argv, tmp_path / "full")
+        assert full.returncode == 0, full.stderr
+        p = subprocess.Popen([sys.executable, *map(str, argv), str(out)], cwd=ROOT, env=env_for())
+        shard_dir = out / "shards"
+        assert wait_for(lambda: p.poll() is not None or len(list(shard_dir.glob("shard-*"))) == 20, 300)
+        p.kill()
+        p.wait()
+        assert p.returncode == -signal.SIGKILL, "the run ended before it was killed"
+        st = os.statvfs(mnt)
+        user = mnt / "my_big_file"
+        user.write_bytes(b"x" * (st.f_bavail * st.f_frsize - (64 << 10)))
+        before = snapshot([user])
+        p = run(*argv, out)
+        err = [line for line in p.stderr.splitlines() if line.strip()]
+        assert p.returncode == 2 and len(err) == 1, p.stdout + p.stderr
+        assert err[0].startswith("error: ") and str(out) in err[0] and "free some disk space" in err[0], err
+        assert snapshot([user]) == before
+        user.unlink()
+        p = run(*argv, out)
+        assert p.returncode == 0 and p.stderr.strip() == "", p.stderr
+        skip = (stamps.STAMP_NAME, "generation_report.json", stamps.LOCK_NAME)
+        assert snapshot([out]).keys() and {
+            k.replace(str(out), ""): v for k, v in snapshot([out]).items() if Path(k).name not in skip
+        } == {
+            k.replace(str(tmp_path / "full"), ""): v
+            for k, v in snapshot([tmp_path / "full"]).items()
+            if Path(k).name not in skip
+        }
+    finally:
+        subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
 
 
 @pytest.fixture(scope="module")

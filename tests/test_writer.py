@@ -224,8 +224,10 @@ def test_episode_stats_equal_lerobots_bit_for_bit():
             "aug.start": rng.random((n, len(START_NAMES)), dtype=np.float32),
             "timestamp": np.arange(n) / 10,
             "frame_index": np.arange(n),
-            "episode_index": np.full(n, e),
-            "index": np.arange(1000 * e, 1000 * e + n),
+            # large indices, as deep in a 10^5-episode merge: a constant column whose bins are finer
+            # than its float spacing (the edges found by bisection, issue 31)
+            "episode_index": np.full(n, 99_990 + e),
+            "index": np.arange(3_200_000 + 1000 * e, 3_200_000 + 1000 * e + n),
             "task_index": np.zeros(n, dtype=np.int64),
         }
         ours, theirs = lerobot_io._episode_stats(buf, feats), compute_episode_stats(buf, feats)

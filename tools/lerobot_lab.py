@@ -38,7 +38,8 @@ from ch37 import ROOT
 from ch37.config import DEFAULTS, check, parser
 from ch37.errors import DataError
 from ch37.errors import main as run
-from ch37.ownership import dump_json, round_floats, write_atomic
+from ch37.ownership import check_out_path, dump_json, round_floats, write_atomic
+from ch37.seeds import MAX_SEED
 
 SOURCES = DEFAULTS["source_episodes"]  # 12
 N = 108  # the lab's point where the MLP's exchange rate is 0.65
@@ -369,12 +370,15 @@ def main(argv=None) -> int:
     check(
         a,
         positive=("steps", "workers", "eval_episodes"),
-        non_negative=("pilot", "eval_every"),
+        non_negative=("pilot", "eval_every", "seeds"),
         finite=("lr",),
-        at_most={"eval_episodes": 1000},
+        at_most={"eval_episodes": 1000, "seeds": MAX_SEED},
     )
     if a.lr >= 1:
         raise DataError(f"--lr must be below 1, got {a.lr}")
+    problem = check_out_path(a.out)  # a file, a folder that cannot be written: one line, before any work
+    if problem:
+        raise DataError(problem)
     a.out.mkdir(parents=True, exist_ok=True)
     import scale_lab
     from ch37.parallel import map_jobs
