@@ -949,7 +949,7 @@ def test_a_full_disk_during_the_merge_is_one_line_naming_the_file(ref, tmp_path)
         user.unlink()
         p = run(*argv, out)
         assert p.returncode == 0 and p.stderr.strip() == "", p.stderr
-        skip = (stamps.STAMP_NAME, "generation_report.json", stamps.LOCK_NAME)
+        skip = (ownership.STAMP_NAME, "generation_report.json", ownership.LOCK_NAME)
         assert snapshot([out]).keys() and {
             k.replace(str(out), ""): v for k, v in snapshot([out]).items() if Path(k).name not in skip
         } == {
