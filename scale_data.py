@@ -95,11 +95,12 @@ flag(
     help="processes for re-solves and evaluation physics (default: cores); same results",
 )
 args = cli.parse(p)  # every flag checked here: a bad one is one line and exit 2, before any heavy import
-cli.claim_out(args)  # --out usable and locked, nothing of yours in the way, our old results there cleared
-
 import torch  # noqa: E402  (after the checks, so --help and flag errors are instant)
 
 args.device = cli.pick_device(args.device)
+# Every input is checked before anything is removed: your --pusht_data/--aloha_data first, then --out
+# is usable and locked, nothing of yours in the way; only then are our old results there cleared.
+cli.claim_out(args)
 device = torch.device(args.device)
 torch.manual_seed(args.seed)
 if args.smoke:  # tiny matrices: a second thread only adds overhead, and 1 is the same everywhere

@@ -100,10 +100,25 @@ def aug_dir_name(seed, n_sources, per_demo, mode: str) -> str:
     return f"pusht_aug_seed{seed}_src{n_sources}_k{per_demo}" + ("" if mode == "resolve" else f"_{mode}")
 
 
+def check_inputs(args: argparse.Namespace) -> None:
+    """Your --pusht_data and --aloha_data checked as the wrangle region will read them (ch37.demos
+    .check_given), before claim_out clears anything: a typo is one line, the last results intact."""
+    from ch37.demos import check_given
+    from gen_demos_aloha import ALOHA
+    from gen_demos_pusht import PUSHT
+
+    for emb, given in ((PUSHT, args.pusht_data), (ALOHA, args.aloha_data)):
+        if given is not None:
+            check_given(emb, given, episodes=args.source_episodes, seed=args.seed, noise=emb.default_noise)
+
+
 def claim_out(args: argparse.Namespace):
-    """--out taken for this run before any work (ch37.files.claim): usable, locked against a second
-    run, nothing of yours where this run writes, this program's earlier results there cleared."""
+    """--out taken for this run before any work (ch37.files.claim): every input checked first
+    (check_inputs), then usable, locked against a second run, nothing of yours where this run
+    writes, this program's earlier results there cleared."""
     from ch37.files import claim
+
+    check_inputs(args)
 
     demos = Path(args.out) / "demos"
     reuses = [
