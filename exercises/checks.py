@@ -128,10 +128,13 @@ def expected_mix(pusht_actions, aloha_actions):
 
 
 def ex2_cases():
-    """Values bounded away from 0 with random signs, so a zero or a copy in the wrong place shows."""
+    """Values bounded away from 0 with random signs, so a zero or a copy in the wrong place shows, except
+    a few exact zeros in real dimensions, as real demos hold them (ALOHA's right_vy, column 1, and left_vy,
+    column 4, when an arm stands still; a PushT pusher at rest): a mask built from the values drops them."""
     rng, out = np.random.default_rng(37), []
     for i, (n, m) in enumerate([(5, 3), (5, 3), (1, 1), (1, 4), (0, 4), (3, 0), (0, 0), (64, 17)]):
         p, a = (rng.uniform(0.1, 1.0, (k, d)) * rng.choice([-1, 1], (k, d)) for k, d in ((n, 2), (m, 6)))
+        p[::3, 1], a[::2, 1], a[1::3, [0, 3, 4]] = 0.0, 0.0, 0.0  # real dimensions that are exactly 0
         out.append((p.astype((np.float32, np.float64)[i % 2]), a.astype((np.float32, np.float64)[i % 2])))
     return out + [(out[0][0].astype(np.float64), out[0][1])]  # mixed dtypes
 
@@ -143,6 +146,12 @@ def _wrong_values(name, got, p, a) -> str:
         return "0 for every PushT row, 1 for every ALOHA row, PushT rows first"
     if name == "mask" and n and np.all(got == 1):
         return "the mask is all ones: padded dimensions (columns 2..5 of PushT rows) must be 0"
+    if name == "mask" and np.array_equal(got, expected_mix(p, a)[0] != 0):
+        return (
+            "the mask follows the values (actions != 0), but a real action can be exactly 0 (an arm at rest: "
+            "the ALOHA demos hold hundreds of exact zeros), and such a mask drops it from the loss; mark "
+            "a dimension real by which robot the row is from, not by its value"
+        )
     if name == "mask":
         return "1.0 for real dimensions, 0.0 for padding: [1, 1, 0, 0, 0, 0] for PushT, all ones for ALOHA"
     if n and np.array_equal(got[:n, 4:], p) and not np.array_equal(got[:n, :2], p):

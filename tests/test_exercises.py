@@ -272,6 +272,11 @@ def garbage_in_padding(p, a):
     return act, mask, ids
 
 
+def mask_from_nonzero(p, a):  # issue 33 #3: real demos hold exact zeros (ALOHA's right_vy 265 times)
+    act, _, ids = checks.expected_mix(p, a)
+    return act, (act != 0).astype(np.float32), ids
+
+
 def exits_early(p, a):
     sys.exit(0)  # an unfinished answer that ends the process "successfully"
 
@@ -288,6 +293,7 @@ WRONG_MIXES = [
     (two_outputs, "return a tuple"),
     (garbage_in_padding, "must be exactly zero"),
     (exits_early, r"raised SystemExit: 0 \(case 1"),
+    (mask_from_nonzero, "a real action can be exactly 0"),
 ]
 
 
