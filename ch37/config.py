@@ -65,8 +65,19 @@ def parser(description: str, prog: str | None = None) -> argparse.ArgumentParser
                 kw["type"] = _path
             return super().add_argument(*names, **kw)
 
-    fmt = argparse.RawDescriptionHelpFormatter
-    return Parser(prog=prog, description=description, formatter_class=fmt, allow_abbrev=False)
+    return Parser(prog=prog, description=description, formatter_class=_Help, allow_abbrev=False)
+
+
+class _Help(argparse.RawDescriptionHelpFormatter):
+    """--help shows every flag's default after its help (on/off for a switch), unless the help already
+    says it in words (a default that is computed, such as --out's)."""
+
+    def _get_help_string(self, action):
+        text, default = action.help or "", action.default
+        if not action.option_strings or default is None or default is argparse.SUPPRESS or "(default" in text:
+            return text
+        shown = ("off", "on")[default] if isinstance(default, bool) else "%(default)s"
+        return f"{text} (default: {shown})"
 
 
 def check(args, *, positive=(), non_negative=(), finite=(), at_most=None) -> None:

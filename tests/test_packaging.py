@@ -647,8 +647,10 @@ def test_wallclock_row_replaces_only_its_tier(tmp_path):
         and rows["cpu-2core"]["minutes"] == "1.66"
         and rows["mps"]["status"] == "pending"
     )
-    assert ch37.cli.expected_wallclock("t4", path).startswith("about 1.4 min")
-    assert "not yet measured" in ch37.cli.expected_wallclock("mps", path)
+    assert ch37.cli.expected_wallclock("t4", "abc", path).startswith("about 1.4 min for this configuration")
+    # issue 33 #7: another configuration (a bigger --pusht_data, another seed) gets no estimate
+    assert "not this configuration" in ch37.cli.expected_wallclock("t4", "def", path)
+    assert "not yet measured" in ch37.cli.expected_wallclock("mps", "abc", path)
 
 
 def test_wallclock_cli_smoke_never_writes(tmp_path, stub):
@@ -662,10 +664,11 @@ def test_wallclock_cli_smoke_never_writes(tmp_path, stub):
     assert row["status"] == "measured" and float(row["minutes"]) >= 0 and len(row["config_hash"]) == 12
 
 
-def test_config_hash_ignores_only_device_workers_cache():
-    c = {"seed": 0, "epochs": 500, "device": "cpu", "workers": 2, "cache": False}
+def test_config_hash_ignores_only_device_workers_cache_rerun():
+    c = {"seed": 0, "epochs": 500, "device": "cpu", "workers": 2, "cache": False, "rerun": False}
     h = wallclock.config_hash
-    assert h(c) == h(dict(c, device="cuda", workers=8, cache=True)) != h(dict(c, epochs=499))
+    assert h(c) == h(dict(c, device="cuda", workers=8, cache=True, rerun=True)) != h(dict(c, epochs=499))
+    assert h(c) != h(dict(c, seed=1)) != h(dict(c, pusht_data="big"))
     assert h(c) == h(dict(reversed(list(c.items()))))
 
 
