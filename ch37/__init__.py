@@ -39,8 +39,12 @@ DATA_CODE = tuple(
     "pusht_env.py pusht.xml aloha_env.py aloha.xml scripted_expert.py ch37/demos.py ch37/lerobot_io.py "
     "ch37/seeds.py".split()
 )
-CODE_FILES = DATA_CODE + tuple(
-    "scale_data.py bc_recipe.py gen_demos_pusht.py gen_demos_aloha.py ch37/cli.py ch37/files.py "
-    "ch37/parallel.py ch37/stamps.py ch37/viz.py ch37/poster.py ch37/ensemble.py ch37/engine.py "
-    "ch37/shards.py ch37/frame_stats.py ch37/executors.py ch37/config.py".split()
-)
+CODE_FILES = (
+    DATA_CODE
+    + tuple(
+        "scale_data.py bc_recipe.py gen_demos_pusht.py gen_demos_aloha.py ch37/cli.py ch37/files.py "
+        "ch37/parallel.py ch37/stamps.py ch37/viz.py ch37/poster.py ch37/ensemble.py ch37/engine.py "
+        "ch37/shards.py ch37/frame_stats.py ch37/executors.py ch37/config.py".split()
+    )
+    + ("meta.yaml",)
+)  # the five-seed reference the headline and the poster place a run beside

@@ -701,7 +701,10 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
             "demos_per_s": made / seconds,
             "command": " ".join(shlex.quote(x) for x in [Path(sys.executable).name, *sys.argv]),
             "versions": vers,
-            "dataset": {"episodes": merged, "load": f"LeRobotDataset('local/pusht_aug', root='{out}')"},
+            "dataset": {  # pyav: torchcodec without system FFmpeg logs a long traceback before falling back
+                "episodes": merged,
+                "load": f"LeRobotDataset('local/pusht_aug', root='{out}', video_backend='pyav')",
+            },
         },
     )
     assert report["kept"] == merged, (report["kept"], merged)

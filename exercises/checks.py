@@ -1,5 +1,6 @@
-"""Checks for the chapter 3.7 exercises, run from the repository root: `pytest exercises/checks.py -k ex1`
-(ex2, ex3), or `python -m exercises.checks ex2` without pytest (a failure is one `error:` line, exit 1).
+"""Checks for the chapter 3.7 exercises, run from the repository root with the project's Python:
+`.venv/bin/python -m pytest exercises/checks.py -k ex1` (ex2, ex3), or `.venv/bin/python -m exercises.checks
+ex2` without pytest (a failure is one `error:` line, exit 1); with .venv activated, `python` alone.
 A prediction the data contradicts does not fail: the check says so, and that is the lesson.
 
 For instructors and the test suite: CH37_EXERCISE_DIR (answer files, default exercises/), CH37_META
@@ -198,6 +199,12 @@ def check_mix(fn, pusht_mask_density: float = 1 / 3, where: str = "exercises/ex2
     return len(cases)
 
 
+def _shown(python: str) -> str:
+    """The interpreter as a learner types it from the repository root (.venv/bin/python), else in full."""
+    path = Path(python)
+    return str(path.relative_to(ROOT)) if path.is_absolute() and path.is_relative_to(ROOT) else python
+
+
 @checker
 def run_chapter(seed: int, aug_per_demo: int, smoke: bool, say=print, extra: tuple = ()):
     """scale_data.py's metrics for one configuration, its report streamed because a full run takes
@@ -206,7 +213,7 @@ def run_chapter(seed: int, aug_per_demo: int, smoke: bool, say=print, extra: tup
     out /= f"{'smoke_' if smoke else ''}seed{seed}_aug{aug_per_demo}"
     flags = ["--seed", str(seed), "--aug_per_demo", str(aug_per_demo), "--no-rerun", "--out", str(out)]
     flags += [*(SMOKE_FLAGS if smoke else FULL_FLAGS), *extra]
-    say(f"running: python scale_data.py {' '.join(flags)}")
+    say(f"running: {_shown(sys.executable)} scale_data.py {' '.join(flags)}")
     argv, env = [sys.executable, str(ROOT / "scale_data.py"), *flags], dict(os.environ, PYTHONHASHSEED="0")
     with tempfile.TemporaryFile("w+") as err:  # progress bars: kept for the error message only
         p = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, stderr=err, text=True, env=env)
@@ -407,7 +414,9 @@ def main(argv: list[str]) -> int:
     """python -m exercises.checks ex1|ex2|ex3: a failed check is one `error:` line and exit 1, as a failed
     test; a wrong command is exit 2, as any command's wrong flag."""
     if len(argv) != 1 or argv[0] not in RUNS:
-        raise errors.DataError(f"usage: python -m exercises.checks ex1|ex2|ex3, got {' '.join(argv)!r}")
+        raise errors.DataError(
+            f"usage: .venv/bin/python -m exercises.checks ex1|ex2|ex3, got {' '.join(argv)!r}"
+        )
     try:
         RUNS[argv[0]](print)
     except ExerciseError as e:

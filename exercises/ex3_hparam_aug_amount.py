@@ -27,11 +27,12 @@ What to do
     4. Look at the 95% intervals in each metrics.json: with 50 evaluation starts, which of the
        steps could be noise?
     5. Three points cannot say whether the curve keeps climbing past them, or where it bends:
-       `python scale_lab.py` (the Scale Lab, see the README) measures it at 12 to 972 demos,
+       `.venv/bin/python scale_lab.py` (the Scale Lab, see the README) measures it at 12 to 972 demos,
        for fresh expert demos and both data engines, over three seeds.
 
-How to check
-    pytest exercises/checks.py -k ex3
+How to check (from the repository root, after the README's set-up)
+    .venv/bin/python -m pytest exercises/checks.py -k ex3
+    (with .venv activated: python -m pytest exercises/checks.py -k ex3)
 
 Estimated time: 20 minutes (most of it waiting for three runs; fewer if exercise 1 ran first).
 """
