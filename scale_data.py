@@ -227,7 +227,7 @@ cross = {
     "padded_dim_max_grad": pad_grad,
     "quantiles": "q01/q99 over all frames; LeRobot's meta/stats.json averages per-episode quantiles instead",
 }
-write_atomic(args.out / "cross_embodiment.json", dump_json(round_floats(cross, 6)))
+cross_path = write_atomic(args.out / "cross_embodiment.json", dump_json(round_floats(cross, 6)))
 # --- endregion ---
 
 # --- region: augment ---
@@ -366,7 +366,7 @@ metrics = {
                  "union": len(c_src | c_aug), "outside_annulus": {"source": out_src, "augmented": out_aug}},
 }  # fmt: skip
 metrics_path = write_atomic(args.out / "metrics.json", dump_json(round_floats(metrics, 6)))
-written = [args.out / "cross_embodiment.json", metrics_path]
+written = [cross_path, metrics_path]
 from ch37 import poster, viz  # noqa: E402  (the drawing code: PNG, HTML poster, Rerun; not the lesson)
 
 written.append(viz.figure(args.out / "scale_data.png", src_starts, aug_starts, metrics, bc.ANNULUS))

@@ -4,7 +4,8 @@ errors        DataError, guard() / run_main() / main(): one line and an exit cod
 files         claim(): an output folder checked up front, locked, owned file by file; write_atomic,
               dump_json: whole files or none, no leftovers
 config        the chapter's defaults and smoke settings, the one flag parser and checker
-cli           scale_data.py's flag limits, claim_out, device choice, the tier banner
+cli           scale_data.py's flag limits, input checks, claim_out, device choice, the tier banner,
+              the five-seed reference a run is placed beside
 lerobot_io    LeRobot v3 read/write: features, write_dataset, load_arrays, schema checks
 seeds         env_seed: demos, augmentation and evaluation never share a start
 stamps        ownership stamps: only files this project wrote are ever deleted or rewritten; read_json
@@ -23,11 +24,15 @@ files.claim (or files.check_out_path), stamps.replace_own_dir and parallel.worke
 """
 
 import os
+import warnings
 from pathlib import Path
 
 # Offline by construction: everything the chapter reads it made itself, so no LeRobot or Hugging Face
 # call may reach for the Hub (a missing local file must be an error here, never a download).
 os.environ["HF_HUB_OFFLINE"] = os.environ["HF_DATASETS_OFFLINE"] = "1"
+# In Jupyter without ipywidgets, tqdm.auto (which the datasets library imports) warns once and uses
+# the text progress bar instead of a widget: the notebook loses nothing, so the warning is noise.
+warnings.filterwarnings("ignore", message="IProgress not found")
 
 ROOT = Path(__file__).resolve().parent.parent  # the repository root: scale_data.py, the envs, meta.yaml
 CHAPTER_ID = "ch3.7-scale-data"

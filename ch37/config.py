@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -70,11 +71,12 @@ def parser(description: str, prog: str | None = None) -> argparse.ArgumentParser
 
 class _Help(argparse.RawDescriptionHelpFormatter):
     """--help shows every flag's default after its help (on/off for a switch), unless the help already
-    says it in words (a default that is computed, such as --out's)."""
+    names it ("default ...": one that is computed, such as --out's)."""
 
     def _get_help_string(self, action):
         text, default = action.help or "", action.default
-        if not action.option_strings or default is None or default is argparse.SUPPRESS or "(default" in text:
+        said = re.search(r"\bdefault\b", text)  # "default 12", "(default: cores)": said in words
+        if not action.option_strings or default is None or default is argparse.SUPPRESS or said:
             return text
         shown = ("off", "on")[default] if isinstance(default, bool) else "%(default)s"
         return f"{text} (default: {shown})"
