@@ -584,6 +584,16 @@ def test_notebook_runs_end_to_end_in_smoke_mode(tmp_path, smoke_sweep):
     client.execute(env=env)
     text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs)
     assert "lerobot ready" in text and "headline:" in text and "wrote" in text and "reusing" not in text
+    # issue 33 #9: no stray value (a PosixPath after the wrangle cell) and no tqdm IProgress warning
+    results = [
+        c.id
+        for c in nb.cells
+        if c.cell_type == "code"
+        for o in c.outputs
+        if o.output_type == "execute_result"
+    ]
+    assert results == ["poster"], results
+    assert "IProgress" not in text and "TqdmWarning" not in text, text
     (poster,) = [c for c in nb.cells if "poster" in c.metadata.get("tags", [])]
     shown = "".join(o.get("data", {}).get("text/html", "") for o in poster.outputs)
     assert shown == (out / "scale_data.html").read_text(encoding="utf-8") and "<svg" in shown
