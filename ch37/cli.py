@@ -240,8 +240,8 @@ def ex1_reminder() -> str | None:
 
 
 def banner(args: argparse.Namespace) -> None:
-    """Two lines: what runs where, and how long this configuration takes on this tier; a third line
-    reminds a learner who has not yet written exercise 1's prediction."""
+    """Two lines: what runs where, and how long this configuration takes on this tier; in the default
+    configuration (exercise 1's experiment), a third reminds a learner who has not written a prediction."""
     import torch
 
     tier = device_tier(args.device)
@@ -249,5 +249,6 @@ def banner(args: argparse.Namespace) -> None:
     print(f"{head} | torch {torch.__version__}")
     smoke = "smoke run: tiny configuration, seconds, numbers not meaningful"
     print(smoke if args.smoke else expected_wallclock(tier, config_hash(result_config(args))))
-    if not args.smoke and (reminder := ex1_reminder()):
+    default = not args.smoke and five_seed_reference(result_config(args)) is not None  # ex1's experiment
+    if default and (reminder := ex1_reminder()):
         print(reminder)

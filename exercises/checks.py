@@ -279,7 +279,7 @@ def check_ex1_measured(metrics: dict, band: dict):
     if not want:
         yield "ex1: meta.yaml's exercise_checks.ex1.band has neither scale_effect_min nor scale_effect_max"
     s, a = arms["source_full"]["success"], arms["augmented_full"]["success"]
-    measured = f"source-only {s:.2f} -> source+augmented {a:.2f} ({eff * 100:+.0f} points)"
+    measured = f"source only {s:.2f} -> source + augmented {a:.2f} ({eff * 100:+.0f} points)"
     measured = f"at {budgets['full']} steps each, {measured}"
     if not lo - 1e-9 <= eff <= hi + 1e-9:
         yield (

@@ -6,7 +6,7 @@ Objective
     k = 4 is part of the set at k = 8), so the curve compares more of the same kind of data.
     All three runs train for one and the same number of gradient steps: the full budget of the
     k = 8 run (500 passes over its source + augmented set), passed to the k = 0 and k = 4 runs
-    with --full_steps. So the curve moves the data alone, and you read the source+augmented arm
+    with --full_steps. So the curve moves the data alone, and you read the source + augmented arm
     at that full budget.
 
 What to do
