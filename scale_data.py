@@ -288,9 +288,9 @@ aug = load_arrays(aug_path, keys=engine.KEPT_KEYS) if kept else engine.empty_kep
 # steps from the same initial weights and batch-order seed: within a budget the data is the only
 # difference. Every policy rolls out on the same held-out starts. The network, the training loop
 # (forward, loss.backward(), optimizer.step()) and the rollout are in bc_recipe.py: open it.
-# The table shows each arm's final training loss beside its success: a low loss on 12 demos is
-# fitting those demos, not solving new starts (at seed 0, full budget: source only reaches loss
-# 0.0018 and success 0.00; source + augmented 0.035 and 0.24). Read success, not loss.
+# The table shows each arm's final training loss beside its success because they can disagree:
+# a network can fit 12 demos almost exactly (a low loss) and still solve none of the held-out
+# starts. That is overfitting, and only the rollouts show it: read success, not loss.
 import math  # noqa: E402
 
 import bc_recipe as bc  # noqa: E402
