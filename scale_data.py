@@ -15,8 +15,9 @@ at two budgets, so what the data buys is read apart from what more training buys
   4. measure  a 2x2: data {source, source+augmented} x budget {short, full}, equal steps per budget
   5. emit     metrics.json, cross_embodiment.json, a PNG figure, an HTML poster and a Rerun recording
 
-Run:    python scale_data.py --seed 0
+Run:    python scale_data.py --seed 0             (python: .venv/bin/python, or with .venv activated)
 Smoke:  python scale_data.py --smoke --seed 0     (seconds; two runs give identical metrics.json)
+Before the first run, write your prediction in exercises/ex1_predict_scale.py: this run answers it.
 """
 
 # --- region: setup ---
@@ -33,7 +34,7 @@ from ch37 import cli, errors, result_cache
 from ch37.config import CHAPTER as D
 from ch37.config import parser
 
-errors.guard()  # a problem you can fix: one line, exit 2; Ctrl-C: exit 130, and the same command continues
+errors.guard()  # a fixable problem: one line, exit 2; Ctrl-C: exit 130 (demo sets kept, training restarts)
 t_start = time.perf_counter()
 p = parser("Chapter 3.7: Datasets at Scale (see the module docstring).")
 flag = p.add_argument
@@ -95,13 +96,20 @@ flag(
     help="processes for re-solves and evaluation physics (default: cores); same results",
 )
 args = cli.parse(p)  # every flag checked here: a bad one is one line and exit 2, before any heavy import
-claim = cli.claim_out(
-    args
-)  # --out usable and locked, nothing of yours in the way, our old results there cleared
-
 import torch  # noqa: E402  (after the checks, so --help and flag errors are instant)
 
 args.device = cli.pick_device(args.device)
+# Every input is checked before anything is removed: your --pusht_data/--aloha_data first (the wrangle
+# region reuses the answer), then --out is usable and locked, nothing of yours in the way; only then
+# are our old results there cleared.
+from datagen import check_given  # noqa: E402
+from gen_demos_aloha import ALOHA  # noqa: E402
+from gen_demos_pusht import PUSHT  # noqa: E402
+
+for emb, given in ((PUSHT, args.pusht_data), (ALOHA, args.aloha_data)):
+    if given is not None:
+        check_given(emb, given, episodes=args.source_episodes, seed=args.seed, noise=emb.default_noise)
+claim = cli.claim_out(args)
 device = torch.device(args.device)
 torch.manual_seed(args.seed)
 if args.smoke:  # tiny matrices: a second thread only adds overhead, and 1 is the same everywhere
@@ -116,10 +124,11 @@ if cache.replay():  # an identical earlier run (same flags, code and data): its 
 # Pool two robots' demos. Each keeps its own statistics (a PushT velocity and an ALOHA grip
 # command share no scale), actions are zero-padded to the widest robot (6) with a mask so the
 # padding never teaches anything, and an embodiment id says which robot a row came from.
+# The pile is what a cross-embodiment policy would train on; it is not what trains below. The
+# measure region trains a PushT-only BC policy that min-max scales its own data (bc_recipe.Policy),
+# so there are two normalizations: the pile standardizes per robot, the policy scales PushT alone.
 from ch37.ownership import dump_json, round_floats, write_atomic  # noqa: E402
 from datagen import ensure_demos  # noqa: E402
-from gen_demos_aloha import ALOHA  # noqa: E402
-from gen_demos_pusht import PUSHT  # noqa: E402
 from lerobot_v3 import load_arrays  # noqa: E402
 
 sets = {}
@@ -202,6 +211,7 @@ print(
     f"masked loss: largest gradient on PushT's padded dims = {pad_grad:.1f} "
     f"(real dims: {pusht_grad[:, :pusht_act].abs().max().item():.2e})"
 )
+print("the pile shows the wrangling; the policy below trains on PushT alone, with its own min-max scaling")
 cross = {
     "padded_action_dim": PAD,
     "embodiments": [
@@ -223,7 +233,7 @@ cross = {
     "padded_dim_max_grad": pad_grad,
     "quantiles": "q01/q99 over all frames; LeRobot's meta/stats.json averages per-episode quantiles instead",
 }
-write_atomic(args.out / "cross_embodiment.json", dump_json(round_floats(cross, 6)), claim)
+cross_path = write_atomic(args.out / "cross_embodiment.json", dump_json(round_floats(cross, 6)), claim)
 # --- endregion ---
 
 # --- region: augment ---
@@ -233,6 +243,8 @@ write_atomic(args.out / "cross_embodiment.json", dump_json(round_floats(cross, 6
 # keeps its first --aug_per_demo successes in k order, so the set for aug_per_demo=4 is a subset of
 # the set for 8 and the scaling curve compares nested data. --aug_mode replay has no solver: it
 # replays the source path in the new block pose, and the success filter decides what is kept.
+# At the default settings the expert solves every perturbed start (yield 1.00), so the filter
+# rejects nothing here; under replay it rejects most attempts (docs/replay.md).
 import datagen  # noqa: E402  (the data engine: datagen.grow over a task, here datagen.PUSHT)
 from ch37.parallel import progress  # noqa: E402
 
@@ -265,6 +277,10 @@ print(
 if attempts > len(kept):  # the success filter at work: what it threw away, and why
     why = ", ".join(f"{reason} {n}" for reason, n in failures.items() if n)
     print(f"  the success filter rejected {attempts - len(kept)} of {attempts} attempts: {why}")
+elif attempts:
+    print(
+        "  the success filter rejected none: the expert solved every start; under --aug_mode replay it bites"
+    )
 aug_path = args.out / "demos" / cli.aug_dir_name(args.seed, len(sources), args.aug_per_demo, args.aug_mode)
 datagen.save(
     datagen.PUSHT, aug_path, kept, repo_id="local/pusht_aug", stamp={"kind": "augmented", "seed": args.seed}
@@ -281,6 +297,9 @@ aug = load_arrays(aug_path, keys=datagen.KEPT_KEYS) if kept else datagen.empty_k
 # steps from the same initial weights and batch-order seed: within a budget the data is the only
 # difference. Every policy rolls out on the same held-out starts. The network, the training loop
 # (forward, loss.backward(), optimizer.step()) and the rollout are in bc_recipe.py: open it.
+# The table shows each arm's final training loss beside its success because they can disagree:
+# a network can fit 12 demos almost exactly (a low loss) and still solve none of the held-out
+# starts. That is overfitting, and only the rollouts show it: read success, not loss.
 import math  # noqa: E402
 
 import bc_recipe as bc  # noqa: E402
@@ -310,13 +329,20 @@ for budget, steps in budgets.items():
                                     "ci95": bc.wilson(rate, len(eval_seeds))}  # fmt: skip
     print(f"budget {budget}: {steps} steps for each data arm ({time.perf_counter() - t0:.1f} s)")
 steps_named = " | ".join(f"{b} = {n} steps" for b, n in budgets.items())
-print(f"success (95% interval) on {len(eval_seeds)} held-out starts | {steps_named}")
+print(f"success (95% interval), training loss, on {len(eval_seeds)} held-out starts | {steps_named}")
+label = {"source": "source only", "augmented": "source + augmented"}  # the arm named "augmented" has both
 for name, (x, _) in data.items():
     row = [arms[f"{name}_{b}"] for b in budgets]
     print(
-        f"  {name:9s} {len(x):6d} frames | "
-        + " | ".join(f"{a['success']:.2f} [{a['ci95'][0]:.2f}, {a['ci95'][1]:.2f}]" for a in row)
+        f"  {label[name]:18s} {len(x):6d} frames | "
+        + " | ".join(
+            f"{a['success']:.2f} [{a['ci95'][0]:.2f}, {a['ci95'][1]:.2f}] loss {a['final_loss']:.4f}"
+            for a in row
+        )
     )
+print(
+    "  a lower training loss is not a higher success: fitting a few demos closely is not solving new starts"
+)
 effects = {  # success differences, each between two arms that differ in one thing only
     "data_full": arms["augmented_full"]["success"] - arms["source_full"]["success"],  # the headline
     "data_short": arms["augmented_short"]["success"] - arms["source_short"]["success"],
@@ -327,8 +353,11 @@ effects = {  # success differences, each between two arms that differ in one thi
 
 # --- region: emit ---
 # Coverage is one reason extra demos can help: count which cells of the spawn annulus (3 rings x 12
-# sectors) hold a block start. Then metrics.json (sorted, rounded, atomic), a PNG figure and a
-# Rerun recording, and the headline last: the data effect at equal steps.
+# sectors) hold a block start. A perturbed start may lie a little outside the annulus (the engine
+# keeps blocks on a wider band): it is kept and trained on, but counted in no cell. Then metrics.json
+# (sorted, rounded, atomic; "scale_effect" repeats effects.data_full, the headline, under the name
+# the exercises read), a PNG figure, a poster and a Rerun recording, and the headline last: the
+# data effect at equal steps, beside the five-seed reference in meta.yaml when this is its setting.
 src_starts = np.array([src.states[0][2:4] for src in sources.values()])  # (12, 2) block xy
 _, first_rows = np.unique(aug["episode_index"], return_index=True)  # each augmented episode's first frame
 aug_starts = aug["aug.start"][first_rows, :2]  # (kept, 2) block xy
@@ -346,12 +375,16 @@ metrics = {
                  "union": len(c_src | c_aug), "outside_annulus": {"source": out_src, "augmented": out_aug}},
 }  # fmt: skip
 metrics_path = write_atomic(args.out / "metrics.json", dump_json(round_floats(metrics, 6)), claim)
-written = [args.out / "cross_embodiment.json", metrics_path]
+written = [cross_path, metrics_path]
 from ch37 import poster, viz  # noqa: E402  (the drawing code: PNG, HTML poster, Rerun; not the lesson)
 
 written.append(viz.figure(args.out / "scale_data.png", src_starts, aug_starts, metrics, bc.ANNULUS, claim))
+ref = cli.five_seed_reference(metrics["config"])  # meta.yaml's sweep, None unless this configuration
+ref_words = cli.reference_words(ref, args.seed, effects["data_full"]) if ref else ""
 written.append(
-    poster.chapter(args.out / "scale_data.html", metrics, cross, src_starts, aug_starts, bc.ANNULUS, claim)
+    poster.chapter(
+        args.out / "scale_data.html", metrics, cross, src_starts, aug_starts, bc.ANNULUS, ref_words, claim
+    )
 )
 if args.rerun:
     shown = [  # a few augmented trajectories
@@ -366,12 +399,14 @@ rate = {name: arm["success"] for name, arm in arms.items()}
 opens = {".json": "JSON", ".png": "open as an image", ".html": "any browser", ".rrd": "open with: rerun {}"}
 files_named = ", ".join(f"{f} ({opens[f.suffix].format(f)})" for f in written)
 summary = (
-    f"headline: at equal steps ({budgets['full']} each), source {rate['source_full']:.2f} -> source+aug "
-    f"{rate['augmented_full']:.2f} ({effects['data_full'] * 100:+.0f} points)\n"
-    f"at the short budget ({budgets['short']} steps): {rate['source_short']:.2f} -> "
-    f"{rate['augmented_short']:.2f} ({effects['data_short'] * 100:+.0f}); more steps alone: source "
-    f"{effects['compute_source'] * 100:+.0f}, source+augmented {effects['compute_augmented'] * 100:+.0f}; "
-    f"coverage {len(c_src)} -> {len(c_src | c_aug)} of {bc.RINGS * bc.SECTORS} cells\nwrote {files_named}\n"
+    f"headline: at equal steps ({budgets['full']} each), source only {rate['source_full']:.2f} -> source + "
+    f"augmented {rate['augmented_full']:.2f} ({effects['data_full'] * 100:+.0f} points)\n"
+    + (f"one seed is one draw: {ref_words}\n" if ref_words else "")
+    + f"at the short budget ({budgets['short']} steps): {rate['source_short']:.2f} -> "
+    f"{rate['augmented_short']:.2f} ({effects['data_short'] * 100:+.0f}); more steps alone: source only "
+    f"{effects['compute_source'] * 100:+.0f}, source + augmented {effects['compute_augmented'] * 100:+.0f}; "
+    f"coverage {len(c_src)} -> {len(c_src | c_aug)} of {bc.RINGS * bc.SECTORS} cells (augmented starts "
+    f"just outside the annulus, kept but in no cell: {out_aug})\nwrote {files_named}\n"
 )
 cache.store(written, summary)
 print(f"finished in {time.perf_counter() - t_start:.0f} s")

@@ -12,7 +12,8 @@ plumbing (imported by the engine, the format's error type included, and the tool
   ensemble      several MLPs as one module: the arms of a training budget side by side
 presentation and flags (the lesson's and the tools'; never imported by datagen or lerobot_v3)
   config        the chapter's defaults and smoke settings, the one flag parser and checker
-  cli           scale_data.py's flag limits, claim_out, device choice, the tier banner
+  cli           scale_data.py's flag limits, claim_out, device choice, the tier banner, the five-seed
+                reference a run is placed beside
   result_cache  reuse a finished run whose flags and code match; entries verified by checksum
   viz           the PNG figures and the Rerun recordings (the chapter's and the Scale Lab's)
   poster        the self-contained HTML posters (scale_data.html, scale_lab.html): inline SVG, no script
@@ -23,11 +24,15 @@ ownership.claim (or ownership.check_out_path), ownership.replace_own_dir and pro
 
 import hashlib
 import os
+import warnings
 from pathlib import Path
 
 # Offline by construction: everything the chapter reads it made itself, so no LeRobot or Hugging Face
 # call may reach for the Hub (a missing local file must be an error here, never a download).
 os.environ["HF_HUB_OFFLINE"] = os.environ["HF_DATASETS_OFFLINE"] = "1"
+# In Jupyter without ipywidgets, tqdm.auto (which the datasets library imports) warns once and uses
+# the text progress bar instead of a widget: the notebook loses nothing, so the warning is noise.
+warnings.filterwarnings("ignore", message="IProgress not found")
 
 ROOT = Path(__file__).resolve().parent.parent  # the repository root: scale_data.py, the envs, meta.yaml
 CHAPTER_ID = "ch3.7-scale-data"

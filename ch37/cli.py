@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import csv
+import hashlib
+import json
 import os
 from pathlib import Path
 
@@ -15,6 +17,8 @@ from ch37.seeds import MAX_SEED, SEED_BLOCK
 # wallclock.csv's tiers: two CPU-side ones, then GPUs matched by a substring of the device name.
 GPU_TIERS = ("t4", "l4", "4090", "a100", "h100", "h200")
 TIERS = ("cpu-2core", "mps", *GPU_TIERS)
+# not in config_hash: the tier names the device; workers, cache and the .rrd change speed only
+HASH_EXCLUDE = ("device", "workers", "cache", "rerun")
 POSITIVE = ("source_episodes", "epochs", "batch_size", "hidden_dim", "eval_episodes", "workers", "aug_tries")
 NON_NEGATIVE = ("aug_per_demo", "seed", "full_steps")
 FINITE = ("aug_pos_sigma", "aug_yaw_sigma", "lr")
@@ -84,8 +88,9 @@ def aug_dir_name(seed, n_sources, per_demo, mode: str) -> str:
 
 
 def claim_out(args: argparse.Namespace):
-    """--out taken for this run before any work (ch37.ownership.claim): usable, locked against a second
-    run, nothing of yours where this run writes, this program's earlier results there cleared."""
+    """--out taken for this run before any work (ch37.ownership.claim), once the lesson has checked your
+    inputs: usable, locked against a second run, nothing of yours where this run writes, this
+    program's earlier results there cleared."""
     from ch37.ownership import claim
 
     demos = Path(args.out) / "demos"
@@ -121,24 +126,101 @@ def device_tier(device: str) -> str:
     return {"mps": "mps"}.get(device, "cpu-2core")
 
 
-def expected_wallclock(tier: str, csv_path: Path = ROOT / "wallclock.csv") -> str:
+def config_hash(config: dict) -> str:
+    """First 12 hex of sha256 over metrics.json's "config" less HASH_EXCLUDE, as sorted compact JSON:
+    the configuration a wallclock.csv row was measured with (tools.wallclock writes it)."""
+    c = {k: v for k, v in config.items() if k not in HASH_EXCLUDE}
+    return hashlib.sha256(json.dumps(c, sort_keys=True, separators=(",", ":")).encode()).hexdigest()[:12]
+
+
+def expected_wallclock(tier: str, config: str, csv_path: Path = ROOT / "wallclock.csv") -> str:
+    """This tier's measured wall-clock, only when its wallclock.csv row measured this configuration
+    (config: config_hash of this run); any other configuration may take much longer or shorter."""
     try:
         rows = list(csv.DictReader(csv_path.open()))
     except OSError:
         rows = []
     for r in rows:
         if r.get("tier") == tier and r.get("status") == "measured":
+            if r.get("config_hash") != config:
+                return "wall-clock: measured for the default run only (wallclock.csv), not this configuration"
             minutes, date = float(r["minutes"]), r["date"]
-            return f"about {minutes:.1f} min for the default run (wallclock.csv, measured {date})"
+            return f"about {minutes:.1f} min for this configuration (wallclock.csv, measured {date})"
     return "default-run wall-clock not yet measured for this tier"
 
 
+READS = (ROOT / "meta.yaml",)  # the five-seed reference a run is placed beside: part of the result cache key
+
+
+def five_seed_reference(run_config: dict, meta_path: Path = READS[0]) -> dict | None:
+    """meta.yaml's reference_run over seeds (python -m tools.sweep --seeds 5): the data effect at the full
+    budget, per seed and summarised, when this run's configuration is the swept one (any seed); else None.
+    The sweep ran before --aug_mode and --aug_tries existed: it re-solved, and at yield 1.00 no cap bound."""
+    import yaml
+
+    try:
+        ref = yaml.safe_load(meta_path.read_text())["reference_run"]["seeds"]
+        swept = {"aug_mode": "resolve", "aug_tries": config.CHAPTER.aug_tries}
+        swept |= ref["provenance"]["config"]
+        rows, paired = ref["rows"], ref["paired"]["data_full"]
+    except (OSError, KeyError, TypeError, yaml.YAMLError):
+        return None
+    if any(run_config.get(k) != v for k, v in swept.items() if k not in HASH_EXCLUDE):
+        return None
+    effects = {int(r["seed"]): float(r["data_full"]) for r in rows}
+    return {
+        "command": ref["provenance"]["command"],
+        "effects": effects,
+        "mean": float(paired["mean"]),
+        "up": int(paired["wins"]),
+        "n": int(paired["n"]),
+    }
+
+
+def reference_words(ref: dict, seed: int, effect: float) -> str:
+    """One sentence placing this run's data effect (a success difference) beside the five-seed reference."""
+    effects = ref["effects"]
+    lo, hi = min(effects.values()), max(effects.values())
+    seeds = ", ".join(map(str, sorted(effects)))
+    text = (
+        f"this seed {effect * 100:+.0f} points beside the five-seed reference (meta.yaml, {ref['command']}): "
+        f"mean {ref['mean'] * 100:+.1f} over seeds {seeds}, from {lo * 100:+.0f} to {hi * 100:+.0f}, "
+        f"up on {ref['up']} of {ref['n']}"
+    )
+    if seed in effects:
+        rank = sorted(effects.values(), reverse=True).index(effects[seed]) + 1
+        place = {1: "the largest", len(effects): "the smallest"}.get(rank, f"number {rank} from the top")
+        text += f"; seed {seed} is {place} of the {len(effects)}"
+    return text
+
+
+def ex1_reminder() -> str | None:
+    """A line for a learner who runs the chapter before writing exercise 1's prediction, which this run
+    answers; None once exercises/ex1_predict_scale.py holds one (read as its check reads it)."""
+    try:
+        from exercises.checks import EX1_CHOICES, ExerciseError, check_prediction, load_exercise
+    except ImportError:  # the exercises or pytest are not here: nothing to remind of
+        return None
+    try:
+        check_prediction(load_exercise("ex1"), tuple(EX1_CHOICES), "ex1")
+        return None
+    except ExerciseError:
+        return (
+            "exercise 1: this run answers its question; write your PREDICTION and WHY in "
+            "exercises/ex1_predict_scale.py before you read the numbers (Ctrl-C stops the run)"
+        )
+
+
 def banner(args: argparse.Namespace) -> None:
-    """Two lines: what runs where, and how long the default run takes on this tier."""
+    """Two lines: what runs where, and how long this configuration takes on this tier; in the default
+    configuration (exercise 1's experiment), a third reminds a learner who has not written a prediction."""
     import torch
 
     tier = device_tier(args.device)
     head = f"ch3.7 Datasets at Scale | seed {args.seed} | device {args.device} ({tier})"
     print(f"{head} | torch {torch.__version__}")
     smoke = "smoke run: tiny configuration, seconds, numbers not meaningful"
-    print(smoke if args.smoke else expected_wallclock(tier))
+    print(smoke if args.smoke else expected_wallclock(tier, config_hash(result_config(args))))
+    default = not args.smoke and five_seed_reference(result_config(args)) is not None  # ex1's experiment
+    if default and (reminder := ex1_reminder()):
+        print(reminder)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -65,8 +66,20 @@ def parser(description: str, prog: str | None = None) -> argparse.ArgumentParser
                 kw["type"] = _path
             return super().add_argument(*names, **kw)
 
-    fmt = argparse.RawDescriptionHelpFormatter
-    return Parser(prog=prog, description=description, formatter_class=fmt, allow_abbrev=False)
+    return Parser(prog=prog, description=description, formatter_class=_Help, allow_abbrev=False)
+
+
+class _Help(argparse.RawDescriptionHelpFormatter):
+    """--help shows every flag's default after its help (on/off for a switch), unless the help already
+    names it ("default ...": one that is computed, such as --out's)."""
+
+    def _get_help_string(self, action):
+        text, default = action.help or "", action.default
+        said = re.search(r"\bdefault\b", text)  # "default 12", "(default: cores)": said in words
+        if not action.option_strings or default is None or default is argparse.SUPPRESS or said:
+            return text
+        shown = ("off", "on")[default] if isinstance(default, bool) else "%(default)s"
+        return f"{text} (default: {shown})"
 
 
 def _values(args, name) -> list:

@@ -17,12 +17,11 @@ import math
 from pathlib import Path
 
 from ch37.ownership import dump_json, round_floats, write_atomic
-from ch37.viz import DATA_COLOURS, LAB_DEFAULT, LAB_STYLE
+from ch37.viz import DATA_COLOURS, DATA_LABEL, LAB_DEFAULT, LAB_STYLE
 
 HEX = {"tab:blue": "#1f77b4", "tab:orange": "#ff7f0e", "tab:green": "#2ca02c", "tab:red": "#d62728"}
 NAMES = {"pusht": "PushT", "aloha": "ALOHA"}  # embodiment names as the chapter writes them
 GROWN_BY = {"resolve": "re-solving", "replay": "replay"}
-DATA_LABEL = {"source": "source only", "augmented": "source + augmented"}
 DATA_VAR = {"source": "var(--src)", "augmented": "var(--aug)"}  # the arms' colours, set in CSS
 BUDGET_ORDER = ("short", "full")
 SHORT = dict(fresh="fresh", resolve="re-solve", replay="replay", resolve_fixed="re-solve, fixed budget")
@@ -256,9 +255,10 @@ def _strip(cross: dict) -> str:
     )
 
 
-def chapter_html(metrics: dict, cross: dict, src_starts, aug_starts, annulus) -> str:
+def chapter_html(metrics: dict, cross: dict, src_starts, aug_starts, annulus, reference: str = "") -> str:
     """scale_data.html's text from the run's metrics.json and cross_embodiment.json dicts and the block
-    starts (src_starts (S, 2), aug_starts (K, 2), metres); annulus = (r_min, r_max, rings, sectors)."""
+    starts (src_starts (S, 2), aug_starts (K, 2), metres); annulus = (r_min, r_max, rings, sectors);
+    reference: a sentence placing this seed beside meta.yaml's five-seed reference (ch37.cli), or ""."""
     m = _as_written(metrics)
     rate = {k: a["success"] for k, a in m["arms"].items()}
     b, eff, cov, cfg = m["budgets"], m["effects"], m["coverage"], m["config"]
@@ -277,6 +277,7 @@ def chapter_html(metrics: dict, cross: dict, src_starts, aug_starts, annulus) ->
 <p class="headline">At equal steps ({b["full"]:,} each), source only <b>{rate["source_full"]:.2f}</b> \
 &rarr; source + augmented <b>{rate["augmented_full"]:.2f}</b> ({_pts(eff["data_full"])} points) on \
 {n_eval} held-out PushT starts.</p>
+{f"<p>One seed is one draw: {_e(reference)}.</p>" if reference else ""}
 <p>At the short budget ({b["short"]:,} steps): {rate["source_short"]:.2f} &rarr; \
 {rate["augmented_short"]:.2f} ({_pts(eff["data_short"])}). More steps alone: source \
 {_pts(eff["compute_source"])}, source + augmented {_pts(eff["compute_augmented"])}. Coverage \
@@ -289,7 +290,8 @@ from {m["source_demos"]} source demos.</p>
 <h2 id="cov-h">Where the block starts: {cov["source"]} &rarr; {cov["union"]} of {cov["cells"]} cells</h2>
 {legend_cov}{_coverage_svg(src_starts, aug_starts, cov, annulus)}
 <figcaption>Each start is the block's position when a demo begins; a cell counts once it holds one. \
-Augmented alone: {cov["augmented"]} cells. Outside the annulus: source {out["source"]}, augmented \
+Augmented alone: {cov["augmented"]} cells. Outside the annulus, kept but in no cell (a perturbed block \
+may lie on a band a little wider than the annulus): source {out["source"]}, augmented \
 {out["augmented"]}.</figcaption>
 </figure>
 <figure aria-labelledby="bars-h">
@@ -302,16 +304,20 @@ batch order: the data is the only difference. Intervals are Wilson 95% over {n_e
 {_strip(_as_written(cross))}"""
     note = (
         f"Run: {run}, device {_e(cfg.get('device'))}. Drawn from this run's <code>metrics.json</code> and "
-        "<code>cross_embodiment.json</code> only; the page holds no date (metrics.json has none), so the "
-        "same flags write the same bytes."
+        "<code>cross_embodiment.json</code>"
+        + (", beside <code>meta.yaml</code>'s five-seed reference" if reference else " only")
+        + "; the page holds no date (metrics.json has none), so the same flags write the same bytes."
     )
     rates = f"source {rate['source_full']:.2f} -> source+aug {rate['augmented_full']:.2f}"
     return _doc(f"Datasets at Scale, {run}: {rates}", body, note, cfg)
 
 
-def chapter(path: Path, metrics: dict, cross: dict, src_starts, aug_starts, annulus, claim=None) -> Path:
+def chapter(
+    path: Path, metrics: dict, cross: dict, src_starts, aug_starts, annulus, reference: str = "", claim=None
+) -> Path:
     """Write scale_data.html (see chapter_html), whole or not at all; returns its path."""
-    return write_atomic(Path(path), chapter_html(metrics, cross, src_starts, aug_starts, annulus), claim)
+    html_text = chapter_html(metrics, cross, src_starts, aug_starts, annulus, reference)
+    return write_atomic(Path(path), html_text, claim)
 
 
 # --- scale_lab.html --------------------------------------------------------------------------------

@@ -75,8 +75,9 @@ def result_key(config: dict) -> str:
 
 def code_files() -> dict[str, str]:
     """{path from ROOT: sha256} of the project files loaded in this process: the file of every imported
-    module under the repository (its virtualenv and tests aside) and the model file an env module
-    names (XML_PATH). Read when a run ends, so it is what that run actually imported."""
+    module under the repository (its virtualenv and tests aside), the model file an env module names
+    (XML_PATH) and the files a module says it reads (READS). Read when a run ends, so it is what that
+    run actually imported."""
 
     def ours(f) -> str | None:  # path from ROOT of a project file, else None
         p = Path(f).resolve() if isinstance(f, (str, Path)) else None
@@ -86,8 +87,9 @@ def code_files() -> dict[str, str]:
 
     found = set()
     for module in list(sys.modules.values()):
-        if rel := ours(getattr(module, "__file__", None)):  # only our modules are asked for XML_PATH
-            found |= {rel} | ({xml} if (xml := ours(module.__dict__.get("XML_PATH"))) else set())
+        if rel := ours(getattr(module, "__file__", None)):  # only our modules are asked what they read
+            named = (module.__dict__.get("XML_PATH"), *module.__dict__.get("READS", ()))
+            found |= {rel} | {f for f in map(ours, named) if f}
     return {rel: sha256_bytes((ROOT / rel).read_bytes()) for rel in sorted(found)}
 
 

@@ -12,6 +12,8 @@ import numpy as np
 from ch37.ownership import place, temp_path, write_atomic
 
 DATA_COLOURS = {"source": "tab:blue", "augmented": "tab:orange"}
+# metrics.json names the data arms "source" and "augmented"; the augmented arm trains on both sets
+DATA_LABEL = {"source": "source only", "augmented": "source + augmented"}
 RERUN_APP_ID = "ch3_7_scale_data"  # letters, digits and underscores: accepted by Rerun as is
 
 
@@ -42,9 +44,9 @@ def figure(path: Path, src_starts, aug_starts, metrics: dict, annulus, claim=Non
         c, s = math.cos(th), math.sin(th)
         ax0.plot([r_min * c, r_max * c], [r_min * s, r_max * s], color="0.7", lw=0.8)
     if len(aug_starts):
-        label = f"augmented ({len(aug_starts)})"
+        label = f"augmented starts ({len(aug_starts)})"
         ax0.scatter(aug_starts[:, 0], aug_starts[:, 1], s=10, c=DATA_COLOURS["augmented"], label=label)
-    label = f"source ({len(src_starts)})"
+    label = f"source starts ({len(src_starts)})"
     ax0.scatter(src_starts[:, 0], src_starts[:, 1], s=30, c=DATA_COLOURS["source"], marker="s", label=label)
     ax0.plot(0, 0, "k+", ms=10)
     lim = (-r_max * 1.25, r_max * 1.25)
@@ -57,7 +59,7 @@ def figure(path: Path, src_starts, aug_starts, metrics: dict, annulus, claim=Non
             arm = arms[f"{data}_{budget}"]
             x, rate = i + (j - 0.5) * width, arm["success"]
             err = [[rate - arm["ci95"][0]], [arm["ci95"][1] - rate]]
-            label = data if i == 0 else None
+            label = DATA_LABEL[data] if i == 0 else None
             ax1.bar(x, rate, width, color=DATA_COLOURS[data], label=label, yerr=err, capsize=5)
             ax1.text(x, arm["ci95"][1] + 0.02, f"{rate:.2f}", ha="center", va="bottom", fontsize=8)
     ax1.set_xticks(range(len(budgets)), [f"{b} budget\n{n} steps each" for b, n in budgets.items()])

@@ -2,7 +2,8 @@
 
 task       Task (what a task provides: env, start names, perturbation, place, expert, segments,
            replay, success), Perturbation, Source, Segment, rollout, write_dataset (a stamped set)
-demos      expert demo sets: Embodiment, generate, ensure_demos (the chapter's private demo cache)
+demos      expert demo sets: Embodiment, generate, ensure_demos (the chapter's private demo cache),
+           check_given (a set you name, checked and never modified)
 pusht      PUSHT: PushT as a task (the only module here that imports pusht_env and its expert)
 engine     one attempt, keep_first, grow, run_attempts, save: task-agnostic
 shards     a run on disk: fixed shards on local processes or Ray (ch37.parallel.map_jobs), resume,
@@ -11,7 +12,7 @@ shards     a run on disk: fixed shards on local processes or Ray (ch37.parallel.
 TASKS maps a task's name to it.
 """
 
-from datagen.demos import Embodiment, check_gl, ensure_demos, generate
+from datagen.demos import Embodiment, check_given, check_gl, ensure_demos, generate
 from datagen.engine import (
     ATTEMPTS_PER_KEPT,
     KEPT_KEYS,
@@ -44,6 +45,7 @@ __all__ = [
     "attempt_rng",
     "check_gl",
     "empty_kept",
+    "check_given",
     "ensure_demos",
     "first_per_source",
     "generate",

@@ -125,40 +125,58 @@ def ensure_demos(
     and finite frames, and is used as given. Otherwise (our private cache) a stale set we made is
     rebuilt, and a directory we did not make is refused.
     """
-    m = emb.env_module
+    if user_given:
+        return check_given(emb, path, episodes=episodes, seed=seed, noise=noise)
     want = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=False)
     stamp = read_stamp(path)
-    ours = is_ours(stamp) and "kind" not in stamp  # a set gen_demos made (stamp_for); others have a kind
-    matches = ours and all(stamp.get(k) == v for k, v in want.items())
+    matches = is_ours(stamp) and "kind" not in stamp and all(stamp.get(k) == v for k, v in want.items())
     changed = changed_files(path, stamp) if matches else []  # missing, truncated or edited since written
-    if user_given:
-        if not holds_data(path):
-            raise DataError(
-                f"{path} does not exist or is empty; generate it with gen_demos_{emb.name}.py first"
-            )
-        if not path.is_dir():
-            raise DataError(f"{path} is a file, not a LeRobot dataset folder")
-        if ours and not matches:
-            diff = ", ".join(f"{k}={stamp.get(k)} (need {v})" for k, v in want.items() if stamp.get(k) != v)
-            raise DataError(f"{path} does not match this run: {diff}; pass matching flags or another set")
-        if changed:
-            raise DataError(
-                f"{path} is damaged: {', '.join(changed[:3])} changed since it was written; "
-                f"regenerate it with gen_demos_{emb.name}.py (it was not modified)"
-            )
-        if is_ours(stamp) and stamp.get("kind") == "engine" and not stamp.get("complete"):
-            raise DataError(f"{path} is an unfinished augment_demos.py run; finish it with the same command")
-        problem = schema_problem(path, len(m.STATE_NAMES), len(m.ACTION_NAMES))
-        if not problem and not ours:  # a set we did not generate: its rate and frames are checked
-            problem = fps_problem(path, m.FPS) or frames_problem(
-                path, load_arrays(path, keys=("observation.state", "action"))
-            )
-        if problem:
-            raise DataError(problem)
-        return "matches its stamp" if ours else "your own set, used as given"
     if matches and not changed:
         return "cached"
     replace_own_dir(path)  # a stale or damaged set we made is rebuilt; anything else is refused
     s = generate(emb, path, episodes=episodes, seed=seed, noise=noise, quiet=quiet)
     why = f"; {', '.join(changed[:3])} had changed since written" if changed else ""
     return f"generated ({s['successes']}/{s['episodes']} expert successes{why})"
+
+
+_GIVEN: dict[tuple, str] = {}  # sets already checked in this process: the early check and the wrangle's
+
+
+def check_given(emb, path: Path, *, episodes: int, seed: int, noise: float) -> str:
+    """A set named by --pusht_data/--aloha_data, checked and never modified; a problem is a DataError.
+
+    scale_data.py checks it before --out is claimed (so a typo leaves the last run's results intact)
+    and again in the wrangle region, where the first check's answer is reused."""
+    path = Path(path)
+    key = (emb.name, str(path.resolve()), episodes, seed, noise)
+    if key in _GIVEN:
+        return _GIVEN[key]
+    m = emb.env_module
+    want = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=False)
+    stamp = read_stamp(path)
+    ours = is_ours(stamp) and "kind" not in stamp  # a set gen_demos made (stamp_for); others have a kind
+    matches = ours and all(stamp.get(k) == v for k, v in want.items())
+    changed = changed_files(path, stamp) if matches else []  # missing, truncated or edited since written
+    if not holds_data(path):
+        raise DataError(f"{path} does not exist or is empty; generate it with gen_demos_{emb.name}.py first")
+    if not path.is_dir():
+        raise DataError(f"{path} is a file, not a LeRobot dataset folder")
+    if ours and not matches:
+        diff = ", ".join(f"{k}={stamp.get(k)} (need {v})" for k, v in want.items() if stamp.get(k) != v)
+        raise DataError(f"{path} does not match this run: {diff}; pass matching flags or another set")
+    if changed:
+        raise DataError(
+            f"{path} is damaged: {', '.join(changed[:3])} changed since it was written; "
+            f"regenerate it with gen_demos_{emb.name}.py (it was not modified)"
+        )
+    if is_ours(stamp) and stamp.get("kind") == "engine" and not stamp.get("complete"):
+        raise DataError(f"{path} is an unfinished augment_demos.py run; finish it with the same command")
+    problem = schema_problem(path, len(m.STATE_NAMES), len(m.ACTION_NAMES))
+    if not problem and not ours:  # a set we did not generate: its rate and frames are checked
+        problem = fps_problem(path, m.FPS) or frames_problem(
+            path, load_arrays(path, keys=("observation.state", "action"))
+        )
+    if problem:
+        raise DataError(problem)
+    _GIVEN[key] = "matches its stamp" if ours else "your own set, used as given"
+    return _GIVEN[key]

@@ -598,9 +598,9 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
             "demos_per_s": made / seconds,  # this run's: the demos it made over its seconds
             "command": " ".join(shlex.quote(x) for x in [Path(sys.executable).name, *sys.argv]),
             "versions": vers,
-            "dataset": {
+            "dataset": {  # pyav: torchcodec without system FFmpeg logs a long traceback before falling back
                 "episodes": merged,
-                "load": f"LeRobotDataset('local/{config['task']}_aug', root='{out}')",
+                "load": f"LeRobotDataset('local/{config['task']}_aug', root='{out}', video_backend='pyav')",
             },
         },
     )

@@ -1,5 +1,6 @@
-"""Checks for the chapter 3.7 exercises, run from the repository root: `pytest exercises/checks.py -k ex1`
-(ex2, ex3), or `python -m exercises.checks ex2` without pytest (a failure is one `error:` line, exit 1).
+"""Checks for the chapter 3.7 exercises, run from the repository root with the project's Python:
+`.venv/bin/python -m pytest exercises/checks.py -k ex1` (ex2, ex3), or `.venv/bin/python -m exercises.checks
+ex2` without pytest (a failure is one `error:` line, exit 1); with .venv activated, `python` alone.
 A prediction the data contradicts does not fail: the check says so, and that is the lesson.
 
 For instructors and the test suite: CH37_EXERCISE_DIR (answer files, default exercises/), CH37_META
@@ -128,10 +129,13 @@ def expected_mix(pusht_actions, aloha_actions):
 
 
 def ex2_cases():
-    """Values bounded away from 0 with random signs, so a zero or a copy in the wrong place shows."""
+    """Values bounded away from 0 with random signs, so a zero or a copy in the wrong place shows, except
+    a few exact zeros in real dimensions, as real demos hold them (ALOHA's right_vy, column 1, and left_vy,
+    column 4, when an arm stands still; a PushT pusher at rest): a mask built from the values drops them."""
     rng, out = np.random.default_rng(37), []
     for i, (n, m) in enumerate([(5, 3), (5, 3), (1, 1), (1, 4), (0, 4), (3, 0), (0, 0), (64, 17)]):
         p, a = (rng.uniform(0.1, 1.0, (k, d)) * rng.choice([-1, 1], (k, d)) for k, d in ((n, 2), (m, 6)))
+        p[::3, 1], a[::2, 1], a[1::3, [0, 3, 4]] = 0.0, 0.0, 0.0  # real dimensions that are exactly 0
         out.append((p.astype((np.float32, np.float64)[i % 2]), a.astype((np.float32, np.float64)[i % 2])))
     return out + [(out[0][0].astype(np.float64), out[0][1])]  # mixed dtypes
 
@@ -143,6 +147,12 @@ def _wrong_values(name, got, p, a) -> str:
         return "0 for every PushT row, 1 for every ALOHA row, PushT rows first"
     if name == "mask" and n and np.all(got == 1):
         return "the mask is all ones: padded dimensions (columns 2..5 of PushT rows) must be 0"
+    if name == "mask" and np.array_equal(got, expected_mix(p, a)[0] != 0):
+        return (
+            "the mask follows the values (actions != 0), but a real action can be exactly 0 (an arm at rest: "
+            "the ALOHA demos hold hundreds of exact zeros), and such a mask drops it from the loss; mark "
+            "a dimension real by which robot the row is from, not by its value"
+        )
     if name == "mask":
         return "1.0 for real dimensions, 0.0 for padding: [1, 1, 0, 0, 0, 0] for PushT, all ones for ALOHA"
     if n and np.array_equal(got[:n, 4:], p) and not np.array_equal(got[:n, :2], p):
@@ -189,6 +199,12 @@ def check_mix(fn, pusht_mask_density: float = 1 / 3, where: str = "exercises/ex2
     return len(cases)
 
 
+def _shown(python: str) -> str:
+    """The interpreter as a learner types it from the repository root (.venv/bin/python), else in full."""
+    path = Path(python)
+    return str(path.relative_to(ROOT)) if path.is_absolute() and path.is_relative_to(ROOT) else python
+
+
 @checker
 def run_chapter(seed: int, aug_per_demo: int, smoke: bool, say=print, extra: tuple = ()):
     """scale_data.py's metrics for one configuration, its report streamed because a full run takes
@@ -197,7 +213,7 @@ def run_chapter(seed: int, aug_per_demo: int, smoke: bool, say=print, extra: tup
     out /= f"{'smoke_' if smoke else ''}seed{seed}_aug{aug_per_demo}"
     flags = ["--seed", str(seed), "--aug_per_demo", str(aug_per_demo), "--no-rerun", "--out", str(out)]
     flags += [*(SMOKE_FLAGS if smoke else FULL_FLAGS), *extra]
-    say(f"running: python scale_data.py {' '.join(flags)}")
+    say(f"running: {_shown(sys.executable)} scale_data.py {' '.join(flags)}")
     argv, env = [sys.executable, str(ROOT / "scale_data.py"), *flags], dict(os.environ, PYTHONHASHSEED="0")
     with tempfile.TemporaryFile("w+") as err:  # progress bars: kept for the error message only
         p = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, stderr=err, text=True, env=env)
@@ -263,7 +279,7 @@ def check_ex1_measured(metrics: dict, band: dict):
     if not want:
         yield "ex1: meta.yaml's exercise_checks.ex1.band has neither scale_effect_min nor scale_effect_max"
     s, a = arms["source_full"]["success"], arms["augmented_full"]["success"]
-    measured = f"source-only {s:.2f} -> source+augmented {a:.2f} ({eff * 100:+.0f} points)"
+    measured = f"source only {s:.2f} -> source + augmented {a:.2f} ({eff * 100:+.0f} points)"
     measured = f"at {budgets['full']} steps each, {measured}"
     if not lo - 1e-9 <= eff <= hi + 1e-9:
         yield (
@@ -398,7 +414,9 @@ def main(argv: list[str]) -> int:
     """python -m exercises.checks ex1|ex2|ex3: a failed check is one `error:` line and exit 1, as a failed
     test; a wrong command is exit 2, as any command's wrong flag."""
     if len(argv) != 1 or argv[0] not in RUNS:
-        raise errors.DataError(f"usage: python -m exercises.checks ex1|ex2|ex3, got {' '.join(argv)!r}")
+        raise errors.DataError(
+            f"usage: .venv/bin/python -m exercises.checks ex1|ex2|ex3, got {' '.join(argv)!r}"
+        )
     try:
         RUNS[argv[0]](print)
     except ExerciseError as e:

@@ -17,7 +17,7 @@ What to do
     2. Set WHY to one sentence (at least three words) saying why you expect that. Think about
        what 12 demos cover of the start space, and what the augmented demos add.
     3. Run the check. It validates your answer first, then runs
-           python scale_data.py --seed 0 --no-rerun --out outputs/exercises/seed0_aug8
+           scale_data.py --seed 0 --no-rerun --out outputs/exercises/seed0_aug8
        (a few minutes on a laptop CPU), checks the measured effect against the band recorded
        in meta.yaml, and prints whether your prediction matched the measurement. A wrong
        prediction does not fail the check; a missing one does.
@@ -25,8 +25,9 @@ What to do
        budget (500 passes over the source set only) does the extra data still help? What does
        that say about data and compute?
 
-How to check
-    pytest exercises/checks.py -k ex1
+How to check (from the repository root, after the README's set-up)
+    .venv/bin/python -m pytest exercises/checks.py -k ex1
+    (with .venv activated: python -m pytest exercises/checks.py -k ex1)
 
 Estimated time: 10 minutes (about 3 of them waiting for the run).
 """

@@ -25,10 +25,13 @@ What to do
 
     Hint: np.zeros, np.concatenate and astype are enough; about 6 lines.
 
-How to check
-    pytest exercises/checks.py -k ex2
+How to check (from the repository root, after the README's set-up)
+    .venv/bin/python -m pytest exercises/checks.py -k ex2
+    (with .venv activated: python -m pytest exercises/checks.py -k ex2)
     (deterministic, under a second; it compares your function with the specification on several
-    shapes, including N = 0, M = 0 and N = 1, and on float32 and float64 inputs)
+    shapes, including N = 0, M = 0 and N = 1, on float32 and float64 inputs, and on actions that are
+    exactly 0 in a real dimension, as an arm at rest gives: the mask says which dimensions a robot
+    has, not which values are nonzero)
 
 Estimated time: 15 minutes.
 """

@@ -6,7 +6,7 @@ Objective
     k = 4 is part of the set at k = 8), so the curve compares more of the same kind of data.
     All three runs train for one and the same number of gradient steps: the full budget of the
     k = 8 run (500 passes over its source + augmented set), passed to the k = 0 and k = 4 runs
-    with --full_steps. So the curve moves the data alone, and you read the source+augmented arm
+    with --full_steps. So the curve moves the data alone, and you read the source + augmented arm
     at that full budget.
 
 What to do
@@ -27,11 +27,12 @@ What to do
     4. Look at the 95% intervals in each metrics.json: with 50 evaluation starts, which of the
        steps could be noise?
     5. Three points cannot say whether the curve keeps climbing past them, or where it bends:
-       `python scale_lab.py` (the Scale Lab, see the README) measures it at 12 to 972 demos,
+       `.venv/bin/python scale_lab.py` (the Scale Lab, see the README) measures it at 12 to 972 demos,
        for fresh expert demos and both data engines, over three seeds.
 
-How to check
-    pytest exercises/checks.py -k ex3
+How to check (from the repository root, after the README's set-up)
+    .venv/bin/python -m pytest exercises/checks.py -k ex3
+    (with .venv activated: python -m pytest exercises/checks.py -k ex3)
 
 Estimated time: 20 minutes (most of it waiting for three runs; fewer if exercise 1 ran first).
 """

@@ -6,6 +6,7 @@ dicts; a few tests run `pytest exercises/checks.py -k ...` in a subprocess, as a
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -272,6 +273,11 @@ def garbage_in_padding(p, a):
     return act, mask, ids
 
 
+def mask_from_nonzero(p, a):  # issue 33 #3: real demos hold exact zeros (ALOHA's right_vy 265 times)
+    act, _, ids = checks.expected_mix(p, a)
+    return act, (act != 0).astype(np.float32), ids
+
+
 def exits_early(p, a):
     sys.exit(0)  # an unfinished answer that ends the process "successfully"
 
@@ -288,6 +294,7 @@ WRONG_MIXES = [
     (two_outputs, "return a tuple"),
     (garbage_in_padding, "must be exactly zero"),
     (exits_early, r"raised SystemExit: 0 \(case 1"),
+    (mask_from_nonzero, "a real action can be exactly 0"),
 ]
 
 
@@ -316,6 +323,41 @@ def test_ex2_unfilled_fails_clearly_and_solutions_pass_under_pytest():
     p = run_checks("-k", "ex2", env_extra={"CH37_EXERCISE_DIR": "exercises/solutions"})
     assert p.returncode == 0, p.stdout + p.stderr
     assert "matches the specification" in p.stdout and "1 passed, 2 deselected" in p.stdout
+
+
+def test_printed_commands_work_as_printed():
+    """Issue 33 #4: the README's commands come after it says how to activate .venv, none is a bare
+    `pytest`, and each exercise file prints a check command that runs as printed from the root."""
+    readme = (ROOT / "README.md").read_text()
+    activate = readme.index("source .venv/bin/activate")
+    commands = list(re.finditer(r"^    (?:python|pytest|rerun|CH37_\w+=\S+ python)\b.*$", readme, re.M))
+    assert commands and all(m.start() > activate for m in commands), commands[0].group(0)
+    assert not re.search(r"(^|`)pytest ", readme, re.M), "a bare pytest: not found outside the venv"
+    venv_python = ROOT / ".venv" / "bin" / "python"
+    for ex, name in checks.FILES.items():
+        text = (ROOT / "exercises" / name).read_text()
+        assert f"    .venv/bin/python -m pytest exercises/checks.py -k {ex}\n" in text, name
+        assert not re.search(r"^\s+pytest ", text, re.M), name
+    if not venv_python.exists():
+        pytest.skip("no .venv here: the commands are printed for the README's set-up")
+    env = {k: v for k, v in os.environ.items() if k not in EXERCISE_VARS}
+    env.update(CH37_EXERCISE_DIR="exercises/solutions", CH37_META=str(META))
+    cmd = ".venv/bin/python -m pytest exercises/checks.py -k ex2 -p no:cacheprovider".split()
+    p = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
+    assert p.returncode == 0 and "matches the specification" in p.stdout, p.stdout + p.stderr
+
+
+def test_the_first_runs_banner_reminds_of_the_ex1_prediction(monkeypatch, tmp_path):
+    """Issue 33 #2: until exercises/ex1_predict_scale.py holds a prediction, the banner says so."""
+    from ch37 import cli
+
+    monkeypatch.setenv("CH37_EXERCISE_DIR", str(ROOT / "exercises"))  # the unfilled file
+    assert "exercises/ex1_predict_scale.py" in cli.ex1_reminder()
+    monkeypatch.setenv("CH37_EXERCISE_DIR", str(SOLUTIONS))
+    assert cli.ex1_reminder() is None
+    (tmp_path / checks.FILES["ex1"]).write_text('PREDICTION = "A"\nWHY = "more"\n')  # WHY too short
+    monkeypatch.setenv("CH37_EXERCISE_DIR", str(tmp_path))
+    assert cli.ex1_reminder() is not None
 
 
 @pytest.mark.parametrize(

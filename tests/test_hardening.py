@@ -666,6 +666,33 @@ def test_one_commands_results_are_never_cleared_by_another(tmp_path, theirs, com
     }
 
 
+def _results_of(out: Path) -> dict:
+    return {k: v for k, v in snapshot([out]).items() if not k.endswith(ownership.LOCK_NAME)}
+
+
+def test_a_mistyped_input_after_a_finished_run_leaves_its_results_intact(ref, tmp_path):
+    """Issue 33 #1: every input (--pusht_data, --aloha_data, --device) is checked before anything, ours
+    included, is removed: a typo is one line and exit 2, and the last run's results are all still there."""
+    out = tmp_path / "o"
+    p = run(*SD, "--out", out, env=env_for(ref["cache"]))  # the finished run (replayed from its cache)
+    assert p.returncode == 0 and (out / "metrics.json").read_bytes() == ref["metrics"], p.stdout + p.stderr
+    before = _results_of(out)
+    assert {"metrics.json", "scale_data.png", "scale_data.html"} <= {Path(k).name for k in before}
+    typos = [
+        ("--pusht_data", tmp_path / "my_pushtt", "does not exist or is empty"),
+        ("--aloha_data", ROOT / "README.md", "is a file, not a LeRobot dataset folder"),
+    ]
+    import torch
+
+    if not torch.cuda.is_available():
+        typos.append(("--device", "cuda", "--device cuda is not available"))
+    for flag, value, needle in typos:
+        p = run(*SD, "--no-cache", "--out", out, flag, value, env=env_for(ref["cache"]))
+        err = p.stderr.strip().splitlines()
+        assert p.returncode == 2 and len(err) == 1 and needle in err[0], p.stdout + p.stderr
+        assert _results_of(out) == before, f"{flag} {value} removed results of the finished run"
+
+
 def test_claimed_out_refuses_a_foreign_file_and_clears_only_its_own(tmp_path):
     from ch37.errors import DataError
 

@@ -584,6 +584,16 @@ def test_notebook_runs_end_to_end_in_smoke_mode(tmp_path, smoke_sweep):
     client.execute(env=env)
     text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs)
     assert "lerobot ready" in text and "headline:" in text and "wrote" in text and "reusing" not in text
+    # issue 33 #9: no stray value (a PosixPath after the wrangle cell) and no tqdm IProgress warning
+    results = [
+        c.id
+        for c in nb.cells
+        if c.cell_type == "code"
+        for o in c.outputs
+        if o.output_type == "execute_result"
+    ]
+    assert results == ["poster"], results
+    assert "IProgress" not in text and "TqdmWarning" not in text, text
     (poster,) = [c for c in nb.cells if "poster" in c.metadata.get("tags", [])]
     shown = "".join(o.get("data", {}).get("text/html", "") for o in poster.outputs)
     assert shown == (out / "scale_data.html").read_text(encoding="utf-8") and "<svg" in shown
@@ -647,8 +657,10 @@ def test_wallclock_row_replaces_only_its_tier(tmp_path):
         and rows["cpu-2core"]["minutes"] == "1.66"
         and rows["mps"]["status"] == "pending"
     )
-    assert ch37.cli.expected_wallclock("t4", path).startswith("about 1.4 min")
-    assert "not yet measured" in ch37.cli.expected_wallclock("mps", path)
+    assert ch37.cli.expected_wallclock("t4", "abc", path).startswith("about 1.4 min for this configuration")
+    # issue 33 #7: another configuration (a bigger --pusht_data, another seed) gets no estimate
+    assert "not this configuration" in ch37.cli.expected_wallclock("t4", "def", path)
+    assert "not yet measured" in ch37.cli.expected_wallclock("mps", "abc", path)
 
 
 def test_wallclock_cli_smoke_never_writes(tmp_path, stub):
@@ -662,10 +674,11 @@ def test_wallclock_cli_smoke_never_writes(tmp_path, stub):
     assert row["status"] == "measured" and float(row["minutes"]) >= 0 and len(row["config_hash"]) == 12
 
 
-def test_config_hash_ignores_only_device_workers_cache():
-    c = {"seed": 0, "epochs": 500, "device": "cpu", "workers": 2, "cache": False}
+def test_config_hash_ignores_only_device_workers_cache_rerun():
+    c = {"seed": 0, "epochs": 500, "device": "cpu", "workers": 2, "cache": False, "rerun": False}
     h = wallclock.config_hash
-    assert h(c) == h(dict(c, device="cuda", workers=8, cache=True)) != h(dict(c, epochs=499))
+    assert h(c) == h(dict(c, device="cuda", workers=8, cache=True, rerun=True)) != h(dict(c, epochs=499))
+    assert h(c) != h(dict(c, seed=1)) != h(dict(c, pusht_data="big"))
     assert h(c) == h(dict(reversed(list(c.items()))))
 
 

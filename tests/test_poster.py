@@ -132,6 +132,30 @@ def test_the_lab_answers_read_the_published_curves_as_the_readme_does():
     assert poster.matched_fresh(result, 2.0) is None  # above every fresh point: not read off the curve
 
 
+def test_the_headline_places_the_default_seed_beside_the_five_seed_reference(runs):
+    """Issue 33 #8: for the swept configuration, the poster and the printed headline say where this seed
+    stands among meta.yaml's five (mean, range, seeds up); another configuration is not compared."""
+    from ch37 import cli
+
+    seeds = yaml.safe_load((ROOT / "meta.yaml").read_text())["reference_run"]["seeds"]
+    default = dict(seeds["provenance"]["config"], seed=0, aug_mode="resolve", aug_tries=100, rerun=True)
+    ref = cli.five_seed_reference(default)
+    assert ref["effects"] == {r["seed"]: r["data_full"] for r in seeds["rows"]}
+    assert (ref["mean"], ref["up"], ref["n"]) == (seeds["paired"]["data_full"]["mean"], 5, 5)
+    words = cli.reference_words(ref, 0, 0.24)
+    assert "mean +11.2 over seeds 0, 1, 2, 3, 4, from +2 to +24, up on 5 of 5" in words
+    assert "seed 0 is the largest of the 5" in words and "python -m tools.sweep --seeds 5" in words
+    for other in ({"aug_mode": "replay"}, {"pusht_data": "big"}, {"epochs": 499}, {"smoke": True}):
+        assert cli.five_seed_reference(dict(default, **other)) is None, other
+    _, a, _ = runs  # a smoke run: no reference on its page or in its headline
+    m = json.loads((a / "metrics.json").read_text())
+    assert cli.five_seed_reference(m["config"]) is None
+    cross = json.loads((a / "cross_embodiment.json").read_text())
+    page = poster.chapter_html(m, cross, np.zeros((0, 2)), np.zeros((0, 2)), (0.1, 0.24, 3, 12), words)
+    assert f"One seed is one draw: {words}." in text_of(page)
+    assert "five-seed reference" not in (a / "scale_data.html").read_text(encoding="utf-8")
+
+
 def chromium(tmp_path, *args) -> subprocess.CompletedProcess:
     flags = ["--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars"]
     profile = f"--user-data-dir={tmp_path / 'profile'}"  # a private profile: runs side by side never collide

@@ -2,6 +2,7 @@
 
 import hashlib
 import json
+import re
 import shutil
 
 import numpy as np
@@ -164,6 +165,15 @@ def test_bad_flags_one_clear_line(tmp_path, argv, needle):
     err = p.stderr.strip().splitlines()
     assert p.returncode == 2 and len(err) == 1 and needle in err[0] and "Traceback" not in p.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_help_shows_every_default():
+    """Issue 33 #7: the README promises every flag with its default; each option's entry says one."""
+    text = run_script("scale_data.py", "--help").stdout.split("options:", 1)[1]
+    entries = re.split(r"\n(?=  -)", text.strip("\n"))
+    assert len(entries) > 15 and entries[0].startswith("  -h, --help")
+    missing = [e.split()[0] for e in entries[1:] if "(default" not in " ".join(e.split())]
+    assert not missing, f"--help gives no default for {missing}"
 
 
 def test_unavailable_device_is_refused(tmp_path):

@@ -7,8 +7,9 @@
 
 The run is cold (a fresh output folder, demos generated, the result cache off). The tiers are
 ch37.cli.TIERS, the list the banner of scale_data.py reads its expected wall-clock from. config_hash
-is the first 12 hex of sha256 over the run's config without the device, workers and cache, so the
-same configuration hashes the same on every tier.
+is ch37.cli.config_hash: the first 12 hex of sha256 over the run's config without the device, workers,
+cache and rerun, so the same configuration hashes the same on every tier; the banner shows a row's
+minutes only to a run of that configuration.
 
 Exit codes: 0 ok, 2 bad input (bad flags, a failed run, a malformed wallclock.csv).
 """
@@ -17,7 +18,6 @@ from __future__ import annotations
 
 import csv
 import datetime
-import hashlib
 import io
 import json
 import shlex
@@ -28,20 +28,12 @@ import time
 from pathlib import Path
 
 from ch37 import CHAPTER_ID, ROOT, errors
-from ch37.cli import TIERS, device_tier
+from ch37.cli import TIERS, config_hash, device_tier
 from ch37.errors import DataError
 from ch37.ownership import write_atomic
 from tools.common import WALLCLOCK, parser, rel, supports_flag
 
 WALLCLOCK_FIELDS = ("chapter", "tier", "minutes", "config_hash", "date", "status")
-# not in config_hash: the tier names the device; workers and cache change speed only
-HASH_EXCLUDE = ("device", "workers", "cache")
-
-
-def config_hash(config: dict) -> str:
-    """First 12 hex of sha256 over metrics.json's "config" less HASH_EXCLUDE, as sorted compact JSON."""
-    c = {k: v for k, v in config.items() if k not in HASH_EXCLUDE}
-    return hashlib.sha256(json.dumps(c, sort_keys=True, separators=(",", ":")).encode()).hexdigest()[:12]
 
 
 def _pending(tier: str) -> dict:
