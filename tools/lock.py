@@ -102,6 +102,14 @@ def versions(path: Path = LOCK) -> dict[str, str]:
     return {"python": platform.python_version()} | {p: pins.get(p, "") for p in META_PACKAGES}
 
 
+def ran_versions(names=("python", *META_PACKAGES)) -> dict[str, str]:
+    """This interpreter's python and the installed versions of `names`: what a timing ran on."""
+    have = installed()
+    return {
+        n: platform.python_version() if n == "python" else have.get(canonicalize_name(n), "") for n in names
+    }
+
+
 def environment_section(path: Path = LOCK, python: str | None = None) -> dict:
     """meta.yaml's `environment`: the lock, its digest and the versions the published numbers ran on."""
     v = versions(path)
