@@ -90,6 +90,20 @@ def test_truncated_at_the_step_limit_without_success(env_id, mod, Sim, Expert):
     assert ends[-1] and not any(ends[:-1])
 
 
+@pytest.mark.parametrize("env_id,mod,Sim,Expert", SPECS)
+def test_observations_stay_in_the_space_under_full_speed_random_actions(env_id, mod, Sim, Expert):
+    """Bang-bang actions push into the reach limits and reverse (ALOHA overshoots its soft limits)."""
+    env = gym.make(env_id)
+    for seed in (0, 1):
+        obs, _ = env.reset(seed=seed)
+        env.action_space.seed(seed)
+        done = False
+        while not done:
+            obs, _, terminated, truncated, _ = env.step(np.sign(env.action_space.sample()))
+            assert obs in env.observation_space, obs
+            done = terminated or truncated
+
+
 def test_pusht_start_option_places_set_starts_start():
     start = (0.15, -0.05, 0.4, -0.2, 0.25)  # block x m, y m, yaw rad, pusher x m, y m
     want = pusht_env.PushTEnv().set_start(*start)
