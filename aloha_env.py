@@ -64,7 +64,8 @@ cube centre is within SUCCESS_TOL of the target for SUCCESS_HOLD consecutive con
 whether or not a gripper still holds it. Success latches. ``done`` is True at success or after
 MAX_STEPS control steps.
 
-Spawn distribution (``reset(seed)``, all from ``np.random.default_rng(seed)`` built there):
+Spawn distribution (``reset(seed)``, all from ``np.random.default_rng(seed)`` built there;
+``set_start(cube, target, right, left)`` places any other start):
 * cube uniform in CUBE_X_RANGE x CUBE_Y_RANGE = [0.15, 0.30] x [-0.15, 0.15] m (right-only);
 * target uniform in TARGET_X_RANGE x TARGET_Y_RANGE = [-0.30, -0.15] x [-0.15, 0.15] m
   (left-only);
@@ -177,7 +178,15 @@ class AlohaCubeEnv:
         target = np.array([rng.uniform(*TARGET_X_RANGE), rng.uniform(*TARGET_Y_RANGE)])
         right = np.array([rng.uniform(*RIGHT_START_X_RANGE), rng.uniform(*START_Y_RANGE)])
         left = np.array([rng.uniform(*LEFT_START_X_RANGE), rng.uniform(*START_Y_RANGE)])
+        return self.set_start(cube, target, right, left)
 
+    def set_start(self, cube, target, right, left) -> np.ndarray:
+        """Place a chosen start and return its first obs: cube, target and the right and left end-effectors
+        at (x, y) m each, grippers open, everything at rest, counters zeroed (what reset(seed) does with the
+        four it draws). The caller keeps each arm inside its reach (RIGHT_X_RANGE, LEFT_X_RANGE, Y_RANGE)."""
+        cube, target, right, left = (
+            np.asarray(p, dtype=np.float64).reshape(2) for p in (cube, target, right, left)
+        )
         mujoco.mj_resetData(self.model, self.data)
         for a, p in (("right", right), ("left", left)):
             self._jx[a].qpos[0] = p[0]

@@ -15,13 +15,18 @@ if [ ! -x .venv/bin/python ]; then
     fi
     "$PY" -m venv .venv
 fi
-stamp=.venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)
+# the stamp keys on the lock: a new requirements.lock (bash tools/lock.sh) reinstalls, nothing else does
+stamp=.venv/.installed-$(sha256sum requirements.lock | cut -c1-16)
 if [ ! -f "$stamp" ]; then
-    echo "setting up .venv (first run downloads lerobot and torch, a few GB, a few minutes)..."
-    .venv/bin/python -m pip install -q --upgrade pip
-    # the dependencies of pyproject.toml (runtime + dev + ray + train: the tests run the data engine
-    # on a real local Ray and LeRobot's own trainer); the chapter itself runs from this folder
-    mapfile -t deps < <(.venv/bin/python -c 'import tomllib; p = tomllib.load(open("pyproject.toml", "rb"))["project"]; x = p["optional-dependencies"]; print("\n".join(p["dependencies"] + x["dev"] + x["ray"] + x["train"]))')
-    .venv/bin/python -m pip install -q "${deps[@]}"
+    echo "setting up .venv from requirements.lock (first run downloads lerobot and torch, a few GB, a few minutes)..."
+    # exactly the lock: every package the set-up installs (pyproject.toml's dependencies + dev, ray and
+    # train extras: the tests run the data engine on a real local Ray and LeRobot's own trainer), pinned
+    # with its hashes; the chapter itself runs from this folder. uv when present (faster), pip otherwise.
+    if command -v uv >/dev/null 2>&1; then
+        uv pip sync -q --python .venv/bin/python requirements.lock
+    else
+        .venv/bin/python -m pip install -q --require-hashes --no-deps -r requirements.lock
+    fi
+    rm -f .venv/.installed-*
     touch "$stamp"
 fi

@@ -11,6 +11,10 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 # scale_data.py's result cache: one private folder per test session, never the user's outputs/
 os.environ.setdefault("CH37_CACHE_DIR", tempfile.mkdtemp(prefix="ch37-cache-"))
+# headless rendering in this process (tests/test_gym_envs.py): mujoco picks its GL backend when first
+# imported, which a test module's imports do before any of ours could choose (EGL, as datagen.demos does)
+if sys.platform.startswith("linux"):
+    os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 def run_script(*args, cwd=ROOT, check=True, timeout=600):

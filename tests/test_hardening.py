@@ -1019,7 +1019,10 @@ def as_nobody(ref):
             return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, env=env, timeout=300)
 
         if run_nobody("-c", "import numpy, ch37").returncode:
-            pytest.skip("this checkout or its packages are not readable by an unprivileged user")
+            pytest.skip(
+                "this checkout or its .venv is not readable by an unprivileged user (a private folder such "
+                "as /root): clone it into a world-readable folder to run these"
+            )
         yield work, run_nobody
     finally:
         shutil.rmtree(work, ignore_errors=True)

@@ -29,7 +29,7 @@ TOP = (
     "gen_demos_pusht",
     "gen_demos_aloha",
 )
-TOP += ("pusht_env", "aloha_env", "scripted_expert")
+TOP += ("pusht_env", "aloha_env", "scripted_expert", "gym_envs")
 # the chapter's presentation and flag modules: the engine and the format never reach them
 PRESENTATION = {"ch37.cli", "ch37.config", "ch37.viz", "ch37.poster", "ch37.result_cache"}
 ERROR_TYPE = "ch37.errors"

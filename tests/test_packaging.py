@@ -5,6 +5,7 @@ import contextlib
 import csv
 import json
 import os
+import platform
 import shutil
 import sys
 import textwrap
@@ -517,7 +518,8 @@ def test_notebook_is_fresh_and_deterministic():
     text = notebook.build_notebook()
     assert text == notebook.build_notebook()
     assert common.NOTEBOOK.read_text() == text, "scale_data.ipynb is stale: run python -m tools.notebook"
-    nbformat = pytest.importorskip("nbformat")
+    import nbformat  # the dev extra, in requirements.lock
+
     nb = nbformat.reads(text, as_version=4)
     nbformat.validate(nb)
     code = [c for c in nb.cells if c.cell_type == "code"]
@@ -548,8 +550,8 @@ def test_notebook_check_flags_a_stale_notebook(tmp_path):
 
 def test_notebook_runs_end_to_end_in_smoke_mode(tmp_path, smoke_sweep):
     """Execute the committed notebook offline with nbclient; its metrics.json must equal the script's."""
-    nbformat = pytest.importorskip("nbformat")
-    nbclient = pytest.importorskip("nbclient")
+    import nbclient  # the dev extra, in requirements.lock
+    import nbformat
     from jupyter_client import KernelManager
     from jupyter_client.kernelspec import KernelSpecManager
 
@@ -672,6 +674,9 @@ def test_wallclock_cli_smoke_never_writes(tmp_path, stub):
     p = run_script("-m", "tools.wallclock", "--script", stub, "--csv", path, "--tier", "mps")
     row = {r["tier"]: r for r in csv.DictReader(path.open())}["mps"]
     assert row["status"] == "measured" and float(row["minutes"]) >= 0 and len(row["config_hash"]) == 12
+    import torch
+
+    assert row["torch"] == torch.__version__.split("+")[0] and row["python"] == platform.python_version()
 
 
 def test_config_hash_ignores_only_device_workers_cache_rerun():
@@ -690,6 +695,8 @@ def test_wallclock_csv_in_repo_is_well_formed():
         assert r["chapter"] == CHAPTER_ID and r["status"] in ("measured", "pending")
         if r["status"] == "measured":
             assert float(r["minutes"]) > 0 and len(r["config_hash"]) == 12 and r["date"]
+            # the versions it ran on: all recorded (tools.wallclock since issue 32) or none (rows before it)
+            assert len({bool(r[k]) for k in wallclock.VERSION_FIELDS}) == 1, r
         else:
             assert r["minutes"] == ""
 

@@ -3,7 +3,7 @@
     python -m tools.regions [--check | --write]  the regions of scale_data.py, their hashes vs meta.yaml
     python -m tools.sweep --seeds 3 [FLAGS]      scale_data.py over seeds 0..2 -> sweep_seeds.json
     python -m tools.sweep --aug 0 4 8 [FLAGS]    seed 0 over aug_per_demo 0, 4, 8 -> sweep_aug.json
-    python -m tools.meta                         meta.yaml: reference_run, exercise_checks, region_hashes
+    python -m tools.meta                         meta.yaml: environment, reference_run, exercise_checks, ...
     python -m tools.replay --seeds 5 [--sigma M] replay vs re-solve on the chapter's recipe -> replay_*.json
     python -m tools.wallclock [--dry-run]        time the default run here, write its wallclock.csv row
     python -m tools.notebook [--check]           scale_data.ipynb from the regions
@@ -13,6 +13,7 @@
     python -m tools.bench_writer                 the one-pass LeRobot v3 writer vs LeRobot's per-frame path
     python -m tools.lerobot_eval --policy P      a LeRobot checkpoint on the lesson's held-out PushT starts
     python -m tools.lerobot_lab [FLAGS]          LeRobot's own policies trained on the lab's data points
+    python -m tools.lock [--write-meta]          .venv against requirements.lock (bash tools/lock.sh makes it)
     (tools.common holds what they share: the parser, regions, provenance)
 
 Exit codes: 0 ok, 1 a check failed (drift, a stale notebook), 2 bad input (one `error:` line).

@@ -4,12 +4,12 @@
 
 --policy is a `pretrained_model` folder that lerobot-train wrote (diffusion, ACT, ... trained on a set
 this project wrote: observation.state [10] and observation.environment_state [8], no images). Episode
-j starts from env.reset(ch37.seeds.env_seed(seed, "eval", j)), the starts the lesson's measure region
-evaluates its MLP on; it succeeds when the env's info["success"] is set and ends when the env says
-done (success, or 300 control steps). The policy is reset and torch is seeded with that start's seed
-before each episode, so an episode's outcome does not depend on the ones before it. Prints the
-success rate with the lesson's 95% Wilson interval and writes it as JSON beside the policy folder
-(--out to choose): lerobot_eval_seed{S}_n{N}.json.
+j starts from gymnasium.make("ch37/PushT-v0").reset(seed=ch37.seeds.env_seed(seed, "eval", j)), the
+starts the lesson's measure region evaluates its MLP on (gym_envs.py); it succeeds when the env says
+terminated (the lesson's success rule) and ends there or truncated (300 control steps). The policy is
+reset and torch is seeded with that start's seed before each episode, so an episode's outcome does not
+depend on the ones before it. Prints the success rate with the lesson's 95% Wilson interval and writes
+it as JSON beside the policy folder (--out to choose): lerobot_eval_seed{S}_n{N}.json.
 
 Exit codes: 0 ok, 2 bad input (one `error:` line).
 """
@@ -85,23 +85,26 @@ def observation_builder(policy):
 
 
 def evaluate(policy, pre, post, seeds) -> list[dict]:
-    """One episode per env seed: {"seed", "success", "steps"}, the lesson's success rule."""
+    """One episode per env seed through Gymnasium (gym_envs' ch37/PushT-v0, whose reset(seed=s) is the
+    lesson's start s): {"seed", "success", "steps"}, the lesson's success rule (terminated = success)."""
+    import gymnasium as gym
     import torch
 
-    import pusht_env
+    import gym_envs
 
-    env, build = pusht_env.PushTEnv(), observation_builder(policy)
+    env, build = gym.make(gym_envs.PUSHT_ID), observation_builder(policy)
     episodes = []
     with torch.inference_mode():
         for s in seeds:
             torch.manual_seed(s)  # diffusion's sampling noise: a pure function of the start
             policy.reset()  # empties the action queue and the observation history
-            obs, done, steps, success = env.reset(s), False, 0, False
-            while not done:
+            (obs, _), terminated, truncated, steps = env.reset(seed=s), False, False, 0
+            while not (terminated or truncated):
                 action = post(policy.select_action(pre(build(obs))))  # (1, 2), m/s
-                obs, _, done, info = env.step(action[0].cpu().numpy().astype(np.float32))
-                success, steps = bool(info["success"]), steps + 1
-            episodes.append({"seed": s, "success": success, "steps": steps})
+                obs, _, terminated, truncated, _ = env.step(action[0].cpu().numpy().astype(np.float32))
+                steps += 1
+            episodes.append({"seed": s, "success": bool(terminated), "steps": steps})
+    env.close()
     return episodes
 
 

@@ -25,10 +25,12 @@ from ch37.errors import DataError
 from ch37.ownership import write_atomic
 from exercises.rules import RULES, derive_checks
 from tools.common import META, drifted, parser, region_hashes, rel
+from tools.lock import LOCK, environment_section, versions
 
 META_HEADER = """\
-# Chapter 3.7 metadata. Written by `python -m tools.meta` (reference_run, exercise_checks,
-# region_hashes: never typed by hand) and `python -m tools.regions --write` (region_hashes only).
+# Chapter 3.7 metadata. Written by `python -m tools.meta` (environment, reference_run, exercise_checks,
+# region_hashes: never typed by hand), `python -m tools.regions --write` (region_hashes only) and
+# `python -m tools.lock --write-meta` (environment only: requirements.lock's versions).
 # id, title, track, objectives and mimicgen are kept as found here; edit them freely (comments are not kept).
 """
 
@@ -69,7 +71,8 @@ META_STATIC = {
         ],
     },
 }
-META_ORDER = "id title track objectives mimicgen reference_run replay scale_lab exercise_checks region_hashes"
+META_ORDER = "id title track objectives mimicgen environment reference_run replay scale_lab exercise_checks"
+META_ORDER += " region_hashes"
 # What each sweep file must hold for reference_run and derive_checks: top-level keys, then keys of every row.
 SWEEP_KEYS = {
     "seeds": ("rows mean paired pooled action_dims padded_action_dim", "seed delta ci95"),
@@ -121,6 +124,18 @@ def _read_json(path: Path, what: str, again: str):
         return json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError) as e:
         raise DataError(f"{rel(path)} is not a readable {what} ({e}); {again}") from None
+
+
+def run_python(meta: dict) -> str | None:
+    """The Python version the reference run recorded (None when meta.yaml has none)."""
+    prov = meta.get("reference_run", {}).get("seeds", {}).get("provenance", {})
+    return prov.get("platform", {}).get("python")
+
+
+def lock_mismatch(sweep: dict, lock: Path = LOCK) -> list[str]:
+    """`name ran X, locked Y` for each package whose version in a sweep's provenance is not the lock's."""
+    ran, pins = sweep.get("packages") or {}, versions(lock)
+    return [f"{p} ran {v}, locked {pins[p]}" for p, v in ran.items() if p in pins and v != pins[p]]
 
 
 def reference_run(seeds: dict, aug: dict) -> dict:
@@ -274,6 +289,9 @@ def main(argv: list[str]) -> int:
         if stale := ", ".join(drifted(current, s.get("script_region_hashes"))):
             why = f"the {name} sweep ran a different scale_data.py (regions {stale} changed since)"
             print(f"warning: {why}; re-run it if those changes can move the numbers", file=sys.stderr)
+        if off := lock_mismatch(s):
+            why = f"the {name} sweep did not run on {rel(LOCK)}'s versions ({', '.join(off)})"
+            print(f"warning: {why}; re-run it in a .venv made from the lock", file=sys.stderr)
     old = load_yaml(a.meta)
     meta = {k: old.get(k, v) for k, v in META_STATIC.items()} | old
     try:
@@ -288,6 +306,7 @@ def main(argv: list[str]) -> int:
     if (replay := replay_section(a.replay)) is not None:
         meta["replay"] = replay
     meta["region_hashes"] = current
+    meta["environment"] = environment_section(LOCK, run_python(meta))
     write_meta(a.meta, meta)
     ex = meta["exercise_checks"]
     smoke = " (provisional: smoke sweep)" if meta["reference_run"]["provisional"] else ""

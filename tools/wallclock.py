@@ -9,7 +9,8 @@ The run is cold (a fresh output folder, demos generated, the result cache off). 
 ch37.cli.TIERS, the list the banner of scale_data.py reads its expected wall-clock from. config_hash
 is ch37.cli.config_hash: the first 12 hex of sha256 over the run's config without the device, workers,
 cache and rerun, so the same configuration hashes the same on every tier; the banner shows a row's
-minutes only to a run of that configuration.
+minutes only to a run of that configuration. python, torch, numpy, mujoco and lerobot are the versions
+the timed run ran on (installed from requirements.lock; a warning when .venv differs from it).
 
 Exit codes: 0 ok, 2 bad input (bad flags, a failed run, a malformed wallclock.csv).
 """
@@ -32,12 +33,16 @@ from ch37.cli import TIERS, config_hash, device_tier
 from ch37.errors import DataError
 from ch37.ownership import write_atomic
 from tools.common import WALLCLOCK, parser, rel, supports_flag
+from tools.lock import drift, ran_versions
 
-WALLCLOCK_FIELDS = ("chapter", "tier", "minutes", "config_hash", "date", "status")
+# the versions the timed run ran on (tools.lock; setup_env.sh installs them from requirements.lock); rows
+# measured before they were recorded leave them empty
+VERSION_FIELDS = ("python", "torch", "numpy", "mujoco", "lerobot")
+WALLCLOCK_FIELDS = ("chapter", "tier", "minutes", "config_hash", "date", "status", *VERSION_FIELDS)
 
 
 def _pending(tier: str) -> dict:
-    return dict(chapter=CHAPTER_ID, tier=tier, minutes="", config_hash="", date="", status="pending")
+    return dict.fromkeys(WALLCLOCK_FIELDS, "") | dict(chapter=CHAPTER_ID, tier=tier, status="pending")
 
 
 def read_wallclock(path: Path) -> list[dict]:
@@ -47,8 +52,9 @@ def read_wallclock(path: Path) -> list[dict]:
         return [_pending(t) for t in TIERS]
     with path.open(newline="") as f:
         rows = list(csv.DictReader(f))
-    if rows and set(rows[0]) != set(WALLCLOCK_FIELDS):
+    if rows and set(rows[0]) not in (set(WALLCLOCK_FIELDS), set(WALLCLOCK_FIELDS) - set(VERSION_FIELDS)):
         raise DataError(f"{rel(path)}: columns must be {','.join(WALLCLOCK_FIELDS)}")
+    rows = [dict.fromkeys(VERSION_FIELDS, "") | r for r in rows]  # a file from before the version columns
     have = {r["tier"] for r in rows}
     return rows + [_pending(t) for t in TIERS if t not in have]
 
@@ -81,7 +87,9 @@ def measure_wallclock(script: Path, smoke: bool, tier: str | None) -> dict:
         config = json.loads((Path(tmp) / "metrics.json").read_text())["config"]
     date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d")
     row = _pending(tier or device_tier(config["device"])) | {"minutes": f"{wall / 60:.2f}", "date": date}
-    return row | {"config_hash": config_hash(config), "status": "measured"}
+    if off := drift():
+        print(f"warning: .venv differs from requirements.lock ({'; '.join(off[:3])})", file=sys.stderr)
+    return row | {"config_hash": config_hash(config), "status": "measured"} | ran_versions(VERSION_FIELDS)
 
 
 def main(argv: list[str]) -> int:

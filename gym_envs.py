@@ -1,0 +1,163 @@
+"""PushT and the ALOHA handoff as Gymnasium environments; importing this module registers both.
+
+    import gymnasium as gym
+    import gym_envs  # noqa: F401  (registers the ids)
+
+    env = gym.make("ch37/PushT-v0", render_mode="rgb_array")        # or "ch37/AlohaHandoff-v0"
+    obs, info = env.reset(seed=0)                                   # the start PushTEnv().reset(0) draws
+    obs, info = env.reset(options={"start": (0.15, 0.0, 0.0, 0.0, 0.30)})  # a chosen start
+    obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    frame = env.render()                                            # uint8 (96, 96, 3), the top camera
+
+Each class wraps the lesson's own simulator (pusht_env.PushTEnv, aloha_env.AlohaCubeEnv, kept as they are
+with their 4-tuple step) and adds what Gymnasium asks for:
+
+* Box spaces, float32, with the bounds and units of the env modules' index tables (below).
+* ``reset(seed=s)`` starts the episode the simulator's ``reset(s)`` starts, so the same seed gives the same
+  episode through either interface; ``reset()`` with no seed draws the simulator's seed from the env's
+  np_random (seeded by the last seed given). ``options={"start": ...}`` places a chosen start instead
+  (the data engine's move): PushT takes set_start's five numbers (block x m, y m, yaw rad, pusher x m,
+  y m; a sequence or a mapping by those names), ALOHA four (x, y) pairs in m (cube, target, right, left).
+  A start outside the observation space is a ValueError.
+* ``step`` returns (obs, reward, terminated, truncated, info): terminated once success has latched,
+  truncated at the simulator's step limit without success (PushT 300, ALOHA 400 control steps at 10 Hz).
+  info is the simulator's ("success", "steps", ...).
+* ``render()`` in "rgb_array" mode: the simulator's top-down renderer, uint8 (render_size, render_size, 3).
+  It needs an OpenGL backend (EGL or OSMesa; on Linux MUJOCO_GL defaults to egl here); without one it
+  raises gymnasium.error.DependencyNotInstalled with one line saying what to install.
+
+Observation bounds: PushT positions within the walls (|x|, |y| <= WALL_INNER = 0.42 m), sin and cos in
+[-1, 1] (the target's too, though it is fixed at (0, 0, 0, 1)). ALOHA end-effectors within their reach
+(aloha_env's joint ranges) widened by LIMIT_SLACK = 0.03 m (MuJoCo's soft limits let full-speed
+actions overshoot by up to 14 mm), grippers in [0, 1], cube and target within both reaches widened by
+GRASP_RADIUS (a held cube sits up to that far from its gripper) plus LIMIT_SLACK.
+Actions: Box(-1, 1), the range both simulators clip to.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Mapping
+
+if sys.platform.startswith("linux"):  # headless rendering: EGL unless the user chose a GL backend
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
+# the imports below come after MUJOCO_GL: mujoco reads it when it is first imported
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+import aloha_env
+import pusht_env
+
+__all__ = ["PUSHT_ID", "ALOHA_ID", "PushTGym", "AlohaHandoffGym", "LIMIT_SLACK"]
+
+PUSHT_ID = "ch37/PushT-v0"
+ALOHA_ID = "ch37/AlohaHandoff-v0"
+# m past a reach limit: steady full-speed pushing overshoots by ~2 mm (aloha_env), full-speed random actions
+# by up to 13.6 mm (12,000 steps, 30 seeds, np.sign of action_space.sample(); 2026-11-25)
+LIMIT_SLACK = 0.03
+SEED_RANGE = 2**63  # reset() without a seed draws the simulator's seed in [0, SEED_RANGE)
+
+
+def _box(bounds: list[tuple[float, float]]) -> spaces.Box:
+    lo, hi = np.array(bounds, dtype=np.float32).T
+    return spaces.Box(lo, hi, dtype=np.float32)
+
+
+class _SimGym(gym.Env):
+    """What both share: the simulator's episode behind Gymnasium's reset, step, render and close."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": pusht_env.FPS}
+    sim_class: type
+    start_names: tuple[str, ...]
+
+    def __init__(self, render_mode: str | None = None, render_size: int = 96) -> None:
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.render_mode, self.render_size = render_mode, int(render_size)
+        self.sim = self.sim_class()
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        start = (options or {}).get("start")
+        if start is not None:
+            args = [start[k] for k in self.start_names] if isinstance(start, Mapping) else list(start)
+            if len(args) != len(self.start_names):
+                raise ValueError(f"options['start'] takes {', '.join(self.start_names)}; got {start!r}")
+            obs, sim_seed = self.sim.set_start(*args), None
+            if not self.observation_space.contains(obs):
+                raise ValueError(f"options['start'] {start!r} lies outside the observation space")
+        else:
+            sim_seed = seed if seed is not None else int(self.np_random.integers(SEED_RANGE))
+            obs = self.sim.reset(sim_seed)
+        return obs, {"sim_seed": sim_seed, "success": False, "steps": 0}
+
+    def step(self, action):
+        obs, reward, done, info = self.sim.step(action)
+        terminated = bool(info["success"])
+        return obs, float(reward), terminated, bool(done and not terminated), info
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None  # Gymnasium's contract for render_mode=None
+        try:
+            return self.sim.render(self.render_size)
+        except Exception as e:  # MuJoCo raises its own kinds (or AttributeError) when no GL context exists
+            backend = os.environ.get("MUJOCO_GL", "glfw")
+            raise gym.error.DependencyNotInstalled(
+                f"render() needs an OpenGL backend; MUJOCO_GL={backend} failed ({type(e).__name__}): "
+                "use MUJOCO_GL=egl (apt-get install libegl1) or MUJOCO_GL=osmesa (apt-get install libosmesa6)"
+            ) from e
+
+    def close(self) -> None:
+        self.sim.close()
+
+
+class PushTGym(_SimGym):
+    """pusht_env.PushTEnv as a gymnasium.Env: obs float32[10] (STATE_NAMES), action float32[2] m/s."""
+
+    sim_class = pusht_env.PushTEnv
+    start_names = ("block_x", "block_y", "block_yaw", "pusher_x", "pusher_y")  # set_start's arguments
+    metadata = {"render_modes": ["rgb_array"], "render_fps": pusht_env.FPS}
+
+    def __init__(self, render_mode: str | None = None, render_size: int = 96) -> None:
+        super().__init__(render_mode, render_size)
+        wall, unit = (-pusht_env.WALL_INNER, pusht_env.WALL_INNER), (-1.0, 1.0)
+        # pusher x, y; block x, y, sin, cos; target x, y, sin, cos (the target's as wide as the block's:
+        # Gymnasium's checker warns on a Box whose low equals its high, though the target is fixed today)
+        self.observation_space = _box([wall, wall, wall, wall, unit, unit, wall, wall, unit, unit])
+        lim = pusht_env.ACTION_LIMIT
+        self.action_space = spaces.Box(-lim, lim, shape=(pusht_env.ACT_DIM,), dtype=np.float32)
+
+
+class AlohaHandoffGym(_SimGym):
+    """aloha_env.AlohaCubeEnv as a gymnasium.Env: obs float32[10] (STATE_NAMES), action float32[6]."""
+
+    sim_class = aloha_env.AlohaCubeEnv
+    start_names = ("cube", "target", "right", "left")  # set_start's arguments, (x, y) m each
+    metadata = {"render_modes": ["rgb_array"], "render_fps": aloha_env.FPS}
+
+    def __init__(self, render_mode: str | None = None, render_size: int = 96) -> None:
+        super().__init__(render_mode, render_size)
+        a, s = aloha_env, LIMIT_SLACK
+
+        def widen(r, by):
+            return (r[0] - by, r[1] + by)
+
+        rx, lx, y = (widen(r, s) for r in (a.RIGHT_X_RANGE, a.LEFT_X_RANGE, a.Y_RANGE))
+        obj_x = widen((a.LEFT_X_RANGE[0], a.RIGHT_X_RANGE[1]), a.GRASP_RADIUS + s)
+        obj_y = widen(a.Y_RANGE, a.GRASP_RADIUS + s)
+        grip = (0.0, 1.0)
+        self.observation_space = _box([rx, y, grip, lx, y, grip, obj_x, obj_y, obj_x, obj_y])
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(a.ACT_DIM,), dtype=np.float32)
+
+
+def _register() -> None:
+    for env_id, cls, sim in ((PUSHT_ID, PushTGym, pusht_env), (ALOHA_ID, AlohaHandoffGym, aloha_env)):
+        if env_id not in gym.registry:  # importing twice (or reloading) registers once
+            gym.register(env_id, entry_point=cls, max_episode_steps=sim.MAX_STEPS, nondeterministic=False)
+
+
+_register()

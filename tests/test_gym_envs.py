@@ -1,0 +1,148 @@
+"""PushT and the ALOHA handoff through Gymnasium (gym_envs.py): Gymnasium's own checker, the same episode as
+the lesson's simulators for the same seed, terminated/truncated, chosen starts and rendering."""
+
+import subprocess
+import sys
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from conftest import ROOT
+from gymnasium.utils.env_checker import check_env
+
+import aloha_env
+import gym_envs
+import pusht_env
+from scripted_expert import AlohaExpert, PushTExpert
+
+SPECS = [
+    pytest.param(gym_envs.PUSHT_ID, pusht_env, pusht_env.PushTEnv, PushTExpert, id="pusht"),
+    pytest.param(gym_envs.ALOHA_ID, aloha_env, aloha_env.AlohaCubeEnv, AlohaExpert, id="aloha"),
+]
+
+
+def gl_works() -> bool:
+    from datagen import check_gl
+
+    return check_gl() is None
+
+
+@pytest.mark.parametrize("env_id,mod,Sim,Expert", SPECS)
+def test_gymnasium_check_env_passes(env_id, mod, Sim, Expert):
+    """gymnasium.make on the id, then Gymnasium's env_checker with every warning an error; with a renderer
+    where this machine has an OpenGL backend, and its one-line error where it has none."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env = gym.make(env_id)
+        check_env(env.unwrapped)
+        assert env.spec.max_episode_steps == mod.MAX_STEPS
+        assert env.observation_space.shape == (mod.OBS_DIM,) and env.action_space.shape == (mod.ACT_DIM,)
+        env = gym.make(env_id, render_mode="rgb_array")
+        env.reset(seed=0)
+        if gl_works():
+            check_env(env.unwrapped)
+            env.reset(seed=0)
+            frame = env.render()
+            assert frame.dtype == np.uint8 and frame.shape == (96, 96, 3) and frame.std() > 0
+        else:
+            with pytest.raises(gym.error.DependencyNotInstalled, match="OpenGL backend"):
+                env.render()
+
+
+@pytest.mark.parametrize("env_id,mod,Sim,Expert", SPECS)
+def test_same_seed_same_episode_through_either_interface(env_id, mod, Sim, Expert):
+    """The expert's episode from seed s: the lesson's 4-tuple env and gymnasium.make give the same obs
+    bytes, rewards and end at every step; it ends terminated (success), not truncated."""
+    seed = 11
+    sim, expert = Sim(), Expert(noise=0.0)
+    obs, done, ref = sim.reset(seed), False, []
+    expert.reset()
+    while not done:
+        act = expert.act(obs)
+        obs, r, done, info = sim.step(act)
+        ref.append((act, obs, r, done, info["success"]))
+    assert ref[-1][4], "the expert should solve this start"
+
+    env = gym.make(env_id)
+    obs, info = env.reset(seed=seed)
+    assert obs.tobytes() == Sim().reset(seed).tobytes() and info["sim_seed"] == seed
+    for act, o, r, done, success in ref:
+        obs, reward, terminated, truncated, info = env.step(act)
+        assert obs.tobytes() == o.tobytes() and reward == r
+        assert (terminated, truncated) == (success and done, False)
+    assert terminated and info["steps"] == len(ref)
+
+
+@pytest.mark.parametrize("env_id,mod,Sim,Expert", SPECS)
+def test_truncated_at_the_step_limit_without_success(env_id, mod, Sim, Expert):
+    env = gym.make(env_id)
+    env.reset(seed=0)
+    zero = np.zeros(env.action_space.shape, np.float32)  # nothing moves: no success
+    for t in range(1, mod.MAX_STEPS + 1):
+        obs, reward, terminated, truncated, info = env.step(zero)
+        assert obs in env.observation_space and not terminated and truncated == (t == mod.MAX_STEPS)
+    assert info["steps"] == mod.MAX_STEPS and not info["success"]
+    # the unwrapped env truncates by itself, not only through gymnasium.make's TimeLimit wrapper
+    raw = env.unwrapped
+    raw.reset(seed=0)
+    ends = [raw.step(zero)[3] for _ in range(mod.MAX_STEPS)]
+    assert ends[-1] and not any(ends[:-1])
+
+
+@pytest.mark.parametrize("env_id,mod,Sim,Expert", SPECS)
+def test_observations_stay_in_the_space_under_full_speed_random_actions(env_id, mod, Sim, Expert):
+    """Bang-bang actions push into the reach limits and reverse (ALOHA overshoots its soft limits)."""
+    env = gym.make(env_id)
+    for seed in (0, 1):
+        obs, _ = env.reset(seed=seed)
+        env.action_space.seed(seed)
+        done = False
+        while not done:
+            obs, _, terminated, truncated, _ = env.step(np.sign(env.action_space.sample()))
+            assert obs in env.observation_space, obs
+            done = terminated or truncated
+
+
+def test_pusht_start_option_places_set_starts_start():
+    start = (0.15, -0.05, 0.4, -0.2, 0.25)  # block x m, y m, yaw rad, pusher x m, y m
+    want = pusht_env.PushTEnv().set_start(*start)
+    env = gym.make(gym_envs.PUSHT_ID)
+    for given in (start, dict(zip(("block_x", "block_y", "block_yaw", "pusher_x", "pusher_y"), start))):
+        obs, info = env.reset(seed=5, options={"start": given})
+        assert obs.tobytes() == want.tobytes() and info["sim_seed"] is None
+    with pytest.raises(ValueError, match="outside the observation space"):
+        env.reset(options={"start": (0.9, 0.0, 0.0, 0.0, 0.3)})  # beyond the wall at 0.42 m
+    with pytest.raises(ValueError, match="takes block_x"):
+        env.reset(options={"start": (0.1, 0.0)})
+
+
+def test_aloha_start_option_places_set_starts_start():
+    start = {"cube": (0.2, 0.1), "target": (-0.2, -0.1), "right": (0.25, 0.0), "left": (-0.25, 0.05)}
+    sim = aloha_env.AlohaCubeEnv()
+    want = sim.set_start(**start)
+    assert np.allclose(sim.cube_pos, start["cube"]) and np.allclose(sim.target_pos, start["target"])
+    assert np.allclose(sim.right_ee, start["right"]) and np.allclose(sim.left_ee, start["left"])
+    env = gym.make(gym_envs.ALOHA_ID)
+    obs, _ = env.reset(options={"start": start})
+    assert obs.tobytes() == want.tobytes()
+    obs, _ = env.reset(options={"start": list(start.values())})
+    assert obs.tobytes() == want.tobytes()
+    # set_start is what reset(seed) does with the start it draws
+    a, b = aloha_env.AlohaCubeEnv(), aloha_env.AlohaCubeEnv()
+    o = a.reset(4)
+    assert b.set_start(a.cube_pos, a.target_pos, a.right_ee, a.left_ee).tobytes() == o.tobytes()
+
+
+def test_render_without_a_gl_backend_is_one_clear_line():
+    """MUJOCO_GL=disable stands for a machine without EGL or OSMesa: render() says what to install."""
+    code = (
+        "import gymnasium as gym, gym_envs\n"
+        "e = gym.make(gym_envs.PUSHT_ID, render_mode='rgb_array'); e.reset(seed=0)\n"
+        "try:\n    e.render()\nexcept gym.error.DependencyNotInstalled as x:\n    print(x)\n"
+    )
+    env = {"MUJOCO_GL": "disable", "PATH": "/usr/bin:/bin"}
+    p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    line = p.stdout.strip()
+    assert len(line.splitlines()) == 1 and "MUJOCO_GL=egl" in line and "apt-get install" in line, line
