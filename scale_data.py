@@ -33,6 +33,7 @@ import numpy as np
 from ch37 import cli, errors, result_cache
 from ch37.config import CHAPTER as D
 from ch37.config import parser
+from exercises import ex1_reminder
 
 errors.guard()  # a fixable problem: one line, exit 2; Ctrl-C: exit 130 (demo sets kept, training restarts)
 t_start = time.perf_counter()
@@ -114,7 +115,7 @@ device = torch.device(args.device)
 torch.manual_seed(args.seed)
 if args.smoke:  # tiny matrices: a second thread only adds overhead, and 1 is the same everywhere
     torch.set_num_threads(1)
-cli.banner(args)
+cli.banner(args, ex1_reminder)  # and, until you have written it, a reminder of exercise 1
 cache = result_cache.ResultCache(args, claim)
 if cache.replay():  # an identical earlier run (same flags, code and data): its outputs are now in --out
     sys.exit(0)

@@ -194,26 +194,10 @@ def reference_words(ref: dict, seed: int, effect: float) -> str:
     return text
 
 
-def ex1_reminder() -> str | None:
-    """A line for a learner who runs the chapter before writing exercise 1's prediction, which this run
-    answers; None once exercises/ex1_predict_scale.py holds one (read as its check reads it)."""
-    try:
-        from exercises.checks import EX1_CHOICES, ExerciseError, check_prediction, load_exercise
-    except ImportError:  # the exercises or pytest are not here: nothing to remind of
-        return None
-    try:
-        check_prediction(load_exercise("ex1"), tuple(EX1_CHOICES), "ex1")
-        return None
-    except ExerciseError:
-        return (
-            "exercise 1: this run answers its question; write your PREDICTION and WHY in "
-            "exercises/ex1_predict_scale.py before you read the numbers (Ctrl-C stops the run)"
-        )
-
-
-def banner(args: argparse.Namespace) -> None:
+def banner(args: argparse.Namespace, reminder=None) -> None:
     """Two lines: what runs where, and how long this configuration takes on this tier; in the default
-    configuration (exercise 1's experiment), a third reminds a learner who has not written a prediction."""
+    configuration (exercise 1's experiment), a third: `reminder()`, when it has a line (the exercises'
+    ex1_reminder: a learner who has not written a prediction yet)."""
     import torch
 
     tier = device_tier(args.device)
@@ -222,5 +206,5 @@ def banner(args: argparse.Namespace) -> None:
     smoke = "smoke run: tiny configuration, seconds, numbers not meaningful"
     print(smoke if args.smoke else expected_wallclock(tier, config_hash(result_config(args))))
     default = not args.smoke and five_seed_reference(result_config(args)) is not None  # ex1's experiment
-    if default and (reminder := ex1_reminder()):
-        print(reminder)
+    if default and reminder and (line := reminder()):
+        print(line)

@@ -349,15 +349,15 @@ def test_printed_commands_work_as_printed():
 
 def test_the_first_runs_banner_reminds_of_the_ex1_prediction(monkeypatch, tmp_path):
     """Issue 33 #2: until exercises/ex1_predict_scale.py holds a prediction, the banner says so."""
-    from ch37 import cli
+    from exercises import ex1_reminder
 
     monkeypatch.setenv("CH37_EXERCISE_DIR", str(ROOT / "exercises"))  # the unfilled file
-    assert "exercises/ex1_predict_scale.py" in cli.ex1_reminder()
+    assert "exercises/ex1_predict_scale.py" in ex1_reminder()
     monkeypatch.setenv("CH37_EXERCISE_DIR", str(SOLUTIONS))
-    assert cli.ex1_reminder() is None
+    assert ex1_reminder() is None
     (tmp_path / checks.FILES["ex1"]).write_text('PREDICTION = "A"\nWHY = "more"\n')  # WHY too short
     monkeypatch.setenv("CH37_EXERCISE_DIR", str(tmp_path))
-    assert cli.ex1_reminder() is not None
+    assert ex1_reminder() is not None
 
 
 @pytest.mark.parametrize(

@@ -62,7 +62,7 @@ def test_the_lock_covers_pyproject():
 def test_meta_records_the_lock_its_numbers_ran_on():
     meta = yaml.safe_load((ROOT / "meta.yaml").read_text())
     env = meta["environment"]
-    assert env["lock_sha256"] == lock.lock_digest(), "meta.yaml is stale: python -m tools.lock --write-meta"
+    assert env["lock_sha256"] == lock.lock_digest(), "meta.yaml is stale: python -m tools.meta --environment"
     pins = lock.locked_here()
     assert {p: env[p] for p in lock.META_PACKAGES} == {p: pins[p] for p in lock.META_PACKAGES}
     for part in ("seeds", "aug_curve"):  # the published sweeps ran on the locked versions

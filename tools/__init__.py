@@ -13,7 +13,7 @@
     python -m tools.bench_writer                 the one-pass LeRobot v3 writer vs LeRobot's per-frame path
     python -m tools.lerobot_eval --policy P      a LeRobot checkpoint on the lesson's held-out PushT starts
     python -m tools.lerobot_lab [FLAGS]          LeRobot's own policies trained on the lab's data points
-    python -m tools.lock [--write-meta]          .venv against requirements.lock (bash tools/lock.sh makes it)
+    python -m tools.lock                         .venv against requirements.lock (bash tools/lock.sh makes it)
     (tools.common holds what they share: the parser, regions, provenance)
 
 Exit codes: 0 ok, 1 a check failed (drift, a stale notebook), 2 bad input (one `error:` line).

@@ -1,7 +1,7 @@
 """requirements.lock, the hashed lock setup_env.sh installs: read it, check .venv against it, record it.
 
     python -m tools.lock                  exit 1 naming every installed package that differs from the lock
-    python -m tools.lock --write-meta     refresh meta.yaml's `environment` (nothing else) from the lock
+    python -m tools.meta --environment    refresh meta.yaml's `environment` (nothing else) from the lock
     bash tools/lock.sh [--upgrade]        make the lock itself (uv pip compile; see that script)
 
 The lock pins every package the set-up installs (pyproject.toml's dependencies plus its dev, ray and
@@ -25,7 +25,7 @@ from packaging.utils import canonicalize_name
 
 from ch37 import ROOT, errors
 from ch37.errors import DataError
-from tools.common import META, parser, rel
+from tools.common import parser, rel
 
 LOCK = ROOT / "requirements.lock"
 # meta.yaml's and wallclock.csv's record of what the numbers came from: the packages that move floats
@@ -122,17 +122,7 @@ def environment_section(path: Path = LOCK, python: str | None = None) -> dict:
 def main(argv: list[str]) -> int:
     p = parser("lock", __doc__)
     p.add_argument("--lock", type=Path, default=LOCK, help="default requirements.lock")
-    p.add_argument("--write-meta", action="store_true", help="refresh meta.yaml's environment (nothing else)")
-    p.add_argument("--meta", type=Path, default=META, help="default meta.yaml")
     a = p.parse_args(argv)
-    if a.write_meta:
-        from tools.meta import META_STATIC, load_yaml, run_python, write_meta
-
-        meta = load_yaml(a.meta)
-        meta["environment"] = environment_section(a.lock, run_python(meta))
-        write_meta(a.meta, meta if meta.get("id") else {**META_STATIC, **meta})
-        print(f"wrote environment of {rel(a.lock)} to {rel(a.meta)}")
-        return 0
     if bad := drift(a.lock):
         for line in bad:
             print(f"drift: {line}")

@@ -1,6 +1,7 @@
 """meta.yaml from the result files: reference_run, exercise_checks and region_hashes, never typed by hand.
 
     python -m tools.meta [--sweep F] [--aug-sweep F] [--replay DIR] [--scale-lab F] [--meta F]
+    python -m tools.meta --environment           meta.yaml's `environment` alone, from requirements.lock
 
 reference_run comes from the seed sweep (--sweep, from `python -m tools.sweep --seeds 3`) and the aug
 sweep (--aug-sweep, from `python -m tools.sweep --aug 0 4 8`), exercise_checks from them through
@@ -30,7 +31,7 @@ from tools.lock import LOCK, environment_section, versions
 META_HEADER = """\
 # Chapter 3.7 metadata. Written by `python -m tools.meta` (environment, reference_run, exercise_checks,
 # region_hashes: never typed by hand), `python -m tools.regions --write` (region_hashes only) and
-# `python -m tools.lock --write-meta` (environment only: requirements.lock's versions).
+# `python -m tools.meta --environment` (environment only: requirements.lock's versions).
 # id, title, track, objectives and mimicgen are kept as found here; edit them freely (comments are not kept).
 """
 
@@ -282,7 +283,15 @@ def main(argv: list[str]) -> int:
     p.add_argument("--replay", type=Path, default=out / "replay", help="python -m tools.replay's folder")
     p.add_argument("--scale-lab", type=Path, default=out / "scale_lab/scale_lab.json", help="the lab's")
     p.add_argument("--meta", type=Path, default=META, help="default meta.yaml")
+    p.add_argument("--environment", action="store_true", help="refresh the environment (the lock) alone")
+    p.add_argument("--lock", type=Path, default=LOCK, help="with --environment; default requirements.lock")
     a = p.parse_args(argv)
+    if a.environment:
+        meta = load_yaml(a.meta)
+        meta["environment"] = environment_section(a.lock, run_python(meta))
+        write_meta(a.meta, meta if meta.get("id") else {**META_STATIC, **meta})
+        print(f"wrote environment of {rel(a.lock)} to {rel(a.meta)}")
+        return 0
     seeds, aug = read_sweep(a.sweep, "seeds", "--sweep"), read_sweep(a.aug_sweep, "aug", "--aug-sweep")
     lab, current = read_scale_lab(a.scale_lab), region_hashes(a.script)
     for name, s in (("seed", seeds), ("aug", aug)):
