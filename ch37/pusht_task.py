@@ -19,8 +19,9 @@ one to the other over the push is our reading of "relative to the block and the 
 push_frame="block" the push stays relative to the block alone, MimicGen's single-object form).
 The first subtask is entered from the pusher's start by linear interpolation at up to
 engine.APPROACH_SPEED (the push follows the approach in the same frame, see replay); then the
-pusher tracks the segment's transformed waypoints: the source's velocity turned into the frame plus TRACK_GAIN times the waypoint error. The object is read only
-at each subtask's start; the attempt is kept only on the env's success.
+pusher tracks the segment's transformed waypoints: the source's velocity turned into the frame
+plus TRACK_GAIN times the waypoint error. The object is read only at each subtask's start; the
+attempt is kept only on the env's success.
 """
 
 from __future__ import annotations
