@@ -5,6 +5,7 @@ interface).
     start = perturbed_start(source.states[0], rng, pos_sigma)   # START_NAMES, or None
     ep = resolve(env, start)                                    # the noise-free AlohaExpert
     steps = plan(env, source)                                   # the source's subtasks, by grasp signals
+                                                                # (whole(source): one segment, for contrast)
     ep, why = replay(env, start, source, steps)                 # why: None (kept) or a REPLAY_FAILURES entry
     e = nearest(sources, start)                                 # MimicGen's nearest source selection
 
@@ -164,6 +165,12 @@ def split(held: np.ndarray) -> list[Subtask]:
     release = after + int(free[0])
     bounds = (0, engage, release, n)
     return [Subtask(name, a, b, (fr, fl)) for (name, fr, fl), a, b in zip(SUBTASKS, bounds, bounds[1:])]
+
+
+def whole(source: Source) -> list[Subtask]:
+    """The whole demo as one segment with both arms relative to the cube: MimicGen's move without its
+    subtasks (as PushT's engine.replay makes it), for contrast: the target does not move with the cube."""
+    return [Subtask("whole", 0, len(source.actions), ("cube", "cube"))]
 
 
 def plan(env, source: Source) -> list[Subtask]:
