@@ -11,6 +11,8 @@ stamps        ownership stamps: only files this project wrote are ever deleted o
 demos         demo sets: rollout, generation, the private demo cache
 parallel      parallel_map over forked workers, LockstepEnvs for evaluation physics; workers die with the run
 engine        one augmentation attempt: perturb a source start, re-solve or replay it, keep it on success
+pusht_task    PushT replay by subtasks (approach, push) and nearest source selection
+aloha_task    the ALOHA handoff for the engine: perturbation, re-solve, replay by grasp-signal subtasks
 shards        a data-engine run on disk: fixed shards (LeRobot sets with stamps), merge, stats over frames
 executors     where the shards run: local processes or Ray
 ensemble      several MLPs as one module: the arms of a training budget side by side

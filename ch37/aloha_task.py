@@ -53,6 +53,10 @@ from ch37.engine import Source, transform_segment
 from scripted_expert import AlohaExpert
 
 START_NAMES = aloha_env.START_NAMES
+PROVENANCE = {  # LeRobot features stored on every frame of a kept episode (as engine.PROVENANCE)
+    "aug.source_episode": {"dtype": "int64", "shape": (1,), "names": None},  # the source replayed
+    "aug.start": {"dtype": "float32", "shape": (len(START_NAMES),), "names": list(START_NAMES)},
+}
 TRIES = 100  # draws per perturbed point before giving up with "no_valid_start"
 # Where each point of a perturbed start must land (m): the env's own spawn regions, so a perturbed
 # start is one reset() could have drawn, every point inside its arm's reach.
