@@ -1,6 +1,7 @@
 """MimicGen's whole move on both robots (issue 29): ALOHA's set_start, perturbation, grasp-signal subtasks,
 segment re-expression, bridged replay and nearest selection; PushT's subtask split and nearest selection."""
 
+import json
 import math
 
 import numpy as np
@@ -259,3 +260,18 @@ def test_pusht_nearest_weighs_yaw_by_the_success_tolerances():
         assert pt.nearest(srcs, start) == e
     a, b = (0.1, 0.0, 0.0), (0.1, 0.0, 0.2)  # 0.2 rad apart = one success tolerance = 0.03 m
     assert pt.pose_distance(a, b) == pytest.approx(pusht_env.SUCCESS_POS_TOL)
+
+
+def test_replay_yield_tool_counts_every_attempt_of_every_cell(tmp_path):
+    from tools import replay_yield
+
+    argv = ["--seeds", "1", "--sources", "2", "--attempts", "1", "--aloha_sigma", "2", "--out", str(tmp_path)]
+    assert replay_yield.main(argv) == 0
+    res = json.loads((tmp_path / "replay_yield.json").read_text())
+    rows = {(r["task"], r["mode"], r["multiplier"]): r for r in res["rows"]}
+    want = {(t, m, 1.0) for t, modes in replay_yield.MODES.items() for m in modes}
+    assert set(rows) == want | {("aloha", m, 2.0) for m in replay_yield.SIGMA_MODES}
+    for r in rows.values():
+        assert r["attempts"] == 2 and r["kept"] + sum(r["failures"].values()) == 2
+    assert rows[("pusht", "resolve", 1.0)]["kept"] == rows[("aloha", "resolve", 1.0)]["kept"] == 2
+    assert res["command"].endswith("--aloha_sigma 2")

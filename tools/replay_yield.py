@@ -45,7 +45,7 @@ MODES = {
     "pusht": ("resolve", "replay", "subtasks", "subtasks_nearest", "subtasks_block_nearest"),
     "aloha": ("resolve", "replay", "subtasks", "subtasks_nearest"),
 }
-SIGMA_MODES = ("subtasks", "subtasks_nearest")  # ALOHA modes of the perturbation sweep
+SIGMA_MODES = ("replay", "subtasks", "subtasks_nearest")  # ALOHA modes of the perturbation sweep
 
 _WORK: dict = {}  # (task, seed) -> {"sources": {e: Source}, "plans": {e: [Subtask]}}, built before forking
 _ENVS: dict = {}  # one simulator per task per process
@@ -131,7 +131,10 @@ def main(argv: list[str]) -> int:
     todo += [("aloha", mode, m) for m in sorted(a.aloha_sigma) if m != 1.0 for mode in SIGMA_MODES]
     for task, mode, m in todo:
         rows.append(r := cell(task, mode, seeds, a.sources, a.attempts, m, a.workers))
-        print(f"{task:5s} x{m:g} {mode:22s} {r['kept']}/{r['attempts']} = {r['yield']:.3f} {r['failures']}")
+        print(
+            f"{task:5s} x{m:<4g} {mode:22s} {r['kept']}/{r['attempts']} = {r['yield']:.3f} {r['failures']}",
+            flush=True,
+        )
     cmd = f"python -m tools.replay_yield --seeds {a.seeds} --sources {a.sources} --attempts {a.attempts}"
     cmd += " --aloha_sigma " + " ".join(f"{m:g}" for m in a.aloha_sigma) if a.aloha_sigma else ""
     res = {"kind": "replay_yield", "command": cmd, "seeds": seeds, "rows": rows} | provenance(a.script)
