@@ -275,3 +275,5 @@ def test_replay_yield_tool_counts_every_attempt_of_every_cell(tmp_path):
         assert r["attempts"] == 2 and r["kept"] + sum(r["failures"].values()) == 2
     assert rows[("pusht", "resolve", 1.0)]["kept"] == rows[("aloha", "resolve", 1.0)]["kept"] == 2
     assert res["command"].endswith("--aloha_sigma 2")
+    kept = [r for r in rows.values() if r["kept"]]
+    assert kept and all(r["kept_frames_median"] > 0 for r in kept)

@@ -27,6 +27,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+import numpy as np
+
 import aloha_env
 import pusht_env
 from ch37 import ROOT, aloha_task, engine, errors, pusht_task
@@ -68,8 +70,9 @@ def sources(task: str, seed: int, n: int) -> dict:
     return out
 
 
-def one(job) -> str:
-    """'kept' or the failure reason of one attempt: job = (task, mode, seed, episode, k, sigma multiplier)."""
+def one(job) -> tuple[str, int]:
+    """('kept', frames of the kept episode) or (the failure reason, 0) of one attempt:
+    job = (task, mode, seed, episode, k, sigma multiplier)."""
     task, mode, seed, e, k, m = job
     work, env = _WORK[(task, seed)], env_of(task)
     src, pool, rng = work["sources"][e], work["sources"], engine.attempt_rng(seed, e, k)
@@ -77,17 +80,20 @@ def one(job) -> str:
         plans = work["plans"] if mode != "replay" else {x: aloha_task.whole(s) for x, s in pool.items()}
         how = dict(pos_sigma=m * POS_SIGMA, mode="resolve" if mode == "resolve" else "replay", plans=plans)
         r = aloha_task.attempt(src, rng, env, pool=pool if mode.endswith("nearest") else None, **how)
-        return r if isinstance(r, str) else "kept"
+        return (r, 0) if isinstance(r, str) else ("kept", len(r[0]["action"]))
     start = engine.perturbed_start(src.states[0], rng, m * POS_SIGMA, m * YAW_SIGMA)
     if start is None:
-        return "no_valid_start"
+        return "no_valid_start", 0
     if mode == "resolve":
-        return "kept" if engine.resolve(env, start)["success"] else "expert_failed"
-    if mode == "replay":
-        return engine.replay(env, start, src)[1] or "kept"
-    chosen = pool[pusht_task.nearest(pool, start)] if mode.endswith("nearest") else src
-    frame = "block" if mode == "subtasks_block_nearest" else "block+target"
-    return pusht_task.replay(env, start, chosen, push_frame=frame)[1] or "kept"
+        ep = engine.resolve(env, start)
+        why = None if ep["success"] else "expert_failed"
+    elif mode == "replay":
+        ep, why = engine.replay(env, start, src)
+    else:
+        chosen = pool[pusht_task.nearest(pool, start)] if mode.endswith("nearest") else src
+        frame = "block" if mode == "subtasks_block_nearest" else "block+target"
+        ep, why = pusht_task.replay(env, start, chosen, push_frame=frame)
+    return (why, 0) if why else ("kept", len(ep["action"]))
 
 
 def cell(task: str, mode: str, seeds, n: int, attempts: int, m: float, workers: int) -> dict:
@@ -96,13 +102,14 @@ def cell(task: str, mode: str, seeds, n: int, attempts: int, m: float, workers: 
 
     t = time.perf_counter()
     jobs = [(task, mode, s, e, k, m) for s in seeds for e in range(n) for k in range(attempts)]
-    got = parallel_map(one, jobs, workers=workers)
+    got, frames = zip(*parallel_map(one, jobs, workers=workers))
     kept = got.count("kept")
     per_seed = {s: got[i * n * attempts : (i + 1) * n * attempts].count("kept") for i, s in enumerate(seeds)}
     row = {"task": task, "mode": mode, "multiplier": m, "pos_sigma": m * POS_SIGMA}
     row |= {"yaw_sigma": m * YAW_SIGMA if task == "pusht" else None, "attempts": len(got), "kept": kept}
     row |= {"yield": kept / len(got), "ci95": wilson(kept / len(got), len(got)), "kept_per_seed": per_seed}
     row["failures"] = {why: got.count(why) for why in sorted(set(got) - {"kept"})}
+    row["kept_frames_median"] = float(np.median([f for f in frames if f])) if kept else None
     return row | {"seconds": round(time.perf_counter() - t, 1)}
 
 
@@ -131,10 +138,10 @@ def main(argv: list[str]) -> int:
     todo += [("aloha", mode, m) for m in sorted(a.aloha_sigma) if m != 1.0 for mode in SIGMA_MODES]
     for task, mode, m in todo:
         rows.append(r := cell(task, mode, seeds, a.sources, a.attempts, m, a.workers))
-        print(
-            f"{task:5s} x{m:<4g} {mode:22s} {r['kept']}/{r['attempts']} = {r['yield']:.3f} {r['failures']}",
-            flush=True,
+        got = (
+            f"{r['kept']}/{r['attempts']} = {r['yield']:.3f} {r['failures']} frames {r['kept_frames_median']}"
         )
+        print(f"{task:5s} x{m:<4g} {mode:22s} {got}", flush=True)
     cmd = f"python -m tools.replay_yield --seeds {a.seeds} --sources {a.sources} --attempts {a.attempts}"
     cmd += " --aloha_sigma " + " ".join(f"{m:g}" for m in a.aloha_sigma) if a.aloha_sigma else ""
     res = {"kind": "replay_yield", "command": cmd, "seeds": seeds, "rows": rows} | provenance(a.script)
