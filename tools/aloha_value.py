@@ -82,7 +82,7 @@ def stack(eps: list[dict]) -> tuple[np.ndarray, np.ndarray]:
     return (np.concatenate([e["observation.state"] for e in eps]), np.concatenate([e["action"] for e in eps]))
 
 
-def one_seed(seed: int, c: dict, workers: int) -> dict:
+def one_seed(seed: int, c: dict, workers: int, device: str = "cpu") -> dict:
     import bc_recipe as bc
 
     t0 = time.perf_counter()
@@ -98,7 +98,7 @@ def one_seed(seed: int, c: dict, workers: int) -> dict:
     steps = math.ceil(c["epochs"] * max(len(x) for x, _ in data.values()) / c["batch_size"])
     init = bc.init_weights(c["hidden_dim"], seed, act_dim=aloha_env.ACT_DIM)
     hp = dict(batch_size=c["batch_size"], lr=c["lr"], seed=seed)
-    pols, fits = bc.train([data[a] for a in ARMS], steps, init, **hp)
+    pols, fits = bc.train([data[a] for a in ARMS], steps, init, device=device, **hp)
     eval_seeds = [env_seed(seed, "eval", j) for j in range(c["eval_episodes"])]
     arms = {}
     for a, pol, fit in zip(ARMS, pols, fits):
@@ -133,6 +133,9 @@ def main(argv: list[str]) -> int:
     p.add_argument("--smoke", action="store_true", help="tiny configuration (seconds)")
     p.add_argument("--workers", type=int, default=2, help="processes for the evaluation physics")
     p.add_argument(
+        "--device", default="cpu", help="torch device for training (cpu, cuda; about 1 h/seed on 1 busy core)"
+    )
+    p.add_argument(
         "--out", type=Path, help="default outputs/aloha_value (outputs/aloha_value-smoke with --smoke)"
     )
     a = p.parse_args(argv)
@@ -143,7 +146,7 @@ def main(argv: list[str]) -> int:
     out.mkdir(parents=True, exist_ok=True)
     rows, prov = [], provenance(a.script)
     for s in range(a.seeds):  # the file is rewritten after every seed: a stopped run keeps its seeds
-        rows.append(r := one_seed(s, c, a.workers))
+        rows.append(r := one_seed(s, c, a.workers, a.device))
         rates = " ".join(f"{k} {v['success']:.2f}" for k, v in r["arms"].items())
         kept = f"{r['replay']['kept']}/{r['replay']['attempts']}"
         print(f"seed {s}: replay {kept} kept, {rates} ({r['seconds']} s)", flush=True)
