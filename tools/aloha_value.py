@@ -133,7 +133,9 @@ def main(argv: list[str]) -> int:
     p.add_argument("--smoke", action="store_true", help="tiny configuration (seconds)")
     p.add_argument("--workers", type=int, default=2, help="processes for the evaluation physics")
     p.add_argument(
-        "--device", default="cpu", help="torch device for training (cpu, cuda; about 1 h/seed on 1 busy core)"
+        "--device",
+        default="cpu",
+        help="torch device for the training: cpu or cuda (see docs/replay.md for its cost)",
     )
     p.add_argument(
         "--out", type=Path, help="default outputs/aloha_value (outputs/aloha_value-smoke with --smoke)"
