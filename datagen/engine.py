@@ -39,6 +39,7 @@ __all__ = [
     "run_attempts",
     "save",
     "sources",
+    "with_provenance",
 ]
 
 KEPT_KEYS = ("observation.state", "action", "episode_index", "aug.source_episode", "aug.start")
@@ -91,8 +92,14 @@ def attempt(
     if isinstance(got, str):
         return got
     ep, start, used = got
+    return with_provenance(ep, used, start)
+
+
+def with_provenance(ep: dict, source_episode: int, start) -> dict:
+    """`ep` with its provenance on every frame: aug.source_episode (n, 1), the source it was made from,
+    and aug.start (n, len(start_names)), the start it was made from."""
     n = len(ep["action"])
-    ep["aug.source_episode"] = np.full((n, 1), used, np.int64)  # provenance, on every frame
+    ep["aug.source_episode"] = np.full((n, 1), source_episode, np.int64)
     ep["aug.start"] = np.tile(np.float32(start), (n, 1))
     return ep
 

@@ -56,6 +56,7 @@ __all__ = [
     "nearest",
     "perturbed_start",
     "pose_distance",
+    "replay_lanes",
     "replay_subtasks",
     "rotation",
     "split",
@@ -293,6 +294,89 @@ def nearest(sources: dict, start) -> int:
     return min(sources, key=lambda e: (pose_distance(block_pose(sources[e].states[0]), start[:3]), e))
 
 
+# ---------------------------------------------------------------- replay in lockstep (datagen.lockstep)
+def replay_lanes(sources: dict, how: Perturbation) -> dict:
+    """Mode "replay" as datagen.lockstep lanes: replay()'s approach and open-loop segment, decided for
+    all lanes at once, bit for bit what replay() does one attempt at a time (tests/test_lockstep.py)."""
+    from datagen.engine import with_provenance
+    from datagen.lockstep import Lane, start_of_job
+
+    def begin(job, env):
+        start = start_of_job(PUSHT, sources, job, how)
+        if start is None:
+            return "no_valid_start"
+        src = sources[job[0]]
+        path, commands = transform_segment(
+            src.states[:, :2], src.actions, block_pose(src.states[0]), start[:3]
+        )
+        obs = env.set_start(*start)
+        # approached: approach steps taken; blocked: None until the approach ends, then whether it
+        # moved the block (from `before`, the block's pose at the start); executed: segment steps taken
+        return Lane(
+            job,
+            obs,
+            start=start,
+            path=path,
+            commands=commands,
+            before=env.block_pose,
+            approached=0,
+            blocked=None,
+            executed=0,
+        )
+
+    def end_approach(lane, env) -> None:
+        shift = env.block_pose - lane.before
+        lane.blocked = (
+            math.hypot(shift[0], shift[1]) > MOVED_TOL[0]
+            or abs(pusht_env.wrap_angle(shift[2])) > MOVED_TOL[1]
+        )
+
+    def decide(lanes, envs, obs):
+        n = len(lanes)
+        actions = np.zeros((n, pusht_env.ACT_DIM), np.float32)
+        stop, took = np.zeros(n, bool), np.zeros(n, bool)  # took: an approach step this call
+        approaching = [j for j, lane in enumerate(lanes) if lane.blocked is None]
+        if approaching:  # approach the first waypoint on a straight line, in replay's float64 math
+            gap = np.stack([lanes[j].path[0] - envs[j].pusher_pos for j in approaching])  # (M, 2) m
+            dist = np.hypot(gap[:, 0], gap[:, 1])  # the ufunc replay calls on two scalars
+            speed = np.minimum(APPROACH_GAIN * dist, APPROACH_SPEED)
+            with np.errstate(invalid="ignore", divide="ignore"):  # a lane on its waypoint: not used
+                step = gap / dist[:, None] * speed[:, None]
+            for m, j in enumerate(approaching):
+                lane = lanes[j]
+                if lane.approached < APPROACH_STEPS and not dist[m] <= APPROACH_TOL:
+                    actions[j] = step[m]  # cast to float32, as replay's act does
+                    lane.approached += 1
+                    took[j] = True
+                else:
+                    end_approach(lane, envs[j])
+        for j, lane in enumerate(lanes):  # the transformed segment, open-loop; stop when it ran out
+            if took[j]:
+                continue
+            if lane.executed < len(lane.commands):
+                actions[j] = lane.commands[lane.executed]
+                lane.executed += 1
+            else:
+                stop[j] = True
+        return actions, stop
+
+    def finish(lane, env, episode):
+        if lane.blocked is None:  # the episode ended during the approach
+            end_approach(lane, env)
+        success = env.success
+        if success:
+            return with_provenance(episode | {"success": success}, lane.job[0], lane.start)
+        if lane.blocked:
+            return "approach_blocked"
+        if np.any(np.abs(lane.path) > REACH):
+            return "path_off_table"
+        if lane.executed < len(lane.commands):
+            return "out_of_time"
+        return "finished_off_target"
+
+    return {"begin": begin, "decide": decide, "finish": finish}
+
+
 class PushT(Task):
     """PushT's parts for the engine (see the module docstring)."""
 
@@ -338,6 +422,9 @@ class PushT(Task):
 
     def success(self, env) -> bool:
         return bool(env.success)
+
+    def replay_lanes(self, sources: dict, how: Perturbation) -> dict:
+        return replay_lanes(sources, how)
 
 
 PUSHT = PushT()

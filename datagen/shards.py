@@ -75,7 +75,7 @@ from ch37.ownership import (
 from ch37.parallel import map_jobs
 from ch37.process import available_memory
 from ch37.seeds import SEED_BLOCK
-from datagen import TASKS, engine
+from datagen import TASKS, engine, lockstep
 from datagen.task import Perturbation, Task
 from lerobot_v3.dataset import check_hf_cache, fps_problem, frames_problem, load_arrays, schema_problem
 from lerobot_v3.merge import merge_sets
@@ -97,6 +97,7 @@ def engine_version() -> str:
     is never mixed into a run. Computed when a run starts, not at import."""
     files = (
         "datagen/engine.py",
+        "datagen/lockstep.py",
         "datagen/task.py",
         "datagen/pusht.py",
         "datagen/aloha.py",
@@ -187,8 +188,9 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
     seconds_write, the seconds the worker spent writing the set and reading it back."""
     task = TASKS[config["task"]]
     how = Perturbation(config["seed"], config["pos_sigma"], config["yaw_sigma"])
-    results = engine.run_attempts(
-        task, sources, jobs, how, mode=config["mode"], select=config["select"], workers=1
+    # = engine.run_attempts', bit for bit (tests/test_lockstep.py), attempts stepped together
+    results = lockstep.attempts_lockstep(
+        task, sources, jobs, how, mode=config["mode"], select=config["select"]
     )
     kept = [r for r in results if not isinstance(r, str)]
     per_source = {}  # source episode -> [attempts, kept]

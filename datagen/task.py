@@ -197,6 +197,11 @@ class Task:
     def success(self, env) -> bool:
         raise NotImplementedError
 
+    def replay_lanes(self, sources: dict, how: Perturbation) -> dict | None:
+        """Mode "replay" as lockstep lanes (datagen.lockstep: begin, decide, finish), bit-identical to
+        replay_mode with the attempt's own source; None: the engine replays one attempt at a time."""
+        return None
+
     # ---- the modes, the same for every task ----
     def resolve(self, source: Source, rng, how: Perturbation, env, pool=None):
         """1. perturb the source's first state, 2. re-solve with the expert, 3. keep only on success.
