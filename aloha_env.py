@@ -64,13 +64,29 @@ cube centre is within SUCCESS_TOL of the target for SUCCESS_HOLD consecutive con
 whether or not a gripper still holds it. Success latches. ``done`` is True at success or after
 MAX_STEPS control steps.
 
-Spawn distribution (``reset(seed)``, all from ``np.random.default_rng(seed)`` built there;
-``set_start(cube, target, right, left)`` places any other start):
+Spawn distribution (``reset(seed)``, all from ``np.random.default_rng(seed)`` built there):
 * cube uniform in CUBE_X_RANGE x CUBE_Y_RANGE = [0.15, 0.30] x [-0.15, 0.15] m (right-only);
 * target uniform in TARGET_X_RANGE x TARGET_Y_RANGE = [-0.30, -0.15] x [-0.15, 0.15] m
   (left-only);
 * right end-effector uniform in [0.10, 0.30] x [-0.20, 0.20] m, left end-effector in
   [-0.30, -0.10] x [-0.20, 0.20] m; both grippers open, everything at rest.
+
+Start, float[8] (``START_NAMES``): what ``set_start(...)`` takes, and ``reset(seed)`` draws
+
+    idx  name      unit  meaning
+    0    cube_x    m     cube centre x
+    1    cube_y    m     cube centre y
+    2    target_x  m     delivery target x
+    3    target_y  m     delivery target y
+    4    right_x   m     right end-effector x
+    5    right_y   m     right end-effector y
+    6    left_x    m     left end-effector x
+    7    left_y    m     left end-effector y
+
+``set_start(*start)`` places any start with both grippers open, nothing held, everything at rest
+and fresh step and success counters; ``reset(seed)`` is its draw followed by ``set_start``, so
+the same start gives the same bytes either way. The grasp signals (engaged, released) are read
+through the ``holding`` accessor after each step.
 """
 
 from __future__ import annotations
@@ -129,6 +145,8 @@ ACTION_NAMES = ("right_vx", "right_vy", "right_grip_cmd", "left_vx", "left_vy", 
 # LeRobot's convention puts the object and task state in observation.environment_state (its
 # policies need it or an image): here the cube and the target, state indices 6..9, by name.
 ENV_STATE_NAMES = STATE_NAMES[6:]  # cube_x, cube_y, target_x, target_y
+# set_start's arguments, in order (m): objects first, then the two end-effectors.
+START_NAMES = ("cube_x", "cube_y", "target_x", "target_y", "right_x", "right_y", "left_x", "left_y")
 ROBOT_TYPE = "aloha_planar_bimanual"
 TASK = "Pick the cube with the right arm, hand it to the left arm, and place it on the target."
 
@@ -178,26 +196,37 @@ class AlohaCubeEnv:
         target = np.array([rng.uniform(*TARGET_X_RANGE), rng.uniform(*TARGET_Y_RANGE)])
         right = np.array([rng.uniform(*RIGHT_START_X_RANGE), rng.uniform(*START_Y_RANGE)])
         left = np.array([rng.uniform(*LEFT_START_X_RANGE), rng.uniform(*START_Y_RANGE)])
-        return self.set_start(cube, target, right, left)
+        return self.set_start(*cube, *target, *right, *left)
 
-    def set_start(self, cube, target, right, left) -> np.ndarray:
-        """Place a chosen start and return its first obs: cube, target and the right and left end-effectors
-        at (x, y) m each, grippers open, everything at rest, counters zeroed (what reset(seed) does with the
-        four it draws). The caller keeps each arm inside its reach (RIGHT_X_RANGE, LEFT_X_RANGE, Y_RANGE)."""
-        cube, target, right, left = (
-            np.asarray(p, dtype=np.float64).reshape(2) for p in (cube, target, right, left)
-        )
+    def set_start(
+        self,
+        cube_x: float,
+        cube_y: float,
+        target_x: float,
+        target_y: float,
+        right_x: float,
+        right_y: float,
+        left_x: float,
+        left_y: float,
+    ) -> np.ndarray:
+        """Place cube, target and both end-effectors (m, ``START_NAMES`` order) with both grippers
+        open, nothing held and everything at rest; zero the step and success counters; return the obs.
+
+        ``reset(seed)`` draws its start and calls this, so the same start gives the same obs and
+        episode either way. The caller keeps the start inside the reach limits (see the module
+        docstring); a position beyond a joint range is pulled back by the joint limit on the first step.
+        """
         mujoco.mj_resetData(self.model, self.data)
-        for a, p in (("right", right), ("left", left)):
+        for a, p in (("right", (right_x, right_y)), ("left", (left_x, left_y))):
             self._jx[a].qpos[0] = p[0]
             self._jy[a].qpos[0] = p[1]
             self._jf[a].qpos[0] = 0.0
             self._holding[a] = False
             self._offset[a][:] = 0.0
-        self._cube_x.qpos[0] = cube[0]
-        self._cube_y.qpos[0] = cube[1]
-        self._target[:] = target
-        self._target_site.pos[:2] = target
+        self._cube_x.qpos[0] = cube_x
+        self._cube_y.qpos[0] = cube_y
+        self._target[:] = (target_x, target_y)
+        self._target_site.pos[:2] = self._target
         mujoco.mj_forward(self.model, self.data)
         self._steps = 0
         self._in_tol = 0

@@ -1,15 +1,19 @@
-"""Grow a PushT demo set: perturbed starts of every source demo, re-solved by the expert, kept on success.
+"""Grow a PushT or ALOHA demo set: perturbed starts of every source demo, re-solved or replayed, kept on
+success.
 
     python augment_demos.py --src my_pusht --per_demo 100 --out big [--workers N | --ray [ADDRESS]]
 
---src is any LeRobot v3 PushT set (observation.state float32[10], action float32[2], laid out as in
-pusht_env.py): one from gen_demos_pusht.py or your own. It is only read. --out becomes a LeRobot v3
-set of the kept demos, every frame carrying its provenance (aug.source_episode: the source episode;
-aug.start: block x, y, yaw, pusher x, y it was solved from), with generation_report.json beside it.
+--src is any LeRobot v3 set of a task the engine knows (datagen.TASKS), the task read from the set's
+robot_type (or its widths): PushT (observation.state float32[10], action float32[2], laid out as in
+pusht_env.py; gen_demos_pusht.py) or the ALOHA handoff (float32[10], float32[6], aloha_env.py;
+gen_demos_aloha.py), one made by those commands or your own. It is only read. --out becomes a
+LeRobot v3 set of the kept demos, every frame carrying its provenance (aug.source_episode: the source
+episode it was made from, the one replayed; aug.start: the task's start it was solved from, for PushT
+block x, y, yaw, pusher x, y), with generation_report.json beside it.
 
 The same command gives the same bytes with any --workers, with --ray, and after a killed run is
 re-run (finished shards are kept, only the missing ones are made). The engine lives in datagen/:
-engine.py (one attempt), pusht.py (the PushT task), shards.py (the run: shards, stats, report);
+engine.py (one attempt), pusht.py and aloha.py (the tasks), shards.py (the run: shards, stats, report);
 the merge in lerobot_v3/merge.py, local processes or Ray in ch37.parallel.map_jobs.
 """
 
@@ -48,7 +52,15 @@ def parse(argv=None):
         choices=("resolve", "replay"),  # datagen.Task.modes (not imported here: --help stays instant)
         default="resolve",
         help="resolve: the expert solves each start; replay: the source path transformed into the new "
-        "block pose, executed open-loop, kept only on success (MimicGen's move; most attempts fail here)",
+        "object poses, executed open-loop, kept only on success (MimicGen's move; on PushT most attempts "
+        "fail here; ALOHA replays subtask by subtask)",
+    )
+    p.add_argument(
+        "--select",
+        choices=("own", "nearest"),  # datagen.engine.SELECTS
+        default="own",
+        help="the source a replay transforms: own (the attempt's own source demo, the default) or nearest "
+        "(the source demo whose objects start nearest the new start: MimicGen's selection); --mode replay",
     )
     p.add_argument(
         "--workers", type=int, default=min(8, os.cpu_count() or 1), help="local processes (default: cores)"
@@ -72,15 +84,17 @@ def parse(argv=None):
     at_most = {"seed": MAX_SEED, "pos_sigma": config.SIGMA_MAX, "yaw_sigma": config.SIGMA_MAX}
     at_most["per_demo"] = SEED_BLOCK  # an attempt index stays in one seed block, like an episode's
     config.check(a, positive=positive, non_negative=("seed",), finite=finite, at_most=at_most)
+    if a.select != "own" and a.mode != "replay":
+        p.error("--select nearest chooses the source a replay transforms; use it with --mode replay")
     return a
 
 
 def main(argv=None) -> int:
     a = parse(argv)
-    from datagen import TASKS, shards
+    from datagen import shards
 
     settings = {k: getattr(a, k) for k in shards.SETTINGS}
-    r = shards.run(TASKS["pusht"], a.src, a.out, settings, workers=a.workers, ray=a.ray, quiet=a.quiet)
+    r = shards.run(shards.task_of(a.src), a.src, a.out, settings, workers=a.workers, ray=a.ray, quiet=a.quiet)
     made, reused = r.get("kept_this_run", r["kept"]), r["shards"]["reused"]
     rate = f" in {r['seconds']:.1f} s ({r['demos_per_s']:.1f} demos/s)"
     if reused:  # a resumed run: what it made now (and its rate) apart from what an earlier run made

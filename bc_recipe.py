@@ -9,7 +9,8 @@ all import it, so they train and score exactly what the lesson does.
     covered, outside = cells(block_xy)                      # spawn-annulus cells a set of starts covers
 
 Shapes: a state is PushT's observation (10 numbers, see pusht_env.py), an action its pusher
-velocity (2 numbers, m/s). Everything here is a pure function of its arguments.
+velocity (2 numbers, m/s); the ALOHA handoff's 6-D actions through init_weights(..., act_dim=6) and
+evaluate(..., make_env=aloha_env.AlohaCubeEnv). Everything here is a pure function of its arguments.
 """
 
 from __future__ import annotations
@@ -24,13 +25,16 @@ from ch37.ensemble import BatchOrder, MLPStack
 from ch37.parallel import LockstepEnvs, progress
 
 
-def mlp(hidden: int) -> torch.nn.Sequential:  # the BC network: 10 -> hidden -> hidden -> 2, ReLU
+def mlp(
+    hidden: int, obs_dim: int = pusht_env.OBS_DIM, act_dim: int = pusht_env.ACT_DIM
+) -> torch.nn.Sequential:
+    """The BC network: obs_dim -> hidden -> hidden -> act_dim, ReLU (PushT's 10 -> 2 by default)."""
     return torch.nn.Sequential(
-        torch.nn.Linear(pusht_env.OBS_DIM, hidden),
+        torch.nn.Linear(obs_dim, hidden),
         torch.nn.ReLU(),
         torch.nn.Linear(hidden, hidden),
         torch.nn.ReLU(),
-        torch.nn.Linear(hidden, pusht_env.ACT_DIM),
+        torch.nn.Linear(hidden, act_dim),
     )
 
 
@@ -55,10 +59,11 @@ class BCPolicy(torch.nn.Module):
         return (self.net(self.norm_s(s)) + 1) / 2 * self.a_span + self.a_lo
 
 
-def init_weights(hidden: int, seed: int) -> dict:
-    """The initial weights every arm of a comparison starts from: a pure function of (hidden, seed)."""
+def init_weights(hidden: int, seed: int, act_dim: int = pusht_env.ACT_DIM) -> dict:
+    """The initial weights every arm of a comparison starts from: a pure function of (hidden, seed,
+    act_dim); act_dim 6 for the ALOHA handoff."""
     torch.manual_seed(seed)
-    return mlp(hidden).state_dict()
+    return mlp(hidden, act_dim=act_dim).state_dict()
 
 
 def train(
@@ -68,8 +73,8 @@ def train(
     steps of `batch_size` rows from the weights `init`, every arm with the same batch-order seed.
     Returns the policies and each one's final MSE on its own (normalized) data."""
     device = torch.device(device)
-    hidden = init["0.weight"].shape[0]
-    pols = [BCPolicy(x, y, mlp(hidden)).to(device) for x, y in datasets]
+    (hidden, obs_dim), act_dim = init["0.weight"].shape, init["4.weight"].shape[0]  # the init's shapes
+    pols = [BCPolicy(x, y, mlp(hidden, obs_dim, act_dim)).to(device) for x, y in datasets]
     tensors = [  # normalized once, not per batch
         (p.norm_s(torch.as_tensor(x, device=device)), p.norm_a(torch.as_tensor(y, device=device)))
         for p, (x, y) in zip(pols, datasets)
@@ -97,13 +102,14 @@ def train(
 
 
 @torch.no_grad()
-def evaluate(pol, seeds, *, workers: int = 1) -> float:
-    """Success rate of `pol` on PushT starts env.reset(seed), all episodes stepped in lockstep, their
-    physics on `workers` processes (1: in this process); the rate never depends on `workers`."""
+def evaluate(pol, seeds, *, workers: int = 1, make_env=pusht_env.PushTEnv) -> float:
+    """Success rate of `pol` on starts env.reset(seed) of make_env() (PushT unless told), all episodes
+    stepped in lockstep, their physics on `workers` processes (1: in this process); the rate never
+    depends on `workers`."""
     device = next(pol.buffers()).device
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # a (N, 10) batch needs no second thread; leave the cores to the physics workers
-    with LockstepEnvs(pusht_env.PushTEnv, seeds, workers=workers) as envs:
+    with LockstepEnvs(make_env, seeds, workers=workers) as envs:
         obs = envs.reset()  # (N, 10)
         live, success = np.ones(len(seeds), bool), np.zeros(len(seeds), bool)
         while live.any():

@@ -17,7 +17,8 @@ with their 4-tuple step) and adds what Gymnasium asks for:
   episode through either interface; ``reset()`` with no seed draws the simulator's seed from the env's
   np_random (seeded by the last seed given). ``options={"start": ...}`` places a chosen start instead
   (the data engine's move): PushT takes set_start's five numbers (block x m, y m, yaw rad, pusher x m,
-  y m; a sequence or a mapping by those names), ALOHA four (x, y) pairs in m (cube, target, right, left).
+  y m; a sequence or a mapping by those names), ALOHA the eight numbers of aloha_env.START_NAMES
+  (cube, target, right and left end-effector (x, y), m).
   A start outside the observation space is a ValueError.
 * ``step`` returns (obs, reward, terminated, truncated, info): terminated once success has latched,
   truncated at the simulator's step limit without success (PushT 300, ALOHA 400 control steps at 10 Hz).
@@ -136,7 +137,7 @@ class AlohaHandoffGym(_SimGym):
     """aloha_env.AlohaCubeEnv as a gymnasium.Env: obs float32[10] (STATE_NAMES), action float32[6]."""
 
     sim_class = aloha_env.AlohaCubeEnv
-    start_names = ("cube", "target", "right", "left")  # set_start's arguments, (x, y) m each
+    start_names = aloha_env.START_NAMES  # set_start's arguments, m each
     metadata = {"render_modes": ["rgb_array"], "render_fps": aloha_env.FPS}
 
     def __init__(self, render_mode: str | None = None, render_size: int = 96) -> None:

@@ -80,6 +80,21 @@ def _pt_candidates() -> tuple[np.ndarray, np.ndarray]:
     return np.array(pts, dtype=np.float64), np.array(nrm, dtype=np.float64)
 
 
+def _mv(m: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rows of m (N, a, b) @ v (N, b) -> (N, a): one BLAS gemv per row, as `m[i] @ v[i]` is."""
+    return np.matmul(m, v[:, :, None])[:, :, 0]
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rows' dot products (N, d) . (N, d) -> (N,): one BLAS dot per row, as `a[i] @ b[i]` is."""
+    return np.matmul(a[:, None, :], b[:, :, None])[:, 0, 0]
+
+
+def _norm(v: np.ndarray) -> np.ndarray:
+    """np.linalg.norm of each row (N, d) -> (N,): sqrt of its dot with itself, as numpy computes it."""
+    return np.sqrt(_dot(v, v))
+
+
 class PushTExpert:
     """Scripted PushT expert: ``act(obs) -> float32[2]`` pusher velocity (m/s), Markov in obs.
 
@@ -174,6 +189,113 @@ class PushTExpert:
         v = tang + radial * grad
         return rot @ (_PT_V_MOVE[1] * v / max(np.linalg.norm(v), 1e-9))
 
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        """``act`` for N observations at once: obs (N, 10) -> float32 (N, 2), row i bit-identical to
+        ``act(obs[i])`` (tests/test_lockstep.py). The expert is Markov, so no per-env state is kept;
+        noise would need one generator per env, so only the noise-free expert (the engine's) batches."""
+        if self.noise > 0.0:
+            raise ValueError("act_batch is for the noise-free expert; a noisy one draws per env (act)")
+        o = np.asarray(obs, dtype=np.float64).reshape(-1, _pt.OBS_DIM)
+        return np.clip(self._clean_batch(o), -1.0, 1.0).astype(np.float32)
+
+    def _clean_batch(self, o: np.ndarray) -> np.ndarray:
+        """_clean_action over rows, every term computed as the scalar path computes it. Two rules keep
+        the bits: (1) transcendental terms (atan2, cos, sin, hypot, wrap_angle) stay Python's math calls,
+        one per env, since numpy's vector versions may round differently; (2) every product the scalar
+        path hands to BLAS (``@``: gemv, gemm, and np.linalg.norm's dot) is a stacked np.matmul, which
+        calls the same BLAS routine per env with the same shapes and layout, where an elementwise
+        rewrite would not fuse multiply-adds the way OpenBLAS's kernels do (they differ in the last bit)."""
+        n = len(o)
+        rows = o.tolist()  # Python floats, as math reads o[i] in the scalar path
+        yaw = [math.atan2(r[4], r[5]) for r in rows]
+        c = np.array([math.cos(y) for y in yaw])
+        s = np.array([math.sin(y) for y in yaw])
+        rot = np.empty((n, 2, 2))  # (N, 2, 2) C-ordered per env, as np.array([[c, -s], [s, c]]) is
+        rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = c, -s, s, c
+        rot_t = rot.transpose(0, 2, 1)  # each env's rot.T: the same transposed view the scalar gemv gets
+        pw, bw = o[:, 0:2], o[:, 2:4]
+        e = _mv(rot_t, o[:, 6:8] - bw)  # (N, 2) position error, block frame (m)
+        eyaw = np.array([_pt.wrap_angle(math.atan2(r[8], r[9]) - y) for r, y in zip(rows, yaw)])
+        p = _mv(rot_t, pw - bw)  # (N, 2) pusher, block frame (m)
+        err = np.array([math.hypot(a, b) for a, b in e.tolist()])
+        sdf_p = _pt.t_sdf(p)  # (N,) elementwise ufuncs: the same per row as for one point
+        out = np.empty((n, 2))
+
+        # 4. At the goal: back away, then stand still.
+        goal = (err < _PT_GOAL_POS) & (np.abs(eyaw) < _PT_GOAL_YAW)
+        if goal.any():
+            back = _mv(rot[goal], 0.1 * self._grad_batch(p[goal]))
+            out[goal] = np.where((sdf_p[goal] > _PT_R + 0.03)[:, None], 0.0, back)
+        go = np.flatnonzero(~goal)  # the rows that push or move; every name below is over these rows
+        if go.size == 0:
+            return out
+        e, eyaw, err, p, sdf_p, rot, rot_t = e[go], eyaw[go], err[go], p[go], sdf_p[go], rot[go], rot_t[go]
+
+        # 1-2. Score every candidate push against the desired twist.
+        want = np.stack([e[:, 0], e[:, 1], _PT_YAW_LEN * eyaw], axis=1)
+        want /= _norm(want)[:, None]
+        align = np.matmul(self._u, want[:, :, None])[..., 0]  # (M, K): gemv per row, as self._u @ want
+        pre_w = bw[go, None, :] + np.matmul(self._pre, rot_t)  # (M, K, 2): gemm per row
+        bound = np.abs(pre_w) < _pt.WALL_INNER - _PT_R - 0.005
+        reach = bound[:, :, 0] & bound[:, :, 1]  # np.all over x, y
+        rel = p[:, None, :] - self._contact  # (M, K, 2)
+        along = np.clip(np.einsum("nkj,kj->nk", rel, self._n), -_PT_STANDOFF, 0.0)
+        travel = np.linalg.norm(rel - along[:, :, None] * self._n, axis=2)
+        score = np.where(reach, align - _PT_TRAVEL_COST * travel, -np.inf)
+        k = np.argmax(score, axis=1)
+        nk, tk, c0, g = self._n[k], self._t[k], self._contact[k], self._pre[k]  # (M, 2) each
+        move = np.empty((len(go), 2))  # block frame, rotated to the world at the end
+
+        # 3a. Behind the contact and on its line: push through it.
+        rel = p - c0
+        along, lat = _dot(rel, nk), _dot(rel, tk)
+        push = (np.abs(lat) < 0.006) & (-(_PT_STANDOFF + 0.008) < along) & (along < 0.01)
+        if push.any():
+            twist = np.array([math.hypot(a, _PT_YAW_LEN * b) for a, b in zip(err[push], eyaw[push])])
+            speed = np.minimum(np.maximum(_PT_PUSH_GAIN * twist, _PT_V_PUSH[0]), _PT_V_PUSH[1])
+            move[push] = speed[:, None] * nk[push] - (5.0 * lat[push])[:, None] * tk[push]
+        # 3b. Path to the pre-contact point clear of the T: go straight there.
+        rest = np.flatnonzero(~push)
+        if rest.size:
+            p, g, sdf_p = p[rest], g[rest], sdf_p[rest]
+            dg = g - p
+            dist = np.sqrt(_dot(dg, dg))  # np.linalg.norm of a vector: sqrt of its dot with itself
+            speed = np.minimum(np.maximum(_PT_MOVE_GAIN * dist, _PT_V_MOVE[0]), _PT_V_MOVE[1])
+            path = p[:, None, :] + self._seg[:, None] * dg[:, None, :]  # (R, 7, 2)
+            floor = np.minimum(_PT_R + 0.002, sdf_p - 0.001)
+            straight = np.all(_pt.t_sdf(path) > floor[:, None], axis=1)
+            move[rest[straight]] = (
+                speed[straight, None] * dg[straight] / np.maximum(dist[straight], 1e-9)[:, None]
+            )
+            # 3c. Otherwise orbit the T at a safe clearance, the shorter way round.
+            orbit = ~straight
+            if orbit.any():
+                gr = self._grad_batch(p[orbit])
+                tang = np.stack([-gr[:, 1], gr[:, 0]], axis=1)
+                rp, rg = (p[orbit] - _PT_ORBIT_CENTER).tolist(), (g[orbit] - _PT_ORBIT_CENTER).tolist()
+                flip = [
+                    _pt.wrap_angle(math.atan2(b[1], b[0]) - math.atan2(a[1], a[0])) < 0.0
+                    for a, b in zip(rp, rg)
+                ]
+                tang[flip] = -tang[flip]
+                gap = sdf_p[orbit] - _PT_R
+                radial = np.minimum(np.maximum(20.0 * (_PT_CLEAR - gap), -1.0), 1.0)
+                v = tang + radial[:, None] * gr
+                move[rest[orbit]] = _PT_V_MOVE[1] * v / np.maximum(_norm(v), 1e-9)[:, None]
+        out[go] = _mv(rot, move)
+        return out
+
+    @staticmethod
+    def _grad_batch(p: np.ndarray) -> np.ndarray:
+        """_grad for rows p (N, 2) -> (N, 2)."""
+        h = 1e-5
+        q = np.stack([p + (h, 0.0), p - (h, 0.0), p + (0.0, h), p - (0.0, h)], axis=1)  # (N, 4, 2)
+        d = _pt.t_sdf(q)
+        g = np.stack([d[:, 0] - d[:, 1], d[:, 2] - d[:, 3]], axis=1)
+        nrm = _norm(g)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where((nrm > 1e-12)[:, None], g / nrm[:, None], (0.0, 1.0))
+
     @staticmethod
     def _grad(p: np.ndarray) -> np.ndarray:
         """Unit outward gradient of the T's distance field at block-frame point p."""
@@ -242,6 +364,56 @@ class AlohaExpert:
         if dist < self.CLOSE_DIST or (closedness > 0.3 and dist < self.KEEP_DIST):
             return 1.0
         return -1.0
+
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        """``act`` for N observations at once: obs (N, 10) -> float32 (N, 6), row i bit-identical to
+        ``act(obs[i])`` (tests/test_lockstep.py). The phase is re-derived from each row (no per-env
+        state); only the noise-free expert batches (a noisy one draws from one generator, in env order).
+        Every term is elementwise: np.hypot is the same ufunc the scalar path calls on two scalars."""
+        if self.noise > 0.0:
+            raise ValueError("act_batch is for the noise-free expert; a noisy one draws per env (act)")
+        o = np.asarray(obs, dtype=np.float64).reshape(-1, 10)
+        r, rg, lft, lg, c, t = o[:, 0:2], o[:, 2], o[:, 3:5], o[:, 5], o[:, 6:8], o[:, 8:10]
+        dr = np.hypot(*(r - c).T)
+        dl = np.hypot(*(lft - c).T)
+        right_has = (rg > 0.9) & (dr < self.HOLD_DIST)
+        left_has = (lg > 0.9) & (dl < self.HOLD_DIST)
+        handoff = np.stack([np.full(len(o), self.HANDOFF_X), t[:, 1]], axis=1)
+        ready = np.hypot(*(c - handoff).T) < self.READY_DIST
+        release = left_has & (rg > 0.05)
+        deliver = left_has & ~release
+        carry = ~left_has & right_has
+        pick = ~left_has & ~right_has
+        backoff = np.stack([np.full(len(o), self.RIGHT_BACKOFF_X), r[:, 1]], axis=1)
+
+        # The right arm: goal and grip per phase (release: keep still, open).
+        r_from = np.where(carry[:, None], c, r)
+        r_goal = np.where(deliver[:, None], backoff, np.where(carry[:, None], handoff, c))
+        rv = np.where(release[:, None], 0.0, self._vel_batch(r_from, r_goal))
+        rcmd = np.where(carry, 1.0, np.where(pick, self._grip_batch(dr, rg), -1.0))
+        # The left arm: carries the cube when delivering, meets it at the handoff point, else waits there.
+        meet = carry & ready
+        l_from = np.where(deliver[:, None], c, lft)
+        l_goal = np.where(deliver[:, None], t, np.where(meet[:, None], c, handoff))
+        lv = np.where(release[:, None], 0.0, self._vel_batch(l_from, l_goal))
+        lcmd = np.where(left_has, 1.0, np.where(meet, self._grip_batch(dl, lg), -1.0))
+
+        action = np.stack([rv[:, 0], rv[:, 1], rcmd, lv[:, 0], lv[:, 1], lcmd], axis=1)
+        return np.clip(action, -1.0, 1.0).astype(np.float32)
+
+    def _vel_batch(self, pos: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """_vel over rows (N, 2): v scaled by MAX_SPEED / speed where the speed exceeds the cap."""
+        v = self.GAIN * (goal - pos)
+        speed = np.hypot(v[:, 0], v[:, 1])
+        over = speed > self.MAX_SPEED
+        with np.errstate(divide="ignore"):
+            v[over] *= (self.MAX_SPEED / speed[over])[:, None]
+        return v
+
+    def _grip_batch(self, dist: np.ndarray, closedness: np.ndarray) -> np.ndarray:
+        """_grip_cmd over rows: 1.0 (close) or -1.0 (open)."""
+        close = (dist < self.CLOSE_DIST) | ((closedness > 0.3) & (dist < self.KEEP_DIST))
+        return np.where(close, 1.0, -1.0)
 
     def act(self, obs) -> np.ndarray:
         o = np.asarray(obs, dtype=np.float64)

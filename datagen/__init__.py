@@ -5,6 +5,8 @@ task       Task (what a task provides: env, start names, perturbation, place, ex
 demos      expert demo sets: Embodiment, generate, ensure_demos (the chapter's private demo cache),
            check_given (a set you name, checked and never modified)
 pusht      PUSHT: PushT as a task (the only module here that imports pusht_env and its expert)
+aloha      ALOHA: the ALOHA cube handoff as a task (perturbation in the spawn regions, re-solve,
+           replay by grasp-signal subtasks; the only module here that imports aloha_env)
 engine     one attempt, keep_first, grow, run_attempts, save: task-agnostic
 shards     a run on disk: fixed shards on local processes or Ray (ch37.parallel.map_jobs), resume,
            the generation report, the merge (lerobot_v3.merge_sets)
@@ -12,6 +14,7 @@ shards     a run on disk: fixed shards on local processes or Ray (ch37.parallel.
 TASKS maps a task's name to it.
 """
 
+from datagen.aloha import ALOHA
 from datagen.demos import Embodiment, check_given, check_gl, ensure_demos, generate
 from datagen.engine import (
     ATTEMPTS_PER_KEPT,
@@ -29,9 +32,10 @@ from datagen.engine import (
 from datagen.pusht import PUSHT
 from datagen.task import Perturbation, Segment, Source, Task, rollout, write_dataset
 
-TASKS = {PUSHT.name: PUSHT}
+TASKS = {PUSHT.name: PUSHT, ALOHA.name: ALOHA}
 
 __all__ = [
+    "ALOHA",
     "ATTEMPTS_PER_KEPT",
     "Embodiment",
     "KEPT_KEYS",

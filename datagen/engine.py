@@ -28,6 +28,7 @@ from datagen.task import Perturbation, Source, Task
 __all__ = [
     "ATTEMPTS_PER_KEPT",
     "KEPT_KEYS",
+    "SELECTS",
     "attempt",
     "attempt_rng",
     "empty_kept",
@@ -38,9 +39,11 @@ __all__ = [
     "run_attempts",
     "save",
     "sources",
+    "with_provenance",
 ]
 
 KEPT_KEYS = ("observation.state", "action", "episode_index", "aug.source_episode", "aug.start")
+SELECTS = ("own", "nearest")  # which source a replay transforms: the attempt's own, or MimicGen's nearest
 ATTEMPTS_PER_KEPT = 10  # keep_first gives up on a source demo after this many attempts per wanted demo
 
 
@@ -77,16 +80,26 @@ def empty_kept(task: Task) -> dict:
 _ENVS: dict[str, object] = {}  # task name -> this process's simulator, fully reset by place() per attempt
 
 
-def attempt(task: Task, source: Source, k: int, how: Perturbation, *, mode: str = "resolve", env=None):
-    """Attempt k from `source`: a kept episode (arrays per frame, with provenance) or a failure reason."""
+def attempt(
+    task: Task, source: Source, k: int, how: Perturbation, *, mode: str = "resolve", env=None, pool=None
+):
+    """Attempt k from `source`: a kept episode (arrays per frame, with provenance) or a failure reason.
+    pool: {episode: Source} a replay chooses its source from (the nearest, MimicGen's selection);
+    None replays the attempt's own. aug.source_episode is the source actually replayed."""
     if env is None:
         env = _ENVS.get(task.name) or _ENVS.setdefault(task.name, task.make_env())
-    got = task.run_mode(mode, source, attempt_rng(how.seed, source.episode, k), how, env)
+    got = task.run_mode(mode, source, attempt_rng(how.seed, source.episode, k), how, env, pool)
     if isinstance(got, str):
         return got
-    ep, start = got
+    ep, start, used = got
+    return with_provenance(ep, used, start)
+
+
+def with_provenance(ep: dict, source_episode: int, start) -> dict:
+    """`ep` with its provenance on every frame: aug.source_episode (n, 1), the source it was made from,
+    and aug.start (n, len(start_names)), the start it was made from."""
     n = len(ep["action"])
-    ep["aug.source_episode"] = np.full((n, 1), source.episode, np.int64)  # provenance, on every frame
+    ep["aug.source_episode"] = np.full((n, 1), source_episode, np.int64)
     ep["aug.start"] = np.tile(np.float32(start), (n, 1))
     return ep
 
@@ -146,12 +159,16 @@ def first_per_source(episode_index, source_episode, take) -> np.ndarray:
     return np.isin(episode_index, ep[rank < limit])
 
 
-def run_attempts(task: Task, sources: dict, jobs, how: Perturbation, *, mode="resolve", workers=1, bar=None):
-    """[attempt(task, sources[e], k, how, mode=mode) for (e, k) in jobs], in order, on `workers` processes."""
+def run_attempts(
+    task: Task, sources: dict, jobs, how: Perturbation, *, mode="resolve", select="own", workers=1, bar=None
+):
+    """[attempt(task, sources[e], k, how, mode=mode) for (e, k) in jobs], in order, on `workers` processes.
+    select "nearest": each replay transforms the source of `sources` nearest its start (SELECTS)."""
+    pool = sources if select == "nearest" else None
 
     def one(job):
         e, k = job
-        return attempt(task, sources[e], k, how, mode=mode)
+        return attempt(task, sources[e], k, how, mode=mode, pool=pool)
 
     return list(map_jobs(one, jobs, workers=workers, bar=bar))
 
@@ -163,6 +180,7 @@ def grow(
     how: Perturbation,
     *,
     mode="resolve",
+    select="own",
     cap=ATTEMPTS_PER_KEPT,
     workers=1,
     bar=None,
@@ -173,7 +191,9 @@ def grow(
     return keep_first(
         sorted(sources),
         per_source,
-        lambda jobs: run_attempts(task, sources, jobs, how, mode=mode, workers=workers, bar=bar),
+        lambda jobs: run_attempts(
+            task, sources, jobs, how, mode=mode, select=select, workers=workers, bar=bar
+        ),
         reasons=task.failures[mode],
         cap=cap,
     )

@@ -13,19 +13,56 @@ and its expert.
               transform_source_data_segment_using_object_pose), an approach from the pusher's own start
               to the first transformed waypoint (as MimicGen interpolates into a segment), then the
               transformed commands open-loop; kept only on the env's success, else the reason
+    nearest   MimicGen's nearest source selection: the source whose block start is nearest the new
+              start, position plus YAW_WEIGHT x yaw (pose_distance)
+
+MimicGen by subtasks (issue 29; tools/replay_yield.py's study, not the engine's --mode replay, whose
+bytes stay the one-segment replay above): split(source) cuts a source demo at the first frame the
+pusher touches the T (pusht_env.t_signed_distance within PUSHER_RADIUS + CONTACT_TOL):
+
+    approach  0 .. first contact   relative to the block (its pose when the subtask starts)
+    push      first contact .. end relative to the block and the target: the frame starts on the
+              block's pose when the push starts and moves linearly (x, y, yaw) onto the target's
+              frame by the push's last frame
+
+MimicGen gives every subtask one reference object; PushT's push has two (the block it moves and
+the target it must end on, which does not move with the block), and the frame that slides from
+one to the other over the push is our reading of "relative to the block and the target" (with
+push_frame="block" the push stays relative to the block alone, MimicGen's single-object form).
+replay_subtasks enters the first subtask from the pusher's start by linear interpolation at up to
+APPROACH_SPEED; then the pusher tracks the segment's transformed waypoints: the source's velocity
+turned into the frame plus TRACK_GAIN times the waypoint error. The object is read only at each
+subtask's start; the attempt is kept only on the env's success.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 import pusht_env
-from datagen.task import Perturbation, Segment, Source, Task
+from datagen.task import Perturbation, Segment, Source, Task, rotation, transform_segment
 from scripted_expert import PushTExpert
 
-__all__ = ["PUSHT", "PushT", "START_NAMES", "block_pose", "perturbed_start", "rotation", "transform_segment"]
+__all__ = [
+    "PUSHT",
+    "PushT",
+    "START_NAMES",
+    "Subtask",
+    "block_pose",
+    "first_contact",
+    "nearest",
+    "perturbed_start",
+    "pose_distance",
+    "replay_lanes",
+    "replay_subtasks",
+    "rotation",
+    "split",
+    "subtask_segment",
+    "transform_segment",
+]
 
 R_LO, R_HI = 0.08, 0.26  # m; the block is kept on a band slightly wider than the spawn annulus
 TRIES = 100  # perturbation draws per attempt before giving up with "no_valid_start"
@@ -58,27 +95,6 @@ def perturbed_start(first_state, rng, pos_sigma: float, yaw_sigma: float, tries:
 def block_pose(state) -> np.ndarray:
     """(x m, y m, yaw rad) of the block in a PushT observation."""
     return np.array([state[2], state[3], math.atan2(state[4], state[5])])
-
-
-def rotation(yaw: float) -> np.ndarray:
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([[c, -s], [s, c]])
-
-
-def transform_segment(points, vectors, src_pose, new_pose):
-    """Re-express a path that was made relative to an object at `src_pose` for the object at `new_pose`.
-
-    points (T, 2) world positions (m) and vectors (T, 2) world velocities (m/s); poses (x, y, yaw).
-    A point is first written in the source object's frame, q = R(-yaw0) (p - xy0), then put back in the
-    world from the new pose, p' = R(yaw1) q + xy1; a velocity only rotates, v' = R(yaw1 - yaw0) v.
-    Returns (points' (T, 2), vectors' (T, 2)); an identical pose returns the inputs (to float rounding).
-    """
-    x0, y0, yaw0 = (float(v) for v in src_pose)
-    x1, y1, yaw1 = (float(v) for v in new_pose)
-    in_object = (np.asarray(points, np.float64) - (x0, y0)) @ rotation(-yaw0).T  # (T, 2) object frame
-    moved = in_object @ rotation(yaw1).T + (x1, y1)
-    turned = np.asarray(vectors, np.float64) @ rotation(yaw1 - yaw0).T
-    return moved, turned
 
 
 APPROACH_GAIN = 10.0  # 1/s: approach speed per m of distance to the first waypoint
@@ -147,6 +163,220 @@ def replay(env, start, source: Source, segment: Segment | None = None) -> tuple[
     return ep, "finished_off_target"
 
 
+# ---------------------------------------------------------------- MimicGen by subtasks, nearest selection
+CONTACT_TOL = 0.002  # m: the pusher's edge this close to the T counts as touching it
+TRACK_GAIN = 5.0  # 1/s: velocity added per m of waypoint error (halves an error every 0.1 s step)
+BRIDGE_TOL = APPROACH_TOL  # m: closer, the tracking absorbs the gap (a 1-step bridge stalls on the block)
+# Nearest selection weighs a yaw difference against a position difference as the success
+# tolerances do (0.03 m against 0.20 rad), so "nearest" means nearest in units of the goal's slack.
+YAW_WEIGHT = pusht_env.SUCCESS_POS_TOL / pusht_env.SUCCESS_YAW_TOL  # m per rad
+
+
+@dataclass(frozen=True)
+class Subtask:
+    name: str
+    start: int  # first frame of the source in this subtask
+    stop: int  # one past its last frame
+
+
+def first_contact(states) -> int:
+    """The first frame (obs (T, 10)) at which the pusher touches the T; len(states) if it never does."""
+    for t, s in enumerate(states):
+        d = pusht_env.t_signed_distance(s[0], s[1], s[2], s[3], math.atan2(s[4], s[5]))
+        if d <= pusht_env.PUSHER_RADIUS + CONTACT_TOL:
+            return t
+    return len(states)
+
+
+def split(source: Source) -> list[Subtask]:
+    """approach (frames before the first contact) and push (the rest); an empty approach is dropped."""
+    c, n = first_contact(source.states), len(source.states)
+    return [s for s in (Subtask("approach", 0, c), Subtask("push", c, n)) if s.stop > s.start]
+
+
+def interp_pose(a, b, s: float) -> tuple[float, float, float]:
+    """The planar pose a fraction s (0..1) of the way from a to b (x, y linear; yaw the short way)."""
+    dyaw = pusht_env.wrap_angle(float(b[2]) - float(a[2]))
+    return (a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1]), float(a[2]) + s * dyaw)
+
+
+def subtask_segment(source: Source, sub: Subtask, now, push_frame: str = "block+target") -> tuple:
+    """The pusher's segment of `sub`, re-expressed for the block pose in the observation `now`.
+
+    approach, and push with push_frame="block": from the source's block pose at the subtask's first frame
+    to the block pose now (transform_segment). push with "block+target": frame t of a T-frame push
+    goes into the pose a fraction t/(T-1) of the way from the block now to the source's block pose, so the
+    push starts on the block and ends where the source's push ended (the target frame: the target is
+    fixed). Returns waypoints (T, 2) m and velocities (T, 2) m/s."""
+    rows = slice(sub.start, sub.stop)
+    pts, vel = source.states[rows, :2], source.actions[rows]
+    src, new = block_pose(source.states[sub.start]), block_pose(now)
+    if sub.name == "approach" or push_frame == "block":
+        return transform_segment(pts, vel, src, new)
+    n = len(pts)
+    out_p, out_v = np.zeros((n, 2)), np.zeros((n, 2))
+    for t in range(n):
+        pose = interp_pose(new, src, t / max(n - 1, 1))
+        out_p[t], out_v[t] = (m[0] for m in transform_segment(pts[t : t + 1], vel[t : t + 1], src, pose))
+    return out_p, out_v
+
+
+def replay_subtasks(
+    env, start, source: Source, steps=None, push_frame: str = "block+target"
+) -> tuple[dict, str | None]:
+    """Replay `source` from `start` (START_NAMES) subtask by subtask in the real physics.
+
+    Returns the episode (frames and actions executed, as datagen.task.rollout returns them) and None on the
+    env's success, else the first replay failure that applies: approach_blocked (a bridge into a subtask
+    moved the block), path_off_table (a waypoint beyond the walls), out_of_time, finished_off_target."""
+    steps = split(source) if steps is None else steps
+    obs = env.set_start(*start)
+    states, actions, succ = [], [], []
+    done, off_table, blocked = False, False, False
+
+    def act(wp, vel) -> None:
+        nonlocal obs, done
+        a = np.clip(vel + TRACK_GAIN * (wp - np.asarray(obs[:2], np.float64)), -1.0, 1.0).astype(np.float32)
+        states.append(obs)
+        actions.append(a)
+        obs, _, done, info = env.step(a)
+        succ.append(bool(info["success"]))
+
+    for sub in steps:
+        if done:
+            break
+        pts, vel = subtask_segment(source, sub, obs, push_frame)
+        off_table |= bool(np.any(np.abs(pts) > REACH))
+        here = np.asarray(obs[:2], np.float64)
+        dist = float(np.hypot(*(pts[0] - here)))
+        # Only the plan's first subtask is bridged: the push starts one frame after the approach ended,
+        # in the same block frame, so its gap is tracking error (mm) that the tracking law closes; a
+        # bridge there would stall the pusher against the block it already touches.
+        first = sub is steps[0]
+        n = math.ceil(dist / (APPROACH_SPEED / pusht_env.FPS) - 1e-9) if first and dist > BRIDGE_TOL else 0
+        before = env.block_pose
+        for i in range(n):  # bridge: linear interpolation to the first waypoint
+            if done:
+                break
+            act(here + i / n * (pts[0] - here), (pts[0] - here) * pusht_env.FPS / n)
+        shift = env.block_pose - before  # a bridge that moves the block has hit it
+        blocked |= math.hypot(*shift[:2]) > MOVED_TOL[0] or abs(pusht_env.wrap_angle(shift[2])) > MOVED_TOL[1]
+        for wp, v in zip(pts, vel):
+            if done:
+                break
+            act(wp, v)
+    planned = not done or env.success
+    ep = {
+        "observation.state": np.asarray(states, np.float32).reshape(-1, pusht_env.OBS_DIM),
+        "action": np.asarray(actions, np.float32).reshape(-1, pusht_env.ACT_DIM),
+        "next.success": np.asarray(succ, bool).reshape(-1, 1),
+        "success": env.success,
+    }
+    if env.success:
+        return ep, None
+    if blocked:
+        return ep, "approach_blocked"
+    if off_table:
+        return ep, "path_off_table"
+    if not planned:
+        return ep, "out_of_time"
+    return ep, "finished_off_target"
+
+
+def pose_distance(a, b) -> float:
+    """Distance between two block poses (x m, y m, yaw rad): position plus YAW_WEIGHT x |yaw difference|."""
+    return math.hypot(a[0] - b[0], a[1] - b[1]) + YAW_WEIGHT * abs(pusht_env.wrap_angle(a[2] - b[2]))
+
+
+def nearest(sources: dict, start) -> int:
+    """MimicGen's nearest selection: the episode of the source whose start block pose lies nearest
+    `start`'s (pose_distance); ties go to the lowest episode index."""
+    return min(sources, key=lambda e: (pose_distance(block_pose(sources[e].states[0]), start[:3]), e))
+
+
+# ---------------------------------------------------------------- replay in lockstep (datagen.lockstep)
+def replay_lanes(sources: dict, how: Perturbation) -> dict:
+    """Mode "replay" as datagen.lockstep lanes: replay()'s approach and open-loop segment, decided for
+    all lanes at once, bit for bit what replay() does one attempt at a time (tests/test_lockstep.py)."""
+    from datagen.engine import with_provenance
+    from datagen.lockstep import Lane, start_of_job
+
+    def begin(job, env):
+        start = start_of_job(PUSHT, sources, job, how)
+        if start is None:
+            return "no_valid_start"
+        src = sources[job[0]]
+        path, commands = transform_segment(
+            src.states[:, :2], src.actions, block_pose(src.states[0]), start[:3]
+        )
+        obs = env.set_start(*start)
+        # approached: approach steps taken; blocked: None until the approach ends, then whether it
+        # moved the block (from `before`, the block's pose at the start); executed: segment steps taken
+        return Lane(
+            job,
+            obs,
+            start=start,
+            path=path,
+            commands=commands,
+            before=env.block_pose,
+            approached=0,
+            blocked=None,
+            executed=0,
+        )
+
+    def end_approach(lane, env) -> None:
+        shift = env.block_pose - lane.before
+        lane.blocked = (
+            math.hypot(shift[0], shift[1]) > MOVED_TOL[0]
+            or abs(pusht_env.wrap_angle(shift[2])) > MOVED_TOL[1]
+        )
+
+    def decide(lanes, envs, obs):
+        n = len(lanes)
+        actions = np.zeros((n, pusht_env.ACT_DIM), np.float32)
+        stop, took = np.zeros(n, bool), np.zeros(n, bool)  # took: an approach step this call
+        approaching = [j for j, lane in enumerate(lanes) if lane.blocked is None]
+        if approaching:  # approach the first waypoint on a straight line, in replay's float64 math
+            gap = np.stack([lanes[j].path[0] - envs[j].pusher_pos for j in approaching])  # (M, 2) m
+            dist = np.hypot(gap[:, 0], gap[:, 1])  # the ufunc replay calls on two scalars
+            speed = np.minimum(APPROACH_GAIN * dist, APPROACH_SPEED)
+            with np.errstate(invalid="ignore", divide="ignore"):  # a lane on its waypoint: not used
+                step = gap / dist[:, None] * speed[:, None]
+            for m, j in enumerate(approaching):
+                lane = lanes[j]
+                if lane.approached < APPROACH_STEPS and not dist[m] <= APPROACH_TOL:
+                    actions[j] = step[m]  # cast to float32, as replay's act does
+                    lane.approached += 1
+                    took[j] = True
+                else:
+                    end_approach(lane, envs[j])
+        for j, lane in enumerate(lanes):  # the transformed segment, open-loop; stop when it ran out
+            if took[j]:
+                continue
+            if lane.executed < len(lane.commands):
+                actions[j] = lane.commands[lane.executed]
+                lane.executed += 1
+            else:
+                stop[j] = True
+        return actions, stop
+
+    def finish(lane, env, episode):
+        if lane.blocked is None:  # the episode ended during the approach
+            end_approach(lane, env)
+        success = env.success
+        if success:
+            return with_provenance(episode | {"success": success}, lane.job[0], lane.start)
+        if lane.blocked:
+            return "approach_blocked"
+        if np.any(np.abs(lane.path) > REACH):
+            return "path_off_table"
+        if lane.executed < len(lane.commands):
+            return "out_of_time"
+        return "finished_off_target"
+
+    return {"begin": begin, "decide": decide, "finish": finish}
+
+
 class PushT(Task):
     """PushT's parts for the engine (see the module docstring)."""
 
@@ -180,6 +410,9 @@ class PushT(Task):
     def object_pose(self, state) -> np.ndarray:
         return block_pose(state)
 
+    def nearest(self, pool: dict, start) -> int:
+        return nearest(pool, start)
+
     def segments(self, source: Source) -> list[Segment]:
         return [Segment(0, len(source.actions), tuple(float(v) for v in block_pose(source.states[0])))]
 
@@ -189,6 +422,9 @@ class PushT(Task):
 
     def success(self, env) -> bool:
         return bool(env.success)
+
+    def replay_lanes(self, sources: dict, how: Perturbation) -> dict:
+        return replay_lanes(sources, how)
 
 
 PUSHT = PushT()

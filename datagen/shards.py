@@ -75,7 +75,7 @@ from ch37.ownership import (
 from ch37.parallel import map_jobs
 from ch37.process import available_memory
 from ch37.seeds import SEED_BLOCK
-from datagen import TASKS, engine
+from datagen import TASKS, engine, lockstep
 from datagen.task import Perturbation, Task
 from lerobot_v3.dataset import check_hf_cache, fps_problem, frames_problem, load_arrays, schema_problem
 from lerobot_v3.merge import merge_sets
@@ -87,7 +87,7 @@ MERGE_DIR = ".merged.partial"  # the merge is built here, then its data/ and met
 # there is the user's, and a resume refuses to start rather than delete it (datagen.shards.foreign).
 RUN_NAMES = {STAMP_NAME, LOCK_NAME, REPORT_NAME, SHARDS_DIR, "data", "meta", MERGE_DIR}
 SHARD_NAMES = re.compile(r"shard-\d{5}|\.shard-\d{5}\.(partial|scratch)")
-SETTINGS = ("mode", "per_demo", "seed", "pos_sigma", "yaw_sigma", "shard_size")  # a run's flags
+SETTINGS = ("mode", "select", "per_demo", "seed", "pos_sigma", "yaw_sigma", "shard_size")  # a run's flags
 # per_demo here is augment_demos.py's documented flag: attempts per source episode (every one is made);
 # datagen.engine.grow's per_source is the kept demos wanted per source episode.
 
@@ -97,7 +97,10 @@ def engine_version() -> str:
     is never mixed into a run. Computed when a run starts, not at import."""
     files = (
         "datagen/engine.py",
+        "datagen/lockstep.py",
+        "datagen/task.py",
         "datagen/pusht.py",
+        "datagen/aloha.py",
         "datagen/shards.py",
         "lerobot_v3/merge.py",
         "lerobot_v3/frame_stats.py",
@@ -185,7 +188,10 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
     seconds_write, the seconds the worker spent writing the set and reading it back."""
     task = TASKS[config["task"]]
     how = Perturbation(config["seed"], config["pos_sigma"], config["yaw_sigma"])
-    results = engine.run_attempts(task, sources, jobs, how, mode=config["mode"], workers=1)
+    # = engine.run_attempts', bit for bit (tests/test_lockstep.py), attempts stepped together
+    results = lockstep.attempts_lockstep(
+        task, sources, jobs, how, mode=config["mode"], select=config["select"]
+    )
     kept = [r for r in results if not isinstance(r, str)]
     per_source = {}  # source episode -> [attempts, kept]
     for (e, _), r in zip(jobs, results):
@@ -391,6 +397,35 @@ def state_range_problem(task: Task, src: Path, states: np.ndarray) -> str | None
     return None
 
 
+def task_of(src: Path) -> Task:
+    """The task whose sets `src` is (datagen.TASKS), read from its meta/info.json: the task whose env's
+    ROBOT_TYPE the set records, or, for a set without one, the one task whose state and action widths it
+    has. DataError (one line) for a set that fits no task. A folder without a readable info.json is left
+    to read_source's checks (as PushT's, the engine's first task), which name what is wrong with it."""
+    try:
+        info = json.loads((Path(src) / "meta" / "info.json").read_text())
+        feats = info["features"]
+        shapes = tuple(list(feats[k]["shape"]) for k in ("observation.state", "action"))
+    except (OSError, ValueError, KeyError, TypeError):
+        return TASKS["pusht"]
+    robot = info.get("robot_type")
+    if robot:
+        fits = [t for t in TASKS.values() if t.env_module.ROBOT_TYPE == robot]
+    else:
+        fits = [t for t in TASKS.values() if shapes == ([t.env_module.OBS_DIM], [t.env_module.ACT_DIM])]
+    if len(fits) == 1:
+        return fits[0]
+    known = "; ".join(
+        f"{t.title}: robot_type '{t.env_module.ROBOT_TYPE}', observation.state [{t.env_module.OBS_DIM}], "
+        f"action [{t.env_module.ACT_DIM}] (make one with {t.generator})"
+        for t in TASKS.values()
+    )
+    raise DataError(
+        f"--src {src} fits no task of the engine (robot_type {robot!r}, observation.state {shapes[0]}, "
+        f"action {shapes[1]}); it grows {known}"
+    )
+
+
 def read_source(task: Task, src: Path) -> dict:
     """The source set's columns (a set of `task`), or DataError with one line saying what is wrong with it."""
     import datasets
@@ -558,8 +593,11 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
         print(note, flush=True)
     scratch = None if ray not in (None, "local") else str(out / SHARDS_DIR)  # this machine's disk
     (out / SHARDS_DIR).mkdir(exist_ok=True)
+    # A shard gets the sources its attempts start from; with --select nearest a replay may choose any
+    # source, so every shard gets them all.
+    pool = sources if config["select"] == "nearest" else None
     tasks = [
-        (i, shards[i], {e: sources[e] for e in sorted({e for e, _ in shards[i]})}, config, scratch)
+        (i, shards[i], pool or {e: sources[e] for e in sorted({e for e, _ in shards[i]})}, config, scratch)
         for i in todo
     ]
     timing = {"start_s": 0.0}  # of seconds_generate: starting or joining Ray

@@ -19,10 +19,12 @@ subclass; it provides
                          None when no valid draw was found (reason "no_valid_start")
     place(env, start)    the simulator put at `start` with fresh counters; returns the observation
     expert()             the noise-free expert that re-solves a placed start
-    object_pose(state)   the pose of the object the task is about, from an observation (the source
-                         demo nearest a new start is chosen by it: MimicGen's nearest selection)
+    object_pose(state)   the pose of the object the task is about, from an observation
+    nearest(pool, start) the episode of the source in `pool` ({episode: Source}) whose objects lie
+                         nearest `start`'s (MimicGen's nearest source selection, --select nearest)
     segments(source)     the source demo cut into segments, each relative to one object frame
-                         (Segment); replay re-expresses each in the new start's frame
+                         (Segment, or the task's own subtask type); replay re-expresses each in the
+                         new start's frame
     replay(env, start, source)
                          the source's segments re-expressed for `start` and executed open-loop:
                          (episode, None) on success, else (episode, reason)
@@ -37,6 +39,7 @@ same parts (place, expert, success) over a batch.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -45,7 +48,16 @@ import numpy as np
 from ch37.ownership import publish_dir
 from lerobot_v3 import IMAGE_KEY, IMAGE_SIZE, write_set
 
-__all__ = ["Perturbation", "Segment", "Source", "Task", "rollout", "write_dataset"]
+__all__ = [
+    "Perturbation",
+    "Segment",
+    "Source",
+    "Task",
+    "rollout",
+    "rotation",
+    "transform_segment",
+    "write_dataset",
+]
 
 
 @dataclass(frozen=True)
@@ -73,6 +85,29 @@ class Segment:
     start: int
     stop: int
     pose: tuple[float, float, float]
+
+
+def rotation(yaw: float) -> np.ndarray:
+    """The 2x2 rotation by `yaw` (rad)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s], [s, c]])
+
+
+def transform_segment(points, vectors, src_pose, new_pose):
+    """Re-express a path that was made relative to an object at `src_pose` for the object at `new_pose`.
+
+    points (T, 2) world positions (m) and vectors (T, 2) world velocities (m/s); poses (x, y, yaw).
+    A point is first written in the source object's frame, q = R(-yaw0) (p - xy0), then put back in the
+    world from the new pose, p' = R(yaw1) q + xy1; a velocity only rotates, v' = R(yaw1 - yaw0) v.
+    The planar SE(2) analog of MimicGen's transform_source_data_segment_using_object_pose.
+    Returns (points' (T, 2), vectors' (T, 2)); an identical pose returns the inputs (to float rounding).
+    """
+    x0, y0, yaw0 = (float(v) for v in src_pose)
+    x1, y1, yaw1 = (float(v) for v in new_pose)
+    in_object = (np.asarray(points, np.float64) - (x0, y0)) @ rotation(-yaw0).T  # (T, 2) object frame
+    moved = in_object @ rotation(yaw1).T + (x1, y1)
+    turned = np.asarray(vectors, np.float64) @ rotation(yaw1 - yaw0).T
+    return moved, turned
 
 
 def write_dataset(
@@ -150,7 +185,10 @@ class Task:
     def object_pose(self, state) -> np.ndarray:
         raise NotImplementedError
 
-    def segments(self, source: Source) -> list[Segment]:
+    def nearest(self, pool: dict, start) -> int:
+        raise NotImplementedError
+
+    def segments(self, source: Source) -> list:
         raise NotImplementedError
 
     def replay(self, env, start, source: Source) -> tuple[dict, str | None]:
@@ -159,28 +197,37 @@ class Task:
     def success(self, env) -> bool:
         raise NotImplementedError
 
+    def replay_lanes(self, sources: dict, how: Perturbation) -> dict | None:
+        """Mode "replay" as lockstep lanes (datagen.lockstep: begin, decide, finish), bit-identical to
+        replay_mode with the attempt's own source; None: the engine replays one attempt at a time."""
+        return None
+
     # ---- the modes, the same for every task ----
-    def resolve(self, source: Source, rng, how: Perturbation, env):
-        """1. perturb the source's first state, 2. re-solve with the expert, 3. keep only on success."""
+    def resolve(self, source: Source, rng, how: Perturbation, env, pool=None):
+        """1. perturb the source's first state, 2. re-solve with the expert, 3. keep only on success.
+        The expert solves the start itself: no source is replayed, so `pool` is not read."""
         start = self.perturb(source.states[0], rng, how)
         if start is None:
             return "no_valid_start"
         ep = rollout(env, self.expert(), self.place(env, start))
         if not ep["success"]:
             return "expert_failed"
-        return ep, start
+        return ep, start, source.episode
 
-    def replay_mode(self, source: Source, rng, how: Perturbation, env):
-        """1. perturb (the same draw as resolve), 2. replay the transformed source, 3. keep on success."""
+    def replay_mode(self, source: Source, rng, how: Perturbation, env, pool=None):
+        """1. perturb (the same draw as resolve), 2. replay the transformed source (the attempt's own, or
+        given `pool` ({episode: Source}) the pool's nearest to the new start), 3. keep on success."""
         start = self.perturb(source.states[0], rng, how)
         if start is None:
             return "no_valid_start"
-        ep, why = self.replay(env, start, source)
-        return why or (ep, start)
+        chosen = pool[self.nearest(pool, start)] if pool else source
+        ep, why = self.replay(env, start, chosen)
+        return why or (ep, start, chosen.episode)
 
-    def run_mode(self, mode: str, source: Source, rng, how: Perturbation, env):
-        """(episode, start) for a kept attempt of `mode`, else the reason it was not kept."""
-        return {"resolve": self.resolve, "replay": self.replay_mode}[mode](source, rng, how, env)
+    def run_mode(self, mode: str, source: Source, rng, how: Perturbation, env, pool=None):
+        """(episode, start, the source episode it was made from) for a kept attempt of `mode`, else the
+        reason it was not kept. pool: the sources --select nearest chooses from (None: the attempt's own)."""
+        return {"resolve": self.resolve, "replay": self.replay_mode}[mode](source, rng, how, env, pool)
 
     @property
     def modes(self) -> tuple[str, ...]:

@@ -20,7 +20,7 @@ import gen_demos_aloha
 import gen_demos_pusht
 import pusht_env
 from ch37.ownership import LOCK_NAME, MADE_BY, STAMP_NAME
-from datagen import PUSHT, Perturbation, engine, pusht, shards
+from datagen import ALOHA, PUSHT, Perturbation, engine, pusht, shards
 from lerobot_v3.dataset import load_arrays, open_dataset
 
 PER_DEMO, SHARD = 4, 2  # 3 sources x 4 = 12 attempts in 6 shards: enough to kill one run mid-way
@@ -330,10 +330,13 @@ def _without_index_columns(root):
     return root
 
 
-def _aloha(tmp, src):
-    out = tmp / "aloha"
-    assert gen_demos_aloha.main(["--episodes", "1", "--out", str(out), "--quiet"]) == 0
-    return out
+def _other_robot(tmp, src):  # issue 29: a set of no task the engine knows
+    bad = tmp / "so100"
+    shutil.copytree(src, bad)
+    info = json.loads((bad / "meta" / "info.json").read_text())
+    info["robot_type"] = "so100_follower"
+    (bad / "meta" / "info.json").write_text(json.dumps(info))
+    return bad
 
 
 def _user_out(tmp):
@@ -362,7 +365,7 @@ BAD = [  # (id, make src or None (the good one), make out or None (a new folder)
     ("src_is_a_file", lambda t, s: s / "meta" / "info.json", None, [], "not a folder"),
     ("not_lerobot", lambda t, s: t, None, [], "not a LeRobot v3 dataset"),
     ("wrong_schema", _wrong_schema, None, [], "observation.state"),
-    ("aloha_set", _aloha, None, [], "'action' has shape [6]"),
+    ("set_of_no_task", _other_robot, None, [], "robot_type 'so100_follower'"),
     ("renamed_state", _renamed_state, None, [], "names"),
     ("corrupt_parquet", _corrupt_parquet, None, [], "not a readable parquet file"),
     ("no_data_files", _no_data_files, None, [], "could not be read"),
@@ -400,6 +403,7 @@ BAD = [  # (id, make src or None (the good one), make out or None (a new folder)
     ("yaw_sigma_huge", None, None, ["--yaw_sigma", "1e308"], "--yaw_sigma must be at most 10"),  # issue 22 #9
     ("pos_sigma_huge", None, None, ["--pos_sigma", "11"], "--pos_sigma must be at most 10"),
     ("mode_unknown", None, None, ["--mode", "teleport"], "--mode"),
+    ("select_nearest_resolve", None, None, ["--select", "nearest"], "--select nearest chooses the source"),
 ]
 
 
@@ -570,3 +574,74 @@ def test_a_stamp_whose_counts_disagree_with_its_files_is_a_damaged_shard(src, re
     assert tree(out) == tree(reference)
     rep = json.loads((out / shards.REPORT_NAME).read_text())
     assert rep["kept"] == json.loads((reference / shards.REPORT_NAME).read_text())["kept"]
+
+
+# ----------------------------------------------------------------------------------------------
+# The ALOHA handoff through the same engine (issue 29): its task read from the set
+# ----------------------------------------------------------------------------------------------
+ALOHA_SETTINGS = ["--per_demo", "2", "--shard_size", "1", "--quiet"]  # 3 sources x 2 = 6 shards of 1
+
+
+@pytest.fixture(scope="module")
+def aloha_src(tmp_path_factory):
+    out = tmp_path_factory.mktemp("asrc") / "aloha3"
+    assert gen_demos_aloha.main(["--episodes", "3", "--seed", "0", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def test_aloha_replay_nearest_same_bytes_for_workers_ray_and_resume(aloha_src, tmp_path):
+    """MimicGen's subtask replay from the nearest source, on an ALOHA set: the attempts as
+    datagen.engine.attempt makes them, provenance naming the source replayed, and the same bytes for
+    --workers 1 and 2, a local Ray and a run killed after its first shard and finished."""
+    flags = ["--src", aloha_src, "--mode", "replay", "--select", "nearest", *ALOHA_SETTINGS]
+    ref = tmp_path / "w1"
+    augment(*flags, "--out", ref, "--workers", "1")
+    sources = engine.sources(load_arrays(aloha_src))
+    how = Perturbation(0, 0.08, 0.5)
+    jobs = [(e, k) for e in range(3) for k in range(2)]
+    want = [engine.attempt(ALOHA, sources[e], k, how, mode="replay", pool=sources) for e, k in jobs]
+    kept = [w for w in want if not isinstance(w, str)]
+    keys = ("observation.state", "action", "aug.start", "aug.source_episode")
+    got = load_arrays(ref, keys=keys)
+    assert kept and got["action"].shape[1] == 6 and got["aug.start"].shape[1] == len(ALOHA.start_names)
+    for key in keys:
+        assert got[key].tobytes() == np.concatenate([w[key] for w in kept]).reshape(got[key].shape).tobytes()
+    own = [e for e, _ in jobs]
+    chosen = [int(w["aug.source_episode"][0, 0]) if not isinstance(w, str) else e for w, e in zip(want, own)]
+    assert chosen != own  # nearest chose another source for some attempt (else this test shows nothing)
+    rep = json.loads((ref / shards.REPORT_NAME).read_text())
+    assert set(rep["failures"]) == set(ALOHA.failures["replay"]) and rep["settings"]["select"] == "nearest"
+    assert rep["kept"] + sum(rep["failures"].values()) == rep["attempts"] == 6
+    augment(*flags, "--out", tmp_path / "w2", "--workers", "2")
+    assert tree(tmp_path / "w2") == tree(ref)
+    augment(*flags, "--out", tmp_path / "ray", "--ray", "--workers", "2")
+    assert tree(tmp_path / "ray") == tree(ref)
+    out = tmp_path / "killed"
+    cmd = [sys.executable, str(ROOT / "augment_demos.py"), *map(str, flags)]
+    cmd += ["--out", str(out), "--workers", "1"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 300
+    while not list((out / shards.SHARDS_DIR).glob("shard-*")) and proc.poll() is None:
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.communicate()
+    assert proc.returncode == -signal.SIGKILL and not (out / "meta").exists()
+    augment(*cmd[2:])
+    assert tree(out) == tree(ref)
+    assert json.loads((out / shards.REPORT_NAME).read_text())["shards"]["reused"] >= 1
+
+
+def test_aloha_resolve_is_a_lerobot_set_of_the_handoff(aloha_src, tmp_path):
+    """--mode resolve on an ALOHA set: the noise-free AlohaExpert re-solves each perturbed start, and
+    LeRobotDataset reads the result with its 6-D actions and provenance over ALOHA's start names."""
+    out = tmp_path / "res"
+    p = augment("--src", aloha_src, "--out", out, "--workers", "1", *ALOHA_SETTINGS)
+    assert p.stdout.strip().splitlines()[-1].startswith("augment_demos: 6 attempts")
+    ds = open_dataset(out)
+    rep = json.loads((out / shards.REPORT_NAME).read_text())
+    assert ds.num_episodes == rep["kept"] > 0 and ds.meta.robot_type == ALOHA.env_module.ROBOT_TYPE
+    assert ds.meta.features["aug.start"]["names"] == list(ALOHA.start_names)
+    frame = ds[0]
+    assert tuple(frame["action"].shape) == (6,) and tuple(frame["aug.start"].shape) == (8,)
+    assert set(rep["failures"]) == set(ALOHA.failures["resolve"])

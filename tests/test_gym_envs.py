@@ -118,20 +118,21 @@ def test_pusht_start_option_places_set_starts_start():
 
 
 def test_aloha_start_option_places_set_starts_start():
-    start = {"cube": (0.2, 0.1), "target": (-0.2, -0.1), "right": (0.25, 0.0), "left": (-0.25, 0.05)}
+    values = (0.2, 0.1, -0.2, -0.1, 0.25, 0.0, -0.25, 0.05)  # cube, target, right, left: (x, y) m each
+    start = dict(zip(aloha_env.START_NAMES, values))
     sim = aloha_env.AlohaCubeEnv()
     want = sim.set_start(**start)
-    assert np.allclose(sim.cube_pos, start["cube"]) and np.allclose(sim.target_pos, start["target"])
-    assert np.allclose(sim.right_ee, start["right"]) and np.allclose(sim.left_ee, start["left"])
+    assert np.allclose(sim.cube_pos, values[0:2]) and np.allclose(sim.target_pos, values[2:4])
+    assert np.allclose(sim.right_ee, values[4:6]) and np.allclose(sim.left_ee, values[6:8])
     env = gym.make(gym_envs.ALOHA_ID)
     obs, _ = env.reset(options={"start": start})
     assert obs.tobytes() == want.tobytes()
-    obs, _ = env.reset(options={"start": list(start.values())})
+    obs, _ = env.reset(options={"start": values})
     assert obs.tobytes() == want.tobytes()
     # set_start is what reset(seed) does with the start it draws
     a, b = aloha_env.AlohaCubeEnv(), aloha_env.AlohaCubeEnv()
     o = a.reset(4)
-    assert b.set_start(a.cube_pos, a.target_pos, a.right_ee, a.left_ee).tobytes() == o.tobytes()
+    assert b.set_start(*a.cube_pos, *a.target_pos, *a.right_ee, *a.left_ee).tobytes() == o.tobytes()
 
 
 def test_render_without_a_gl_backend_is_one_clear_line():

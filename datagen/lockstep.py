@@ -1,0 +1,168 @@
+"""Lockstep attempts: a worker runs a batch of the engine's attempts together, one env per live attempt,
+and the expert (or replay) decides for all of them in one call.
+
+    attempts_lockstep(task, sources, jobs, how, mode=, select=, lanes=) -> [result per job]
+
+returns exactly what [datagen.engine.attempt(task, sources[e], k, how, ...) for (e, k) in jobs]
+returns, frame for frame and bit for bit (tests/test_lockstep.py), at a fraction of the Python cost
+per frame: the engine's one-at-a-time path pays the expert's ~40 small numpy calls for every frame of
+every attempt, where here they are paid once per control step for up to `lanes` attempts (the task's
+expert's act_batch: PushTExpert, AlohaExpert). Each attempt still gets its own simulator, fully reset
+at its start, so its frames do not depend on what shares its batch, on the lane it runs in, or on when
+it was started.
+
+The runner (run_lanes) knows no task. A mode hands it
+    make_env()                   -> an env with step(action) -> (obs, reward, done, info["success"])
+                                    (made once per process and reused: begin resets it fully)
+    begin(job, env)              -> a Lane placed at its start (lane.obs: its first observation), or a
+                                    final result (a failure reason) when there is nothing to simulate
+    decide(lanes, envs, obs)     -> (actions (N, act_dim) float32, stop (N,) bool or None): one call for
+                                    every live lane; a stopped lane ends before this step (replay's
+                                    segment ran out) and is not stepped
+    finish(lane, env, episode)   -> the attempt's result, from the frames recorded for it
+and the runner keeps `lanes` envs busy, refilling a lane as soon as its attempt ends, recording every
+frame into preallocated arrays (lanes x max_frames), and returns the results in job order.
+Mode "resolve" is built here for every task from its parts (perturb, place, expert().act_batch);
+mode "replay" from task.replay_lanes (PushT's one-segment replay) where the task has it, else (ALOHA's
+subtask replay, and --select nearest) the attempts run one at a time through datagen.engine.attempt.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from datagen import engine
+from datagen.task import Perturbation, Task
+
+__all__ = ["LANES", "Lane", "attempts_lockstep", "resolve_lanes", "run_lanes", "start_of_job"]
+
+LANES = 64  # attempts stepped together per worker: enough to amortise one batched decision per step
+
+
+_POOL: dict = {}  # make_env -> envs made in this process; each attempt fully resets its env (begin)
+
+
+class Lane:
+    """One live attempt: its job, its first observation, and what its task keeps between steps."""
+
+    def __init__(self, job, obs, **state):
+        self.job, self.obs = job, obs
+        self.__dict__.update(state)
+
+
+def run_lanes(
+    jobs, *, make_env, begin, decide, finish, max_frames: int, obs_dim: int, act_dim: int, lanes: int
+):
+    """[result of job] for every job, in order, with up to `lanes` attempts stepped together (see the
+    module docstring). Frame t of a lane pairs the observation before action t with action t and
+    next.success after it, as datagen.task.rollout records them."""
+    results = [None] * len(jobs)
+    todo = deque(range(len(jobs)))
+    width = max(1, min(lanes, len(jobs)))
+    pool = _POOL.setdefault(make_env, [])  # this process's envs of this kind, kept between calls
+    pool += [make_env() for _ in range(width - len(pool))]  # (a model load each: ~5 ms)
+    envs = pool[:width]
+    obs_buf = np.zeros((width, max_frames + 1, obs_dim), np.float32)  # +1: the obs after the last step
+    act_buf = np.zeros((width, max_frames, act_dim), np.float32)
+    succ_buf = np.zeros((width, max_frames), bool)
+    live: dict[int, tuple[int, Lane]] = {}  # slot -> (job index, lane)
+    t = [0] * width  # frames recorded per slot
+
+    def fill(slot: int) -> None:
+        while todo:
+            i = todo.popleft()
+            got = begin(jobs[i], envs[slot])
+            if not isinstance(got, Lane):
+                results[i] = got
+                continue
+            live[slot], t[slot] = (i, got), 0
+            obs_buf[slot, 0] = got.obs
+            return
+
+    def end(slot: int) -> None:
+        i, lane = live.pop(slot)
+        n = t[slot]
+        episode = {
+            "observation.state": obs_buf[slot, :n].copy(),
+            "action": act_buf[slot, :n].copy(),
+            "next.success": succ_buf[slot, :n, None].copy(),
+        }
+        results[i] = finish(lane, envs[slot], episode)
+        fill(slot)
+
+    for slot in range(width):
+        fill(slot)
+    while live:
+        slots = list(live)
+        at = [t[s] for s in slots]
+        obs = obs_buf[slots, at]  # (N, obs_dim): each live lane's current observation
+        actions, stop = decide([live[s][1] for s in slots], [envs[s] for s in slots], obs)
+        act_buf[slots, at] = actions  # a stopped lane's row lies past its frames: never read
+        for j, slot in enumerate(slots):
+            if stop is not None and stop[j]:
+                end(slot)
+                continue
+            o, _, done, info = envs[slot].step(actions[j])
+            n = at[j]
+            obs_buf[slot, n + 1] = o
+            succ_buf[slot, n] = info["success"]
+            t[slot] = n + 1
+            if done:
+                end(slot)
+    return results
+
+
+# ----------------------------------------------------------------------------------------------
+# The modes as lanes, for any task
+# ----------------------------------------------------------------------------------------------
+def start_of_job(task: Task, sources: dict, job, how: Perturbation):
+    """The perturbed start of attempt (e, k), drawn as datagen.engine.attempt draws it, or None."""
+    e, k = job
+    return task.perturb(sources[e].states[0], engine.attempt_rng(how.seed, e, k), how)
+
+
+def resolve_lanes(task: Task, sources: dict, how: Perturbation) -> dict:
+    """Mode "resolve": the task's noise-free expert from each perturbed start, kept on success."""
+    expert = task.expert()
+
+    def begin(job, env):
+        start = start_of_job(task, sources, job, how)
+        if start is None:
+            return "no_valid_start"
+        return Lane(job, task.place(env, start), start=start)
+
+    def decide(lanes, envs, obs):
+        return expert.act_batch(obs), None
+
+    def finish(lane, env, episode):
+        success = bool(episode["next.success"][-1, 0])  # rollout's success: the last frame's
+        if not success:
+            return "expert_failed"
+        return engine.with_provenance(episode | {"success": success}, lane.job[0], lane.start)
+
+    return {"begin": begin, "decide": decide, "finish": finish}
+
+
+def attempts_lockstep(
+    task: Task, sources: dict, jobs, how: Perturbation, *, mode="resolve", select="own", lanes=LANES
+) -> list:
+    """[datagen.engine.attempt(task, sources[e], k, how, mode=mode, pool=...) for (e, k) in jobs], the
+    same bytes, stepped in lockstep where the mode has lanes (else one attempt at a time)."""
+    jobs = list(jobs)
+    parts = resolve_lanes(task, sources, how) if mode == "resolve" else None
+    if mode == "replay" and select == "own":
+        parts = task.replay_lanes(sources, how)
+    if parts is None:
+        return engine.run_attempts(task, sources, jobs, how, mode=mode, select=select, workers=1)
+    m = task.env_module
+    return run_lanes(
+        jobs,
+        make_env=task.make_env,
+        **parts,
+        max_frames=m.MAX_STEPS,
+        obs_dim=m.OBS_DIM,
+        act_dim=m.ACT_DIM,
+        lanes=lanes,
+    )

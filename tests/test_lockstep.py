@@ -1,0 +1,131 @@
+"""Lockstep attempts and batched experts give today's one-at-a-time bytes: every decision of
+PushTExpert.act_batch and AlohaExpert.act_batch equals act's bit for bit along real episodes, and
+datagen.lockstep.attempts_lockstep returns exactly what datagen.engine.attempt returns, for both modes
+on PushT and for ALOHA's re-solve."""
+
+import numpy as np
+import pytest
+
+import aloha_env
+import gen_demos_aloha
+import gen_demos_pusht
+import pusht_env
+from datagen import ALOHA, PUSHT, Perturbation, engine, lockstep
+from datagen.task import rollout
+from lerobot_v3.dataset import load_arrays
+from scripted_expert import AlohaExpert, PushTExpert
+
+
+def states_along(env, expert_class, seeds, noise: float) -> np.ndarray:
+    """Every observation of the expert's episodes from env.reset(seed); every other one noisy, so the
+    states also come from off the clean expert's path (recoveries, orbits, failed grasps)."""
+    obs = []
+    for i, s in enumerate(seeds):
+        ep = rollout(env, expert_class(noise=noise if i % 2 else 0.0, seed=s), env.reset(s))
+        obs.append(ep["observation.state"])
+    return np.concatenate(obs)
+
+
+def assert_same_decisions(expert, states: np.ndarray, chunk: int) -> None:
+    scalar = np.stack([expert.act(o) for o in states])
+    batched = np.concatenate([expert.act_batch(states[i : i + chunk]) for i in range(0, len(states), chunk)])
+    assert batched.dtype == scalar.dtype == np.float32 and batched.shape == scalar.shape
+    differ = np.flatnonzero((batched.view(np.uint32) != scalar.view(np.uint32)).any(axis=1))
+    assert differ.size == 0, f"{differ.size} of {len(states)} decisions differ, first at row {differ[:1]}"
+
+
+def test_pusht_batched_expert_is_bit_identical():
+    states = states_along(pusht_env.PushTEnv(), PushTExpert, range(240), noise=0.3)
+    assert len(states) > 3000
+    assert_same_decisions(PushTExpert(), states, chunk=37)  # 37: the batches mix every kind of state
+
+
+def test_aloha_batched_expert_is_bit_identical():
+    states = states_along(aloha_env.AlohaCubeEnv(), AlohaExpert, range(16), noise=0.3)
+    assert len(states) > 2000
+    assert_same_decisions(AlohaExpert(), states, chunk=29)
+
+
+def test_batched_experts_refuse_noise():
+    with pytest.raises(ValueError):
+        PushTExpert(noise=0.1).act_batch(np.zeros((2, 10), np.float32))
+    with pytest.raises(ValueError):
+        AlohaExpert(noise=0.1).act_batch(np.zeros((2, 10), np.float32))
+
+
+@pytest.fixture(scope="module")
+def sources(tmp_path_factory):
+    out = tmp_path_factory.mktemp("src") / "pusht4"
+    assert gen_demos_pusht.main(["--episodes", "4", "--seed", "0", "--out", str(out), "--quiet"]) == 0
+    return engine.sources(load_arrays(out))
+
+
+def assert_same_results(one_at_a_time: list, together: list) -> None:
+    assert len(one_at_a_time) == len(together)
+    for i, (a, b) in enumerate(zip(one_at_a_time, together)):
+        if isinstance(a, str) or isinstance(b, str):
+            assert a == b, f"attempt {i}: {a!r} one at a time, {b!r} in lockstep"
+            continue
+        assert list(a) == list(b), f"attempt {i}: keys differ"
+        assert a["success"] is b["success"]
+        for key in a:
+            if key != "success":
+                x, y = a[key], b[key]
+                assert (x.dtype, x.shape) == (y.dtype, y.shape), f"attempt {i}: {key}"
+                assert x.tobytes() == y.tobytes(), f"attempt {i}: {key} differs"
+
+
+@pytest.mark.parametrize(
+    "mode, sigmas, lanes",
+    [("resolve", (0.08, 0.5), lockstep.LANES), ("replay", (0.02, 0.2), 7)],  # replay: some keep
+)
+def test_lockstep_attempts_equal_one_at_a_time(sources, mode, sigmas, lanes):
+    how = Perturbation(1, *sigmas)
+    jobs = [(e, k) for e in sorted(sources) for k in range(50)]  # 200 attempts
+    one = [engine.attempt(PUSHT, sources[e], k, how, mode=mode) for e, k in jobs]
+    together = lockstep.attempts_lockstep(PUSHT, sources, jobs, how, mode=mode, lanes=lanes)
+    kept = sum(not isinstance(r, str) for r in one)
+    assert kept >= 10 and (mode == "resolve" or kept < len(jobs))  # both outcomes are compared
+    assert_same_results(one, together)
+
+
+def test_lockstep_reasons_without_a_start(sources):
+    jobs = [(0, 0), (1, 3)]
+    how = Perturbation(0, 10.0, 0.1)  # no draw lands on the band
+    assert lockstep.attempts_lockstep(PUSHT, sources, jobs, how) == ["no_valid_start"] * 2
+
+
+def test_the_runner_is_task_agnostic_aloha_episodes_equal_rollout():
+    """run_lanes with ALOHA's env and AlohaExpert.act_batch (the shape an ALOHA engine task plugs in):
+    each episode from env.reset(seed) equals datagen.task.rollout's, frame for frame and bit for bit."""
+    expert = AlohaExpert()
+    seeds = list(range(12))
+    got = lockstep.run_lanes(
+        seeds,
+        make_env=aloha_env.AlohaCubeEnv,
+        begin=lambda seed, env: lockstep.Lane(seed, env.reset(seed)),
+        decide=lambda lanes, envs, obs: (expert.act_batch(obs), None),
+        finish=lambda lane, env, episode: episode | {"success": bool(episode["next.success"][-1, 0])},
+        max_frames=aloha_env.MAX_STEPS,
+        obs_dim=aloha_env.OBS_DIM,
+        act_dim=aloha_env.ACT_DIM,
+        lanes=5,
+    )
+    env = aloha_env.AlohaCubeEnv()
+    want = [rollout(env, AlohaExpert(), env.reset(s)) for s in seeds]
+    assert sum(ep["success"] for ep in want) >= 6 and len({len(ep["action"]) for ep in want}) > 1
+    assert_same_results(want, got)
+
+
+def test_aloha_resolve_in_lockstep_equals_one_at_a_time(tmp_path):
+    """ALOHA's re-solve through the engine's lockstep (the generic resolve lanes over the task's parts,
+    AlohaExpert.act_batch deciding) returns exactly datagen.engine.attempt's results."""
+    out = tmp_path / "aloha3"
+    assert gen_demos_aloha.main(["--episodes", "3", "--seed", "0", "--out", str(out), "--quiet"]) == 0
+    srcs = engine.sources(load_arrays(out))
+    how = Perturbation(0, 0.08, 0.5)
+    jobs = [(e, k) for e in sorted(srcs) for k in range(10)]  # 30 attempts
+    one = [engine.attempt(ALOHA, srcs[e], k, how) for e, k in jobs]
+    together = lockstep.attempts_lockstep(ALOHA, srcs, jobs, how, lanes=8)
+    assert sum(not isinstance(r, str) for r in one) >= 10
+    assert_same_results(one, together)
