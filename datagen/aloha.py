@@ -49,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 import aloha_env
-from datagen.task import Perturbation, Source, Task, rollout, transform_segment
+from datagen.task import Perturbation, Source, Task, recorded, rollout, transform_segment
 from scripted_expert import AlohaExpert
 
 __all__ = [
@@ -313,12 +313,7 @@ def replay(env, start, source: Source, steps: list[Subtask] | None = None) -> tu
             break
         here = {a: np.asarray(obs[XY[a]], np.float64) for a in ARMS}
         act(here, {a: np.zeros(2) for a in ARMS}, grips)
-    ep = {
-        "observation.state": np.asarray(states, np.float32).reshape(-1, aloha_env.OBS_DIM),
-        "action": np.asarray(actions, np.float32).reshape(-1, aloha_env.ACT_DIM),
-        "next.success": np.asarray(succ, bool).reshape(-1, 1),
-        "success": env.success,
-    }
+    ep = recorded(aloha_env, states, actions, succ, env.success)
     if env.success:
         return ep, None
     if out_of_reach:

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 import pusht_env
-from datagen.task import Perturbation, Segment, Source, Task, rotation, transform_segment
+from datagen.task import Perturbation, Segment, Source, Task, recorded, rotation, transform_segment
 from scripted_expert import PushTExpert
 
 __all__ = [
@@ -146,12 +146,7 @@ def replay(env, start, source: Source, segment: Segment | None = None) -> tuple[
             break
         act(a)
         executed += 1
-    ep = {
-        "observation.state": np.asarray(states, np.float32).reshape(-1, pusht_env.OBS_DIM),
-        "action": np.asarray(actions, np.float32).reshape(-1, pusht_env.ACT_DIM),
-        "next.success": np.asarray(succ, bool).reshape(-1, 1),
-        "success": env.success,
-    }
+    ep = recorded(pusht_env, states, actions, succ, env.success)
     if env.success:
         return ep, None
     if blocked:
@@ -266,12 +261,7 @@ def replay_subtasks(
                 break
             act(wp, v)
     planned = not done or env.success
-    ep = {
-        "observation.state": np.asarray(states, np.float32).reshape(-1, pusht_env.OBS_DIM),
-        "action": np.asarray(actions, np.float32).reshape(-1, pusht_env.ACT_DIM),
-        "next.success": np.asarray(succ, bool).reshape(-1, 1),
-        "success": env.success,
-    }
+    ep = recorded(pusht_env, states, actions, succ, env.success)
     if env.success:
         return ep, None
     if blocked:
