@@ -18,8 +18,8 @@ from datagen import engine, shards
 from lerobot_v3 import frame_stats, merge
 from lerobot_v3.dataset import load_arrays, open_dataset
 
-CONFIG = {"task": "pusht", "mode": "resolve", "per_demo": 4, "seed": 0, "pos_sigma": 0.08, "yaw_sigma": 0.5}
-CONFIG["shard_size"] = 5
+CONFIG = {"task": "pusht", "mode": "resolve", "select": "own", "per_demo": 4, "seed": 0}
+CONFIG |= {"pos_sigma": 0.08, "yaw_sigma": 0.5, "shard_size": 5}
 LAYOUT = ("data/chunk_index", "data/file_index", "meta/episodes/chunk_index", "meta/episodes/file_index")
 
 
