@@ -243,10 +243,8 @@ def test_ray_cluster_messages_stay_off_stdout():
     assert all(x.startswith(("result ", "failed ")) for x in lines), p.stdout  # and nothing of Ray's
 
 
-def test_killed_run_is_finished_by_the_same_command(src, reference, tmp_path):
-    out = tmp_path / "killed"
-    cmd = [sys.executable, str(ROOT / "augment_demos.py"), "--src", str(src), "--out", str(out)]
-    cmd += ["--workers", "1", *SETTINGS]
+def killed_after_its_first_shard(cmd: list, out: Path) -> subprocess.Popen:
+    """Run `cmd` (an augment_demos.py run into `out`) and SIGKILL it once its first shard is on disk."""
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 300
     while not list((out / shards.SHARDS_DIR).glob("shard-*")) and proc.poll() is None:
@@ -254,6 +252,14 @@ def test_killed_run_is_finished_by_the_same_command(src, reference, tmp_path):
         time.sleep(0.01)
     os.kill(proc.pid, signal.SIGKILL)
     proc.communicate()
+    return proc
+
+
+def test_killed_run_is_finished_by_the_same_command(src, reference, tmp_path):
+    out = tmp_path / "killed"
+    cmd = [sys.executable, str(ROOT / "augment_demos.py"), "--src", str(src), "--out", str(out)]
+    cmd += ["--workers", "1", *SETTINGS]
+    proc = killed_after_its_first_shard(cmd, out)
     assert proc.returncode == -signal.SIGKILL
     done = sorted(p.name for p in (out / shards.SHARDS_DIR).glob("shard-*"))
     assert 1 <= len(done) < 6 and not (out / "meta").exists()
@@ -619,13 +625,7 @@ def test_aloha_replay_nearest_same_bytes_for_workers_ray_and_resume(aloha_src, t
     out = tmp_path / "killed"
     cmd = [sys.executable, str(ROOT / "augment_demos.py"), *map(str, flags)]
     cmd += ["--out", str(out), "--workers", "1"]
-    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    deadline = time.monotonic() + 300
-    while not list((out / shards.SHARDS_DIR).glob("shard-*")) and proc.poll() is None:
-        assert time.monotonic() < deadline
-        time.sleep(0.01)
-    os.kill(proc.pid, signal.SIGKILL)
-    proc.communicate()
+    proc = killed_after_its_first_shard(cmd, out)
     assert proc.returncode == -signal.SIGKILL and not (out / "meta").exists()
     augment(*cmd[2:])
     assert tree(out) == tree(ref)
