@@ -56,9 +56,7 @@ __all__ = ["PUSHT_ID", "ALOHA_ID", "PushTGym", "AlohaHandoffGym", "LIMIT_SLACK"]
 
 PUSHT_ID = "ch37/PushT-v0"
 ALOHA_ID = "ch37/AlohaHandoff-v0"
-# m past a reach limit: steady full-speed pushing overshoots by ~2 mm (aloha_env), full-speed random actions
-# by up to 13.6 mm (12,000 steps, 30 seeds, np.sign of action_space.sample(); 2026-11-25)
-LIMIT_SLACK = 0.03
+LIMIT_SLACK = aloha_env.LIMIT_SLACK  # m past a reach limit the observation space allows
 SEED_RANGE = 2**63  # reset() without a seed draws the simulator's seed in [0, SEED_RANGE)
 
 

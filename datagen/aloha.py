@@ -112,10 +112,10 @@ FAILURES = {
 }
 # The ranges aloha_env.py documents for its state (STATE_NAMES order, m; closedness 0..1): each
 # end-effector inside its slide joints' reach (plus MuJoCo's soft-limit overshoot: ~2 mm under steady
-# pushing, up to 13.6 mm under full-speed random actions, so REACH_SLACK is gym_envs' 30 mm), the cube
+# pushing, up to 13.6 mm under full-speed random actions: aloha_env.LIMIT_SLACK, 30 mm), the cube
 # and the target where the arms reach, a held cube up to GRASP_RADIUS beyond its gripper. A value
 # outside is no ALOHA state: its attempts could only fail.
-REACH_SLACK = 0.03  # m
+REACH_SLACK = aloha_env.LIMIT_SLACK  # m
 _RX, _LX = aloha_env.RIGHT_X_RANGE, aloha_env.LEFT_X_RANGE
 _OBJ = REACH_SLACK + aloha_env.GRASP_RADIUS
 _X = (_LX[0] - _OBJ, _RX[1] + _OBJ)
