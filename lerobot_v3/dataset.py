@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import itertools
 import json
 import logging
 import math
@@ -282,41 +283,61 @@ def _episode_stats(buf: dict, feats: dict) -> dict:
     a sum's rounding depends on its layout); min, max and quantiles column by column (_quantiles)
     over all features of one dtype at once. An episode of one frame: LeRobot's own code.
     """
+    return _episodes_stats([buf], feats)[0]
+
+
+def _episodes_stats(bufs: list[dict], feats: dict) -> list[dict]:
+    """[_episode_stats(buf, feats) for buf in bufs], the same bits, with one _quantiles call per
+    episode length, dtype and layout: _quantiles works column by column, so the columns of every
+    episode of one length side by side give each episode its own values (a few sorts per shard
+    instead of two per episode, which were most of the writer's time)."""
     from lerobot.datasets.compute_stats import get_feature_stats
 
-    out, groups = {}, {}
-    for k, data in buf.items():
-        if feats[k]["dtype"] in {"string", "language"}:
-            continue
-        if len(data) < 2:
-            out[k] = get_feature_stats(data, axis=0, keepdims=data.ndim == 1)
-            continue
-        x = data.reshape(-1, 1) if data.ndim == 1 else data
-        x = x.astype(np.result_type(x.dtype, np.float32), copy=False)  # as RunningQuantileStats.update
-        n = len(x)
-        mean, mean_sq = np.mean(x, axis=0), np.mean(x**2, axis=0)
-        # its running update with the same batch, mean + (batch mean - mean) * n / n, kept for equal
-        # bits (-0.0 becomes 0.0, inf becomes nan); the batch mean is `mean` itself, not recomputed
-        mean += (mean - mean) * (n / n)
-        mean_sq += (mean_sq - mean_sq) * (n / n)
-        std = np.sqrt(np.maximum(0, mean_sq - mean**2))
-        out[k] = {"min": None, "max": None, "mean": mean, "std": std, "count": np.array([n])}
-        groups.setdefault(x.dtype, []).append((k, x))
-    for members in groups.values():
-        lo, hi, qs = _quantiles(np.concatenate([x for _, x in members], axis=1))
-        at = 0
-        for k, x in members:
-            cols = slice(at, at + x.shape[1])
-            at += x.shape[1]
-            st = out[k]
-            st["min"], st["max"] = lo[cols].copy(), hi[cols].copy()
-            for key, e0, inside, plain in qs:  # LeRobot's np.array of edges alone stays in their dtype
-                st[key] = (
-                    e0[cols].copy() if plain[cols].all() else np.where(plain[cols], e0[cols], inside[cols])
-                )
-            if buf[k].ndim == 1:  # keepdims: (1,) each, as LeRobot reshapes a (T,) column's stats
+    outs, batches = [], {}  # batches: (length, dtype, layout) -> [(episode, its members)]
+    for e, buf in enumerate(bufs):
+        out, groups = {}, {}
+        for k, data in buf.items():
+            if feats[k]["dtype"] in {"string", "language"}:
+                continue
+            if len(data) < 2:
+                out[k] = get_feature_stats(data, axis=0, keepdims=data.ndim == 1)
+                continue
+            x = data.reshape(-1, 1) if data.ndim == 1 else data
+            x = x.astype(np.result_type(x.dtype, np.float32), copy=False)  # as RunningQuantileStats.update
+            n = len(x)
+            mean, mean_sq = np.mean(x, axis=0), np.mean(x**2, axis=0)
+            # its running update with the same batch, mean + (batch mean - mean) * n / n, kept for equal
+            # bits (-0.0 becomes 0.0, inf becomes nan); the batch mean is `mean` itself, not recomputed
+            mean += (mean - mean) * (n / n)
+            mean_sq += (mean_sq - mean_sq) * (n / n)
+            std = np.sqrt(np.maximum(0, mean_sq - mean**2))
+            out[k] = {"min": None, "max": None, "mean": mean, "std": std, "count": np.array([n])}
+            groups.setdefault(x.dtype, []).append((k, x))
+        outs.append(out)
+        for dtype, members in groups.items():
+            layout = tuple((k, x.shape[1]) for k, x in members)
+            batches.setdefault((len(members[0][1]), dtype, layout), []).append((e, members))
+    for (_, _, layout), eps in batches.items():
+        width = sum(w for _, w in layout)  # an episode's columns in the stacked (T, episodes * width)
+        lo, hi, qs = _quantiles(np.concatenate([x for _, members in eps for _, x in members], axis=1))
+        for j, (e, members) in enumerate(eps):
+            at = j * width
+            for k, x in members:
+                cols = slice(at, at + x.shape[1])
+                at += x.shape[1]
+                st = outs[e][k]
+                st["min"], st["max"] = lo[cols].copy(), hi[cols].copy()
+                for key, e0, inside, plain in qs:  # LeRobot's np.array of edges alone stays in their dtype
+                    st[key] = (
+                        e0[cols].copy()
+                        if plain[cols].all()
+                        else np.where(plain[cols], e0[cols], inside[cols])
+                    )
+    for buf, out in zip(bufs, outs):
+        for k, st in out.items():
+            if buf[k].ndim == 1 and len(buf[k]) >= 2:  # keepdims: (1,) each, as LeRobot reshapes (T,) stats
                 out[k] = {name: v.reshape(1) for name, v in st.items()}
-    return out
+    return outs
 
 
 def _episode_columns(e: int, ep: dict, feats, all_feats, *, fps: int, first_frame: int) -> dict:
@@ -406,6 +427,28 @@ def _write_episodes_table(root: Path, table, limit: float, chunks_size: int) -> 
         write_parquet(part, path)
 
 
+STATS_BATCH = 256  # episodes whose stats are computed together (_episodes_stats); bounds the memory held
+
+
+def _stacked_episodes(episodes, feats, all_feats, *, fps: int, task: str):
+    """(e, its columns as save_episode stacks them, its stats) for every episode, in order; the stats
+    of up to STATS_BATCH episodes at a time (_episodes_stats)."""
+    from lerobot.datasets.feature_utils import validate_frame
+
+    it, e, frames = iter(episodes), 0, 0
+    while batch := list(itertools.islice(it, STATS_BATCH)):
+        bufs = []
+        for ep in batch:
+            n = len(ep["action"])
+            if n == 0:
+                raise ValueError(f"episode {e + len(bufs)} has no frames")
+            validate_frame({k: ep[k][0] for k in feats} | {"task": task}, all_feats)  # LeRobot's messages
+            bufs.append(_episode_columns(e + len(bufs), ep, feats, all_feats, fps=fps, first_frame=frames))
+            frames += n
+        yield from zip(range(e, e + len(bufs)), bufs, _episodes_stats(bufs, all_feats))
+        e += len(bufs)
+
+
 def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb: int | None = None) -> None:
     """Write a LeRobot v3 set (no video) in one pass from the episodes' arrays.
 
@@ -424,11 +467,7 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     import pyarrow as pa
     from lerobot.datasets.compute_stats import aggregate_stats
     from lerobot.datasets.dataset_metadata import CODEBASE_VERSION
-    from lerobot.datasets.feature_utils import (
-        create_empty_dataset_info,
-        get_hf_features_from_features,
-        validate_frame,
-    )
+    from lerobot.datasets.feature_utils import create_empty_dataset_info, get_hf_features_from_features
     from lerobot.datasets.io_utils import write_info, write_stats, write_tasks
     from lerobot.utils.constants import DEFAULT_FEATURES
     from lerobot.utils.utils import flatten_dict
@@ -446,13 +485,8 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     parts = {k: [] for k in all_feats}  # the current data file's columns, episode by episode
     roller = ChunkRoller(rows_below(limit, frame_bytes), info.chunks_size)  # LeRobot's rule for data files
     chunk = file = frames = 0
-    for e, ep in enumerate(episodes):
-        n = len(ep["action"])
-        if n == 0:
-            raise ValueError(f"episode {e} has no frames")
-        validate_frame({k: ep[k][0] for k in feats} | {"task": task}, all_feats)  # LeRobot's messages
-        buf = _episode_columns(e, ep, feats, all_feats, fps=fps, first_frame=frames)
-        stats = _episode_stats(buf, all_feats)
+    for e, buf, stats in _stacked_episodes(episodes, feats, all_feats, fps=fps, task=task):
+        n = len(buf["action"])
         ep_stats.append(stats)
         if (where := roller.place(n)) != (chunk, file):  # this episode starts the next file
             _write_data_file(tmp / info.data_path.format(chunk_index=chunk, file_index=file), schema, parts)
