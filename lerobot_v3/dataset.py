@@ -287,10 +287,11 @@ def _episode_stats(buf: dict, feats: dict) -> dict:
 
 
 def _episodes_stats(bufs: list[dict], feats: dict) -> list[dict]:
-    """[_episode_stats(buf, feats) for buf in bufs], the same bits, with one _quantiles call per
-    episode length, dtype and layout: _quantiles works column by column, so the columns of every
-    episode of one length side by side give each episode its own values (a few sorts per shard
-    instead of two per episode, which were most of the writer's time)."""
+    """[_episode_stats(buf, feats) for buf in bufs], the same bits, computed for all episodes of one
+    length, dtype and layout at once: one _quantiles call (it works column by column, so the
+    columns of every such episode side by side give each its own values) and one mean per feature
+    (_column_means keeps each episode's own summation order). A few numpy calls per shard where
+    there were dozens per episode, which were most of the writer's time."""
     from lerobot.datasets.compute_stats import get_feature_stats
 
     outs, batches = [], {}  # batches: (length, dtype, layout) -> [(episode, its members)]
@@ -304,20 +305,22 @@ def _episodes_stats(bufs: list[dict], feats: dict) -> list[dict]:
                 continue
             x = data.reshape(-1, 1) if data.ndim == 1 else data
             x = x.astype(np.result_type(x.dtype, np.float32), copy=False)  # as RunningQuantileStats.update
-            n = len(x)
-            mean, mean_sq = np.mean(x, axis=0), np.mean(x**2, axis=0)
-            # its running update with the same batch, mean + (batch mean - mean) * n / n, kept for equal
-            # bits (-0.0 becomes 0.0, inf becomes nan); the batch mean is `mean` itself, not recomputed
-            mean += (mean - mean) * (n / n)
-            mean_sq += (mean_sq - mean_sq) * (n / n)
-            std = np.sqrt(np.maximum(0, mean_sq - mean**2))
-            out[k] = {"min": None, "max": None, "mean": mean, "std": std, "count": np.array([n])}
+            out[k] = {"min": None, "max": None, "mean": None, "std": None, "count": np.array([len(x)])}
             groups.setdefault(x.dtype, []).append((k, x))
         outs.append(out)
         for dtype, members in groups.items():
             layout = tuple((k, x.shape[1]) for k, x in members)
             batches.setdefault((len(members[0][1]), dtype, layout), []).append((e, members))
-    for (_, _, layout), eps in batches.items():
+    for (n, _, layout), eps in batches.items():
+        for i, (k, _) in enumerate(layout):  # mean and std as RunningQuantileStats computes them
+            mean, mean_sq = _column_means([members[i][1] for _, members in eps])  # (E, D) each
+            # its running update with the same batch, mean + (batch mean - mean) * n / n, kept for equal
+            # bits (-0.0 becomes 0.0, inf becomes nan); the batch mean is `mean` itself, not recomputed
+            mean += (mean - mean) * (n / n)
+            mean_sq += (mean_sq - mean_sq) * (n / n)
+            std = np.sqrt(np.maximum(0, mean_sq - mean**2))
+            for j, (e, _) in enumerate(eps):
+                outs[e][k]["mean"], outs[e][k]["std"] = mean[j], std[j]
         width = sum(w for _, w in layout)  # an episode's columns in the stacked (T, episodes * width)
         lo, hi, qs = _quantiles(np.concatenate([x for _, members in eps for _, x in members], axis=1))
         for j, (e, members) in enumerate(eps):
@@ -328,16 +331,25 @@ def _episodes_stats(bufs: list[dict], feats: dict) -> list[dict]:
                 st = outs[e][k]
                 st["min"], st["max"] = lo[cols].copy(), hi[cols].copy()
                 for key, e0, inside, plain in qs:  # LeRobot's np.array of edges alone stays in their dtype
-                    st[key] = (
-                        e0[cols].copy()
-                        if plain[cols].all()
-                        else np.where(plain[cols], e0[cols], inside[cols])
-                    )
+                    e0_, inside_, plain_ = e0[cols], inside[cols], plain[cols]
+                    st[key] = e0_.copy() if plain_.all() else np.where(plain_, e0_, inside_)
     for buf, out in zip(bufs, outs):
         for k, st in out.items():
             if buf[k].ndim == 1 and len(buf[k]) >= 2:  # keepdims: (1,) each, as LeRobot reshapes (T,) stats
                 out[k] = {name: v.reshape(1) for name, v in st.items()}
     return outs
+
+
+def _column_means(xs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(mean, mean of squares) over axis 0 of each (T, D) array in xs, as np.mean(x, axis=0) gives
+    them bit for bit, stacked (E, D). A sum's rounding depends on its layout: numpy adds a (T, 1)
+    column pairwise (it is contiguous along T) and a (T, D > 1) array row by row, so one column is
+    stacked as rows (E, T) and summed along them, several side by side (T, E * D) and summed down."""
+    if xs[0].shape[1] == 1:
+        x = np.stack([x[:, 0] for x in xs])  # (E, T)
+        return np.mean(x, axis=1)[:, None], np.mean(x**2, axis=1)[:, None]
+    x, cols = np.concatenate(xs, axis=1), xs[0].shape[1]  # (T, E * D)
+    return np.mean(x, axis=0).reshape(-1, cols), np.mean(x**2, axis=0).reshape(-1, cols)
 
 
 def _episode_columns(e: int, ep: dict, feats, all_feats, *, fps: int, first_frame: int) -> dict:

@@ -209,6 +209,7 @@ def test_episode_stats_equal_lerobots_bit_for_bit():
     feats, _ = pusht_case()
     feats = feats | {k: {"dtype": "int64"} for k in ("frame_index", "episode_index", "index", "task_index")}
     feats["timestamp"] = {"dtype": "float32"}
+    feats["next.reward"] = {"dtype": "float32"}  # one column of floats: summed pairwise, not row by row
     rng = np.random.default_rng(7)
     bufs = []
     for e, n in enumerate((1, 2, 3, 7, 9, 30, 99, 100, 101, 400, 30, 100, 1, 30)):
@@ -222,6 +223,7 @@ def test_episode_stats_equal_lerobots_bit_for_bit():
             "observation.environment_state": x[:, 2:5].copy(),
             "action": rng.standard_normal((n, 2)).astype(np.float32),
             "next.success": np.arange(n) == n - 1,
+            "next.reward": rng.standard_normal(n).astype(np.float32),
             "aug.source_episode": np.full(n, e % 3),
             "aug.start": rng.random((n, len(START_NAMES)), dtype=np.float32),
             "timestamp": np.arange(n) / 10,
