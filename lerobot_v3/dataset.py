@@ -321,18 +321,23 @@ def _episodes_stats(bufs: list[dict], feats: dict) -> list[dict]:
             std = np.sqrt(np.maximum(0, mean_sq - mean**2))
             for j, (e, _) in enumerate(eps):
                 outs[e][k]["mean"], outs[e][k]["std"] = mean[j], std[j]
-        width = sum(w for _, w in layout)  # an episode's columns in the stacked (T, episodes * width)
         lo, hi, qs = _quantiles(np.concatenate([x for _, members in eps for _, x in members], axis=1))
-        for j, (e, members) in enumerate(eps):
-            at = j * width
+        firsts = np.cumsum([0] + [w for _ in eps for _, w in layout][:-1])  # each (episode, feature)'s column
+        # per quantile: the edge where LeRobot returns it, else the interpolated value (float64), and
+        # whether a feature's columns are all edges (LeRobot's np.array of edges alone keeps their dtype)
+        qs = [
+            (key, e0, np.where(plain, e0, inside), np.logical_and.reduceat(plain, firsts))
+            for key, e0, inside, plain in qs
+        ]
+        i = 0
+        for e, members in eps:
             for k, x in members:
-                cols = slice(at, at + x.shape[1])
-                at += x.shape[1]
+                cols = slice(firsts[i], firsts[i] + x.shape[1])
                 st = outs[e][k]
-                st["min"], st["max"] = lo[cols].copy(), hi[cols].copy()
-                for key, e0, inside, plain in qs:  # LeRobot's np.array of edges alone stays in their dtype
-                    e0_, inside_, plain_ = e0[cols], inside[cols], plain[cols]
-                    st[key] = e0_.copy() if plain_.all() else np.where(plain_, e0_, inside_)
+                st["min"], st["max"] = lo[cols], hi[cols]
+                for key, e0, mixed, edges_only in qs:
+                    st[key] = e0[cols] if edges_only[i] else mixed[cols]
+                i += 1
     for buf, out in zip(bufs, outs):
         for k, st in out.items():
             if buf[k].ndim == 1 and len(buf[k]) >= 2:  # keepdims: (1,) each, as LeRobot reshapes (T,) stats
@@ -482,7 +487,6 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     from lerobot.datasets.feature_utils import create_empty_dataset_info, get_hf_features_from_features
     from lerobot.datasets.io_utils import write_info, write_stats, write_tasks
     from lerobot.utils.constants import DEFAULT_FEATURES
-    from lerobot.utils.utils import flatten_dict
 
     check_hf_cache()  # as on LeRobot's path: a cache problem is named here, not at the first read
     all_feats = {k: dict(f, shape=tuple(f["shape"])) for k, f in feats.items()} | DEFAULT_FEATURES
@@ -514,7 +518,9 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
             "data/file_index": file,
             "dataset_from_index": frames,
             "dataset_to_index": frames + n,
-        } | {k: v.tolist() for k, v in flatten_dict({"stats": stats}).items()}
+        }
+        # LeRobot's flatten_dict({"stats": stats}) (its keys, in its order) without its recursion per value
+        row |= {f"stats/{k}/{name}": v.tolist() for k, st in stats.items() for name, v in st.items()}
         for k, v in row.items():
             rows.setdefault(k, []).append(v)
         frames += n
