@@ -147,7 +147,7 @@ def point(src: Path, out: Path, n: int, executor: str, a) -> dict:
     cmd = [sys.executable, str(a.checkout / "augment_demos.py"), "--src", str(src), "--out", str(run_dir)]
     cmd += ["--per_demo", str(per_demo), "--workers", str(workers), "--quiet"]
     cmd += ["--shard_size", str(shard_size)] if shard_size else []
-    cmd += ["--seed", str(a.seed)]
+    cmd += ["--seed", str(a.seed), "--mode", a.mode]
     if executor == "ray2":
         with two_ray_nodes(workers) as (address, env):
             m = run_sampled([*cmd, "--ray", address], env)
@@ -197,20 +197,21 @@ def kept_runs(root: Path) -> list:
     return [(s[0], a) for s, a in zip(np.split(arrays["aug.start"], cuts), np.split(arrays["action"], cuts))]
 
 
-def per_demo_costs(task, src: Path, per_demo: int, seed: int, repeats: int) -> dict:
+def per_demo_costs(task, src: Path, per_demo: int, seed: int, repeats: int, mode: str = "resolve") -> dict:
     """Where one core's time goes, in this process, for augment_demos.py's first per_demo attempts of
-    every source episode at `seed` (re-solves): one attempt at a time, in lockstep, the physics floor
-    of the kept frames, and the engine's write of the kept set; `repeats` rounds, alternated, medians."""
+    every source episode at `seed` in `mode`: one attempt at a time, in lockstep (where the task's mode
+    has lanes; else the same one at a time), the physics floor of the kept frames, and the engine's
+    write of the kept set; `repeats` rounds, alternated, medians."""
     sources = engine.sources(load_arrays(src))
     jobs = [(e, k) for e in sorted(sources) for k in range(per_demo)]
     how = Perturbation(seed=seed, pos_sigma=DEFAULTS["aug_pos_sigma"], yaw_sigma=DEFAULTS["aug_yaw_sigma"])
-    engine.attempt(task, sources[jobs[0][0]], 10**6, how)  # warm up
+    engine.attempt(task, sources[jobs[0][0]], 10**6, how, mode=mode)  # warm up
     times = {"one_at_a_time_s": [], "lockstep_s": [], "physics_s": [], "write_s": []}
     for _ in range(repeats):
         t0 = time.perf_counter()
-        one = [engine.attempt(task, sources[e], k, how) for e, k in jobs]
+        one = [engine.attempt(task, sources[e], k, how, mode=mode) for e, k in jobs]
         t1 = time.perf_counter()
-        together = lockstep.attempts_lockstep(task, sources, jobs, how)
+        together = lockstep.attempts_lockstep(task, sources, jobs, how, mode=mode)
         t2 = time.perf_counter()
         kept = [ep for ep in together if not isinstance(ep, str)]
         if sum(not isinstance(ep, str) for ep in one) != len(kept):
@@ -226,6 +227,7 @@ def per_demo_costs(task, src: Path, per_demo: int, seed: int, repeats: int) -> d
     frames = sum(len(ep["action"]) for ep in kept)
     return {
         "task": task.name,
+        "mode": mode,
         "attempts": len(jobs),
         "kept": len(kept),
         "frames": frames,
@@ -287,6 +289,9 @@ def main(argv: list[str]) -> int:
     p.add_argument(
         "--task", choices=sorted(TASKS), default="pusht", help="the task grown (its generator's set)"
     )
+    p.add_argument(
+        "--mode", choices=("resolve", "replay"), default="resolve", help="augment_demos.py's --mode"
+    )
     p.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000, 100000], help="demos per run")
     p.add_argument("--executors", nargs="+", choices=EXECUTORS, default=list(EXECUTORS))
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes / Ray CPUs")
@@ -315,9 +320,10 @@ def main(argv: list[str]) -> int:
             raise DataError(f"could not make the source set at {src}")
     costs = {}
     if a.cost_repeats:
-        costs = c = per_demo_costs(task, src, a.per_demo_costs, a.seed, a.cost_repeats)
+        costs = c = per_demo_costs(task, src, a.per_demo_costs, a.seed, a.cost_repeats, a.mode)
         print(
-            f"this checkout, one core, {task.title}: {c['attempts']} re-solves ({c['frames']} kept frames), "
+            f"this checkout, one core, {task.title} {a.mode}: {c['attempts']} attempts, {c['kept']} kept "
+            f"({c['frames']} frames), "
             f"medians of {a.cost_repeats} in this process: one at a time {c['one_at_a_time_s']:.2f} s, "
             f"lockstep {c['lockstep_s']:.2f} s, physics floor {c['physics_s']:.2f} s, write "
             f"{c['write_s']:.2f} s; lockstep {c['lockstep_over_physics']:.2f}x the physics "
