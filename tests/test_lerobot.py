@@ -1,5 +1,6 @@
-"""LeRobot's own policies on our sets: lerobot-train reads a set we write as it is, and a checkpoint it
-writes is rolled out in our PushT env by tools.lerobot_eval. Training runs only under -m slow."""
+"""LeRobot's own policies on our sets: lerobot-train reads a set we write as it is (PushT and ALOHA,
+generated or grown), and a checkpoint it writes is rolled out in our PushT env by tools.lerobot_eval.
+Training runs only under -m slow."""
 
 import json
 import shutil
@@ -61,6 +62,34 @@ def test_lerobot_train_runs_on_a_set_we_write(grown, tmp_path, policy):
     assert cfg["type"] == policy
     assert cfg["input_features"]["observation.environment_state"]["shape"] == [8]
     shutil.rmtree(tmp_path / "train")  # the default diffusion U-Net's checkpoint is about 1 GB
+
+
+@pytest.fixture(scope="module")
+def grown_aloha(tmp_path_factory):
+    """Two tiny ALOHA sets grown by the data engine from 2 generated demos, 1 attempt each: one
+    re-solved, one replayed subtask by subtask (issue 29)."""
+    d = tmp_path_factory.mktemp("aloha")
+    run_script(ROOT / "gen_demos_aloha.py", "--episodes", "2", "--seed", "0", "--out", d / "src", "--quiet")
+    for mode in ("resolve", "replay"):
+        flags = ["--per_demo", "1", "--mode", mode, "--out", d / mode, "--workers", "1", "--quiet"]
+        run_script(ROOT / "augment_demos.py", "--src", d / "src", *flags)
+    return d
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mode", ["resolve", "replay"])
+def test_lerobot_train_runs_on_a_grown_aloha_set(grown_aloha, tmp_path, mode):
+    """lerobot-train (ACT, 2 steps) on an ALOHA set the engine grew, as it is: 6-D actions and the
+    ALOHA env state among the policy's inputs."""
+    import aloha_env
+
+    model = train(grown_aloha / mode, tmp_path / "train", "act")
+    cfg = json.loads((model / "config.json").read_text())
+    assert cfg["type"] == "act"
+    assert cfg["output_features"]["action"]["shape"] == [aloha_env.ACT_DIM]
+    assert cfg["input_features"]["observation.state"]["shape"] == [len(aloha_env.STATE_NAMES)]
+    env_state = cfg["input_features"]["observation.environment_state"]["shape"]
+    assert env_state == [len(aloha_env.ENV_STATE_NAMES)]
 
 
 @pytest.mark.slow
