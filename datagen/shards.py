@@ -35,6 +35,7 @@ stamp before they are renamed into OUT); a resume that finds anything else refus
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import json
 import platform
@@ -109,8 +110,14 @@ def engine_version() -> str:
 
 
 def versions() -> dict:
-    """The packages whose versions can change a shard's bytes."""
-    return {name: version(name) for name in ("lerobot", "mujoco", "numpy", "pyarrow")}
+    """The packages whose versions can change a shard's bytes (read once per process: every shard's
+    stamp names them, and each lookup parses the package's metadata, ~5 ms)."""
+    return dict(_versions())
+
+
+@functools.cache
+def _versions() -> tuple:
+    return tuple((name, version(name)) for name in ("lerobot", "mujoco", "numpy", "pyarrow"))
 
 
 def source_identity(arrays: dict) -> dict:
