@@ -11,7 +11,6 @@ import functools
 import itertools
 import json
 import logging
-import math
 import os
 import tempfile
 from pathlib import Path
@@ -209,7 +208,7 @@ def _write_lerobot(tmp: Path, *, repo_id, fps, robot_type, task, feats, episodes
     ds.finalize()
 
 
-def _quantiles(x: np.ndarray):
+def _quantiles(x: np.ndarray, counts: np.ndarray | None = None):
     """Min, max and LeRobot's histogram quantiles of each column of x (T >= 2, D), bit for bit.
 
     LeRobot's RunningQuantileStats, fed one batch, bins each column into 5,000 bins between
@@ -219,11 +218,20 @@ def _quantiles(x: np.ndarray):
     value falls: the same bin and the same float operations from one sort, without the 5,000-bin
     histograms and cumsums per column and quantile. Returns lo, hi and per quantile (key, the bin's
     lower edge, the interpolated value, where LeRobot returns the edge itself), each (D,).
+    counts (D,) >= 2: column d holds counts[d] values, its first rows (the rest is padding, never
+    read), so episodes of different lengths share one call; None: every column holds T.
     """
     from lerobot.datasets.compute_stats import DEFAULT_QUANTILES
 
-    n, dims = x.shape
-    lo, hi = np.min(x, axis=0), np.max(x, axis=0)
+    rows, dims = x.shape
+    if counts is None or (counts == rows).all():
+        n = np.full(dims, rows)
+        lo, hi = np.min(x, axis=0), np.max(x, axis=0)
+        srt = np.sort(x, axis=0)
+    else:  # padding as +inf sorts after every value and is below no edge; min and max skip it
+        n, pad = counts, np.arange(rows)[:, None] >= counts[None, :]  # (T, D)
+        srt = np.sort(np.where(pad, np.inf, x), axis=0)
+        lo, hi = np.min(np.where(pad, np.inf, x), axis=0), np.max(np.where(pad, -np.inf, x), axis=0)
     # Edge k of each dimension's np.linspace(lo - 1e-10, hi + 1e-10, 5001), as numpy computes it
     bins = 5000
     start, stop = lo - 1e-10, hi + 1e-10
@@ -238,9 +246,10 @@ def _quantiles(x: np.ndarray):
             k == bins, stop[:, None], np.where(flat[:, None], (kk / bins) * de + s0, kk * st + s0)
         )
 
-    srt = np.sort(x, axis=0)
-    targets = np.array([q * n for q in DEFAULT_QUANTILES])[:, None]  # (Q, 1), LeRobot's q * count
-    v = srt[[math.ceil(q * n) - 1 for q in DEFAULT_QUANTILES]]  # (Q, D): where each count is reached
+    targets = np.array(DEFAULT_QUANTILES)[:, None] * n  # (Q, D), LeRobot's q * count
+    v = np.take_along_axis(
+        srt, np.ceil(targets).astype(np.int64) - 1, axis=0
+    )  # (Q, D): where each is reached
     # Its bin: how many of edges 1..4999 are <= v (edges rise with k). Counted in a window of 9
     # edges around a float64 guess; exact when the window's ends bracket v, else over the whole row.
     with np.errstate(all="ignore"):
@@ -287,14 +296,14 @@ def _episode_stats(buf: dict, feats: dict) -> dict:
 
 
 def _episodes_stats(bufs: list[dict], feats: dict) -> list[dict]:
-    """[_episode_stats(buf, feats) for buf in bufs], the same bits, computed for all episodes of one
-    length, dtype and layout at once: one _quantiles call (it works column by column, so the
-    columns of every such episode side by side give each its own values) and one mean per feature
-    (_column_means keeps each episode's own summation order). A few numpy calls per shard where
-    there were dozens per episode, which were most of the writer's time."""
+    """[_episode_stats(buf, feats) for buf in bufs], the same bits, computed for many episodes at once:
+    one _quantiles call per dtype and layout (it works column by column, so the columns of every
+    episode side by side, each with its own length, give each its own values) and one mean per
+    feature and episode length (_column_means keeps each episode's own summation order). A few
+    numpy calls per shard where there were dozens per episode, which were most of the writer's time."""
     from lerobot.datasets.compute_stats import get_feature_stats
 
-    outs, batches = [], {}  # batches: (length, dtype, layout) -> [(episode, its members)]
+    outs, batches = [], {}  # batches: (dtype, layout) -> [(episode, its members)]
     for e, buf in enumerate(bufs):
         out, groups = {}, {}
         for k, data in buf.items():
@@ -310,18 +319,29 @@ def _episodes_stats(bufs: list[dict], feats: dict) -> list[dict]:
         outs.append(out)
         for dtype, members in groups.items():
             layout = tuple((k, x.shape[1]) for k, x in members)
-            batches.setdefault((len(members[0][1]), dtype, layout), []).append((e, members))
-    for (n, _, layout), eps in batches.items():
-        for i, (k, _) in enumerate(layout):  # mean and std as RunningQuantileStats computes them
-            mean, mean_sq = _column_means([members[i][1] for _, members in eps])  # (E, D) each
-            # its running update with the same batch, mean + (batch mean - mean) * n / n, kept for equal
-            # bits (-0.0 becomes 0.0, inf becomes nan); the batch mean is `mean` itself, not recomputed
-            mean += (mean - mean) * (n / n)
-            mean_sq += (mean_sq - mean_sq) * (n / n)
-            std = np.sqrt(np.maximum(0, mean_sq - mean**2))
-            for j, (e, _) in enumerate(eps):
-                outs[e][k]["mean"], outs[e][k]["std"] = mean[j], std[j]
-        lo, hi, qs = _quantiles(np.concatenate([x for _, members in eps for _, x in members], axis=1))
+            batches.setdefault((dtype, layout), []).append((e, members))
+    for (dtype, layout), eps in batches.items():
+        by_length = {}
+        for e, members in eps:
+            by_length.setdefault(len(members[0][1]), []).append((e, members))
+        for n, same in by_length.items():  # mean and std as RunningQuantileStats computes them
+            for i, (k, _) in enumerate(layout):
+                mean, mean_sq = _column_means([members[i][1] for _, members in same])  # (E, D) each
+                # its running update with the same batch, mean + (batch mean - mean) * n / n, kept for
+                # equal bits (-0.0 becomes 0.0, inf becomes nan); the batch mean is `mean` itself
+                mean += (mean - mean) * (n / n)
+                mean_sq += (mean_sq - mean_sq) * (n / n)
+                std = np.sqrt(np.maximum(0, mean_sq - mean**2))
+                for j, (e, _) in enumerate(same):
+                    outs[e][k]["mean"], outs[e][k]["std"] = mean[j], std[j]
+        width = sum(w for _, w in layout)
+        lengths = np.array([len(members[0][1]) for _, members in eps])
+        stacked = np.zeros((lengths.max(), len(eps) * width), dtype)  # (longest, episodes * width)
+        for j, (_, members) in enumerate(eps):
+            stacked[: lengths[j], j * width : (j + 1) * width] = np.concatenate(
+                [x for _, x in members], axis=1
+            )
+        lo, hi, qs = _quantiles(stacked, np.repeat(lengths, width))
         firsts = np.cumsum([0] + [w for _ in eps for _, w in layout][:-1])  # each (episode, feature)'s column
         # per quantile: the edge where LeRobot returns it, else the interpolated value (float64), and
         # whether a feature's columns are all edges (LeRobot's np.array of edges alone keeps their dtype)
