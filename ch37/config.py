@@ -38,15 +38,17 @@ SIGMA_MAX = 10.0
 MODES = ("resolve", "replay")  # datagen.Task.modes (not imported here: --help stays instant)
 
 
-def flag(default, help: str, *, bound=None, at_most=None, aliases=(), **argparse_kw):
+def flag(default, help: str, *, bound=None, at_most=None, aliases=(), why=None, **argparse_kw):
     """A dataclass field that is one command-line flag --NAME (NAME: the field's name).
 
     default: its value when not given (a list for nargs="+"; True/False make a switch: True an on/off
     pair --NAME/--no-NAME, False a plain --NAME, or on/off with action=argparse.BooleanOptionalAction);
     help: one line, with its unit and why its default; bound: one of BOUNDS, checked value by value;
-    at_most: its largest value; aliases: older spellings (--NAME2) that still work, the same flag;
-    argparse_kw: what else argparse needs (type, choices, nargs, metavar, const, required, action)."""
-    meta = dict(help=help, bound=bound, at_most=at_most, aliases=tuple(aliases), kw=argparse_kw)
+    at_most: its largest value; why: with both a bound and at_most, the error names the whole range and
+    why ("--NAME must be in [1, 1000000] (WHY), got V"); aliases: older spellings (--NAME2) that still
+    work, the same flag; argparse_kw: what else argparse needs (type, choices, nargs, metavar, const,
+    required, action)."""
+    meta = dict(help=help, bound=bound, at_most=at_most, why=why, aliases=tuple(aliases), kw=argparse_kw)
     if bound not in (None, *BOUNDS):
         raise ValueError(f"unknown bound {bound!r}")
     if isinstance(default, list):
@@ -105,15 +107,28 @@ def spelled(argv, cls) -> dict[str, str]:
 def check_fields(args, cls, argv=None) -> None:
     """DataError (one line) for the first flag of `args` out of the bound its field in `cls` declares."""
     said = spelled(sys.argv[1:] if argv is None else [str(t) for t in argv], cls)
+    for f in fields(cls):  # a range with its why: one message for either end
+        lo, hi, why = (
+            {POSITIVE: 1, NON_NEGATIVE: 0}.get(f.metadata["bound"]),
+            f.metadata["at_most"],
+            f.metadata["why"],
+        )
+        for v in _values(args, f.name) if why else []:
+            if not lo <= v <= hi:
+                raise DataError(f"--{said.get(f.name, f.name)} must be in [{lo}, {hi}] ({why}), got {v}")
     by = {b: [f.name for f in fields(cls) if f.metadata["bound"] == b] for b in BOUNDS}
     most = {f.name: f.metadata["at_most"] for f in fields(cls) if f.metadata["at_most"] is not None}
     check(args, by[POSITIVE], by[NON_NEGATIVE], by[FINITE], by[FINITE_POSITIVE], most, said)
 
 
-def parse(cls, argv=None, *, prog=None, description=None, smoke: dict | None = None) -> argparse.Namespace:
+def parse(
+    cls, argv=None, *, prog=None, description=None, smoke: dict | None = None, defaults: dict | None = None
+) -> argparse.Namespace:
     """Parse and check the flags of command dataclass `cls`; a problem is a DataError (one line, exit 2).
-    With `smoke` and --smoke given, smoke's values are the defaults (flags given explicitly win)."""
+    `defaults` replace fields' defaults known only at run time (the embodiment's noise); with `smoke`
+    and --smoke given, smoke's values are the defaults (flags given explicitly win)."""
     p = parser_of(cls, prog, description)
+    p.set_defaults(**(defaults or {}))
     args = p.parse_args(argv)
     if smoke and getattr(args, "smoke", False):
         p.set_defaults(**smoke)

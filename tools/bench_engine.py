@@ -127,11 +127,12 @@ def remove_run(run_dir: Path) -> None:
 
 def point(src: Path, out: Path, n: int, executor: str, a) -> dict:
     workers, shard_size = a.workers, a.shard_size
-    per_demo = math.ceil(n / SOURCE_EPISODES)
+    attempts_per_demo = math.ceil(n / SOURCE_EPISODES)
     run_dir = out / "runs" / f"n{n}-{executor}"
     remove_run(run_dir)  # an earlier run of this tool; anything else is refused
     cmd = [sys.executable, str(a.checkout / "augment_demos.py"), "--src", str(src), "--out", str(run_dir)]
-    cmd += ["--per_demo", str(per_demo), "--workers", str(workers), "--quiet"]
+    # --per_demo: augment_demos' --attempts_per_demo under the spelling every --checkout understands
+    cmd += ["--per_demo", str(attempts_per_demo), "--workers", str(workers), "--quiet"]
     cmd += ["--shard_size", str(shard_size)] if shard_size else []
     if executor == "ray2":
         with two_ray_nodes(workers) as (address, env):
