@@ -30,7 +30,7 @@ SHARD_SIZE = 100  # attempts per shard: a small parquet set, seconds of one core
 
 
 @dataclass(frozen=True)
-class Args(config.Perturbation, config.Mode, config.Parallel):
+class Args(config.Perturbation, config.Mode, config.Ray):
     """Grow a PushT or ALOHA demo set: perturbed starts of every source demo, re-solved or replayed, kept
     on success."""
 
@@ -63,7 +63,8 @@ def parse(argv=None):
     a.workers = config.default_workers() if a.workers is None else a.workers
     if a.select != "own" and a.aug_mode != "replay":
         raise errors.DataError(
-            "--select nearest chooses the source a replay transforms; use it with --aug_mode replay (see --help)"
+            "--select nearest chooses the source a replay transforms; use it with --aug_mode replay "
+            "(see --help)"
         )
     return a
 

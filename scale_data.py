@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ch37 import cli, errors, result_cache
-from ch37.config import NON_NEGATIVE, POSITIVE, Chapter, Mode, flag
+from ch37.config import NON_NEGATIVE, Chapter, Mode, Parallel, flag
 from exercises import ex1_reminder
 
 errors.guard()  # a fixable problem: one line, exit 2; Ctrl-C: exit 130 (demo sets kept, training restarts)
@@ -40,7 +40,7 @@ t_start = time.perf_counter()
 
 
 @dataclass(frozen=True)
-class Args(Chapter, Mode):
+class Args(Chapter, Mode, Parallel):
     """Chapter 3.7: Datasets at Scale (see the module docstring)."""
 
     out: Path = flag(
@@ -59,12 +59,6 @@ class Args(Chapter, Mode):
     smoke: bool = flag(False, "tiny CPU defaults for tests and CI (seconds); explicit flags win")
     rerun: bool = flag(True, "write a Rerun .rrd recording")
     cache: bool = flag(True, "reuse an identical earlier run (same flags and code)")
-    workers: int = flag(
-        None,
-        "processes for re-solves and evaluation physics (default: cores); same results",
-        bound=POSITIVE,
-        type=int,
-    )
 
 
 args = cli.parse(Args)  # every flag checked here: a bad one is one line and exit 2, before any heavy import

@@ -64,7 +64,7 @@ STORED = {"aug_pos_sigma": "pos_sigma", "aug_yaw_sigma": "yaw_sigma"}
 
 # --- 1. parse ---------------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class Args(config.Recipe, config.Perturbation, config.Parallel):
+class Args(config.Recipe, config.Perturbation, config.Ray):
     """The Scale Lab: the chapter's BC recipe at many demo counts, for fresh demos and two data engines."""
 
     # every N >= 12 with N - 12 divisible by 12 (checked in parse(), with why)

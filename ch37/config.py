@@ -3,8 +3,8 @@
 A command's flags are one dataclass (CleanRL's `Args`), its fields made by flag(): default, help (unit and
 why), bound and old spellings in one place, so adding a flag touches one file. The knobs several commands
 share are groups declared here, and a command takes them by inheriting the group: Recipe (the BC training
-recipe), Perturbation and Mode (the data engine's perturbation and mode), Parallel (where the work
-runs); Chapter is the lesson's experiment (scale_data.py adds the run's own flags), and CHAPTER its
+recipe), Perturbation and Mode (the data engine's perturbation and mode), Parallel and Ray (where
+the work runs); Chapter is the lesson's experiment (scale_data.py adds the run's own flags), and CHAPTER its
 defaults, which the tools and exercises read. So the same knob has the same name, default and bound in
 the lesson, augment_demos.py and scale_lab.py. parse() builds the argparse parser from a dataclass (each
 group an argument group, --help showing every flag's default) and checks the bounds, so every flag
@@ -253,11 +253,21 @@ class Mode:
 
 @dataclass(frozen=True)
 class Parallel:
-    """where the work runs (the same results on any of them)"""
+    """how many processes (the same results for any number)"""
 
     workers: int = flag(
-        None, "local processes, or a local Ray's CPUs (default: cores, at most 8)", bound=POSITIVE, type=int
+        None,
+        "worker processes (with --ray: a local Ray's CPUs); same results for any number "
+        "(default: cores, at most 8)",
+        bound=POSITIVE,
+        type=int,
     )
+
+
+@dataclass(frozen=True)
+class Ray(Parallel):
+    """on Ray instead of local processes (the same results)"""
+
     ray: str = flag(
         None,
         "run on Ray: alone, a private local Ray with --workers CPUs; with ADDRESS, join that cluster",
