@@ -21,9 +21,12 @@ Before the first run, write your prediction in exercises/ex1_predict_scale.py: t
 """
 
 # --- region: setup ---
-# Every knob is a flag with its unit and why its default: the run's own below, the experiment's (the
-# recipe, the perturbation, the demo counts) in ch37/config.py's Chapter, the home the Scale Lab,
-# augment_demos.py and the tools share; --help lists them all. --smoke sets tiny CPU defaults.
+# Every knob is a flag, declared once as a field with its unit and why its default (CleanRL's Args):
+# the run's own below; the experiment's in ch37/config.py, shared with the Scale Lab, augment_demos.py
+# and the tools: Chapter (--source_episodes, --aug_per_demo, --aug_tries, --eval_episodes, --seed, the
+# recipe --epochs --batch_size --lr --hidden_dim, the perturbation --aug_pos_sigma --aug_yaw_sigma),
+# Mode (--aug_mode), Parallel (--workers). --help lists them all with their defaults; --smoke sets tiny
+# CPU defaults.
 import sys
 import time
 from dataclasses import dataclass
