@@ -1,15 +1,15 @@
 """Every command's flags, each declared once as a dataclass field, and the one flag checker.
 
-A command's flags are one dataclass (CleanRL's `Args`), its fields made by flag(): default, help (unit and
-why), bound and old spellings in one place, so adding a flag touches one file. The knobs several commands
-share are groups declared here, and a command takes them by inheriting the group: Recipe (the BC training
-recipe), Perturbation and Mode (the data engine's perturbation and mode), Parallel and Ray (where
-the work runs); Chapter is the lesson's experiment (scale_data.py adds the run's own flags), and CHAPTER its
-defaults, which the tools and exercises read. So the same knob has the same name, default and bound in
-the lesson, augment_demos.py and scale_lab.py. parse() builds the argparse parser from a dataclass (each
-group an argument group, --help showing every flag's default) and checks the bounds, so every flag
-problem is one `error:` line and exit 2 (through ch37.errors), before any heavy import. Importing this
-module defines classes and does nothing else.
+A command's flags are one dataclass (CleanRL's `Args`), its fields made by flag(): default, help (unit
+and why), bound and old spellings in one place, so adding a flag touches one file. The knobs several
+commands share are groups declared here, and a command takes a group by inheriting it: Recipe (the BC
+training recipe), Perturbation and Mode (the data engine's perturbation and mode), Parallel and Ray
+(where the work runs). Chapter is the lesson's experiment (scale_data.py's Args adds the run's own
+flags) and CHAPTER its defaults, which the tools and exercises read. So the same knob has the same name,
+default and bound in the lesson, augment_demos.py and scale_lab.py (tests/test_flags.py). parse() builds
+the argparse parser from a dataclass (each group an argument group, --help showing every flag's default)
+and checks the bounds: every flag problem is one `error:` line and exit 2 (through ch37.errors), before
+any heavy import. Importing this module defines classes and does nothing else.
 """
 
 from __future__ import annotations
@@ -210,7 +210,10 @@ class Recipe:
     """the BC training recipe (bc_recipe.py), the lesson's and the Scale Lab's"""
 
     epochs: int = flag(
-        500, "passes over a data set that make a training budget (see measure)", bound=POSITIVE
+        500,
+        "passes over a data set that make a training budget (scale_data.py: see measure; scale_lab.py: "
+        "over the resolve set at N)",
+        bound=POSITIVE,
     )
     batch_size: int = flag(128, "frames per gradient step", bound=POSITIVE)
     lr: float = flag(1e-3, "Adam learning rate, cosine-decayed to 0", bound=FINITE_POSITIVE, at_most=1.0)
