@@ -242,3 +242,17 @@ def test_supports_flag_reads_a_dataclass_field(tmp_path):
     script.write_text('flag("--rerun", action=on_off)\n')  # a script from before the dataclasses
     assert supports_flag(script, "--rerun") and not supports_flag(script, "--cache")
     assert supports_flag(Path(ROOT / "scale_data.py"), "--cache")
+
+
+def test_the_copies_kept_for_an_instant_help_match_their_sources():
+    """--help and flag errors come before any heavy import (MuJoCo), so a few values are copied beside
+    the flags; each copy must equal what it copies."""
+    import aloha_env
+    import datagen
+    import pusht_env
+    from ch37 import cli
+    from datagen import engine
+
+    assert all(t.modes == config.MODES for t in datagen.TASKS.values())
+    assert augment_demos.Args.__dataclass_fields__["select"].metadata["kw"]["choices"] == engine.SELECTS
+    assert (cli.PUSHT_MAX_STEPS, cli.ALOHA_MAX_STEPS) == (pusht_env.MAX_STEPS, aloha_env.MAX_STEPS)
