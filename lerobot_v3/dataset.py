@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import itertools
 import json
 import logging
 import math
@@ -282,41 +283,78 @@ def _episode_stats(buf: dict, feats: dict) -> dict:
     a sum's rounding depends on its layout); min, max and quantiles column by column (_quantiles)
     over all features of one dtype at once. An episode of one frame: LeRobot's own code.
     """
+    return _episodes_stats([buf], feats)[0]
+
+
+def _episodes_stats(bufs: list[dict], feats: dict) -> list[dict]:
+    """[_episode_stats(buf, feats) for buf in bufs], the same bits, computed for all episodes of one
+    length, dtype and layout at once: one _quantiles call (it works column by column, so the
+    columns of every such episode side by side give each its own values) and one mean per feature
+    (_column_means keeps each episode's own summation order). A few numpy calls per shard where
+    there were dozens per episode, which were most of the writer's time."""
     from lerobot.datasets.compute_stats import get_feature_stats
 
-    out, groups = {}, {}
-    for k, data in buf.items():
-        if feats[k]["dtype"] in {"string", "language"}:
-            continue
-        if len(data) < 2:
-            out[k] = get_feature_stats(data, axis=0, keepdims=data.ndim == 1)
-            continue
-        x = data.reshape(-1, 1) if data.ndim == 1 else data
-        x = x.astype(np.result_type(x.dtype, np.float32), copy=False)  # as RunningQuantileStats.update
-        n = len(x)
-        mean, mean_sq = np.mean(x, axis=0), np.mean(x**2, axis=0)
-        # its running update with the same batch, mean + (batch mean - mean) * n / n, kept for equal
-        # bits (-0.0 becomes 0.0, inf becomes nan); the batch mean is `mean` itself, not recomputed
-        mean += (mean - mean) * (n / n)
-        mean_sq += (mean_sq - mean_sq) * (n / n)
-        std = np.sqrt(np.maximum(0, mean_sq - mean**2))
-        out[k] = {"min": None, "max": None, "mean": mean, "std": std, "count": np.array([n])}
-        groups.setdefault(x.dtype, []).append((k, x))
-    for members in groups.values():
-        lo, hi, qs = _quantiles(np.concatenate([x for _, x in members], axis=1))
-        at = 0
-        for k, x in members:
-            cols = slice(at, at + x.shape[1])
-            at += x.shape[1]
-            st = out[k]
-            st["min"], st["max"] = lo[cols].copy(), hi[cols].copy()
-            for key, e0, inside, plain in qs:  # LeRobot's np.array of edges alone stays in their dtype
-                st[key] = (
-                    e0[cols].copy() if plain[cols].all() else np.where(plain[cols], e0[cols], inside[cols])
-                )
-            if buf[k].ndim == 1:  # keepdims: (1,) each, as LeRobot reshapes a (T,) column's stats
+    outs, batches = [], {}  # batches: (length, dtype, layout) -> [(episode, its members)]
+    for e, buf in enumerate(bufs):
+        out, groups = {}, {}
+        for k, data in buf.items():
+            if feats[k]["dtype"] in {"string", "language"}:
+                continue
+            if len(data) < 2:
+                out[k] = get_feature_stats(data, axis=0, keepdims=data.ndim == 1)
+                continue
+            x = data.reshape(-1, 1) if data.ndim == 1 else data
+            x = x.astype(np.result_type(x.dtype, np.float32), copy=False)  # as RunningQuantileStats.update
+            out[k] = {"min": None, "max": None, "mean": None, "std": None, "count": np.array([len(x)])}
+            groups.setdefault(x.dtype, []).append((k, x))
+        outs.append(out)
+        for dtype, members in groups.items():
+            layout = tuple((k, x.shape[1]) for k, x in members)
+            batches.setdefault((len(members[0][1]), dtype, layout), []).append((e, members))
+    for (n, _, layout), eps in batches.items():
+        for i, (k, _) in enumerate(layout):  # mean and std as RunningQuantileStats computes them
+            mean, mean_sq = _column_means([members[i][1] for _, members in eps])  # (E, D) each
+            # its running update with the same batch, mean + (batch mean - mean) * n / n, kept for equal
+            # bits (-0.0 becomes 0.0, inf becomes nan); the batch mean is `mean` itself, not recomputed
+            mean += (mean - mean) * (n / n)
+            mean_sq += (mean_sq - mean_sq) * (n / n)
+            std = np.sqrt(np.maximum(0, mean_sq - mean**2))
+            for j, (e, _) in enumerate(eps):
+                outs[e][k]["mean"], outs[e][k]["std"] = mean[j], std[j]
+        lo, hi, qs = _quantiles(np.concatenate([x for _, members in eps for _, x in members], axis=1))
+        firsts = np.cumsum([0] + [w for _ in eps for _, w in layout][:-1])  # each (episode, feature)'s column
+        # per quantile: the edge where LeRobot returns it, else the interpolated value (float64), and
+        # whether a feature's columns are all edges (LeRobot's np.array of edges alone keeps their dtype)
+        qs = [
+            (key, e0, np.where(plain, e0, inside), np.logical_and.reduceat(plain, firsts))
+            for key, e0, inside, plain in qs
+        ]
+        i = 0
+        for e, members in eps:
+            for k, x in members:
+                cols = slice(firsts[i], firsts[i] + x.shape[1])
+                st = outs[e][k]
+                st["min"], st["max"] = lo[cols], hi[cols]
+                for key, e0, mixed, edges_only in qs:
+                    st[key] = e0[cols] if edges_only[i] else mixed[cols]
+                i += 1
+    for buf, out in zip(bufs, outs):
+        for k, st in out.items():
+            if buf[k].ndim == 1 and len(buf[k]) >= 2:  # keepdims: (1,) each, as LeRobot reshapes (T,) stats
                 out[k] = {name: v.reshape(1) for name, v in st.items()}
-    return out
+    return outs
+
+
+def _column_means(xs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(mean, mean of squares) over axis 0 of each (T, D) array in xs, as np.mean(x, axis=0) gives
+    them bit for bit, stacked (E, D). A sum's rounding depends on its layout: numpy adds a (T, 1)
+    column pairwise (it is contiguous along T) and a (T, D > 1) array row by row, so one column is
+    stacked as rows (E, T) and summed along them, several side by side (T, E * D) and summed down."""
+    if xs[0].shape[1] == 1:
+        x = np.stack([x[:, 0] for x in xs])  # (E, T)
+        return np.mean(x, axis=1)[:, None], np.mean(x**2, axis=1)[:, None]
+    x, cols = np.concatenate(xs, axis=1), xs[0].shape[1]  # (T, E * D)
+    return np.mean(x, axis=0).reshape(-1, cols), np.mean(x**2, axis=0).reshape(-1, cols)
 
 
 def _episode_columns(e: int, ep: dict, feats, all_feats, *, fps: int, first_frame: int) -> dict:
@@ -406,6 +444,28 @@ def _write_episodes_table(root: Path, table, limit: float, chunks_size: int) -> 
         write_parquet(part, path)
 
 
+STATS_BATCH = 256  # episodes whose stats are computed together (_episodes_stats); bounds the memory held
+
+
+def _stacked_episodes(episodes, feats, all_feats, *, fps: int, task: str):
+    """(e, its columns as save_episode stacks them, its stats) for every episode, in order; the stats
+    of up to STATS_BATCH episodes at a time (_episodes_stats)."""
+    from lerobot.datasets.feature_utils import validate_frame
+
+    it, e, frames = iter(episodes), 0, 0
+    while batch := list(itertools.islice(it, STATS_BATCH)):
+        bufs = []
+        for ep in batch:
+            n = len(ep["action"])
+            if n == 0:
+                raise ValueError(f"episode {e + len(bufs)} has no frames")
+            validate_frame({k: ep[k][0] for k in feats} | {"task": task}, all_feats)  # LeRobot's messages
+            bufs.append(_episode_columns(e + len(bufs), ep, feats, all_feats, fps=fps, first_frame=frames))
+            frames += n
+        yield from zip(range(e, e + len(bufs)), bufs, _episodes_stats(bufs, all_feats))
+        e += len(bufs)
+
+
 def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb: int | None = None) -> None:
     """Write a LeRobot v3 set (no video) in one pass from the episodes' arrays.
 
@@ -424,14 +484,9 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     import pyarrow as pa
     from lerobot.datasets.compute_stats import aggregate_stats
     from lerobot.datasets.dataset_metadata import CODEBASE_VERSION
-    from lerobot.datasets.feature_utils import (
-        create_empty_dataset_info,
-        get_hf_features_from_features,
-        validate_frame,
-    )
+    from lerobot.datasets.feature_utils import create_empty_dataset_info, get_hf_features_from_features
     from lerobot.datasets.io_utils import write_info, write_stats, write_tasks
     from lerobot.utils.constants import DEFAULT_FEATURES
-    from lerobot.utils.utils import flatten_dict
 
     check_hf_cache()  # as on LeRobot's path: a cache problem is named here, not at the first read
     all_feats = {k: dict(f, shape=tuple(f["shape"])) for k, f in feats.items()} | DEFAULT_FEATURES
@@ -446,13 +501,8 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     parts = {k: [] for k in all_feats}  # the current data file's columns, episode by episode
     roller = ChunkRoller(rows_below(limit, frame_bytes), info.chunks_size)  # LeRobot's rule for data files
     chunk = file = frames = 0
-    for e, ep in enumerate(episodes):
-        n = len(ep["action"])
-        if n == 0:
-            raise ValueError(f"episode {e} has no frames")
-        validate_frame({k: ep[k][0] for k in feats} | {"task": task}, all_feats)  # LeRobot's messages
-        buf = _episode_columns(e, ep, feats, all_feats, fps=fps, first_frame=frames)
-        stats = _episode_stats(buf, all_feats)
+    for e, buf, stats in _stacked_episodes(episodes, feats, all_feats, fps=fps, task=task):
+        n = len(buf["action"])
         ep_stats.append(stats)
         if (where := roller.place(n)) != (chunk, file):  # this episode starts the next file
             _write_data_file(tmp / info.data_path.format(chunk_index=chunk, file_index=file), schema, parts)
@@ -468,7 +518,9 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
             "data/file_index": file,
             "dataset_from_index": frames,
             "dataset_to_index": frames + n,
-        } | {k: v.tolist() for k, v in flatten_dict({"stats": stats}).items()}
+        }
+        # LeRobot's flatten_dict({"stats": stats}) (its keys, in its order) without its recursion per value
+        row |= {f"stats/{k}/{name}": v.tolist() for k, st in stats.items() for name, v in st.items()}
         for k, v in row.items():
             rows.setdefault(k, []).append(v)
         frames += n

@@ -202,14 +202,17 @@ def test_lerobot_edit_dataset_works_on_our_output(tmp_path):
 def test_episode_stats_equal_lerobots_bit_for_bit():
     """_episode_stats against LeRobot's compute_episode_stats on episodes shaped like a set's, with
     the cases its histogram quantiles treat apart: constant columns, ties, 1-3 frames, bool, int,
-    huge and tiny values; bit for bit, dtypes and shapes included."""
+    huge and tiny values; bit for bit, dtypes and shapes included. The writer's batched
+    _episodes_stats over all of them at once (several of one length, stacked side by side) too."""
     from lerobot.datasets.compute_stats import compute_episode_stats
 
     feats, _ = pusht_case()
     feats = feats | {k: {"dtype": "int64"} for k in ("frame_index", "episode_index", "index", "task_index")}
     feats["timestamp"] = {"dtype": "float32"}
+    feats["next.reward"] = {"dtype": "float32"}  # one column of floats: summed pairwise, not row by row
     rng = np.random.default_rng(7)
-    for e, n in enumerate((1, 2, 3, 7, 9, 30, 99, 100, 101, 400)):
+    bufs = []
+    for e, n in enumerate((1, 2, 3, 7, 9, 30, 99, 100, 101, 400, 30, 100, 1, 30)):
         x = rng.standard_normal((n, 10)).astype(np.float32)
         x[:, 1] = 0.25  # constant: float32 keeps min - 1e-10 == min, numpy's zero-step linspace
         x[:, 2] = np.round(x[:, 2], 1)  # ties
@@ -220,6 +223,7 @@ def test_episode_stats_equal_lerobots_bit_for_bit():
             "observation.environment_state": x[:, 2:5].copy(),
             "action": rng.standard_normal((n, 2)).astype(np.float32),
             "next.success": np.arange(n) == n - 1,
+            "next.reward": rng.standard_normal(n).astype(np.float32),
             "aug.source_episode": np.full(n, e % 3),
             "aug.start": rng.random((n, len(START_NAMES)), dtype=np.float32),
             "timestamp": np.arange(n) / 10,
@@ -230,14 +234,18 @@ def test_episode_stats_equal_lerobots_bit_for_bit():
             "index": np.arange(3_200_000 + 1000 * e, 3_200_000 + 1000 * e + n),
             "task_index": np.zeros(n, dtype=np.int64),
         }
-        ours, theirs = lerobot_io._episode_stats(buf, feats), compute_episode_stats(buf, feats)
-        assert list(ours) == list(theirs)
-        for key in theirs:
-            assert list(ours[key]) == list(theirs[key])
-            for st in theirs[key]:
-                a, b = ours[key][st], theirs[key][st]
-                assert a.dtype == b.dtype and a.shape == b.shape, (key, st, n)
-                np.testing.assert_array_equal(a, b, err_msg=f"{key} {st} {n} frames")
+        bufs.append(buf)
+    batched = lerobot_io._episodes_stats(bufs, feats)
+    for buf, together in zip(bufs, batched, strict=True):
+        n, theirs = len(buf["action"]), compute_episode_stats(buf, feats)
+        for ours in (lerobot_io._episode_stats(buf, feats), together):
+            assert list(ours) == list(theirs)
+            for key in theirs:
+                assert list(ours[key]) == list(theirs[key])
+                for st in theirs[key]:
+                    a, b = ours[key][st], theirs[key][st]
+                    assert a.dtype == b.dtype and a.shape == b.shape, (key, st, n)
+                    np.testing.assert_array_equal(a, b, err_msg=f"{key} {st} {n} frames")
 
 
 def test_one_pass_writer_splits_files_as_lerobot_names_them(tmp_path):

@@ -1,7 +1,9 @@
-"""Validated demos per second of the data engine, end to end: local processes, Ray, two Ray nodes.
+"""Validated demos per second of the data engine, end to end: local processes, Ray, two Ray nodes,
+each beside the cost of its own physics.
 
     python -m tools.bench_engine                                  # 10^3, 10^4, 10^5 demos; local, ray, ray2
     python -m tools.bench_engine --sizes 1000 --executors local   # quicker
+    python -m tools.bench_engine --task aloha --costs_only        # where one core's time goes (ALOHA)
 
 Each point is one real `augment_demos.py` run (re-solve + shard write + merge + stats) from a
 12-episode gen_demos_pusht.py set, timed from outside, with the peak memory of its process tree
@@ -11,14 +13,23 @@ machine (`ray start --head` and a second `ray start --address`, --workers / 2 CP
 run joins with `--ray ADDRESS`. Runs of one size must give the same bytes on every executor; the
 table says whether they did. Then an estimate for 10^5 and 10^6 demos on 64 and 1,024 cores from
 the measured per-core rate and the measured merge cost per demo (assumptions printed beside it).
-Writes OUT/bench_engine.json (default outputs/bench_engine); the runs' own folders are removed.
-Asserts nothing: the figures are for docs/engine.md.
+The physics floor: the env alone stepped through the very frames a run kept, from their recorded
+starts (aug.start, the task's place()) with their recorded actions; no expert, no recording, no
+writing. A row's "x phys" is the run's generation worker-seconds (the shard writes included) over
+that floor: 1.0 would be a generator that costs only its physics. First, in this process, the same
+split for the first --per_demo_costs attempts of every source episode: one attempt at a time
+(datagen.engine.attempt), in lockstep (datagen.lockstep.attempts_lockstep), the floor, and the
+write of the kept set (datagen.engine.save), each run --cost_repeats times alternated, medians.
+Writes OUT/bench_engine.json (default outputs/bench_engine; bench_engine_costs.json with
+--costs_only); the runs' own folders are removed. Asserts nothing: the figures are for
+docs/engine.md.
 """
 
 from __future__ import annotations
 
 import contextlib
 import hashlib
+import importlib
 import json
 import math
 import os
@@ -30,12 +41,13 @@ import tempfile
 import time
 from pathlib import Path
 
-import gen_demos_pusht
+import numpy as np
+
 from ch37 import ROOT, errors
 from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
 from ch37.ownership import dump_json, is_ours, read_stamp, round_floats, write_atomic
-from datagen import PUSHT, Perturbation, engine, shards
+from datagen import TASKS, Perturbation, engine, lockstep, shards
 from lerobot_v3.dataset import load_arrays
 from tools.common import parser, provenance
 
@@ -48,6 +60,8 @@ TABLE = {  # printed column: row key
     "merge %": "merge_pct",
     "demos/s": "demos_per_s",
     "/worker": "generate_demos_per_s_per_worker",
+    "phys s": "physics_s",
+    "x phys": "gen_over_physics",
 }
 EXECUTORS = ("local", "ray", "ray2")  # ray2: two Ray nodes on this machine, joined by address
 
@@ -134,6 +148,7 @@ def point(src: Path, out: Path, n: int, executor: str, a) -> dict:
     # --per_demo: augment_demos' --attempts_per_demo under the spelling every --checkout understands
     cmd += ["--per_demo", str(attempts_per_demo), "--workers", str(workers), "--quiet"]
     cmd += ["--shard_size", str(shard_size)] if shard_size else []
+    cmd += ["--seed", str(a.seed)]
     if executor == "ray2":
         with two_ray_nodes(workers) as (address, env):
             m = run_sampled([*cmd, "--ray", address], env)
@@ -155,30 +170,73 @@ def point(src: Path, out: Path, n: int, executor: str, a) -> dict:
     }
     row |= {"generate_demos_per_s_per_worker": rep["kept"] / (gen - start) / workers}
     row |= {"shard_size": rep["settings"]["shard_size"], "sha256": tree_digest(run_dir)}
+    # the run's generation worker-seconds (its shard writes included) over its kept frames' physics
+    row["physics_s"] = physics_floor(TASKS[a.task], kept_runs(run_dir)) if rep["kept"] else math.nan
+    row["gen_over_physics"] = (gen - start) * workers / row["physics_s"]
     row |= {"summary": m.pop("stdout").strip().splitlines()[-1], **m}  # m: the peak RSS
     remove_run(run_dir)
     return row
 
 
-def per_demo_costs(src: Path, n: int = 100) -> dict:
-    """Where one core's time per kept demo goes, in this process: the re-solve vs LeRobot's write."""
-    sources = engine.sources(load_arrays(src))
-    jobs = [(e, k) for k in range(n) for e in sources][:n]
-    how = Perturbation(seed=0, pos_sigma=DEFAULTS["aug_pos_sigma"], yaw_sigma=DEFAULTS["aug_yaw_sigma"])
-    engine.attempt(PUSHT, sources[jobs[0][0]], 10**6, how)  # warm up
+def physics_floor(task, runs) -> float:
+    """Seconds the env alone takes over kept frames: for each (start, actions (T, act_dim)) in `runs`,
+    task.place(env, start) then env.step per action; no expert, no recording, no writing."""
+    env = task.make_env()
+    runs = [([float(v) for v in start], list(actions)) for start, actions in runs]
     t0 = time.perf_counter()
-    eps = [engine.attempt(PUSHT, sources[e], k, how) for e, k in jobs]
-    t1 = time.perf_counter()
-    eps = [ep for ep in eps if not isinstance(ep, str)]
-    with tempfile.TemporaryDirectory() as tmp:  # the engine's own writer, whatever columns it adds
-        engine.save(PUSHT, Path(tmp) / "warm", eps[:2], repo_id="local/x", stamp={})
+    for start, actions in runs:
+        task.place(env, start)
+        for act in actions:
+            env.step(act)
+    return time.perf_counter() - t0
+
+
+def kept_runs(root: Path) -> list:
+    """(recorded start, recorded actions) of every episode of an engine run's merged set."""
+    arrays = load_arrays(root, keys=("episode_index", "action", "aug.start"))
+    cuts = np.flatnonzero(np.diff(arrays["episode_index"])) + 1
+    return [(s[0], a) for s, a in zip(np.split(arrays["aug.start"], cuts), np.split(arrays["action"], cuts))]
+
+
+def per_demo_costs(task, src: Path, per_demo: int, seed: int, repeats: int) -> dict:
+    """Where one core's time goes, in this process, for augment_demos.py's first per_demo attempts of
+    every source episode at `seed` (re-solves): one attempt at a time, in lockstep, the physics floor
+    of the kept frames, and the engine's write of the kept set; `repeats` rounds, alternated, medians."""
+    sources = engine.sources(load_arrays(src))
+    jobs = [(e, k) for e in sorted(sources) for k in range(per_demo)]
+    how = Perturbation(seed=seed, pos_sigma=DEFAULTS["aug_pos_sigma"], yaw_sigma=DEFAULTS["aug_yaw_sigma"])
+    engine.attempt(task, sources[jobs[0][0]], 10**6, how)  # warm up
+    times = {"one_at_a_time_s": [], "lockstep_s": [], "physics_s": [], "write_s": []}
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        one = [engine.attempt(task, sources[e], k, how) for e, k in jobs]
+        t1 = time.perf_counter()
+        together = lockstep.attempts_lockstep(task, sources, jobs, how)
         t2 = time.perf_counter()
-        engine.save(PUSHT, Path(tmp) / "set", eps, repo_id="local/x", stamp={})
-        t3 = time.perf_counter()
+        kept = [ep for ep in together if not isinstance(ep, str)]
+        if sum(not isinstance(ep, str) for ep in one) != len(kept):
+            raise DataError("lockstep kept another set than one attempt at a time")
+        physics = physics_floor(task, ((ep["aug.start"][0], ep["action"]) for ep in kept))
+        with tempfile.TemporaryDirectory() as tmp:  # the engine's own writer, whatever columns it adds
+            t3 = time.perf_counter()
+            engine.save(task, Path(tmp) / "set", kept, repo_id="local/x", stamp={})
+            t4 = time.perf_counter()
+        for key, v in zip(times, (t1 - t0, t2 - t1, physics, t4 - t3)):
+            times[key].append(v)
+    med = {k: float(np.median(v)) for k, v in times.items()}
+    frames = sum(len(ep["action"]) for ep in kept)
     return {
-        "attempts": n,
-        "resolve_ms_per_attempt": (t1 - t0) / n * 1e3,
-        "write_ms_per_demo": (t3 - t2) / len(eps) * 1e3,
+        "task": task.name,
+        "attempts": len(jobs),
+        "kept": len(kept),
+        "frames": frames,
+        **med,
+        "runs": times,
+        "one_at_a_time_over_physics": med["one_at_a_time_s"] / med["physics_s"],
+        "lockstep_over_physics": med["lockstep_s"] / med["physics_s"],
+        "lockstep_and_write_over_physics": (med["lockstep_s"] + med["write_s"]) / med["physics_s"],
+        "physics_us_per_frame": med["physics_s"] / frames * 1e6,
+        "write_us_per_frame": med["write_s"] / frames * 1e6,
     }
 
 
@@ -227,29 +285,51 @@ def estimate(rows: list[dict], cores_list=(64, 1024)) -> dict:
 
 def main(argv: list[str]) -> int:
     p = parser("bench_engine", __doc__)
+    p.add_argument(
+        "--task", choices=sorted(TASKS), default="pusht", help="the task grown (its generator's set)"
+    )
     p.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000, 100000], help="demos per run")
     p.add_argument("--executors", nargs="+", choices=EXECUTORS, default=list(EXECUTORS))
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes / Ray CPUs")
     p.add_argument("--shard_size", type=int, help="attempts per shard (default: augment_demos.py's)")
-    p.add_argument("--src", type=Path, help="a PushT set (default: a 12-episode set made under --out)")
+    p.add_argument(
+        "--seed", type=int, default=1, help="augment_demos.py's --seed for every run and the costs"
+    )
+    p.add_argument("--per_demo_costs", type=int, default=50, help="attempts per source episode of the costs")
+    p.add_argument("--cost_repeats", type=int, default=3, help="rounds of the in-process costs (0: none)")
+    p.add_argument("--costs_only", action="store_true", help="only the in-process costs (no runs)")
+    p.add_argument("--src", type=Path, help="a set of --task (default: a 12-episode set made under --out)")
     p.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_engine")
     help = "the checkout whose augment_demos.py runs (default this one); another commit's for a before/after"
     p.add_argument("--checkout", type=Path, default=ROOT, help=help)
     a = p.parse_args(argv)
-    check(a, positive=("workers",))
+    check(a, positive=("workers", "per_demo_costs"), non_negative=("seed", "cost_repeats"))
     if not (a.checkout / "augment_demos.py").is_file():
         raise DataError(f"--checkout {a.checkout} has no augment_demos.py")
     if min(a.sizes) < 1:
         raise DataError("--sizes must be positive")
-    src = a.src or a.out / f"src_pusht_seed0_ep{SOURCE_EPISODES}"
+    task = TASKS[a.task]
+    src = a.src or a.out / f"src_{task.name}_seed0_ep{SOURCE_EPISODES}"
     if a.src is None and not (src / "meta" / "info.json").exists():
-        if gen_demos_pusht.main(["--episodes", str(SOURCE_EPISODES), "--out", str(src), "--quiet"]) != 0:
+        generator = importlib.import_module(task.generator.removesuffix(".py"))
+        if generator.main(["--episodes", str(SOURCE_EPISODES), "--out", str(src), "--quiet"]) != 0:
             raise DataError(f"could not make the source set at {src}")
-    costs = per_demo_costs(src)
-    print(
-        f"this checkout, one core: re-solve {costs['resolve_ms_per_attempt']:.1f} ms an attempt, "
-        f"write (write_dataset) {costs['write_ms_per_demo']:.1f} ms a demo"
-    )
+    costs = {}
+    if a.cost_repeats:
+        costs = c = per_demo_costs(task, src, a.per_demo_costs, a.seed, a.cost_repeats)
+        print(
+            f"this checkout, one core, {task.title}: {c['attempts']} re-solves ({c['frames']} kept frames), "
+            f"medians of {a.cost_repeats} in this process: one at a time {c['one_at_a_time_s']:.2f} s, "
+            f"lockstep {c['lockstep_s']:.2f} s, physics floor {c['physics_s']:.2f} s, write "
+            f"{c['write_s']:.2f} s; lockstep {c['lockstep_over_physics']:.2f}x the physics "
+            f"({c['lockstep_and_write_over_physics']:.2f}x with the write), "
+            f"one at a time {c['one_at_a_time_over_physics']:.2f}x"
+        )
+    if a.costs_only:
+        result = {"per_demo_costs": costs, "provenance": provenance(a.script)}
+        path = write_atomic(a.out / "bench_engine_costs.json", dump_json(round_floats(result, 4)))
+        print(f"wrote {path}")
+        return 0
     rows = []
     head = " ".join(f"{h:>7s}" for h in TABLE)
     print(f"{'demos':>6s} {'executor':8s} {'kept':>6s} {head} {'RSS MB driver/largest/tree':>27s}")
@@ -274,7 +354,13 @@ def main(argv: list[str]) -> int:
             )
     print("assumptions: " + "; ".join(est["assumptions"]))
     same = {str(n): len({r["sha256"] for r in rows if r["demos_requested"] == n}) == 1 for n in a.sizes}
-    result = {"per_demo_costs": costs, "runs": rows, "estimate": est, "checkout": str(a.checkout.resolve())}
+    result = {
+        "task": task.name,
+        "per_demo_costs": costs,
+        "runs": rows,
+        "estimate": est,
+        "checkout": str(a.checkout.resolve()),
+    }
     result |= {"provenance": provenance(a.script), "identical_across_executors": same}
     path = write_atomic(a.out / "bench_engine.json", dump_json(round_floats(result, 4)))
     print(f"wrote {path}")
