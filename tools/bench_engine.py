@@ -198,12 +198,13 @@ def kept_runs(root: Path) -> list:
     return [(s[0], a) for s, a in zip(np.split(arrays["aug.start"], cuts), np.split(arrays["action"], cuts))]
 
 
-def per_demo_costs(task, src: Path, per_demo: int, seed: int, repeats: int) -> dict:
-    """Where one core's time goes, in this process, for augment_demos.py's first per_demo attempts of
-    every source episode at `seed` (re-solves): one attempt at a time, in lockstep, the physics floor
-    of the kept frames, and the engine's write of the kept set; `repeats` rounds, alternated, medians."""
+def per_demo_costs(task, src: Path, attempts_per_demo: int, seed: int, repeats: int) -> dict:
+    """Where one core's time goes, in this process, for augment_demos.py's first attempts_per_demo
+    attempts of every source episode at `seed` (re-solves): one attempt at a time, in lockstep, the
+    physics floor of the kept frames, and the engine's write of the kept set; `repeats` rounds,
+    alternated, medians."""
     sources = engine.sources(load_arrays(src))
-    jobs = [(e, k) for e in sorted(sources) for k in range(per_demo)]
+    jobs = [(e, k) for e in sorted(sources) for k in range(attempts_per_demo)]
     how = Perturbation(seed=seed, pos_sigma=DEFAULTS["aug_pos_sigma"], yaw_sigma=DEFAULTS["aug_yaw_sigma"])
     engine.attempt(task, sources[jobs[0][0]], 10**6, how)  # warm up
     times = {"one_at_a_time_s": [], "lockstep_s": [], "physics_s": [], "write_s": []}
