@@ -1,7 +1,7 @@
 """Grow a PushT or ALOHA demo set: perturbed starts of every source demo, re-solved or replayed, kept on
 success.
 
-    python augment_demos.py --src my_pusht --per_demo 100 --out big [--workers N | --ray [ADDRESS]]
+    python augment_demos.py --src my_pusht --attempts_per_demo 100 --out big [--workers N | --ray [ADDRESS]]
 
 --src is any LeRobot v3 set of a task the engine knows (datagen.TASKS), the task read from the set's
 robot_type (or its widths): PushT (observation.state float32[10], action float32[2], laid out as in
@@ -19,82 +19,76 @@ the merge in lerobot_v3/merge.py, local processes or Ray in ch37.parallel.map_jo
 
 from __future__ import annotations
 
-import os
+from dataclasses import dataclass
 from pathlib import Path
 
 from ch37 import config, errors
+from ch37.config import NON_NEGATIVE, POSITIVE, flag
 from ch37.seeds import MAX_SEED, SEED_BLOCK
 
 SHARD_SIZE = 100  # attempts per shard: a small parquet set, seconds of one core (docs/engine.md)
 
 
-def parse(argv=None):
-    p = config.parser(__doc__.split("\n\n")[0], prog="augment_demos.py")
-    p.add_argument("--src", type=Path, required=True, help="source LeRobot v3 PushT set (never modified)")
-    p.add_argument(
-        "--per_demo",
-        type=int,
-        default=10,
-        help=f"attempts (perturbed starts) per source episode (default 10, at most {SEED_BLOCK:,})",
+@dataclass(frozen=True)
+class Args(config.Perturbation, config.Mode, config.Ray):
+    """Grow a PushT or ALOHA demo set: perturbed starts of every source demo, re-solved or replayed, kept
+    on success."""
+
+    src: Path = flag(
+        None, "source LeRobot v3 set of a task the engine knows (never modified)", type=Path, required=True
     )
-    p.add_argument(
-        "--out", type=Path, required=True, help="output folder: new, or a run of this command to finish"
+    # Attempts, not kept demos: every perturbed start is tried once and kept only on success, so a run
+    # keeps yield x this many per source (the lesson's --aug_per_demo counts kept demos instead).
+    attempts_per_demo: int = flag(
+        10,
+        f"attempts (perturbed starts) per source episode, every one made (at most {SEED_BLOCK:,})",
+        bound=POSITIVE,
+        at_most=SEED_BLOCK,  # an attempt index stays in one seed block, like an episode's
+        aliases=("per_demo",),
     )
-    p.add_argument("--seed", type=int, default=0, help=">= 0; seeds draw disjoint perturbations (default 0)")
-    sigmas = config.CHAPTER.aug_pos_sigma, config.CHAPTER.aug_yaw_sigma
-    most = f"(at most {config.SIGMA_MAX:g})"
-    p.add_argument(
-        "--pos_sigma", type=float, default=sigmas[0], help=f"m; block and pusher xy noise std {most}"
-    )
-    p.add_argument("--yaw_sigma", type=float, default=sigmas[1], help=f"rad; block yaw noise std {most}")
-    p.add_argument(
-        "--mode",
-        choices=("resolve", "replay"),  # datagen.Task.modes (not imported here: --help stays instant)
-        default="resolve",
-        help="resolve: the expert solves each start; replay: the source path transformed into the new "
-        "object poses, executed open-loop, kept only on success (MimicGen's move; on PushT most attempts "
-        "fail here; ALOHA replays subtask by subtask)",
-    )
-    p.add_argument(
-        "--select",
+    out: Path = flag(None, "output folder: new, or a run of this command to finish", type=Path, required=True)
+    seed: int = flag(0, ">= 0; seeds draw disjoint perturbations", bound=NON_NEGATIVE, at_most=MAX_SEED)
+    select: str = flag(
+        "own",
+        "the source a replay transforms: own (the attempt's own source demo) or nearest (the source demo "
+        "whose objects start nearest the new start: MimicGen's selection); --aug_mode replay",
         choices=("own", "nearest"),  # datagen.engine.SELECTS
-        default="own",
-        help="the source a replay transforms: own (the attempt's own source demo, the default) or nearest "
-        "(the source demo whose objects start nearest the new start: MimicGen's selection); --mode replay",
     )
-    p.add_argument(
-        "--workers", type=int, default=min(8, os.cpu_count() or 1), help="local processes (default: cores)"
-    )
-    p.add_argument(
-        "--ray",
-        nargs="?",
-        const="local",
-        metavar="ADDRESS",
-        help="run on Ray: alone, a local Ray with --workers CPUs; with ADDRESS, join that cluster",
-    )
-    p.add_argument(
-        "--shard_size",
-        type=int,
-        default=SHARD_SIZE,
-        help="attempts per shard (default 100); part of the run's settings",
-    )
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    a = p.parse_args(argv)
-    positive, finite = ("per_demo", "workers", "shard_size"), ("pos_sigma", "yaw_sigma")
-    at_most = {"seed": MAX_SEED, "pos_sigma": config.SIGMA_MAX, "yaw_sigma": config.SIGMA_MAX}
-    at_most["per_demo"] = SEED_BLOCK  # an attempt index stays in one seed block, like an episode's
-    config.check(a, positive=positive, non_negative=("seed",), finite=finite, at_most=at_most)
-    if a.select != "own" and a.mode != "replay":
-        p.error("--select nearest chooses the source a replay transforms; use it with --mode replay")
+    shard_size: int = flag(SHARD_SIZE, "attempts per shard; part of the run's settings", bound=POSITIVE)
+    quiet: bool = flag(False, "no progress bar")
+
+
+def parse(argv=None):
+    a = config.parse(Args, argv, prog="augment_demos.py", description=__doc__.split("\n\n")[0])
+    a.workers = config.default_workers() if a.workers is None else a.workers
+    if a.select != "own" and a.aug_mode != "replay":
+        raise errors.DataError(
+            "--select nearest chooses the source a replay transforms; use it with --aug_mode replay "
+            "(see --help)"
+        )
     return a
+
+
+def settings(a) -> dict:
+    """The run's settings (datagen.shards.SETTINGS) from the flags: the engine's own names for them."""
+    return dict(
+        mode=a.aug_mode,
+        select=a.select,
+        attempts_per_demo=a.attempts_per_demo,
+        seed=a.seed,
+        pos_sigma=a.aug_pos_sigma,
+        yaw_sigma=a.aug_yaw_sigma,
+        shard_size=a.shard_size,
+    )
 
 
 def main(argv=None) -> int:
     a = parse(argv)
     from datagen import shards
 
-    settings = {k: getattr(a, k) for k in shards.SETTINGS}
-    r = shards.run(shards.task_of(a.src), a.src, a.out, settings, workers=a.workers, ray=a.ray, quiet=a.quiet)
+    r = shards.run(
+        shards.task_of(a.src), a.src, a.out, settings(a), workers=a.workers, ray=a.ray, quiet=a.quiet
+    )
     made, reused = r.get("kept_this_run", r["kept"]), r["shards"]["reused"]
     rate = f" in {r['seconds']:.1f} s ({r['demos_per_s']:.1f} demos/s)"
     if reused:  # a resumed run: what it made now (and its rate) apart from what an earlier run made

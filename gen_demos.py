@@ -6,13 +6,43 @@ Every problem a user can fix is one line and exit 2, Ctrl-C 130.
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 from pathlib import Path
 
 from ch37 import config
+from ch37.config import FINITE, NON_NEGATIVE, POSITIVE, flag
 from ch37.errors import DataError, run_main
 from ch37.seeds import MAX_SEED, SEED_BLOCK
 from datagen import Embodiment, check_gl, generate
 from lerobot_v3 import IMAGE_SIZE
+
+
+@dataclass(frozen=True)
+class Args:
+    """Generate expert demos as a local LeRobot v3 dataset."""
+
+    episodes: int = flag(
+        50,
+        "number of episodes to roll out (default 50)",
+        bound=POSITIVE,
+        at_most=SEED_BLOCK,
+        why="the demo seeds of one --seed",
+    )
+    seed: int = flag(
+        0,
+        "dataset seed >= 0; seeds never share an episode",
+        bound=NON_NEGATIVE,
+        at_most=MAX_SEED,
+        why="every env seed fits in 63 bits",
+    )
+    out: Path = flag(None, "a new dataset folder", type=Path)
+    noise: float = flag(0.0, "std of Gaussian action noise, m/s", bound=FINITE)
+    video: bool = flag(
+        False,
+        f"also record a {IMAGE_SIZE}x{IMAGE_SIZE} top-down video (needs a headless GL backend)",
+        action=argparse.BooleanOptionalAction,
+    )
+    quiet: bool = flag(False, "no progress bar")
 
 
 def main(emb: Embodiment, argv=None) -> int:
@@ -23,26 +53,13 @@ def main(emb: Embodiment, argv=None) -> int:
 def _main(emb: Embodiment, argv=None) -> int:
     from ch37.ownership import check_out_path, holds_data
 
-    p = config.parser(f"Generate {emb.name} expert demos as a local LeRobot v3 dataset.")
-    p.add_argument("--episodes", type=int, default=50, help="number of episodes to roll out (default 50)")
-    p.add_argument("--seed", type=int, default=0, help="dataset seed >= 0; seeds never share an episode")
-    p.add_argument("--out", type=Path, default=Path(f"outputs/demos/{emb.name}"), help="a new dataset folder")
-    p.add_argument("--noise", type=float, default=emb.default_noise, help="std of Gaussian action noise, m/s")
-    p.add_argument(
-        "--video",
-        action=argparse.BooleanOptionalAction,
-        default=False,
-        help=f"also record a {IMAGE_SIZE}x{IMAGE_SIZE} top-down video (needs a headless GL backend)",
+    doc = f"Generate {emb.name} expert demos as a local LeRobot v3 dataset."
+    a = config.parse(
+        Args,
+        argv,
+        description=doc,
+        defaults=dict(out=Path(f"outputs/demos/{emb.name}"), noise=emb.default_noise),
     )
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    a = p.parse_args(argv)
-    if not 0 < a.episodes <= SEED_BLOCK:
-        raise DataError(
-            f"--episodes must be in [1, {SEED_BLOCK}] (the demo seeds of one --seed), got {a.episodes}"
-        )
-    if not 0 <= a.seed <= MAX_SEED:
-        raise DataError(f"--seed must be in [0, {MAX_SEED}] (every env seed fits in 63 bits), got {a.seed}")
-    config.check(a, finite=("noise",))
     if holds_data(a.out):
         raise DataError(f"{a.out} already holds data; pick another --out (nothing was touched)")
     if problem := check_out_path(a.out, "--out") or (check_gl() if a.video else None):

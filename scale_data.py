@@ -21,82 +21,50 @@ Before the first run, write your prediction in exercises/ex1_predict_scale.py: t
 """
 
 # --- region: setup ---
-# Every knob is a flag with its unit and why its default (the defaults live in ch37/config.py, the
-# one home the other commands share); --smoke sets tiny CPU defaults.
+# Every knob is a flag, declared once as a field with its unit and why its default (CleanRL's Args):
+# the run's own below; the experiment's in ch37/config.py, shared with the Scale Lab, augment_demos.py
+# and the tools: Chapter (--source_episodes, --aug_per_demo, --aug_tries, --eval_episodes, --seed, the
+# recipe --epochs --batch_size --lr --hidden_dim, the perturbation --aug_pos_sigma --aug_yaw_sigma),
+# Mode (--aug_mode), Parallel (--workers). --help lists them all with their defaults; --smoke sets tiny
+# CPU defaults.
 import sys
 import time
-from argparse import BooleanOptionalAction as on_off
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ch37 import cli, errors, result_cache
-from ch37.config import CHAPTER as D
-from ch37.config import parser
+from ch37.config import NON_NEGATIVE, Chapter, Mode, Parallel, flag
 from exercises import ex1_reminder
 
 errors.guard()  # a fixable problem: one line, exit 2; Ctrl-C: exit 130 (demo sets kept, training restarts)
 t_start = time.perf_counter()
-p = parser("Chapter 3.7: Datasets at Scale (see the module docstring).")
-flag = p.add_argument
-flag(
-    "--out", type=Path, help="output folder (default outputs/ch3.7-scale-data, -smoke appended with --smoke)"
-)
-flag("--pusht_data", type=Path, help="your own PushT LeRobot set, never modified (default: made under --out)")
-flag("--aloha_data", type=Path, help="your own ALOHA LeRobot set, never modified (default: made under --out)")
-flag(
-    "--source_episodes",
-    type=int,
-    default=D.source_episodes,
-    help="expert demos per robot; 12 is coverage-starved on purpose",
-)
-flag(
-    "--aug_per_demo",
-    type=int,
-    default=D.aug_per_demo,
-    help="generated demos kept per PushT source demo (0 = none)",
-)
-flag(
-    "--aug_mode",
-    choices=("resolve", "replay"),
-    default="resolve",
-    help="resolve: the expert solves each perturbed start; replay: MimicGen's move, the source path "
-    "transformed into the new block pose and executed open-loop (no solver)",
-)
-flag(
-    "--aug_tries",
-    type=int,
-    default=D.aug_tries,
-    help="attempts per wanted demo before a source demo gives up (replay's success filter rejects most)",
-)
-flag(
-    "--aug_pos_sigma", type=float, default=D.aug_pos_sigma, help="m; std of block and pusher xy moves (<= 10)"
-)
-flag("--aug_yaw_sigma", type=float, default=D.aug_yaw_sigma, help="rad; std of block yaw moves (<= 10)")
-flag("--epochs", type=int, default=D.epochs, help="passes over a data set that make a budget (see measure)")
-flag(
-    "--full_steps", type=int, default=0, help="steps of the full budget (0: --epochs passes over source+aug)"
-)
-flag("--batch_size", type=int, default=D.batch_size, help="frames per gradient step")
-flag("--lr", type=float, default=D.lr, help="Adam learning rate, cosine-decayed to 0")
-flag("--hidden_dim", type=int, default=D.hidden_dim, help="width of both hidden layers of the BC MLP")
-flag(
-    "--eval_episodes",
-    type=int,
-    default=D.eval_episodes,
-    help="held-out PushT starts per arm; 50: +-0.14 at worst",
-)
-flag("--seed", type=int, default=D.seed, help=">= 0; seeds 0, 1, 2 draw disjoint demos and eval starts")
-flag("--device", default="auto", help="auto | cpu | cuda | mps (auto: cuda > mps > cpu)")
-flag("--smoke", action="store_true", help="tiny CPU defaults for tests and CI (seconds); explicit flags win")
-flag("--rerun", action=on_off, default=True, help="write a Rerun .rrd recording")
-flag("--cache", action=on_off, default=True, help="reuse an identical earlier run (same flags and code)")
-flag(
-    "--workers",
-    type=int,
-    help="processes for re-solves and evaluation physics (default: cores); same results",
-)
-args = cli.parse(p)  # every flag checked here: a bad one is one line and exit 2, before any heavy import
+
+
+@dataclass(frozen=True)
+class Args(Chapter, Mode, Parallel):
+    """Chapter 3.7: Datasets at Scale (see the module docstring)."""
+
+    out: Path = flag(
+        None, "output folder (default outputs/ch3.7-scale-data, -smoke appended with --smoke)", type=Path
+    )
+    pusht_data: Path = flag(
+        None, "your own PushT LeRobot set, never modified (default: made under --out)", type=Path
+    )
+    aloha_data: Path = flag(
+        None, "your own ALOHA LeRobot set, never modified (default: made under --out)", type=Path
+    )
+    full_steps: int = flag(
+        0, "steps of the full budget (0: --epochs passes over source+aug)", bound=NON_NEGATIVE
+    )
+    device: str = flag("auto", "auto | cpu | cuda | mps (auto: cuda > mps > cpu)")
+    smoke: bool = flag(False, "tiny CPU defaults for tests and CI (seconds); explicit flags win")
+    rerun: bool = flag(True, "write a Rerun .rrd recording")
+    cache: bool = flag(True, "reuse an identical earlier run (same flags and code)")
+
+
+args = cli.parse(Args)  # every flag checked here: a bad one is one line and exit 2, before any heavy import
 import torch  # noqa: E402  (after the checks, so --help and flag errors are instant)
 
 args.device = cli.pick_device(args.device)

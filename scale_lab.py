@@ -35,13 +35,13 @@ Smoke:  python scale_lab.py --smoke                  (seconds; N = 12, 24, 36, s
 from __future__ import annotations
 
 import math
-import os
 import time
-from argparse import BooleanOptionalAction
+from dataclasses import dataclass
 from pathlib import Path
 
 from ch37 import config
 from ch37.config import CHAPTER as D
+from ch37.config import NON_NEGATIVE, POSITIVE, flag
 from ch37.errors import DataError, main
 from ch37.seeds import MAX_SEED, SEED_BLOCK
 
@@ -53,62 +53,58 @@ FIXED_N = SOURCES * (1 + D.aug_per_demo)  # the chapter's default point (108): i
 SMOKE = dict(n=[12, 24, 36], seeds=[0, 1], eval_episodes=4, hidden_dim=32, epochs=5, batch_size=64)
 INTERVAL = "per point: Wilson 95% over its eval starts; per curve: Wilson over all seeds' episodes pooled"
 RESULTS = ("scale_lab.json", "scale_lab.png", "scale_lab.html", "scale_lab.rrd")
-SHAPING = tuple(
-    "n seeds eval_episodes epochs batch_size lr hidden_dim pos_sigma yaw_sigma replay_tries smoke".split()
+SHAPING = (
+    *"n seeds eval_episodes epochs batch_size lr hidden_dim".split(),
+    *"aug_pos_sigma aug_yaw_sigma replay_tries smoke".split(),
 )
+# scale_lab.json's "config" keeps the perturbation's first names (its flags were --pos_sigma, --yaw_sigma,
+# still accepted): the same bytes as before the rename, for readers of earlier results.
+STORED = {"aug_pos_sigma": "pos_sigma", "aug_yaw_sigma": "yaw_sigma"}
 
 
 # --- 1. parse ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Args(config.Recipe, config.Perturbation, config.Ray):
+    """The Scale Lab: the chapter's BC recipe at many demo counts, for fresh demos and two data engines."""
+
+    # every N >= 12 with N - 12 divisible by 12 (checked in parse(), with why)
+    n: list[int] = flag(list(N_DEFAULT), "total demos per point (N)", at_most=SEED_BLOCK, nargs="+")
+    seeds: list[int] = flag(
+        [0, 1, 2],
+        "each draws disjoint demos and eval starts",
+        bound=NON_NEGATIVE,
+        at_most=MAX_SEED,
+        nargs="+",
+    )
+    eval_episodes: int = flag(
+        100, "held-out starts per point; 100: +-0.1 at worst", bound=POSITIVE, at_most=SEED_BLOCK
+    )
+    replay_tries: int = flag(10, "replay attempts per wanted demo (yield ~2%% here)", bound=POSITIVE)
+    out: Path = flag(
+        None, "output folder (default outputs/scale_lab, -smoke appended with --smoke)", type=Path
+    )
+    rerun: bool = flag(True, "write scale_lab.rrd")
+    smoke: bool = flag(False, "tiny settings for tests (seconds); explicit flags win")
+
+
 def parser(smoke: bool = False):
     """The lab's flags; with `smoke`, SMOKE's values are their defaults."""
-    p = config.parser(__doc__.split("\n\n")[0])
-    flag = p.add_argument
-    flag("--n", type=int, nargs="+", default=list(N_DEFAULT), help="total demos per point (N)")
-    flag("--seeds", type=int, nargs="+", default=[0, 1, 2], help="each draws disjoint demos and eval starts")
-    flag("--eval_episodes", type=int, default=100, help="held-out starts per point; 100: +-0.1 at worst")
-    flag("--epochs", type=int, default=D.epochs, help="passes over the resolve set at N: N's step budget")
-    flag("--batch_size", type=int, default=D.batch_size, help="frames per gradient step (the chapter's)")
-    flag("--lr", type=float, default=D.lr, help="Adam learning rate, cosine-decayed to 0 (the chapter's)")
-    flag("--hidden_dim", type=int, default=D.hidden_dim, help="width of both hidden layers of the BC MLP")
-    flag(
-        "--pos_sigma",
-        type=float,
-        default=D.aug_pos_sigma,
-        help="m; the engine's block and pusher xy noise (<= 10)",
-    )
-    flag("--yaw_sigma", type=float, default=D.aug_yaw_sigma, help="rad; the engine's block yaw noise (<= 10)")
-    flag("--replay_tries", type=int, default=10, help="replay attempts per wanted demo (yield ~2%% here)")
-    flag("--out", type=Path, help="output folder (default outputs/scale_lab, -smoke appended with --smoke)")
-    cpus = os.cpu_count() or 1
-    flag("--workers", type=int, default=cpus, help="local processes or a local Ray's CPUs; same results")
-    flag("--ray", nargs="?", const="local", metavar="ADDRESS", help="a private local Ray, or join ADDRESS")
-    flag("--rerun", action=BooleanOptionalAction, default=True, help="write scale_lab.rrd")
-    flag("--smoke", action="store_true", help="tiny settings for tests (seconds); explicit flags win")
+    p = config.parser_of(Args)
     p.set_defaults(**(SMOKE if smoke else {}))
     return p
 
 
-SIGMAS_AT_MOST = {"pos_sigma": config.SIGMA_MAX, "yaw_sigma": config.SIGMA_MAX}  # m, rad
-
-
 def parse(argv=None):
     """The flags, checked; a problem is a DataError (one line, exit 2)."""
-    a = parser().parse_args(argv)
-    if a.smoke:
-        a = parser(smoke=True).parse_args(argv)
+    a = config.parse(Args, argv, smoke=SMOKE)
     a.out = a.out if a.out is not None else Path("outputs/scale_lab" + ("-smoke" if a.smoke else ""))
+    a.workers = config.default_workers() if a.workers is None else a.workers
     if bad := [n for n in a.n if n < SOURCES or (n - SOURCES) % SOURCES]:
         raise DataError(
             f"--n {bad[0]}: every N must be >= {SOURCES} with N - {SOURCES} divisible by {SOURCES} "
             f"({SOURCES} source demos, each grown by the same count), e.g. 12 36 108"
         )
     a.n, a.seeds = sorted(set(a.n)), sorted(set(a.seeds))
-    if any(not 0 <= s <= MAX_SEED for s in a.seeds):
-        raise DataError(f"--seeds must be in [0, {MAX_SEED}], got {a.seeds}")
-    positive = ("eval_episodes", "epochs", "batch_size", "hidden_dim", "replay_tries", "workers")
-    config.check(a, positive=positive, finite=("pos_sigma", "yaw_sigma", "lr"), at_most=SIGMAS_AT_MOST)
-    if max(a.n) > SEED_BLOCK or a.eval_episodes > SEED_BLOCK:
-        raise DataError(f"--n and --eval_episodes must be at most {SEED_BLOCK} (one seed block)")
     return a
 
 
@@ -165,7 +161,9 @@ def generate(a, srcs: dict, eval_seeds: dict, gen_paths: dict, max_per: dict):
     from lerobot_v3 import load_arrays
 
     cap = {"resolve": datagen.ATTEMPTS_PER_KEPT, "replay": a.replay_tries}
-    tasks = [(grow, m, s, srcs[s], max_per[m], cap[m], a.pos_sigma, a.yaw_sigma) for m, s in gen_paths]
+    tasks = [
+        (grow, m, s, srcs[s], max_per[m], cap[m], a.aug_pos_sigma, a.aug_yaw_sigma) for m, s in gen_paths
+    ]
     tasks += [(expert_success, s, eval_seeds[s]) for s in a.seeds]  # the long ones first
     expert, generation, generated = {}, {}, {}
     for got in map_jobs(operator.call, tasks, workers=a.workers, ray=a.ray, ordered=False, star=True):
@@ -313,7 +311,8 @@ def emit(a, own, points, results, expert, generation, data, t_start, t_train) ->
             "kind": "scale_lab",
             "command": command(a),
             "smoke": a.smoke,
-            "config": {k: getattr(a, k) for k in SHAPING} | {"sources": SOURCES, "fixed_n": FIXED_N},
+            "config": {STORED.get(k, k): getattr(a, k) for k in SHAPING}
+            | {"sources": SOURCES, "fixed_n": FIXED_N},
             "fixed_steps": {str(s): data.steps_at(FIXED_N, s) for s in a.seeds},
             "expert": {"per_seed": ceiling, "success": e_mean, "ci95": e_ci},
             "generation": generation,

@@ -6,27 +6,20 @@ import argparse
 import csv
 import hashlib
 import json
-import os
 from pathlib import Path
 
 from ch37 import ROOT, config
 from ch37.errors import DataError
 from ch37.process import available_memory, max_workers
-from ch37.seeds import MAX_SEED, SEED_BLOCK
 
 # wallclock.csv's tiers: two CPU-side ones, then GPUs matched by a substring of the device name.
 GPU_TIERS = ("t4", "l4", "4090", "a100", "h100", "h200")
 TIERS = ("cpu-2core", "mps", *GPU_TIERS)
 # not in config_hash: the tier names the device; workers, cache and the .rrd change speed only
 HASH_EXCLUDE = ("device", "workers", "cache", "rerun")
-POSITIVE = ("source_episodes", "epochs", "batch_size", "hidden_dim", "eval_episodes", "workers", "aug_tries")
-NON_NEGATIVE = ("aug_per_demo", "seed", "full_steps")
-FINITE = ("aug_pos_sigma", "aug_yaw_sigma", "lr")
-# Upper bounds that come from the code: episode indices live in one seed block (ch37.seeds), and
-# every env seed must fit in 63 bits. The step limits bound a run's frames for the memory estimate.
-# --epochs and --full_steps cost time, not memory: a huge value runs long (Ctrl-C stops it cleanly).
-AT_MOST = {"seed": MAX_SEED, "source_episodes": SEED_BLOCK, "eval_episodes": SEED_BLOCK, "lr": 1.0}
-AT_MOST.update(aug_pos_sigma=config.SIGMA_MAX, aug_yaw_sigma=config.SIGMA_MAX)
+# Every flag's bound is declared with the flag (ch37.config.flag): the experiment's in config.Chapter,
+# the run's in scale_data.py's Args. --epochs and --full_steps cost time, not memory: a huge value runs
+# long (Ctrl-C stops it cleanly). The step limits bound a run's frames for the memory estimate.
 PUSHT_MAX_STEPS, ALOHA_MAX_STEPS = 300, 400  # pusht_env.MAX_STEPS, aloha_env.MAX_STEPS (not imported: slow)
 ENV_BYTES = 1 << 20  # one evaluation env (a MuJoCo model and data), rounded up (docs/engine.md, figures)
 
@@ -56,18 +49,14 @@ def result_config(args: argparse.Namespace) -> dict:
     return {k: (str(v) if isinstance(v, Path) else v) for k, v in items if k not in config.NOT_IN_KEY}
 
 
-def parse(p: argparse.ArgumentParser, argv=None) -> argparse.Namespace:
-    """Parse and check scale_data.py's flags (`p` from ch37.config.parser); a problem is a DataError.
+def parse(cls, argv=None) -> argparse.Namespace:
+    """Parse and check scale_data.py's flags (`cls`: its Args dataclass); a problem is a DataError.
 
     --smoke pins a tiny CPU configuration (the same on every machine); flags given explicitly win."""
-    args = p.parse_args(argv)
-    if args.smoke:
-        p.set_defaults(**config.SMOKE)
-        args = p.parse_args(argv)
+    args = config.parse(cls, argv, smoke=config.SMOKE)
     args.out = args.out or Path("outputs/ch3.7-scale-data" + ("-smoke" if args.smoke else ""))
-    if args.workers is None:  # None, not 0: --workers 0 is an error below, not "the default"
-        args.workers = min(8, os.cpu_count() or 1)
-    config.check(args, positive=POSITIVE, non_negative=NON_NEGATIVE, finite=FINITE, at_most=AT_MOST)
+    if args.workers is None:  # None, not 0: --workers 0 was an error above, not "the default"
+        args.workers = config.default_workers()
     if args.workers > max_workers():
         raise DataError(f"--workers must be at most {max_workers()} (4 per CPU core), got {args.workers}")
     if args.device not in ("auto", "cpu", "cuda", "mps"):

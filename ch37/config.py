@@ -1,50 +1,140 @@
-"""The chapter's defaults in one place, and the one flag checker every command uses.
+"""Every command's flags, each declared once as a dataclass field, and the one flag checker.
 
-CHAPTER holds the lesson's default configuration (scale_data.py's flags take their defaults from it,
-and so do augment_demos.py, scale_lab.py and the tools where they mean the same thing); SMOKE the
-tiny CPU configuration of --smoke. parser() and check() make every command's flag problems one
-`error:` line and exit 2 (through ch37.errors), before any heavy import.
+A command's flags are one dataclass (CleanRL's `Args`), its fields made by flag(): default, help (unit
+and why), bound and old spellings in one place, so adding a flag touches one file. The knobs several
+commands share are groups declared here, and a command takes a group by inheriting it: Recipe (the BC
+training recipe), Perturbation and Mode (the data engine's perturbation and mode), Parallel and Ray
+(where the work runs). Chapter is the lesson's experiment (scale_data.py's Args adds the run's own
+flags) and CHAPTER its defaults, which the tools and exercises read. So the same knob has the same name,
+default and bound in the lesson, augment_demos.py and scale_lab.py (tests/test_flags.py). parse() builds
+the argparse parser from a dataclass (each group an argument group, --help showing every flag's default)
+and checks the bounds: every flag problem is one `error:` line and exit 2 (through ch37.errors), before
+any heavy import. Importing this module defines classes and does nothing else.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import re
+import sys
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from ch37.errors import DataError
+from ch37.seeds import MAX_SEED, SEED_BLOCK
 
-
-@dataclass(frozen=True)
-class Chapter:
-    source_episodes: int = 12  # expert demos per robot: coverage-starved on purpose
-    aug_per_demo: int = 8  # generated demos kept per PushT source demo
-    aug_pos_sigma: float = 0.08  # m, block and pusher xy perturbation
-    aug_yaw_sigma: float = 0.5  # rad, block yaw perturbation
-    aug_tries: int = 100  # attempts per wanted demo before a source demo gives up
-    epochs: int = 500  # passes over a data set that make a training budget
-    batch_size: int = 128  # frames per gradient step
-    lr: float = 1e-3  # Adam, cosine-decayed to 0
-    hidden_dim: int = 512  # width of both hidden layers of the BC MLP
-    eval_episodes: int = 50  # held-out PushT starts per arm
-    seed: int = 0
-
-
-CHAPTER = Chapter()
-DEFAULTS = asdict(CHAPTER)
-SMOKE = dict(
-    source_episodes=4, aug_per_demo=2, epochs=30, hidden_dim=64, eval_episodes=8, batch_size=64, device="cpu"
-)
-RESULT_FILES = tuple(
-    "metrics.json cross_embodiment.json scale_data.png scale_data.html scale_data.rrd".split()
-)
-# The largest --*pos_sigma (m) and --*yaw_sigma (rad): a kept start lies 0.08..0.26 m from the target
+# A flag's bound (flag(bound=...)), each with its one-line error (check() below):
+POSITIVE = "positive"  # an integer > 0: "--NAME must be a positive integer, got V"
+NON_NEGATIVE = "non_negative"  # >= 0: "--NAME must be >= 0, got V"
+FINITE = "finite"  # a finite number >= 0: "--NAME must be a finite non-negative number, got V"
+FINITE_POSITIVE = "finite_positive"  # a finite number > 0: "--NAME must be a finite positive number, got V"
+BOUNDS = (POSITIVE, NON_NEGATIVE, FINITE, FINITE_POSITIVE)
+# The largest --aug_pos_sigma (m) and --aug_yaw_sigma (rad): a kept start lies 0.08..0.26 m from the target
 # (datagen.pusht.R_LO, R_HI), so a 10 m std almost never lands one, and a yaw wraps every 6.3 rad;
 # beyond that a value can only waste attempts, and 1e308 overflows the angle to inf (math domain error).
 SIGMA_MAX = 10.0
-NOT_IN_KEY = ("out", "cache", "workers")  # where results go and how fast they come never change them
+MODES = ("resolve", "replay")  # datagen.Task.modes (not imported here: --help stays instant)
+
+
+def flag(default, help: str, *, bound=None, at_most=None, aliases=(), why=None, **argparse_kw):
+    """A dataclass field that is one command-line flag --NAME (NAME: the field's name).
+
+    default: its value when not given (a list for nargs="+"; True/False make a switch: True an on/off
+    pair --NAME/--no-NAME, False a plain --NAME, or on/off with action=argparse.BooleanOptionalAction);
+    help: one line, with its unit and why its default; bound: one of BOUNDS, checked value by value;
+    at_most: its largest value; why: with both a bound and at_most, the error names the whole range and
+    why ("--NAME must be in [1, 1000000] (WHY), got V"); aliases: older spellings (--NAME2) that still
+    work, the same flag; argparse_kw: what else argparse needs (type, choices, nargs, metavar, const,
+    required, action)."""
+    meta = dict(help=help, bound=bound, at_most=at_most, why=why, aliases=tuple(aliases), kw=argparse_kw)
+    if bound not in (None, *BOUNDS):
+        raise ValueError(f"unknown bound {bound!r}")
+    if isinstance(default, list):
+        return dataclasses.field(default_factory=lambda: list(default), metadata=meta)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+def fields(cls) -> list[dataclasses.Field]:
+    """cls's flags: every dataclass field made by flag()."""
+    return [f for f in dataclasses.fields(cls) if "help" in f.metadata]
+
+
+def _default(f: dataclasses.Field):
+    return f.default_factory() if f.default is dataclasses.MISSING else f.default
+
+
+def _group_of(cls, f: dataclasses.Field) -> type:
+    """The class in cls's MRO that declares f: its argument group in --help."""
+    return next(c for c in reversed(cls.__mro__) if f.name in getattr(c, "__annotations__", {}))
+
+
+def parser_of(cls, prog: str | None = None, description: str | None = None) -> argparse.ArgumentParser:
+    """The parser of command dataclass `cls`: its own flags first, then one argument group per class it
+    takes flags from (in its bases' order, the class docstring's first line the group's title), every
+    flag's default in --help."""
+    p = parser(description or (cls.__doc__ or "").strip(), prog=prog)
+    by_owner = {}
+    for f in fields(cls):
+        by_owner.setdefault(_group_of(cls, f), []).append(f)
+    for owner in (c for c in cls.__mro__ if c in by_owner):
+        group = p if owner is cls else p.add_argument_group((owner.__doc__ or owner.__name__).strip())
+        for f in by_owner[owner]:
+            m, default = f.metadata, _default(f)
+            kw = dict(m["kw"], default=default, help=m["help"])
+            if isinstance(default, bool) and "action" not in kw:
+                kw["action"] = argparse.BooleanOptionalAction if default else "store_true"
+            elif "type" not in kw and "action" not in kw and default is not None:
+                kw["type"] = type(default[0]) if isinstance(default, list) else type(default)
+            if kw.get("type") is Path:
+                kw["type"] = _path
+            group.add_argument(f"--{f.name}", *(f"--{a}" for a in m["aliases"]), dest=f.name, **kw)
+    return p
+
+
+def spelled(argv, cls) -> dict[str, str]:
+    """{field name: the spelling the command line used for it}, for the flags given under an alias:
+    an error names the flag as it was typed (`--pos_sigma must be at most 10` for --pos_sigma 11)."""
+    said = {}
+    for f in fields(cls):
+        for a in f.metadata["aliases"]:
+            if any(t == f"--{a}" or t.startswith(f"--{a}=") for t in argv):
+                said[f.name] = a
+    return said
+
+
+def check_fields(args, cls, argv=None) -> None:
+    """DataError (one line) for the first flag of `args` out of the bound its field in `cls` declares."""
+    said = spelled(sys.argv[1:] if argv is None else [str(t) for t in argv], cls)
+    for f in fields(cls):  # a range with its why: one message for either end
+        lo, hi, why = (
+            {POSITIVE: 1, NON_NEGATIVE: 0}.get(f.metadata["bound"]),
+            f.metadata["at_most"],
+            f.metadata["why"],
+        )
+        for v in _values(args, f.name) if why else []:
+            if not lo <= v <= hi:
+                raise DataError(f"--{said.get(f.name, f.name)} must be in [{lo}, {hi}] ({why}), got {v}")
+    by = {b: [f.name for f in fields(cls) if f.metadata["bound"] == b] for b in BOUNDS}
+    most = {f.name: f.metadata["at_most"] for f in fields(cls) if f.metadata["at_most"] is not None}
+    check(args, by[POSITIVE], by[NON_NEGATIVE], by[FINITE], by[FINITE_POSITIVE], most, said)
+
+
+def parse(
+    cls, argv=None, *, prog=None, description=None, smoke: dict | None = None, defaults: dict | None = None
+) -> argparse.Namespace:
+    """Parse and check the flags of command dataclass `cls`; a problem is a DataError (one line, exit 2).
+    `defaults` replace fields' defaults known only at run time (the embodiment's noise); with `smoke`
+    and --smoke given, smoke's values are the defaults (flags given explicitly win)."""
+    p = parser_of(cls, prog, description)
+    p.set_defaults(**(defaults or {}))
+    args = p.parse_args(argv)
+    if smoke and getattr(args, "smoke", False):
+        p.set_defaults(**smoke)
+        args = p.parse_args(argv)
+    check_fields(args, cls, argv)
+    return args
 
 
 def _path(text: str) -> Path:
@@ -83,29 +173,147 @@ class _Help(argparse.RawDescriptionHelpFormatter):
 
 
 def _values(args, name) -> list:
-    """The flag's values: a flag of several (nargs="+") is checked value by value."""
+    """The flag's values: a flag of several (nargs="+") is checked value by value; None (not given, a
+    default computed later, such as --workers') is not checked."""
     v = getattr(args, name)
-    return list(v) if isinstance(v, (list, tuple)) else [v]
+    return list(v) if isinstance(v, (list, tuple)) else [] if v is None else [v]
 
 
-def check(args, *, positive=(), non_negative=(), finite=(), at_most=None) -> None:
+def check(args, positive=(), non_negative=(), finite=(), finite_positive=(), at_most=None, said=None) -> None:
     """DataError (one line) for the first flag of `args` out of its range: `positive` and
-    `non_negative` integers, `finite` non-negative numbers (lr: positive), and {flag: its maximum}.
+    `non_negative` integers, `finite` non-negative and `finite_positive` positive numbers, and {flag: its
+    maximum}; `said` {name: spelling} names a flag given under an old spelling as it was typed.
     A flag that takes several values (nargs="+") is checked value by value."""
+    said = said or {}
     for name in positive:
         for v in _values(args, name):
             if v <= 0:
-                raise DataError(f"--{name} must be a positive integer, got {v}")
+                raise DataError(f"--{said.get(name, name)} must be a positive integer, got {v}")
     for name in non_negative:
         for v in _values(args, name):
             if v < 0:
-                raise DataError(f"--{name} must be >= 0, got {v}")
-    for name in finite:
-        for v in _values(args, name):
-            if not math.isfinite(v) or v < 0 or (name == "lr" and v == 0):
-                kind = "positive" if name == "lr" else "non-negative"
-                raise DataError(f"--{name} must be a finite {kind} number, got {v}")
+                raise DataError(f"--{said.get(name, name)} must be >= 0, got {v}")
+    for kind, names in (("non-negative", finite), ("positive", finite_positive)):
+        for name in names:
+            for v in _values(args, name):
+                if not math.isfinite(v) or v < 0 or (kind == "positive" and v == 0):
+                    raise DataError(f"--{said.get(name, name)} must be a finite {kind} number, got {v}")
     for name, most in (at_most or {}).items():
         for v in _values(args, name):
             if v > most:
-                raise DataError(f"--{name} must be at most {most}, got {v}")
+                raise DataError(f"--{said.get(name, name)} must be at most {most}, got {v}")
+
+
+# --- the groups several commands share ----------------------------------------------------------
+@dataclass(frozen=True)
+class Recipe:
+    """the BC training recipe (bc_recipe.py), the lesson's and the Scale Lab's"""
+
+    epochs: int = flag(
+        500,
+        "passes over a data set that make a training budget (scale_data.py: see measure; scale_lab.py: "
+        "over the resolve set at N)",
+        bound=POSITIVE,
+    )
+    batch_size: int = flag(128, "frames per gradient step", bound=POSITIVE)
+    lr: float = flag(1e-3, "Adam learning rate, cosine-decayed to 0", bound=FINITE_POSITIVE, at_most=1.0)
+    hidden_dim: int = flag(512, "width of both hidden layers of the BC MLP", bound=POSITIVE)
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """the data engine's perturbation of a source start (datagen.Perturbation)"""
+
+    aug_pos_sigma: float = flag(
+        0.08,
+        f"m; std of block and pusher xy moves (ALOHA: every object's) (<= {SIGMA_MAX:g})",
+        bound=FINITE,
+        at_most=SIGMA_MAX,
+        aliases=("pos_sigma",),
+    )
+    aug_yaw_sigma: float = flag(
+        0.5,
+        f"rad; std of block yaw moves (<= {SIGMA_MAX:g})",
+        bound=FINITE,
+        at_most=SIGMA_MAX,
+        aliases=("yaw_sigma",),
+    )
+
+
+@dataclass(frozen=True)
+class Mode:
+    """how the data engine makes a demo from a perturbed start"""
+
+    aug_mode: str = flag(
+        "resolve",
+        "resolve: the expert solves each perturbed start; replay: MimicGen's move, the source path "
+        "transformed into the new object poses and executed open-loop (no solver), kept only on success "
+        "(on PushT most attempts fail here; ALOHA replays subtask by subtask)",
+        choices=MODES,
+        aliases=("mode",),
+    )
+
+
+@dataclass(frozen=True)
+class Parallel:
+    """how many processes (the same results for any number)"""
+
+    workers: int = flag(
+        None,
+        "worker processes (with --ray: a local Ray's CPUs); same results for any number "
+        "(default: cores, at most 8)",
+        bound=POSITIVE,
+        type=int,
+    )
+
+
+@dataclass(frozen=True)
+class Ray(Parallel):
+    """on Ray instead of local processes (the same results)"""
+
+    ray: str = flag(
+        None,
+        "run on Ray: alone, a private local Ray with --workers CPUs; with ADDRESS, join that cluster",
+        nargs="?",
+        const="local",
+        metavar="ADDRESS",
+    )
+
+
+@dataclass(frozen=True)
+class Chapter(Perturbation, Recipe):
+    """the chapter's experiment (its defaults, CHAPTER, are the tools' and the exercises' too)"""
+
+    source_episodes: int = flag(
+        12, "expert demos per robot; 12 is coverage-starved on purpose", bound=POSITIVE, at_most=SEED_BLOCK
+    )
+    aug_per_demo: int = flag(8, "generated demos kept per PushT source demo (0 = none)", bound=NON_NEGATIVE)
+    aug_tries: int = flag(
+        100,
+        "attempts per wanted demo before a source demo gives up (replay's success filter rejects most)",
+        bound=POSITIVE,
+    )
+    eval_episodes: int = flag(
+        50, "held-out PushT starts per arm; 50: +-0.14 at worst", bound=POSITIVE, at_most=SEED_BLOCK
+    )
+    seed: int = flag(
+        0, ">= 0; seeds 0, 1, 2 draw disjoint demos and eval starts", bound=NON_NEGATIVE, at_most=MAX_SEED
+    )
+
+
+CHAPTER = Chapter()
+DEFAULTS = asdict(CHAPTER)
+SMOKE = dict(
+    source_episodes=4, aug_per_demo=2, epochs=30, hidden_dim=64, eval_episodes=8, batch_size=64, device="cpu"
+)
+RESULT_FILES = tuple(
+    "metrics.json cross_embodiment.json scale_data.png scale_data.html scale_data.rrd".split()
+)
+NOT_IN_KEY = ("out", "cache", "workers")  # where results go and how fast they come never change them
+
+
+def default_workers() -> int:
+    """--workers when not given: the cores, at most 8 (a --workers flag's default None means this)."""
+    import os
+
+    return min(8, os.cpu_count() or 1)

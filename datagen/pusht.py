@@ -16,7 +16,7 @@ and its expert.
     nearest   MimicGen's nearest source selection: the source whose block start is nearest the new
               start, position plus YAW_WEIGHT x yaw (pose_distance)
 
-MimicGen by subtasks (issue 29; tools/replay_yield.py's study, not the engine's --mode replay, whose
+MimicGen by subtasks (issue 29; tools/replay_yield.py's study, not the engine's --aug_mode replay, whose
 bytes stay the one-segment replay above): split(source) cuts a source demo at the first frame the
 pusher touches the T (pusht_env.t_signed_distance within PUSHER_RADIUS + CONTACT_TOL):
 

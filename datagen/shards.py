@@ -88,9 +88,24 @@ MERGE_DIR = ".merged.partial"  # the merge is built here, then its data/ and met
 # there is the user's, and a resume refuses to start rather than delete it (datagen.shards.foreign).
 RUN_NAMES = {STAMP_NAME, LOCK_NAME, REPORT_NAME, SHARDS_DIR, "data", "meta", MERGE_DIR}
 SHARD_NAMES = re.compile(r"shard-\d{5}|\.shard-\d{5}\.(partial|scratch)")
-SETTINGS = ("mode", "select", "per_demo", "seed", "pos_sigma", "yaw_sigma", "shard_size")  # a run's flags
-# per_demo here is augment_demos.py's documented flag: attempts per source episode (every one is made);
-# datagen.engine.grow's per_source is the kept demos wanted per source episode.
+# A run's settings in the engine's names (augment_demos.py maps its flags onto them): attempts_per_demo is
+# the attempts per source episode, every one made (datagen.engine.grow's per_source counts kept demos).
+SETTINGS = ("mode", "select", "attempts_per_demo", "seed", "pos_sigma", "yaw_sigma", "shard_size")
+# How a run's stamps and its report store them (OUT's stamp, every shard's, generation_report.json; a
+# resume compares them): attempts_per_demo under its first name "per_demo", kept so that what a run
+# writes stays the same bytes, for readers of earlier runs. Nothing but this mapping reads "per_demo".
+STORED = {"attempts_per_demo": "per_demo"}
+STORED_SETTINGS = tuple(STORED.get(k, k) for k in SETTINGS)
+
+
+def stored(settings: dict) -> dict:
+    """`settings` (SETTINGS' names) as a run's stamps store them (STORED_SETTINGS' names)."""
+    return {STORED.get(k, k): v for k, v in settings.items()}
+
+
+def attempts_per_demo(config: dict) -> int:
+    """The attempts per source episode of a run's stored config."""
+    return config[STORED["attempts_per_demo"]]
 
 
 def engine_version() -> str:
@@ -144,15 +159,18 @@ def run_key(config: dict) -> str:
 ATTEMPT_BYTES = 200
 
 
-def plan_memory_problem(n_sources: int, per_demo: int, free: int | None) -> str | None:
-    """None if a plan of n_sources x per_demo attempts fits in `free` bytes (None: unknown), else why."""
-    attempts = n_sources * per_demo
+def plan_memory_problem(
+    n_sources: int, attempts_per_demo: int, free: int | None, flag: str = "--attempts_per_demo"
+) -> str | None:
+    """None if a plan of n_sources x attempts_per_demo attempts fits in `free` bytes (None: unknown), else
+    why, naming the command's `flag` for attempts_per_demo."""
+    attempts = n_sources * attempts_per_demo
     if free is None or attempts * ATTEMPT_BYTES <= free:
         return None
     return (
-        f"--per_demo {per_demo:,} x {n_sources} source episodes = {attempts:,} attempts need about "
+        f"{flag} {attempts_per_demo:,} x {n_sources} source episodes = {attempts:,} attempts need about "
         f"{attempts * ATTEMPT_BYTES / 2**30:,.1f} GB of memory to plan, more than the "
-        f"{free / 2**30:,.1f} GB available here; lower --per_demo (or run it in parts with --seed)"
+        f"{free / 2**30:,.1f} GB available here; lower {flag} (or run it in parts with --seed)"
     )
 
 
@@ -173,9 +191,9 @@ def many_files_note(n_shards: int, attempts: int, shard_size: int, out: Path) ->
     )
 
 
-def plan(episodes, per_demo: int, shard_size: int) -> list[list[tuple[int, int]]]:
+def plan(episodes, attempts_per_demo: int, shard_size: int) -> list[list[tuple[int, int]]]:
     """The attempts (e, k), e-major, cut into shards of shard_size (the last may be shorter)."""
-    jobs = [(int(e), k) for e in episodes for k in range(per_demo)]
+    jobs = [(int(e), k) for e in episodes for k in range(attempts_per_demo)]
     return [jobs[i : i + shard_size] for i in range(0, len(jobs), shard_size)]
 
 
@@ -561,10 +579,14 @@ def run(
     check_out(out, src)  # before reading the source: a folder that is not ours is refused at once
     arrays = read_source(task, src)
     n_sources = len(np.unique(arrays["episode_index"]))
-    problem = plan_memory_problem(n_sources, settings["per_demo"], available_memory())
+    problem = plan_memory_problem(n_sources, settings["attempts_per_demo"], available_memory())
     if problem:
         raise DataError(problem)
-    config = settings | {"task": task.name, "source": source_identity(arrays), "engine": engine_version()}
+    config = stored(settings) | {
+        "task": task.name,
+        "source": source_identity(arrays),
+        "engine": engine_version(),
+    }
     config["versions"] = versions()
     check_out(out, src, config)  # every refusal comes before anything is created
     out.mkdir(parents=True, exist_ok=True)
@@ -592,7 +614,7 @@ def run(
 def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
     run_stamp = {"made_by": MADE_BY, "kind": "engine", "config": config, "complete": False}
     write_atomic(out / STAMP_NAME, dump_json(run_stamp))  # the folder is ours from here on
-    shards = plan(sources, config["per_demo"], config["shard_size"])
+    shards = plan(sources, attempts_per_demo(config), config["shard_size"])
     done = finished(out, config, shards)
     todo = [i for i in range(len(shards)) if i not in done]
     note = many_files_note(len(shards), sum(map(len, shards)), config["shard_size"], out) if todo else None
@@ -630,7 +652,7 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
         TASKS[task].failures[config["mode"]],
         {
             "source": {"path": str(src.resolve()), **config["source"]},
-            "settings": {k: config[k] for k in SETTINGS},
+            "settings": {k: config[k] for k in STORED_SETTINGS},
             "shards": {"total": len(shards), "made_this_run": len(todo), "reused": len(shards) - len(todo)},
             "executor": executor,
             "seconds": seconds,

@@ -425,8 +425,12 @@ def test_a_plan_beyond_memory_is_one_line():
     """Issue 22 item 10: the plan's memory (ATTEMPT_BYTES an attempt) is checked against what is free."""
     assert shards.plan_memory_problem(3, 10, 1 << 30) is None
     assert shards.plan_memory_problem(12, 10**6, None) is None  # unknown memory: not refused
-    why = shards.plan_memory_problem(12, 10**6, 1 << 30)  # 12e6 attempts x 200 B = 2.2 GB > 1 GB
+    why = shards.plan_memory_problem(
+        12, 10**6, 1 << 30, "--per_demo"
+    )  # 12e6 attempts x 200 B = 2.2 GB > 1 GB
     assert "12,000,000 attempts need about 2.2 GB" in why and "lower --per_demo" in why
+    # the flag named as the command spells it: augment_demos' --attempts_per_demo unless told otherwise
+    assert "lower --attempts_per_demo" in shards.plan_memory_problem(12, 10**6, 1 << 30)
 
 
 @pytest.mark.parametrize("make_src,make_out,extra,needle", [b[1:] for b in BAD], ids=[b[0] for b in BAD])

@@ -17,7 +17,7 @@ The physics floor: the env alone stepped through the very frames a run kept, fro
 starts (aug.start, the task's place()) with their recorded actions; no expert, no recording, no
 writing. A row's "x phys" is the run's generation worker-seconds (the shard writes included) over
 that floor: 1.0 would be a generator that costs only its physics. First, in this process, the same
-split for the first --per_demo_costs attempts of every source episode: one attempt at a time
+split for the first --cost_attempts_per_demo attempts of every source episode: one attempt at a time
 (datagen.engine.attempt), in lockstep (datagen.lockstep.attempts_lockstep), the floor, and the
 write of the kept set (datagen.engine.save), each run --cost_repeats times alternated, medians.
 Writes OUT/bench_engine.json (default outputs/bench_engine; bench_engine_costs.json with
@@ -141,11 +141,12 @@ def remove_run(run_dir: Path) -> None:
 
 def point(src: Path, out: Path, n: int, executor: str, a) -> dict:
     workers, shard_size = a.workers, a.shard_size
-    per_demo = math.ceil(n / SOURCE_EPISODES)
+    attempts_per_demo = math.ceil(n / SOURCE_EPISODES)
     run_dir = out / "runs" / f"n{n}-{executor}"
     remove_run(run_dir)  # an earlier run of this tool; anything else is refused
     cmd = [sys.executable, str(a.checkout / "augment_demos.py"), "--src", str(src), "--out", str(run_dir)]
-    cmd += ["--per_demo", str(per_demo), "--workers", str(workers), "--quiet"]
+    # --per_demo: augment_demos' --attempts_per_demo under the spelling every --checkout understands
+    cmd += ["--per_demo", str(attempts_per_demo), "--workers", str(workers), "--quiet"]
     cmd += ["--shard_size", str(shard_size)] if shard_size else []
     cmd += ["--seed", str(a.seed), "--mode", a.mode]
     if executor == "ray2":
@@ -197,13 +198,15 @@ def kept_runs(root: Path) -> list:
     return [(s[0], a) for s, a in zip(np.split(arrays["aug.start"], cuts), np.split(arrays["action"], cuts))]
 
 
-def per_demo_costs(task, src: Path, per_demo: int, seed: int, repeats: int, mode: str = "resolve") -> dict:
-    """Where one core's time goes, in this process, for augment_demos.py's first per_demo attempts of
-    every source episode at `seed` in `mode`: one attempt at a time, in lockstep (where the task's mode
-    has lanes; else the same one at a time), the physics floor of the kept frames, and the engine's
-    write of the kept set; `repeats` rounds, alternated, medians."""
+def per_demo_costs(
+    task, src: Path, attempts_per_demo: int, seed: int, repeats: int, mode: str = "resolve"
+) -> dict:
+    """Where one core's time goes, in this process, for augment_demos.py's first attempts_per_demo
+    attempts of every source episode at `seed` in `mode`: one attempt at a time, in lockstep (where the
+    task's mode has lanes; else the same one at a time), the physics floor of the kept frames, and the
+    engine's write of the kept set; `repeats` rounds, alternated, medians."""
     sources = engine.sources(load_arrays(src))
-    jobs = [(e, k) for e in sorted(sources) for k in range(per_demo)]
+    jobs = [(e, k) for e in sorted(sources) for k in range(attempts_per_demo)]
     how = Perturbation(seed=seed, pos_sigma=DEFAULTS["aug_pos_sigma"], yaw_sigma=DEFAULTS["aug_yaw_sigma"])
     engine.attempt(task, sources[jobs[0][0]], 10**6, how, mode=mode)  # warm up
     times = {"one_at_a_time_s": [], "lockstep_s": [], "physics_s": [], "write_s": []}
@@ -299,7 +302,9 @@ def main(argv: list[str]) -> int:
     p.add_argument(
         "--seed", type=int, default=1, help="augment_demos.py's --seed for every run and the costs"
     )
-    p.add_argument("--per_demo_costs", type=int, default=50, help="attempts per source episode of the costs")
+    p.add_argument(
+        "--cost_attempts_per_demo", type=int, default=50, help="attempts per source episode of the costs"
+    )
     p.add_argument("--cost_repeats", type=int, default=3, help="rounds of the in-process costs (0: none)")
     p.add_argument("--costs_only", action="store_true", help="only the in-process costs (no runs)")
     p.add_argument("--src", type=Path, help="a set of --task (default: a 12-episode set made under --out)")
@@ -307,7 +312,7 @@ def main(argv: list[str]) -> int:
     help = "the checkout whose augment_demos.py runs (default this one); another commit's for a before/after"
     p.add_argument("--checkout", type=Path, default=ROOT, help=help)
     a = p.parse_args(argv)
-    check(a, positive=("workers", "per_demo_costs"), non_negative=("seed", "cost_repeats"))
+    check(a, positive=("workers", "cost_attempts_per_demo"), non_negative=("seed", "cost_repeats"))
     if not (a.checkout / "augment_demos.py").is_file():
         raise DataError(f"--checkout {a.checkout} has no augment_demos.py")
     if min(a.sizes) < 1:
@@ -320,7 +325,7 @@ def main(argv: list[str]) -> int:
             raise DataError(f"could not make the source set at {src}")
     costs = {}
     if a.cost_repeats:
-        costs = c = per_demo_costs(task, src, a.per_demo_costs, a.seed, a.cost_repeats, a.mode)
+        costs = c = per_demo_costs(task, src, a.cost_attempts_per_demo, a.seed, a.cost_repeats, a.mode)
         print(
             f"this checkout, one core, {task.title} {a.mode}: {c['attempts']} attempts, {c['kept']} kept "
             f"({c['frames']} frames), "

@@ -44,8 +44,12 @@ def rel(p: Path) -> str:
 
 
 def supports_flag(script: Path, flag: str) -> bool:
-    """Whether the chapter script defines `flag` (read from its source, so nothing is run)."""
-    return f'"{flag}"' in Path(script).read_text(encoding="utf-8")
+    """Whether the chapter script defines `flag` (read from its source, so nothing is run): as a field of
+    its Args dataclass (`cache: bool = flag(...)`, ch37.config.flag), or, in a script from before those,
+    as an argparse string ("--cache")."""
+    text = Path(script).read_text(encoding="utf-8")
+    field = re.compile(rf"^\s+{re.escape(flag.removeprefix('--'))}\s*:[^=\n]*=\s*flag\(", re.MULTILINE)
+    return f'"{flag}"' in text or field.search(text) is not None
 
 
 REGION_ORDER = ("setup", "wrangle", "augment", "measure", "emit")

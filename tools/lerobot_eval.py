@@ -1,6 +1,6 @@
 """A LeRobot policy checkpoint in our PushT env, on the lesson's held-out starts, judged by the lesson's rule.
 
-    python -m tools.lerobot_eval --policy OUT/checkpoints/last/pretrained_model --seed 0 --episodes 50
+    python -m tools.lerobot_eval --policy OUT/checkpoints/last/pretrained_model --seed 0 --eval_episodes 50
 
 --policy is a `pretrained_model` folder that lerobot-train wrote (diffusion, ACT, ... trained on a set
 this project wrote: observation.state [10] and observation.environment_state [8], no images). Episode
@@ -18,12 +18,14 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from bc_recipe import wilson  # the lesson's 95% interval
-from ch37.config import parser
+from ch37 import config
+from ch37.config import NON_NEGATIVE, POSITIVE, flag
 from ch37.errors import DataError
 from ch37.errors import main as run
 from ch37.ownership import dump_json, round_floats, write_atomic
@@ -108,22 +110,35 @@ def evaluate(policy, pre, post, seeds) -> list[dict]:
     return episodes
 
 
+@dataclass(frozen=True)
+class Args:
+    """A LeRobot policy checkpoint in our PushT env, on the lesson's held-out starts."""
+
+    policy: Path = flag(None, "a pretrained_model folder from lerobot-train", type=Path, required=True)
+    seed: int = flag(
+        0,
+        "the lesson's --seed: which held-out starts",
+        bound=NON_NEGATIVE,
+        at_most=MAX_SEED,
+        why="every env seed fits in 63 bits",
+    )
+    eval_episodes: int = flag(
+        50,
+        "held-out starts (the lesson's --eval_episodes)",
+        bound=POSITIVE,
+        at_most=SEED_BLOCK,
+        why="one seed block",
+        aliases=("episodes",),
+    )
+    device: str = flag("auto", "auto: cuda > mps > cpu", choices=("auto", "cpu", "cuda", "mps"))
+    out: Path = flag(None, "JSON path (default: beside --policy)", type=Path)
+
+
 def main(argv: list[str] | None = None) -> int:
-    p = parser(__doc__, prog="python -m tools.lerobot_eval")
-    p.add_argument("--policy", type=Path, required=True, help="a pretrained_model folder from lerobot-train")
-    p.add_argument("--seed", type=int, default=0, help="the lesson's --seed: which held-out starts")
-    p.add_argument("--episodes", type=int, default=50, help="held-out starts (the lesson's --eval_episodes)")
-    devices = ("auto", "cpu", "cuda", "mps")
-    p.add_argument("--device", choices=devices, default="auto", help="auto: cuda > mps > cpu")
-    p.add_argument("--out", type=Path, help="JSON path (default: beside --policy)")
-    a = p.parse_args(argv)
-    if not 0 <= a.seed <= MAX_SEED:
-        raise DataError(f"--seed must be in [0, {MAX_SEED}], got {a.seed}")
-    if not 0 < a.episodes <= SEED_BLOCK:
-        raise DataError(f"--episodes must be in [1, {SEED_BLOCK}], got {a.episodes}")
+    a = config.parse(Args, argv, prog="python -m tools.lerobot_eval", description=__doc__)
     if not a.policy.is_dir():
         raise DataError(f"--policy {a.policy} is not a folder")
-    out = a.out or a.policy.parent / f"{KIND}_seed{a.seed}_n{a.episodes}.json"
+    out = a.out or a.policy.parent / f"{KIND}_seed{a.seed}_n{a.eval_episodes}.json"
     if out.exists():  # ours from an earlier run may be replaced; anything else is the user's
         try:
             ours = json.loads(out.read_text()).get("kind") == KIND
@@ -136,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
 
     device = pick_device(a.device)
     policy, pre, post = load_policy(a.policy, device)
-    seeds = [env_seed(a.seed, "eval", j) for j in range(a.episodes)]
+    seeds = [env_seed(a.seed, "eval", j) for j in range(a.eval_episodes)]
     t0 = time.perf_counter()
     episodes = evaluate(policy, pre, post, seeds)
     k, n = sum(e["success"] for e in episodes), len(episodes)

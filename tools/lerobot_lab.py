@@ -371,7 +371,7 @@ def main(argv=None) -> int:
         a,
         positive=("steps", "workers", "eval_episodes"),
         non_negative=("pilot", "eval_every", "seeds"),
-        finite=("lr",),
+        finite_positive=("lr",),
         at_most={"eval_episodes": 1000, "seeds": MAX_SEED},
     )
     if a.lr >= 1:
