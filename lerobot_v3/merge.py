@@ -141,9 +141,10 @@ def _index_stats(eps, n_eps: int, n_frames: int) -> dict:
     them depending on where the shards were cut: the quantiles are read off a histogram whose bins
     follow the values.
 
-    _episode_stats' float operations, on all episodes of one length at once, an episode per column:
-    _quantiles works column by column, and a mean over a row of the (episodes, frames) array sums in
-    the order of a (frames, 1) column's (tests/test_engine.py checks them equal to _episode_stats)."""
+    _episode_stats' float operations, an episode per column: the means on all episodes of one length
+    at once (a mean over a row of the (episodes, frames) array sums in the order of a (frames, 1)
+    column's), min, max and quantiles on all lengths at once (_quantiles works column by column, each
+    with its own count); tests/test_engine.py checks them equal to _episode_stats."""
     from lerobot_v3.dataset import _episode_stats, _quantiles
 
     lo = eps.column("dataset_from_index").to_numpy() + n_frames
@@ -173,13 +174,19 @@ def _index_stats(eps, n_eps: int, n_frames: int) -> dict:
             mean, mean_sq = np.mean(xt, axis=1), np.mean(xt**2, axis=1)
             mean += (mean - mean) * (n / n)  # as _episode_stats (its running update, for equal bits)
             mean_sq += (mean_sq - mean_sq) * (n / n)
-            st = {
-                "mean": mean,
-                "std": np.sqrt(np.maximum(0, mean_sq - mean**2)),
-                "count": np.full(len(js), n),
-            }
-            st["min"], st["max"], qs = _quantiles(x)
-            st |= {key: np.where(plain, e0, inside) for key, e0, inside, plain in qs}
+            put(f"stats/{name}/mean", js, mean)
+            put(f"stats/{name}/std", js, np.sqrt(np.maximum(0, mean_sq - mean**2)))
+            put(f"stats/{name}/count", js, np.full(len(js), n))
+    js = np.flatnonzero(lengths >= 2)  # min, max and quantiles of every length at once: one column each
+    if len(js):
+        rows = np.arange(lengths[js].max())[:, None]  # a column's rows past its length are not read
+        values = {
+            "episode_index": np.repeat((n_eps + js)[None, :], len(rows), axis=0).astype(np.float64),
+            "index": (lo[js][None, :] + rows).astype(np.float64),
+        }
+        for name, x in values.items():
+            low, high, qs = _quantiles(x, lengths[js])
+            st = {"min": low, "max": high} | {key: np.where(p, e0, inside) for key, e0, inside, p in qs}
             for k, v in st.items():
                 put(f"stats/{name}/{k}", js, v)
     return {k: v.reshape(-1, 1).tolist() for k, v in cols.items()}  # each a list of one, as LeRobot's
