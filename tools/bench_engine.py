@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import importlib
 import json
 import math
 import os
@@ -43,6 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
+import gen_demos_aloha
+import gen_demos_pusht
 from ch37 import ROOT, errors
 from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
@@ -320,7 +321,7 @@ def main(argv: list[str]) -> int:
     task = TASKS[a.task]
     src = a.src or a.out / f"src_{task.name}_seed0_ep{SOURCE_EPISODES}"
     if a.src is None and not (src / "meta" / "info.json").exists():
-        generator = importlib.import_module(task.generator.removesuffix(".py"))
+        generator = {"pusht": gen_demos_pusht, "aloha": gen_demos_aloha}[task.name]  # task.generator's main
         if generator.main(["--episodes", str(SOURCE_EPISODES), "--out", str(src), "--quiet"]) != 0:
             raise DataError(f"could not make the source set at {src}")
     costs = {}
