@@ -230,8 +230,9 @@ def _quantiles(x: np.ndarray, counts: np.ndarray | None = None):
         srt = np.sort(x, axis=0)
     else:  # padding as +inf sorts after every value and is below no edge; min and max skip it
         n, pad = counts, np.arange(rows)[:, None] >= counts[None, :]  # (T, D)
-        srt = np.sort(np.where(pad, np.inf, x), axis=0)
-        lo, hi = np.min(np.where(pad, np.inf, x), axis=0), np.max(np.where(pad, -np.inf, x), axis=0)
+        padded = np.where(pad, np.inf, x)
+        srt = np.sort(padded, axis=0)
+        lo, hi = np.min(padded, axis=0), np.max(np.where(pad, -np.inf, x), axis=0)
     # Edge k of each dimension's np.linspace(lo - 1e-10, hi + 1e-10, 5001), as numpy computes it
     bins = 5000
     start, stop = lo - 1e-10, hi + 1e-10
@@ -247,9 +248,8 @@ def _quantiles(x: np.ndarray, counts: np.ndarray | None = None):
         )
 
     targets = np.array(DEFAULT_QUANTILES)[:, None] * n  # (Q, D), LeRobot's q * count
-    v = np.take_along_axis(
-        srt, np.ceil(targets).astype(np.int64) - 1, axis=0
-    )  # (Q, D): where each is reached
+    # (Q, D): the value where each count is reached
+    v = np.take_along_axis(srt, np.ceil(targets).astype(np.int64) - 1, axis=0)
     # Its bin: how many of edges 1..4999 are <= v (edges rise with k). Counted in a window of 9
     # edges around a float64 guess; exact when the window's ends bracket v, else over the whole row.
     with np.errstate(all="ignore"):
@@ -299,7 +299,7 @@ def _episodes_stats(bufs: list[dict], feats: dict) -> list[dict]:
     """[_episode_stats(buf, feats) for buf in bufs], the same bits, computed for many episodes at once:
     one _quantiles call per dtype and layout (it works column by column, so the columns of every
     episode side by side, each with its own length, give each its own values) and one mean per
-    feature and episode length (_column_means keeps each episode's own summation order). A few
+    feature and episode length (_mean_std keeps each episode's own summation order). A few
     numpy calls per shard where there were dozens per episode, which were most of the writer's time."""
     from lerobot.datasets.compute_stats import get_feature_stats
 
@@ -324,14 +324,9 @@ def _episodes_stats(bufs: list[dict], feats: dict) -> list[dict]:
         by_length = {}
         for e, members in eps:
             by_length.setdefault(len(members[0][1]), []).append((e, members))
-        for n, same in by_length.items():  # mean and std as RunningQuantileStats computes them
+        for same in by_length.values():
             for i, (k, _) in enumerate(layout):
-                mean, mean_sq = _column_means([members[i][1] for _, members in same])  # (E, D) each
-                # its running update with the same batch, mean + (batch mean - mean) * n / n, kept for
-                # equal bits (-0.0 becomes 0.0, inf becomes nan); the batch mean is `mean` itself
-                mean += (mean - mean) * (n / n)
-                mean_sq += (mean_sq - mean_sq) * (n / n)
-                std = np.sqrt(np.maximum(0, mean_sq - mean**2))
+                mean, std = _mean_std([members[i][1] for _, members in same])  # (E, D) each
                 for j, (e, _) in enumerate(same):
                     outs[e][k]["mean"], outs[e][k]["std"] = mean[j], std[j]
         width = sum(w for _, w in layout)
@@ -365,16 +360,24 @@ def _episodes_stats(bufs: list[dict], feats: dict) -> list[dict]:
     return outs
 
 
-def _column_means(xs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """(mean, mean of squares) over axis 0 of each (T, D) array in xs, as np.mean(x, axis=0) gives
-    them bit for bit, stacked (E, D). A sum's rounding depends on its layout: numpy adds a (T, 1)
-    column pairwise (it is contiguous along T) and a (T, D > 1) array row by row, so one column is
-    stacked as rows (E, T) and summed along them, several side by side (T, E * D) and summed down."""
-    if xs[0].shape[1] == 1:
+def _mean_std(xs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and std over axis 0 of each (T, D) array in xs (all of one T), stacked (E, D), as
+    RunningQuantileStats computes them fed one batch, bit for bit. np.mean(x, axis=0)'s rounding
+    depends on the layout: numpy adds a (T, 1) column pairwise (it is contiguous along T) and a
+    (T, D > 1) array row by row, so one column is stacked as rows (E, T) and summed along them,
+    several side by side (T, E * D) and summed down."""
+    n, cols = xs[0].shape
+    if cols == 1:
         x = np.stack([x[:, 0] for x in xs])  # (E, T)
-        return np.mean(x, axis=1)[:, None], np.mean(x**2, axis=1)[:, None]
-    x, cols = np.concatenate(xs, axis=1), xs[0].shape[1]  # (T, E * D)
-    return np.mean(x, axis=0).reshape(-1, cols), np.mean(x**2, axis=0).reshape(-1, cols)
+        mean, mean_sq = np.mean(x, axis=1)[:, None], np.mean(x**2, axis=1)[:, None]
+    else:
+        x = np.concatenate(xs, axis=1)  # (T, E * D)
+        mean, mean_sq = np.mean(x, axis=0).reshape(-1, cols), np.mean(x**2, axis=0).reshape(-1, cols)
+    # its running update with the same batch, mean + (batch mean - mean) * n / n, kept for equal bits
+    # (-0.0 becomes 0.0, inf becomes nan); the batch mean is `mean` itself, not recomputed
+    mean += (mean - mean) * (n / n)
+    mean_sq += (mean_sq - mean_sq) * (n / n)
+    return mean, np.sqrt(np.maximum(0, mean_sq - mean**2))
 
 
 def _episode_columns(e: int, ep: dict, feats, all_feats, *, fps: int, first_frame: int) -> dict:

@@ -141,11 +141,11 @@ def _index_stats(eps, n_eps: int, n_frames: int) -> dict:
     them depending on where the shards were cut: the quantiles are read off a histogram whose bins
     follow the values.
 
-    _episode_stats' float operations, an episode per column: the means on all episodes of one length
-    at once (a mean over a row of the (episodes, frames) array sums in the order of a (frames, 1)
-    column's), min, max and quantiles on all lengths at once (_quantiles works column by column, each
-    with its own count); tests/test_engine.py checks them equal to _episode_stats."""
-    from lerobot_v3.dataset import _episode_stats, _quantiles
+    _episode_stats' float operations, an episode per column: mean and std on all episodes of one
+    length at once (the writer's _mean_std), min, max and quantiles on all lengths at once
+    (_quantiles works column by column, each with its own count); tests/test_engine.py checks them
+    equal to _episode_stats."""
+    from lerobot_v3.dataset import _episode_stats, _mean_std, _quantiles
 
     lo = eps.column("dataset_from_index").to_numpy() + n_frames
     lengths = eps.column("dataset_to_index").to_numpy() + n_frames - lo
@@ -170,12 +170,9 @@ def _index_stats(eps, n_eps: int, n_frames: int) -> dict:
             "index": (lo[js][None, :] + np.arange(n)[:, None]).astype(np.float64),
         }
         for name, x in values.items():
-            xt = np.ascontiguousarray(x.T)  # a row per episode: each mean sums one contiguous row
-            mean, mean_sq = np.mean(xt, axis=1), np.mean(xt**2, axis=1)
-            mean += (mean - mean) * (n / n)  # as _episode_stats (its running update, for equal bits)
-            mean_sq += (mean_sq - mean_sq) * (n / n)
-            put(f"stats/{name}/mean", js, mean)
-            put(f"stats/{name}/std", js, np.sqrt(np.maximum(0, mean_sq - mean**2)))
+            mean, std = _mean_std([x[:, [j]] for j in range(len(js))])  # the writer's own, (E, 1) each
+            put(f"stats/{name}/mean", js, mean[:, 0])
+            put(f"stats/{name}/std", js, std[:, 0])
             put(f"stats/{name}/count", js, np.full(len(js), n))
     js = np.flatnonzero(lengths >= 2)  # min, max and quantiles of every length at once: one column each
     if len(js):
