@@ -153,23 +153,22 @@ def write_set(
     episodes = _with_env_state(episodes, feats)
     if not per_frame and all(f["dtype"] in _DIRECT_DTYPES and len(f["shape"]) == 1 for f in feats.values()):
         _write_direct(root, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes)
-    else:
-        _write_lerobot(
-            root,
-            repo_id=repo_id,
-            fps=fps,
-            robot_type=robot_type,
-            task=task,
-            feats=feats,
-            episodes=episodes,
-        )
-    stats = (
-        root / "meta" / "stats.json"
-    )  # lerobot orders its keys by string hash; sorted, equal sets are equal bytes
+        return  # its stats.json is written sorted
+    _write_lerobot(
+        root, repo_id=repo_id, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes
+    )
+    stats = root / "meta" / "stats.json"
     if stats.exists():
-        stats.write_text(
-            json.dumps(json.loads(stats.read_text()), indent=4, sort_keys=True, ensure_ascii=False)
-        )
+        write_sorted_stats(json.loads(stats.read_text()), root)
+
+
+def write_sorted_stats(stats: dict, root: Path) -> None:
+    """LeRobot's write_stats with sorted keys: LeRobot orders them by string hash; sorted, equal sets
+    are equal bytes."""
+    from lerobot.datasets.utils import serialize_dict
+
+    text = json.dumps(serialize_dict(stats), indent=4, sort_keys=True, ensure_ascii=False)
+    (root / "meta" / "stats.json").write_text(text)
 
 
 # Feature dtypes _write_direct writes as plain Arrow columns (a scalar for shape (1,), else a
@@ -296,88 +295,142 @@ def _episode_stats(buf: dict, feats: dict) -> dict:
 
 
 def _episodes_stats(bufs: list[dict], feats: dict) -> list[dict]:
-    """[_episode_stats(buf, feats) for buf in bufs], the same bits, computed for many episodes at once:
-    one _quantiles call per dtype and layout (it works column by column, so the columns of every
-    episode side by side, each with its own length, give each its own values) and one mean per
-    feature and episode length (_mean_std keeps each episode's own summation order). A few
-    numpy calls per shard where there were dozens per episode, which were most of the writer's time."""
+    """[_episode_stats(buf, feats) for buf in bufs], the same bits and dtypes: rows of _stats_columns
+    (each quantile back in the feature's dtype where LeRobot returns a bin's edge), LeRobot's own
+    get_feature_stats for an episode of one frame."""
     from lerobot.datasets.compute_stats import get_feature_stats
 
-    outs, batches = [], {}  # batches: (dtype, layout) -> [(episode, its members)]
+    outs = [None] * len(bufs)
+    long = [e for e, buf in enumerate(bufs) if _frames(buf, feats) >= 2]
+    if long:
+        cols, edges = _stats_columns([bufs[e] for e in long], feats)
+        for j, e in enumerate(long):
+            outs[e] = {
+                k: {
+                    name: v[j].astype(st["min"].dtype) if name in edges[k] and edges[k][name][j] else v[j]
+                    for name, v in st.items()
+                }
+                for k, st in cols.items()
+            }
     for e, buf in enumerate(bufs):
-        out, groups = {}, {}
-        for k, data in buf.items():
-            if feats[k]["dtype"] in {"string", "language"}:
-                continue
-            if len(data) < 2:
-                out[k] = get_feature_stats(data, axis=0, keepdims=data.ndim == 1)
-                continue
-            x = data.reshape(-1, 1) if data.ndim == 1 else data
-            x = x.astype(np.result_type(x.dtype, np.float32), copy=False)  # as RunningQuantileStats.update
-            out[k] = {"min": None, "max": None, "mean": None, "std": None, "count": np.array([len(x)])}
-            groups.setdefault(x.dtype, []).append((k, x))
-        outs.append(out)
-        for dtype, members in groups.items():
-            layout = tuple((k, x.shape[1]) for k, x in members)
-            batches.setdefault((dtype, layout), []).append((e, members))
-    for (dtype, layout), eps in batches.items():
-        by_length = {}
-        for e, members in eps:
-            by_length.setdefault(len(members[0][1]), []).append((e, members))
-        for same in by_length.values():
-            for i, (k, _) in enumerate(layout):
-                mean, std = _mean_std([members[i][1] for _, members in same])  # (E, D) each
-                for j, (e, _) in enumerate(same):
-                    outs[e][k]["mean"], outs[e][k]["std"] = mean[j], std[j]
-        width = sum(w for _, w in layout)
-        lengths = np.array([len(members[0][1]) for _, members in eps])
-        stacked = np.zeros((lengths.max(), len(eps) * width), dtype)  # (longest, episodes * width)
-        for j, (_, members) in enumerate(eps):
-            stacked[: lengths[j], j * width : (j + 1) * width] = np.concatenate(
-                [x for _, x in members], axis=1
-            )
-        lo, hi, qs = _quantiles(stacked, np.repeat(lengths, width))
-        firsts = np.cumsum([0] + [w for _ in eps for _, w in layout][:-1])  # each (episode, feature)'s column
-        # per quantile: the edge where LeRobot returns it, else the interpolated value (float64), and
-        # whether a feature's columns are all edges (LeRobot's np.array of edges alone keeps their dtype)
-        qs = [
-            (key, e0, np.where(plain, e0, inside), np.logical_and.reduceat(plain, firsts))
-            for key, e0, inside, plain in qs
-        ]
-        i = 0
-        for e, members in eps:
-            for k, x in members:
-                cols = slice(firsts[i], firsts[i] + x.shape[1])
-                st = outs[e][k]
-                st["min"], st["max"] = lo[cols], hi[cols]
-                for key, e0, mixed, edges_only in qs:
-                    st[key] = e0[cols] if edges_only[i] else mixed[cols]
-                i += 1
-    for buf, out in zip(bufs, outs):
-        for k, st in out.items():
-            if buf[k].ndim == 1 and len(buf[k]) >= 2:  # keepdims: (1,) each, as LeRobot reshapes (T,) stats
-                out[k] = {name: v.reshape(1) for name, v in st.items()}
+        if outs[e] is None:
+            outs[e] = {
+                k: get_feature_stats(x, axis=0, keepdims=x.ndim == 1)
+                for k, x in buf.items()
+                if feats[k]["dtype"] not in _TEXT
+            }
     return outs
 
 
-def _mean_std(xs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and std over axis 0 of each (T, D) array in xs (all of one T), stacked (E, D), as
-    RunningQuantileStats computes them fed one batch, bit for bit. np.mean(x, axis=0)'s rounding
-    depends on the layout: numpy adds a (T, 1) column pairwise (it is contiguous along T) and a
-    (T, D > 1) array row by row, so one column is stacked as rows (E, T) and summed along them,
-    several side by side (T, E * D) and summed down."""
-    n, cols = xs[0].shape
-    if cols == 1:
-        x = np.stack([x[:, 0] for x in xs])  # (E, T)
-        mean, mean_sq = np.mean(x, axis=1)[:, None], np.mean(x**2, axis=1)[:, None]
-    else:
-        x = np.concatenate(xs, axis=1)  # (T, E * D)
-        mean, mean_sq = np.mean(x, axis=0).reshape(-1, cols), np.mean(x**2, axis=0).reshape(-1, cols)
-    # its running update with the same batch, mean + (batch mean - mean) * n / n, kept for equal bits
-    # (-0.0 becomes 0.0, inf becomes nan); the batch mean is `mean` itself, not recomputed
-    mean += (mean - mean) * (n / n)
-    mean_sq += (mean_sq - mean_sq) * (n / n)
+_TEXT = {"string", "language"}  # feature dtypes with no stats
+
+
+def _frames(buf: dict, feats: dict) -> int:
+    return len(next(x for k, x in buf.items() if feats[k]["dtype"] not in _TEXT))
+
+
+def _stats_columns(bufs: list[dict], feats: dict) -> tuple[dict, dict]:
+    """The stats of episodes of two frames or more, as columns: {feature: {stat: (E, D) array}}, row e
+    equal in value to compute_episode_stats(bufs[e], feats)[feature][stat] (a quantile in float64, as
+    LeRobot interpolates it), and {feature: {quantile: (E,) bool}}, where LeRobot returns the bin's
+    edge itself, in the feature's dtype. Every episode has the same features.
+
+    Each dtype's features (as RunningQuantileStats casts them: float32 at least) side by side, every
+    episode's beside the others': one _quantiles call over all of them (it works column by column,
+    each column with its own length), and mean and std once per episode length (_column_mean_std keeps
+    each feature's summation order: pairwise for a (T, 1) feature, row by row for (T, D > 1)). A few
+    dozen numpy calls for a shard where there were dozens per episode, and the columns are what the
+    episodes table and the set's aggregate read (_write_direct)."""
+    keys = [k for k in bufs[0] if feats[k]["dtype"] not in _TEXT]
+    lengths = np.array([_frames(buf, feats) for buf in bufs])  # (E,)
+    same = {}  # episode length -> the episodes of that length
+    for e, n in enumerate(lengths.tolist()):
+        same.setdefault(n, []).append(e)
+    groups = {}  # dtype -> [(feature, width)]
+    for k in keys:
+        x = bufs[0][k]
+        groups.setdefault(np.result_type(x.dtype, np.float32), []).append(
+            (k, 1 if x.ndim == 1 else x.shape[1])
+        )
+    cols, edges = {}, {}
+    for dtype, layout in groups.items():
+        width = sum(w for _, w in layout)
+        firsts = np.cumsum([0] + [w for _, w in layout])  # each feature's first column in an episode's
+        stacked = np.zeros((lengths.max(), len(bufs), width), dtype)  # (longest, E, width), padding unread
+        for e, buf in enumerate(bufs):
+            for (k, w), c in zip(layout, firsts):
+                stacked[: lengths[e], e, c : c + w] = buf[k].reshape(lengths[e], w)  # cast as astype
+        mean, std = np.empty((len(bufs), width), dtype), np.empty((len(bufs), width), dtype)
+        wide = [c + i for (_, w), c in zip(layout, firsts) if w > 1 for i in range(w)]
+        narrow = [c for (_, w), c in zip(layout, firsts) if w == 1]
+        exact = [c for c in narrow if _sums_exactly(stacked[:, :, c], dtype)]
+        narrow = [c for c in narrow if c not in exact]
+        if wide or exact:  # summed row by row: a running sum down all episodes at once, read at each end
+            x = stacked[:, :, wide + exact]  # (longest, E, W)
+            mean[:, wide + exact], std[:, wide + exact] = _row_by_row_mean_std(x, lengths)
+        for n, es in same.items() if narrow else ():  # summed pairwise: its blocks depend on the length
+            x = stacked[:n][:, es][:, :, narrow].reshape(n, -1)  # (T, episodes * columns)
+            m, s = _pairwise_mean_std(x)
+            mean[np.ix_(es, narrow)], std[np.ix_(es, narrow)] = m.reshape(len(es), -1), s.reshape(len(es), -1)
+        flat = stacked.reshape(len(stacked), -1)  # (longest, E * width)
+        lo, hi, qs = _quantiles(flat, np.repeat(lengths, width))
+        shaped = lambda v: v.reshape(len(bufs), width)  # noqa: E731
+        lo, hi = shaped(lo), shaped(hi)
+        qs = [(key, shaped(np.where(plain, e0, inside)), shaped(plain)) for key, e0, inside, plain in qs]
+        for (k, w), c in zip(layout, firsts):
+            part = lambda v: np.ascontiguousarray(v[:, c : c + w])  # noqa: E731
+            st = {"min": part(lo), "max": part(hi), "mean": part(mean), "std": part(std)}
+            cols[k] = st | {"count": lengths[:, None].copy()} | {key: part(v) for key, v, _ in qs}
+            edges[k] = {key: plain[:, c : c + w].all(axis=1) for key, _, plain in qs}
+    return {k: cols[k] for k in keys}, edges
+
+
+def _sums_exactly(x: np.ndarray, dtype) -> bool:
+    """Whether every sum of x's values and of their squares is exact in dtype (integers whose squares,
+    added up over the longest episode, stay below 2 ** mantissa bits): such a column's sums do not
+    depend on their order, so a (T, 1) feature's pairwise sum equals a running one. Indices, counts
+    and flags are such columns (padding, zeros, included)."""
+    top = float(np.max(np.abs(x)))
+    return bool(top * top * len(x) < 2.0 ** np.finfo(dtype).nmant and np.all(x == np.round(x)))
+
+
+def _pairwise_mean_std(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and std of each column of x (T, C), each as RunningQuantileStats computes them on a (T, 1)
+    feature fed one batch, bit for bit: np.mean adds a (T, 1) feature pairwise (it is contiguous along
+    T), as it adds each row of the contiguous (C, T) copy here."""
+    x = np.ascontiguousarray(x.T)  # (C, T)
+    return _running_update(np.mean(x, axis=1), np.mean(x**2, axis=1))
+
+
+def _row_by_row_mean_std(x: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and std (E, W) of the first lengths[e] rows of each x[:, e] (longest, E, W), each as
+    RunningQuantileStats computes them on a (T, D > 1) feature, bit for bit: np.mean adds its rows one
+    by one from the first (a running sum, np.cumsum's order), then divides by the count in float64 and
+    rounds to the dtype (np.true_divide by an intp, as np.mean does)."""
+    last, every = lengths - 1, np.arange(x.shape[1])
+    count = lengths[:, None].astype(np.intp)
+
+    def mean(v):  # (E, W)
+        return np.true_divide(
+            np.cumsum(v, axis=0)[last, every], count, out=np.empty(v.shape[1:], v.dtype), casting="unsafe"
+        )
+
+    return _running_update(mean(x), mean(x**2))
+
+
+def _running_update(mean: np.ndarray, mean_sq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """RunningQuantileStats' update with its first batch, mean + (batch mean - mean) * n / n, kept for
+    equal bits (-0.0 becomes 0.0, inf becomes nan; the batch mean is `mean` itself), then std."""
+    mean += mean - mean
+    mean_sq += mean_sq - mean_sq
     return mean, np.sqrt(np.maximum(0, mean_sq - mean**2))
+
+
+def _mean_std(xs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and std over axis 0 of each (T, 1) array in xs (all of one length), stacked (E, 1), as
+    RunningQuantileStats computes them on each (_pairwise_mean_std)."""
+    mean, std = _pairwise_mean_std(np.concatenate(xs, axis=1))
+    return mean[:, None], std[:, None]
 
 
 def _episode_columns(e: int, ep: dict, feats, all_feats, *, fps: int, first_frame: int) -> dict:
@@ -470,9 +523,11 @@ def _write_episodes_table(root: Path, table, limit: float, chunks_size: int) -> 
 STATS_BATCH = 256  # episodes whose stats are computed together (_episodes_stats); bounds the memory held
 
 
-def _stacked_episodes(episodes, feats, all_feats, *, fps: int, task: str):
-    """(e, its columns as save_episode stacks them, its stats) for every episode, in order; the stats
-    of up to STATS_BATCH episodes at a time (_episodes_stats)."""
+def _stacked_batches(episodes, feats, all_feats, *, fps: int, task: str):
+    """(first episode number, the batch's columns as save_episode stacks them, their stats, rows) for up
+    to STATS_BATCH episodes at a time, in order. The stats: {feature: {stat: (E, D)}}, the arrays
+    LeRobot's aggregate_stats stacks from the episodes' stats; rows: {episodes-table column: E values},
+    each episode's stat as LeRobot's flatten_dict lists it (its .tolist())."""
     from lerobot.datasets.feature_utils import validate_frame
 
     it, e, frames = iter(episodes), 0, 0
@@ -485,8 +540,48 @@ def _stacked_episodes(episodes, feats, all_feats, *, fps: int, task: str):
             validate_frame({k: ep[k][0] for k in feats} | {"task": task}, all_feats)  # LeRobot's messages
             bufs.append(_episode_columns(e + len(bufs), ep, feats, all_feats, fps=fps, first_frame=frames))
             frames += n
-        yield from zip(range(e, e + len(bufs)), bufs, _episodes_stats(bufs, all_feats))
+        if all(len(buf["action"]) >= 2 for buf in bufs):  # a column's rows are its episodes' values
+            stats, _ = _stats_columns(bufs, all_feats)
+            rows = {f"stats/{k}/{name}": v.tolist() for k, st in stats.items() for name, v in st.items()}
+        else:  # an episode of one frame: its stats are LeRobot's, dtypes and all; stacked as LeRobot does
+            per_episode = _episodes_stats(bufs, all_feats)
+            stats = {
+                k: {name: np.stack([s[k][name] for s in per_episode]) for name in st}
+                for k, st in per_episode[0].items()
+            }
+            rows = {
+                f"stats/{k}/{name}": [s[k][name].tolist() for s in per_episode]
+                for k, st in per_episode[0].items()
+                for name in st
+            }
+        yield e, bufs, stats, rows
         e += len(bufs)
+
+
+def _aggregate(stats: dict) -> dict:
+    """LeRobot's aggregate_stats of a set's episodes from their stats as columns (_stacked_batches):
+    aggregate_feature_stats' own operations on the arrays it stacks, so the same values, without a
+    dict per episode and feature."""
+    out = {}
+    for k, st in stats.items():
+        means, counts = st["mean"], st["count"]  # (E, D), (E, 1)
+        total_count = counts.sum(axis=0)
+        total_mean = (means * counts).sum(axis=0) / total_count
+        delta_means = means - total_mean
+        total_variance = ((st["std"] ** 2 + delta_means**2) * counts).sum(axis=0) / total_count
+        out[k] = {
+            "min": np.min(st["min"], axis=0),
+            "max": np.max(st["max"], axis=0),
+            "mean": total_mean,
+            "std": np.sqrt(total_variance),
+            "count": total_count,
+        }
+        out[k] |= {
+            q: (v * counts).sum(axis=0) / total_count
+            for q, v in st.items()
+            if q[0] == "q" and q[1:].isdigit()
+        }
+    return out
 
 
 def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb: int | None = None) -> None:
@@ -505,10 +600,9 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     """
     import pandas as pd
     import pyarrow as pa
-    from lerobot.datasets.compute_stats import aggregate_stats
     from lerobot.datasets.dataset_metadata import CODEBASE_VERSION
     from lerobot.datasets.feature_utils import create_empty_dataset_info, get_hf_features_from_features
-    from lerobot.datasets.io_utils import write_info, write_stats, write_tasks
+    from lerobot.datasets.io_utils import write_info, write_tasks
     from lerobot.utils.constants import DEFAULT_FEATURES
 
     check_hf_cache()  # as on LeRobot's path: a cache problem is named here, not at the first read
@@ -520,44 +614,52 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     limit = info.data_files_size_in_mb * 1024**2  # bytes, LeRobot's DEFAULT_DATA_FILE_SIZE_IN_MB
 
     rows: dict[str, list] = {}  # the episodes table, column by column
-    ep_stats = []
+    batches = []  # each batch's stats, {feature: {stat: (E, D)}}
     parts = {k: [] for k in all_feats}  # the current data file's columns, episode by episode
     roller = ChunkRoller(rows_below(limit, frame_bytes), info.chunks_size)  # LeRobot's rule for data files
     chunk = file = frames = 0
-    for e, buf, stats in _stacked_episodes(episodes, feats, all_feats, fps=fps, task=task):
-        n = len(buf["action"])
-        ep_stats.append(stats)
-        if (where := roller.place(n)) != (chunk, file):  # this episode starts the next file
-            _write_data_file(tmp / info.data_path.format(chunk_index=chunk, file_index=file), schema, parts)
-            parts = {k: [] for k in all_feats}
-            chunk, file = where
-        for k, x in buf.items():
-            parts[k].append(x.astype(np.float32) if k == "timestamp" else x)
-        row = {
-            "episode_index": e,
-            "tasks": [task],
-            "length": n,
-            "data/chunk_index": chunk,
-            "data/file_index": file,
-            "dataset_from_index": frames,
-            "dataset_to_index": frames + n,
-        }
-        # LeRobot's flatten_dict({"stats": stats}) (its keys, in its order) without its recursion per value
-        row |= {f"stats/{k}/{name}": v.tolist() for k, st in stats.items() for name, v in st.items()}
-        for k, v in row.items():
-            rows.setdefault(k, []).append(v)
-        frames += n
-    if not ep_stats:
+    for first, bufs, stats, stat_rows in _stacked_batches(episodes, feats, all_feats, fps=fps, task=task):
+        for e, buf in enumerate(bufs, first):
+            n = len(buf["action"])
+            if (where := roller.place(n)) != (chunk, file):  # this episode starts the next file
+                _write_data_file(
+                    tmp / info.data_path.format(chunk_index=chunk, file_index=file), schema, parts
+                )
+                parts = {k: [] for k in all_feats}
+                chunk, file = where
+            for k, x in buf.items():
+                parts[k].append(x.astype(np.float32) if k == "timestamp" else x)
+            row = {
+                "episode_index": e,
+                "tasks": [task],
+                "length": n,
+                "data/chunk_index": chunk,
+                "data/file_index": file,
+                "dataset_from_index": frames,
+                "dataset_to_index": frames + n,
+            }
+            for k, v in row.items():
+                rows.setdefault(k, []).append(v)
+            frames += n
+        # LeRobot's flatten_dict({"stats": stats}) per episode (its keys, in its order), a column at a time
+        for k, v in stat_rows.items():
+            rows.setdefault(k, []).extend(v)
+        batches.append(stats)
+    if not batches:
         write_info(info, tmp)
         return
     _write_data_file(tmp / info.data_path.format(chunk_index=chunk, file_index=file), schema, parts)
-    n_eps = len(ep_stats)
+    n_eps = len(rows["episode_index"])
     _write_episodes_table(tmp, pa.Table.from_pydict(rows), limit, info.chunks_size)
     write_tasks(pd.DataFrame({"task_index": range(1)}, index=pd.Index([task], name="task")), tmp)
     info.total_episodes, info.total_frames, info.total_tasks = n_eps, frames, 1
     info.splits = {"train": f"0:{n_eps}"}
     write_info(info, tmp)
-    write_stats(aggregate_stats(ep_stats), tmp)
+    stats = {
+        k: {name: np.concatenate([b[k][name] for b in batches]) for name in st}
+        for k, st in batches[0].items()
+    }
+    write_sorted_stats(_aggregate(stats), tmp)
 
 
 def open_dataset(root: Path, repo_id: str = "local/demos"):
