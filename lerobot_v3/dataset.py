@@ -542,7 +542,7 @@ def _stacked_batches(episodes, feats, all_feats, *, fps: int, task: str):
             frames += n
         if all(len(buf["action"]) >= 2 for buf in bufs):  # a column's rows are its episodes' values
             stats, _ = _stats_columns(bufs, all_feats)
-            rows = {f"stats/{k}/{name}": v.tolist() for k, st in stats.items() for name, v in st.items()}
+            rows = {f"stats/{k}/{name}": v for k, st in stats.items() for name, v in st.items()}
         else:  # an episode of one frame: its stats are LeRobot's, dtypes and all; stacked as LeRobot does
             per_episode = _episodes_stats(bufs, all_feats)
             stats = {
@@ -556,6 +556,19 @@ def _stacked_batches(episodes, feats, all_feats, *, fps: int, task: str):
             }
         yield e, bufs, stats, rows
         e += len(bufs)
+
+
+def _stats_column(parts: list):
+    """One stats column of the episodes table from its batches (_stacked_batches' rows): (E, D) arrays
+    become the Arrow list array pyarrow infers from their .tolist() (list<double>, list<int64> for a
+    count), built from the numbers at once; lists (a batch with an episode of one frame) stay lists."""
+    import pyarrow as pa
+
+    if not all(isinstance(p, np.ndarray) for p in parts):
+        return [x for p in parts for x in (p.tolist() if isinstance(p, np.ndarray) else p)]
+    v = np.concatenate(parts)  # (E, D)
+    values = v.astype(np.int64 if v.dtype.kind in "iu" else np.float64).ravel()
+    return pa.ListArray.from_arrays(np.arange(0, v.size + 1, v.shape[1], dtype=np.int32), pa.array(values))
 
 
 def _aggregate(stats: dict) -> dict:
@@ -615,6 +628,7 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
 
     rows: dict[str, list] = {}  # the episodes table, column by column
     batches = []  # each batch's stats, {feature: {stat: (E, D)}}
+    stat_parts = {}  # the episodes table's stats columns, batch by batch
     parts = {k: [] for k in all_feats}  # the current data file's columns, episode by episode
     roller = ChunkRoller(rows_below(limit, frame_bytes), info.chunks_size)  # LeRobot's rule for data files
     chunk = file = frames = 0
@@ -643,13 +657,14 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
             frames += n
         # LeRobot's flatten_dict({"stats": stats}) per episode (its keys, in its order), a column at a time
         for k, v in stat_rows.items():
-            rows.setdefault(k, []).extend(v)
+            stat_parts.setdefault(k, []).append(v)
         batches.append(stats)
     if not batches:
         write_info(info, tmp)
         return
     _write_data_file(tmp / info.data_path.format(chunk_index=chunk, file_index=file), schema, parts)
     n_eps = len(rows["episode_index"])
+    rows |= {k: _stats_column(parts) for k, parts in stat_parts.items()}
     _write_episodes_table(tmp, pa.Table.from_pydict(rows), limit, info.chunks_size)
     write_tasks(pd.DataFrame({"task_index": range(1)}, index=pd.Index([task], name="task")), tmp)
     info.total_episodes, info.total_frames, info.total_tasks = n_eps, frames, 1
