@@ -236,18 +236,27 @@ class PushTExpert:
             (a multiply, then add.reduce); the einsum "kj,kj->k" over a length-2 axis is a0*b0 + a1*b1
             (numpy's einsum kernels multiply and add separately, no FMA, in the x86-64 build; only a
             zero's sign may differ, which the squares after it erase); wrap_angle's % is numpy's
-            remainder, which is Python's float % (an exact fmod, then one add);
+            remainder, which is Python's float % (an exact fmod, then one add); np.clip and Python's
+            min(max(...)) are np.maximum then np.minimum (the same values, no NaN here);
         (4) a branch that the scalar path decides by a comparison may skip computing its operand
-            where an error bound already settles the comparison (the reach test below)."""
+            where an error bound already settles the comparison (the reach test below).
+        Apart from the transcendental calls and BLAS's per-env routines, every step is one numpy call
+        over all envs, the goal ones too (their pushes are computed, then dropped): a call costs a few
+        microseconds whatever its length, so picking out each branch's rows would cost more."""
         n = len(o)
+        if n == 0:
+            return np.zeros((0, 2))
         # The per-env angles, with Python's math (rule 1).
         bx, by, sin_b, cos_b, _, _, sin_t, cos_t = o[:, 2:10].T.tolist()
         yaw = list(map(math.atan2, sin_b, cos_b))
         c, s = list(map(math.cos, yaw)), list(map(math.sin, yaw))
         eyaw = np.array(list(map(operator.sub, map(math.atan2, sin_t, cos_t), yaw)))
         eyaw = (eyaw + math.pi) % (2.0 * math.pi) - math.pi  # wrap_angle (rule 3)
-        rot = np.array([c, list(map(operator.neg, s)), s, c]).T.reshape(n, 2, 2)  # C-ordered, as the
-        rot_t = rot.transpose(0, 2, 1)  # scalar np.array([[c, -s], [s, c]]); rot.T is a transposed view
+        rot = np.empty((n, 2, 2))  # C-ordered per env, as the scalar np.array([[c, -s], [s, c]]) is
+        rot[:, 0, 0] = rot[:, 1, 1] = c
+        rot[:, 1, 0] = s
+        np.negative(rot[:, 1, 0], out=rot[:, 0, 1])
+        rot_t = rot.transpose(0, 2, 1)  # each env's rot.T: the same transposed view the scalar gemv gets
         # e = rot.T @ (target - block) and p = rot.T @ (pusher - block): one gemv per vector.
         ep = np.matmul(rot_t[:, None], (o[:, self._ep_cols].reshape(n, 2, 2) - o[:, None, 2:4])[..., None])
         e, p = ep[:, 0, :, 0], ep[:, 1, :, 0]  # (N, 2) each, block frame (m)
@@ -256,8 +265,6 @@ class PushTExpert:
         twist_err = np.array(list(map(math.hypot, err.tolist(), yaw_err.tolist())))
         goal = (err < _PT_GOAL_POS) & (np.abs(eyaw) < _PT_GOAL_YAW)
         any_goal = np.count_nonzero(goal) > 0
-        # Every step below runs over all envs, the goal ones too (their pushes are computed, then
-        # dropped): one numpy call per step costs less than picking out the rows of each branch.
 
         # 1-2. Score every candidate push against the desired twist.
         want = np.concatenate([e, yaw_err[:, None]], axis=1)
@@ -265,7 +272,7 @@ class PushTExpert:
         align = np.matmul(self._u, want[:, :, None])[:, :, 0]  # (N, K): gemv per row, as self._u @ want
         rel = p.T[:, :, None] - self._contact_xy  # (2, N, K): x and y of p - contact
         rn = rel * self._n_xy
-        along = np.maximum(rn[0] + rn[1], -_PT_STANDOFF)  # the einsum (rule 3), then np.clip
+        along = np.maximum(rn[0] + rn[1], -_PT_STANDOFF)  # the einsum, then np.clip (rule 3)
         np.minimum(along, 0.0, out=along)
         rel -= along * self._n_xy
         rel *= rel
@@ -315,13 +322,13 @@ class PushTExpert:
         tang = grad[:, ::-1] * self._ccw  # (-g1, g0)
         orbit = (~(push | straight | goal)).nonzero()[0]
         if orbit.size:
-            c0, c1 = _PT_ORBIT_CENTER.tolist()
-            cw = [
-                i
-                for i, (a0, a1), (b0, b1) in zip(orbit.tolist(), p[orbit].tolist(), g[orbit].tolist())
-                if _pt.wrap_angle(math.atan2(b1 - c1, b0 - c0) - math.atan2(a1 - c1, a0 - c0)) < 0.0
-            ]
-            tang[cw] = -tang[cw]
+            (px, py), (gx, gy) = (
+                (p[orbit] - _PT_ORBIT_CENTER).T.tolist(),
+                (g[orbit] - _PT_ORBIT_CENTER).T.tolist(),
+            )
+            turn = np.array(list(map(math.atan2, gy, gx))) - np.array(list(map(math.atan2, py, px)))
+            cw = orbit[(turn + math.pi) % (2.0 * math.pi) - math.pi < 0.0]  # wrap_angle (rule 3) < 0
+            tang[cw] *= -1.0
         radial = np.minimum(np.maximum(20.0 * (_PT_CLEAR - (sdf_p - _PT_R)), -1.0), 1.0)
         v = tang + radial[:, None] * grad
         v_orbit = _PT_V_MOVE[1] * v / np.maximum(_norm(v), 1e-9)[:, None]
