@@ -8,6 +8,7 @@ bit-for-bit reproducible for a given seed.
 from __future__ import annotations
 
 import math
+import operator
 
 import numpy as np
 
@@ -115,6 +116,26 @@ class PushTExpert:
         u = np.concatenate([n, (_PT_YAW_LEN * _PT_K * tau)[:, None]], axis=1)
         self._u = u / np.linalg.norm(u, axis=1, keepdims=True)  # predicted twist directions
         self._seg = np.linspace(0.0, 1.0, 9)[1:-1]  # interior sample fractions of a path segment
+        # For _clean_batch: each candidate's n, t, contact and pre-contact point in one row; n and
+        # the contact x and y apart (2, 1, K); the push test's open bounds on (along, lat) (m); the
+        # observation columns of the target and the pusher; _grad's stencil offsets, x and y apart,
+        # after a zero one, signed so that adding them rounds as _grad's p + (h, 0.0), p - (h, 0.0),
+        # ... do (x + -0.0 == x and x - 0.0 == x + -0.0, the sign of a zero included); the signs of
+        # the counter-clockwise tangent (-g1, g0).
+        self._cand = np.concatenate([n, self._t, self._contact, self._pre], axis=1)  # (K, 8)
+        self._n_xy = np.ascontiguousarray(n.T)[:, None, :]
+        self._contact_xy = np.ascontiguousarray(self._contact.T)[:, None, :]
+        self._push_lo = np.array([-(_PT_STANDOFF + 0.008), -0.006])
+        self._push_hi = np.array([0.01, 0.006])
+        self._ep_cols = np.array([6, 7, 0, 1])
+        h = 1e-5
+        stencil = np.array([(-0.0, -0.0), (h, 0.0), (-h, -0.0), (0.0, h), (-0.0, -h)])
+        self._stencil_xy = np.ascontiguousarray(stencil.T)[:, None, :]
+        self._ccw = np.array([-1.0, 1.0])
+        # The block's farthest |x| or |y| from every wall at which all pre-contact points are still
+        # reachable: WALL_INNER - R - 5 mm less the farthest pre-contact point, less 1e-9 m for the
+        # roundings of pre @ rot.T + bw (each well under 1e-15 m here).
+        self._reach_free = _pt.WALL_INNER - _PT_R - 0.005 - float(np.hypot(*self._pre.T).max()) - 1e-9
 
     def reset(self) -> None:
         """Nothing to clear: the policy is memoryless (the noise generator keeps running)."""
@@ -196,105 +217,129 @@ class PushTExpert:
         if self.noise > 0.0:
             raise ValueError("act_batch is for the noise-free expert; a noisy one draws per env (act)")
         o = np.asarray(obs, dtype=np.float64).reshape(-1, _pt.OBS_DIM)
-        return np.clip(self._clean_batch(o), -1.0, 1.0).astype(np.float32)
+        v = self._clean_batch(o)
+        # np.clip(v, -1.0, 1.0) as act's, without its wrapper's cost: the same values, NaN included.
+        return np.minimum(np.maximum(v, -1.0, out=v), 1.0, out=v).astype(np.float32)
 
     def _clean_batch(self, o: np.ndarray) -> np.ndarray:
-        """_clean_action over rows, every term computed as the scalar path computes it. Two rules keep
-        the bits: (1) transcendental terms (atan2, cos, sin, hypot, wrap_angle) stay Python's math calls,
-        one per env, since numpy's vector versions may round differently; (2) every product the scalar
-        path hands to BLAS (``@``: gemv, gemm, and np.linalg.norm's dot) is a stacked np.matmul, which
-        calls the same BLAS routine per env with the same shapes and layout, where an elementwise
-        rewrite would not fuse multiply-adds the way OpenBLAS's kernels do (they differ in the last bit)."""
+        """_clean_action over rows, every term computed as the scalar path computes it. The rules that
+        keep the bits:
+        (1) transcendental terms (atan2, cos, sin, hypot) stay Python's math calls, one per env, since
+            numpy's vector versions may round differently (and differ by CPU: SVML on AVX-512);
+        (2) every product the scalar path hands to BLAS (``@``: gemv, gemm, and np.linalg.norm's dot)
+            is a stacked np.matmul, which calls the same BLAS routine per env with the same shapes and
+            layout, where an elementwise rewrite would not fuse multiply-adds the way OpenBLAS's
+            kernels do (they differ in the last bit);
+        (3) what the scalar path computes elementwise may be written as any elementwise arithmetic
+            with the same roundings in the same order, numpy's or Python's floats (both IEEE, one
+            rounding per operation): np.linalg.norm(x, axis=1) of (K, 2) rows is sqrt(x0*x0 + x1*x1)
+            (a multiply, then add.reduce); the einsum "kj,kj->k" over a length-2 axis is a0*b0 + a1*b1
+            (numpy's einsum kernels multiply and add separately, no FMA, in the x86-64 build; only a
+            zero's sign may differ, which the squares after it erase); wrap_angle's % is numpy's
+            remainder, which is Python's float % (an exact fmod, then one add); np.clip and Python's
+            min(max(...)) are np.maximum then np.minimum (the same values, no NaN here);
+        (4) a branch that the scalar path decides by a comparison may skip computing its operand
+            where an error bound already settles the comparison (the reach test below).
+        Apart from the transcendental calls and BLAS's per-env routines, every step is one numpy call
+        over all envs, the goal ones too (their pushes are computed, then dropped): a call costs a few
+        microseconds whatever its length, so picking out each branch's rows would cost more."""
         n = len(o)
-        rows = o.tolist()  # Python floats, as math reads o[i] in the scalar path
-        yaw = [math.atan2(r[4], r[5]) for r in rows]
-        c = np.array([math.cos(y) for y in yaw])
-        s = np.array([math.sin(y) for y in yaw])
-        rot = np.empty((n, 2, 2))  # (N, 2, 2) C-ordered per env, as np.array([[c, -s], [s, c]]) is
-        rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = c, -s, s, c
+        if n == 0:
+            return np.zeros((0, 2))
+        # The per-env angles, with Python's math (rule 1).
+        bx, by, sin_b, cos_b, _, _, sin_t, cos_t = o[:, 2:10].T.tolist()
+        yaw = list(map(math.atan2, sin_b, cos_b))
+        c, s = list(map(math.cos, yaw)), list(map(math.sin, yaw))
+        eyaw = np.array(list(map(operator.sub, map(math.atan2, sin_t, cos_t), yaw)))
+        eyaw = (eyaw + math.pi) % (2.0 * math.pi) - math.pi  # wrap_angle (rule 3)
+        rot = np.empty((n, 2, 2))  # C-ordered per env, as the scalar np.array([[c, -s], [s, c]]) is
+        rot[:, 0, 0] = rot[:, 1, 1] = c
+        rot[:, 1, 0] = s
+        np.negative(rot[:, 1, 0], out=rot[:, 0, 1])
         rot_t = rot.transpose(0, 2, 1)  # each env's rot.T: the same transposed view the scalar gemv gets
-        pw, bw = o[:, 0:2], o[:, 2:4]
-        e = _mv(rot_t, o[:, 6:8] - bw)  # (N, 2) position error, block frame (m)
-        eyaw = np.array([_pt.wrap_angle(math.atan2(r[8], r[9]) - y) for r, y in zip(rows, yaw)])
-        p = _mv(rot_t, pw - bw)  # (N, 2) pusher, block frame (m)
-        err = np.array([math.hypot(a, b) for a, b in e.tolist()])
-        sdf_p = _pt.t_sdf(p)  # (N,) elementwise ufuncs: the same per row as for one point
-        out = np.empty((n, 2))
-
-        # 4. At the goal: back away, then stand still.
+        # e = rot.T @ (target - block) and p = rot.T @ (pusher - block): one gemv per vector.
+        ep = np.matmul(rot_t[:, None], (o[:, self._ep_cols].reshape(n, 2, 2) - o[:, None, 2:4])[..., None])
+        e, p = ep[:, 0, :, 0], ep[:, 1, :, 0]  # (N, 2) each, block frame (m)
+        err = np.array(list(map(math.hypot, *e.T.tolist())))
+        yaw_err = _PT_YAW_LEN * eyaw  # m
+        twist_err = np.array(list(map(math.hypot, err.tolist(), yaw_err.tolist())))
         goal = (err < _PT_GOAL_POS) & (np.abs(eyaw) < _PT_GOAL_YAW)
-        if goal.any():
-            back = _mv(rot[goal], 0.1 * self._grad_batch(p[goal]))
-            out[goal] = np.where((sdf_p[goal] > _PT_R + 0.03)[:, None], 0.0, back)
-        go = np.flatnonzero(~goal)  # the rows that push or move; every name below is over these rows
-        if go.size == 0:
-            return out
-        e, eyaw, err, p, sdf_p, rot, rot_t = e[go], eyaw[go], err[go], p[go], sdf_p[go], rot[go], rot_t[go]
+        any_goal = np.count_nonzero(goal) > 0
 
         # 1-2. Score every candidate push against the desired twist.
-        want = np.stack([e[:, 0], e[:, 1], _PT_YAW_LEN * eyaw], axis=1)
-        want /= _norm(want)[:, None]
-        align = np.matmul(self._u, want[:, :, None])[..., 0]  # (M, K): gemv per row, as self._u @ want
-        pre_w = bw[go, None, :] + np.matmul(self._pre, rot_t)  # (M, K, 2): gemm per row
-        bound = np.abs(pre_w) < _pt.WALL_INNER - _PT_R - 0.005
-        reach = bound[:, :, 0] & bound[:, :, 1]  # np.all over x, y
-        rel = p[:, None, :] - self._contact  # (M, K, 2)
-        along = np.clip(np.einsum("nkj,kj->nk", rel, self._n), -_PT_STANDOFF, 0.0)
-        travel = np.linalg.norm(rel - along[:, :, None] * self._n, axis=2)
-        score = np.where(reach, align - _PT_TRAVEL_COST * travel, -np.inf)
-        k = np.argmax(score, axis=1)
-        nk, tk, c0, g = self._n[k], self._t[k], self._contact[k], self._pre[k]  # (M, 2) each
-        move = np.empty((len(go), 2))  # block frame, rotated to the world at the end
+        want = np.concatenate([e, yaw_err[:, None]], axis=1)
+        want /= np.maximum(_norm(want), 1e-300)[:, None]  # the max only keeps a goal env's 0/0 away
+        align = np.matmul(self._u, want[:, :, None])[:, :, 0]  # (N, K): gemv per row, as self._u @ want
+        rel = p.T[:, :, None] - self._contact_xy  # (2, N, K): x and y of p - contact
+        rn = rel * self._n_xy
+        along = np.maximum(rn[0] + rn[1], -_PT_STANDOFF)  # the einsum, then np.clip (rule 3)
+        np.minimum(along, 0.0, out=along)
+        rel -= along * self._n_xy
+        rel *= rel
+        travel = np.sqrt(rel[0] + rel[1])  # np.linalg.norm(..., axis=1) (rule 3)
+        score = align - _PT_TRAVEL_COST * travel
+        # Reach: pre_w = bw + pre @ rot.T (a gemm per env) within the walls. |pre_w| <= |bw| + |pre|
+        # up to a few roundings, so while every block is far enough from the walls every candidate is
+        # reachable whatever the gemm's last bits (rule 4); else compute it as the scalar path does.
+        if max(max(bx), -min(bx), max(by), -min(by)) >= self._reach_free:
+            pre_w = o[:, None, 2:4] + np.matmul(self._pre, rot_t)  # (N, K, 2): gemm per env
+            bound = np.abs(pre_w) < _pt.WALL_INNER - _PT_R - 0.005
+            score = np.where(bound[:, :, 0] & bound[:, :, 1], score, -np.inf)
+        cand = self._cand[score.argmax(axis=1)]  # the chosen candidate's n, t, contact, pre (N, 8)
+        nt, g = cand[:, 0:4].reshape(n, 2, 2), cand[:, 6:8]
 
         # 3a. Behind the contact and on its line: push through it.
-        rel = p - c0
-        along, lat = _dot(rel, nk), _dot(rel, tk)
-        push = (np.abs(lat) < 0.006) & (-(_PT_STANDOFF + 0.008) < along) & (along < 0.01)
-        if push.any():
-            twist = np.array([math.hypot(a, _PT_YAW_LEN * b) for a, b in zip(err[push], eyaw[push])])
-            speed = np.minimum(np.maximum(_PT_PUSH_GAIN * twist, _PT_V_PUSH[0]), _PT_V_PUSH[1])
-            move[push] = speed[:, None] * nk[push] - (5.0 * lat[push])[:, None] * tk[push]
+        rel = p - cand[:, 4:6]
+        along_lat = np.matmul(nt[:, :, None, :], rel[:, None, :, None])[:, :, 0, 0]  # rel @ n, rel @ t: dots
+        push = (self._push_lo < along_lat) & (along_lat < self._push_hi)  # |lat| < 6 mm, along in range
+        push = push[:, 0] & push[:, 1]
+        speed = np.minimum(np.maximum(_PT_PUSH_GAIN * twist_err, _PT_V_PUSH[0]), _PT_V_PUSH[1])
+        v_push = speed[:, None] * nt[:, 0] - (5.0 * along_lat[:, 1:2]) * nt[:, 1]
         # 3b. Path to the pre-contact point clear of the T: go straight there.
-        rest = np.flatnonzero(~push)
-        if rest.size:
-            p, g, sdf_p = p[rest], g[rest], sdf_p[rest]
-            dg = g - p
-            dist = np.sqrt(_dot(dg, dg))  # np.linalg.norm of a vector: sqrt of its dot with itself
-            speed = np.minimum(np.maximum(_PT_MOVE_GAIN * dist, _PT_V_MOVE[0]), _PT_V_MOVE[1])
-            path = p[:, None, :] + self._seg[:, None] * dg[:, None, :]  # (R, 7, 2)
-            floor = np.minimum(_PT_R + 0.002, sdf_p - 0.001)
-            straight = np.all(_pt.t_sdf(path) > floor[:, None], axis=1)
-            move[rest[straight]] = (
-                speed[straight, None] * dg[straight] / np.maximum(dist[straight], 1e-9)[:, None]
+        dg = g - p
+        dist = np.sqrt(_dot(dg, dg))  # np.linalg.norm of a vector: sqrt of its dot with itself
+        speed = np.minimum(np.maximum(_PT_MOVE_GAIN * dist, _PT_V_MOVE[0]), _PT_V_MOVE[1])
+        v_straight = speed[:, None] * dg / np.maximum(dist, 1e-9)[:, None]
+        # One distance-field call for every env's points, x and y apart (2, N, 12): p, _grad's
+        # stencil around p, then the path (p + f dg as f dg + p: IEEE addition commutes).
+        pts = np.empty((2, n, 5 + len(self._seg)))
+        np.add(p.T[:, :, None], self._stencil_xy, out=pts[:, :, :5])
+        np.multiply(dg.T[:, :, None], self._seg, out=pts[:, :, 5:])
+        pts[:, :, 5:] += p.T[:, :, None]
+        sdf = _pt.t_sdf_xy(pts[0], pts[1])
+        sdf_p = sdf[:, 0]
+        floor = np.minimum(_PT_R + 0.002, sdf_p - 0.001)
+        straight = np.minimum.reduce(sdf[:, 5:], axis=1) > floor  # np.all(t_sdf(path) > floor)
+        # _grad from the stencil: p + (h, 0), p - (h, 0), p + (0, h), p - (0, h).
+        grad = sdf[:, 1:5:2] - sdf[:, 2:5:2]
+        nrm = _norm(grad)
+        grad /= np.maximum(nrm, 1e-12)[:, None]  # the max only keeps 0/0 away: those rows are set next
+        flat = nrm <= 1e-12
+        if np.count_nonzero(flat):
+            grad[flat] = (0.0, 1.0)
+        # 3c. Otherwise orbit the T at a safe clearance, the shorter way round: counter-clockwise
+        # unless the way to g is shorter clockwise (the atan2s only for the orbiting envs).
+        tang = grad[:, ::-1] * self._ccw  # (-g1, g0)
+        orbit = (~(push | straight | goal)).nonzero()[0]
+        if orbit.size:
+            (px, py), (gx, gy) = (
+                (p[orbit] - _PT_ORBIT_CENTER).T.tolist(),
+                (g[orbit] - _PT_ORBIT_CENTER).T.tolist(),
             )
-            # 3c. Otherwise orbit the T at a safe clearance, the shorter way round.
-            orbit = ~straight
-            if orbit.any():
-                gr = self._grad_batch(p[orbit])
-                tang = np.stack([-gr[:, 1], gr[:, 0]], axis=1)
-                rp, rg = (p[orbit] - _PT_ORBIT_CENTER).tolist(), (g[orbit] - _PT_ORBIT_CENTER).tolist()
-                flip = [
-                    _pt.wrap_angle(math.atan2(b[1], b[0]) - math.atan2(a[1], a[0])) < 0.0
-                    for a, b in zip(rp, rg)
-                ]
-                tang[flip] = -tang[flip]
-                gap = sdf_p[orbit] - _PT_R
-                radial = np.minimum(np.maximum(20.0 * (_PT_CLEAR - gap), -1.0), 1.0)
-                v = tang + radial[:, None] * gr
-                move[rest[orbit]] = _PT_V_MOVE[1] * v / np.maximum(_norm(v), 1e-9)[:, None]
-        out[go] = _mv(rot, move)
+            turn = np.array(list(map(math.atan2, gy, gx))) - np.array(list(map(math.atan2, py, px)))
+            cw = orbit[(turn + math.pi) % (2.0 * math.pi) - math.pi < 0.0]  # wrap_angle (rule 3) < 0
+            tang[cw] *= -1.0
+        radial = np.minimum(np.maximum(20.0 * (_PT_CLEAR - (sdf_p - _PT_R)), -1.0), 1.0)
+        v = tang + radial[:, None] * grad
+        v_orbit = _PT_V_MOVE[1] * v / np.maximum(_norm(v), 1e-9)[:, None]
+        move = np.where(push[:, None], v_push, np.where(straight[:, None], v_straight, v_orbit))
+        # 4. At the goal: back away from the block, then stand still (zeros, not a rotated zero).
+        if any_goal:
+            move[goal] = 0.1 * grad[goal]
+        out = _mv(rot, move)
+        if any_goal:
+            out[goal & (sdf_p > _PT_R + 0.03)] = 0.0
         return out
-
-    @staticmethod
-    def _grad_batch(p: np.ndarray) -> np.ndarray:
-        """_grad for rows p (N, 2) -> (N, 2)."""
-        h = 1e-5
-        q = np.stack([p + (h, 0.0), p - (h, 0.0), p + (0.0, h), p - (0.0, h)], axis=1)  # (N, 4, 2)
-        d = _pt.t_sdf(q)
-        g = np.stack([d[:, 0] - d[:, 1], d[:, 2] - d[:, 3]], axis=1)
-        nrm = _norm(g)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where((nrm > 1e-12)[:, None], g / nrm[:, None], (0.0, 1.0))
 
     @staticmethod
     def _grad(p: np.ndarray) -> np.ndarray:
