@@ -159,8 +159,11 @@ _ARMS = ("right", "left")
 class AlohaCubeEnv:
     """Bimanual planar cube handoff. See the module docstring for the full contract."""
 
-    def __init__(self) -> None:
-        self.model = mujoco.MjModel.from_xml_path(str(XML_PATH))
+    def __init__(self, model: mujoco.MjModel | None = None) -> None:
+        """model: another AlohaCubeEnv's compiled aloha.xml to share, else aloha.xml is loaded. MuJoCo
+        only reads a model while stepping, so envs sharing one step independently, each in its own
+        MjData (datagen.lockstep's lanes share one)."""
+        self.model = model if model is not None else mujoco.MjModel.from_xml_path(str(XML_PATH))
         self.data = mujoco.MjData(self.model)
         m, d = self.model, self.data
         if abs(m.opt.timestep - PHYSICS_DT) > 1e-12:

@@ -162,8 +162,11 @@ def pusher_clear(
 class PushTEnv:
     """The PushT task. ``reset(seed)`` or ``set_start(...)``, then ``step(action)`` at 10 Hz."""
 
-    def __init__(self) -> None:
-        self.model = mujoco.MjModel.from_xml_path(str(XML_PATH))
+    def __init__(self, model: mujoco.MjModel | None = None) -> None:
+        """model: another PushTEnv's compiled pusht.xml to share, else pusht.xml is loaded (~4 ms).
+        MuJoCo only reads a model while stepping, so envs sharing one step independently, each in
+        its own MjData (datagen.lockstep's lanes share one)."""
+        self.model = model if model is not None else mujoco.MjModel.from_xml_path(str(XML_PATH))
         self.data = mujoco.MjData(self.model)
         if abs(self.model.opt.timestep - PHYSICS_DT) > 1e-12:
             raise ValueError(f"pusht.xml timestep {self.model.opt.timestep} != PHYSICS_DT {PHYSICS_DT}")

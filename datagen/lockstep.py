@@ -12,7 +12,8 @@ at its start, so its frames do not depend on what shares its batch, on the lane 
 it was started.
 
 The runner (run_lanes) knows no task. A mode hands it
-    make_env()                   -> an env with step(action) -> (obs, reward, done, info["success"])
+    make_env(model=None)         -> an env with step(action) -> (obs, reward, done, info["success"])
+                                    and .model, its compiled MuJoCo model, which the others share
                                     (made once per process and reused: begin resets it fully)
     begin(job, env)              -> a Lane placed at its start (lane.obs: its first observation), or a
                                     final result (a failure reason) when there is nothing to simulate
@@ -62,7 +63,9 @@ def run_lanes(
     todo = deque(range(len(jobs)))
     width = max(1, min(lanes, len(jobs)))
     pool = _POOL.setdefault(make_env, [])  # this process's envs of this kind, kept between calls
-    pool += [make_env() for _ in range(width - len(pool))]  # (a model load each: ~5 ms)
+    pool += [] if pool else [make_env()]
+    # One compiled model for all (a load is ~4 ms, and 64 copies compete for the cache), an MjData each
+    pool += [make_env(model=pool[0].model) for _ in range(width - len(pool))]
     envs = pool[:width]
     obs_buf = np.zeros((width, max_frames + 1, obs_dim), np.float32)  # +1: the obs after the last step
     act_buf = np.zeros((width, max_frames, act_dim), np.float32)

@@ -385,8 +385,8 @@ class PushT(Task):
         ),
     }
 
-    def make_env(self):
-        return pusht_env.PushTEnv()
+    def make_env(self, model=None):
+        return pusht_env.PushTEnv(model)
 
     def perturb(self, first_state, rng, how: Perturbation):
         return perturbed_start(first_state, rng, how.pos_sigma, how.yaw_sigma)
