@@ -26,7 +26,7 @@ from ch37 import config, errors
 from ch37.config import NON_NEGATIVE, POSITIVE, flag
 from ch37.seeds import MAX_SEED, SEED_BLOCK
 
-SHARD_SIZE = 100  # attempts per shard: a small parquet set, seconds of one core (docs/engine.md)
+SHARD_SIZE = 300  # attempts per shard: ~1 MB of parquet, 1-2 s of one core (PushT; docs/engine.md)
 
 
 @dataclass(frozen=True)

@@ -187,7 +187,7 @@ def many_files_note(n_shards: int, attempts: int, shard_size: int, out: Path) ->
     return (
         f"note: --shard_size {shard_size} cuts {attempts:,} attempts into {n_shards:,} shards: up to "
         f"{files:,} files under {Path(out) / SHARDS_DIR} until the merge, which reads each shard's; "
-        "a larger --shard_size (default 100) makes fewer (a new --out: it is part of the settings)"
+        "a larger --shard_size makes fewer (a new --out: it is part of the settings)"
     )
 
 
