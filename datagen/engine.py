@@ -100,7 +100,7 @@ def with_provenance(ep: dict, source_episode: int, start) -> dict:
     and aug.start (n, len(start_names)), the start it was made from."""
     n = len(ep["action"])
     ep["aug.source_episode"] = np.full((n, 1), source_episode, np.int64)
-    ep["aug.start"] = np.tile(np.float32(start), (n, 1))
+    ep["aug.start"] = np.repeat(np.float32(start)[None], n, axis=0)
     return ep
 
 

@@ -39,7 +39,7 @@ from datagen.task import Perturbation, Task
 
 __all__ = ["LANES", "Lane", "attempts_lockstep", "resolve_lanes", "run_lanes", "start_of_job"]
 
-LANES = 128  # attempts stepped together per worker: a default shard (100) at once, one decision per step for all
+LANES = 256  # attempts stepped together per worker: most of a default shard (300) at once; 0.44 MiB a lane
 
 
 _POOL: dict = {}  # make_env -> envs made in this process; each attempt fully resets its env (begin)
