@@ -39,7 +39,7 @@ from datagen.task import Perturbation, Task
 
 __all__ = ["LANES", "Lane", "attempts_lockstep", "resolve_lanes", "run_lanes", "start_of_job"]
 
-LANES = 256  # attempts stepped together per worker: most of a default shard (300) at once; 0.44 MiB a lane
+LANES = 256  # attempts stepped together per worker; a lane is an MjData: 0.44 MiB, 1.4 ms to make
 
 
 _POOL: dict = {}  # make_env -> envs made in this process; each attempt fully resets its env (begin)
