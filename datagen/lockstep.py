@@ -63,7 +63,8 @@ def run_lanes(
     todo = deque(range(len(jobs)))
     width = max(1, min(lanes, len(jobs)))
     pool = _POOL.setdefault(make_env, [])  # this process's envs of this kind, kept between calls
-    pool += [] if pool else [make_env()]
+    if not pool:
+        pool.append(make_env())
     # One compiled model for all (a load is ~4 ms, and 64 copies compete for the cache), an MjData each
     pool += [make_env(model=pool[0].model) for _ in range(width - len(pool))]
     envs = pool[:width]

@@ -79,10 +79,10 @@ STATE_RANGES = dict(
 def perturbed_start(first_state, rng, pos_sigma: float, yaw_sigma: float, tries: int = TRIES):
     """(block x, y, yaw, pusher x, y) near the start `first_state` (an obs), or None if no draw was valid."""
     px, py, bx, by, s, c = (float(v) for v in first_state[:6])
+    h = pusht_env.PUSHER_HALF  # the pusher is clipped with min/max: np.clip's values, without its cost
     for _ in range(tries):
         nbx, nby = bx + rng.normal(0, pos_sigma), by + rng.normal(0, pos_sigma)
         yaw = math.atan2(s, c) + rng.normal(0, yaw_sigma)
-        h = pusht_env.PUSHER_HALF  # np.clip's values, without its cost per draw
         npx, npy = (
             min(max(v, -h), h) for v in (px + rng.normal(0, pos_sigma), py + rng.normal(0, pos_sigma))
         )

@@ -337,10 +337,11 @@ def _stats_columns(bufs: list[dict], feats: dict) -> tuple[dict, dict]:
 
     Each dtype's features (as RunningQuantileStats casts them: float32 at least) side by side, every
     episode's beside the others': one _quantiles call over all of them (it works column by column,
-    each column with its own length), and mean and std once per episode length (_column_mean_std keeps
-    each feature's summation order: pairwise for a (T, 1) feature, row by row for (T, D > 1)). A few
-    dozen numpy calls for a shard where there were dozens per episode, and the columns are what the
-    episodes table and the set's aggregate read (_write_direct)."""
+    each column with its own length), and mean and std in each feature's own summation order: row by
+    row for (T, D > 1), one running sum down every episode at once (_row_by_row_mean_std), pairwise
+    for (T, 1), once per episode length (_pairwise_mean_std) unless its sums are exact in any order
+    (_sums_exactly). A few dozen numpy calls for a shard where there were dozens per episode, and the
+    columns are what the episodes table and the set's aggregate read (_write_direct)."""
     keys = [k for k in bufs[0] if feats[k]["dtype"] not in _TEXT]
     lengths = np.array([_frames(buf, feats) for buf in bufs])  # (E,)
     same = {}  # episode length -> the episodes of that length
@@ -424,13 +425,6 @@ def _running_update(mean: np.ndarray, mean_sq: np.ndarray) -> tuple[np.ndarray, 
     mean += mean - mean
     mean_sq += mean_sq - mean_sq
     return mean, np.sqrt(np.maximum(0, mean_sq - mean**2))
-
-
-def _mean_std(xs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and std over axis 0 of each (T, 1) array in xs (all of one length), stacked (E, 1), as
-    RunningQuantileStats computes them on each (_pairwise_mean_std)."""
-    mean, std = _pairwise_mean_std(np.concatenate(xs, axis=1))
-    return mean[:, None], std[:, None]
 
 
 def _episode_columns(e: int, ep: dict, feats, all_feats, *, fps: int, first_frame: int) -> dict:

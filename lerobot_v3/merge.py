@@ -142,10 +142,10 @@ def _index_stats(eps, n_eps: int, n_frames: int) -> dict:
     follow the values.
 
     _episode_stats' float operations, an episode per column: mean and std on all episodes of one
-    length at once (the writer's _mean_std), min, max and quantiles on all lengths at once
+    length at once (the writer's _pairwise_mean_std), min, max and quantiles on all lengths at once
     (_quantiles works column by column, each with its own count); tests/test_engine.py checks them
     equal to _episode_stats."""
-    from lerobot_v3.dataset import _episode_stats, _mean_std, _quantiles
+    from lerobot_v3.dataset import _episode_stats, _pairwise_mean_std, _quantiles
 
     lo = eps.column("dataset_from_index").to_numpy() + n_frames
     lengths = eps.column("dataset_to_index").to_numpy() + n_frames - lo
@@ -170,9 +170,9 @@ def _index_stats(eps, n_eps: int, n_frames: int) -> dict:
             "index": (lo[js][None, :] + np.arange(n)[:, None]).astype(np.float64),
         }
         for name, x in values.items():
-            mean, std = _mean_std([x[:, [j]] for j in range(len(js))])  # the writer's own, (E, 1) each
-            put(f"stats/{name}/mean", js, mean[:, 0])
-            put(f"stats/{name}/std", js, std[:, 0])
+            mean, std = _pairwise_mean_std(x)  # the writer's own, an episode per column: (E,) each
+            put(f"stats/{name}/mean", js, mean)
+            put(f"stats/{name}/std", js, std)
             put(f"stats/{name}/count", js, np.full(len(js), n))
     js = np.flatnonzero(lengths >= 2)  # min, max and quantiles of every length at once: one column each
     if len(js):

@@ -173,8 +173,8 @@ def point(src: Path, out: Path, n: int, executor: str, a) -> dict:
     row |= {"generate_demos_per_s_per_worker": rep["kept"] / (gen - start) / workers}
     row |= {"shard_size": rep["settings"]["shard_size"], "sha256": tree_digest(run_dir)}
     # the run's generation worker-seconds (its shard writes included) over its kept frames' physics
-    kept = kept_runs(run_dir) if rep["kept"] else None
-    row["physics_s"] = physics_floor(TASKS[a.task], kept, FLOOR_REPEATS) if kept else math.nan
+    kept = rep["kept"]
+    row["physics_s"] = physics_floor(TASKS[a.task], kept_runs(run_dir), FLOOR_REPEATS) if kept else math.nan
     row["gen_over_physics"] = (gen - start) * workers / row["physics_s"]
     row |= {"summary": m.pop("stdout").strip().splitlines()[-1], **m}  # m: the peak RSS
     remove_run(run_dir)
