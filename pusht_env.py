@@ -261,11 +261,40 @@ class PushTEnv:
         a = np.asarray(action, dtype=np.float64).reshape(ACT_DIM)
         if not np.all(np.isfinite(a)):
             raise ValueError(f"non-finite action {a}")
-        self._ctrl_x[0] = min(max(a[0], -ACTION_LIMIT), ACTION_LIMIT)
-        self._ctrl_y[0] = min(max(a[1], -ACTION_LIMIT), ACTION_LIMIT)
+        pos_err, yaw_err = self._advance(
+            min(max(a[0], -ACTION_LIMIT), ACTION_LIMIT), min(max(a[1], -ACTION_LIMIT), ACTION_LIMIT)
+        )
+        reward = 1.0 if self._success else -(pos_err + YAW_REWARD_SCALE * abs(yaw_err))
+        done = self._success or self._steps >= MAX_STEPS
+        info = {"success": self._success, "steps": self._steps, "pos_error": pos_err, "yaw_error": yaw_err}
+        return self._observe(), reward, done, info
+
+    @staticmethod
+    def step_many(envs, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """envs[i].step(actions[i]) for every i, bit for bit, without a reward or info per env:
+        (obs (N, OBS_DIM) float32, success (N,) bool, done (N,) bool). One check and one clip for the
+        batch, then only the control writes, the physics and the counters per env: datagen.lockstep
+        steps its lanes with it."""
+        n = len(envs)
+        a = np.asarray(actions, dtype=np.float64).reshape(n, ACT_DIM)
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"non-finite action in {a}")
+        a = np.clip(a, -ACTION_LIMIT, ACTION_LIMIT).tolist()  # step's min(max()) for finite values
+        obs = np.empty((n, OBS_DIM), np.float32)
+        success, done = np.empty(n, bool), np.empty(n, bool)
+        for i, env in enumerate(envs):
+            env._advance(*a[i])
+            env._fill(obs[i])
+            success[i] = env._success
+            done[i] = env._success or env._steps >= MAX_STEPS
+        return obs, success, done
+
+    def _advance(self, vx: float, vy: float) -> tuple[float, float]:
+        """One control step at the clipped velocity (vx, vy) m/s: the physics, the step count and the
+        success hold. Returns the pose error after it (pos m, wrapped yaw rad)."""
+        self._ctrl_x[0], self._ctrl_y[0] = vx, vy
         mujoco.mj_step(self.model, self.data, nstep=SUBSTEPS)
         self._steps += 1
-
         pos_err = math.hypot(self._bx[0] - TARGET_POSE[0], self._by[0] - TARGET_POSE[1])
         yaw_err = wrap_angle(float(self._byaw[0]) - TARGET_POSE[2])
         if pos_err < SUCCESS_POS_TOL and abs(yaw_err) < SUCCESS_YAW_TOL:
@@ -274,20 +303,20 @@ class PushTEnv:
             self._hold = 0
         if self._hold >= SUCCESS_HOLD:
             self._success = True
-        reward = 1.0 if self._success else -(pos_err + YAW_REWARD_SCALE * abs(yaw_err))
-        done = self._success or self._steps >= MAX_STEPS
-        info = {"success": self._success, "steps": self._steps, "pos_error": pos_err, "yaw_error": yaw_err}
-        return self._observe(), reward, done, info
+        return pos_err, yaw_err
 
     def _observe(self) -> np.ndarray:
+        self._fill(self._obs)
+        return self._obs.copy()
+
+    def _fill(self, o: np.ndarray) -> None:
+        """Write the observation (STATE_NAMES) into o, a float32[OBS_DIM]."""
         yaw = float(self._byaw[0])
-        o = self._obs
         o[0], o[1] = self._px[0], self._py[0]
         o[2], o[3] = self._bx[0], self._by[0]
         o[4], o[5] = math.sin(yaw), math.cos(yaw)
         o[6], o[7] = TARGET_POSE[0], TARGET_POSE[1]
         o[8], o[9] = math.sin(TARGET_POSE[2]), math.cos(TARGET_POSE[2])
-        return o.copy()
 
     # ----- rendering (optional; needs an OpenGL backend such as EGL or OSMesa) -----
     def render(self, size: int = 96) -> np.ndarray:

@@ -72,7 +72,7 @@ def run_lanes(
     act_buf = np.zeros((width, max_frames, act_dim), np.float32)
     succ_buf = np.zeros((width, max_frames), bool)
     live: dict[int, tuple[int, Lane]] = {}  # slot -> (job index, lane)
-    t = [0] * width  # frames recorded per slot
+    t = np.zeros(width, int)  # frames recorded per slot
 
     def fill(slot: int) -> None:
         while todo:
@@ -98,24 +98,36 @@ def run_lanes(
 
     for slot in range(width):
         fill(slot)
+    step_many = getattr(type(envs[0]), "step_many", _step_each)
     while live:
-        slots = list(live)
-        at = [t[s] for s in slots]
+        slots = np.fromiter(live, int, len(live))
+        at = t[slots]
         obs = obs_buf[slots, at]  # (N, obs_dim): each live lane's current observation
-        actions, stop = decide([live[s][1] for s in slots], [envs[s] for s in slots], obs)
+        actions, stop = decide([live[s][1] for s in slots.tolist()], [envs[s] for s in slots.tolist()], obs)
         act_buf[slots, at] = actions  # a stopped lane's row lies past its frames: never read
-        for j, slot in enumerate(slots):
-            if stop is not None and stop[j]:
+        if stop is not None and stop.any():  # ended before this step, not stepped
+            for slot in slots[stop].tolist():
                 end(slot)
+            slots, at, actions = slots[~stop], at[~stop], actions[~stop]
+            if not len(slots):
                 continue
-            o, _, done, info = envs[slot].step(actions[j])
-            n = at[j]
-            obs_buf[slot, n + 1] = o
-            succ_buf[slot, n] = info["success"]
-            t[slot] = n + 1
-            if done:
-                end(slot)
+        o, success, done = step_many([envs[s] for s in slots.tolist()], actions)
+        obs_buf[slots, at + 1] = o
+        succ_buf[slots, at] = success
+        t[slots] = at + 1
+        for slot in slots[done].tolist():
+            end(slot)
     return results
+
+
+def _step_each(envs, actions):
+    """An env's step_many where it has none: its step per env, (obs (N, obs_dim), success (N,), done (N,))."""
+    steps = [env.step(a) for env, a in zip(envs, actions)]
+    return (
+        np.array([s[0] for s in steps]),
+        np.array([s[3]["success"] for s in steps], bool),
+        np.array([s[2] for s in steps], bool),
+    )
 
 
 # ----------------------------------------------------------------------------------------------

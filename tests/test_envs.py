@@ -84,6 +84,30 @@ def test_pusht_set_start_places_state_with_fresh_counters():
     )
 
 
+def test_pusht_step_many_is_step_bit_for_bit():
+    """step_many (datagen.lockstep's batched step) = step per env: the same obs, success and done bits,
+    clipped actions and the success latch included; a non-finite action is refused as step refuses it."""
+    expert, rng = PushTExpert(), np.random.default_rng(0)
+    one = [pusht_env.PushTEnv() for _ in range(6)]
+    many = [pusht_env.PushTEnv(model=one[0].model) for _ in range(6)]
+    obs = np.stack([e.reset(s) for e, s in zip(one, range(6))])
+    assert np.array_equal(obs, np.stack([e.reset(s) for e, s in zip(many, range(6))]))
+    latched = set()
+    for t in range(pusht_env.MAX_STEPS):
+        act = expert.act_batch(obs)
+        act[:2] = rng.uniform(-3, 3, (2, 2))  # two envs on random actions, beyond the clip
+        got = pusht_env.PushTEnv.step_many(many, act)
+        want = [e.step(a) for e, a in zip(one, act)]
+        assert got[0].tobytes() == np.stack([w[0] for w in want]).tobytes()
+        assert got[1].tolist() == [w[3]["success"] for w in want]
+        assert got[2].tolist() == [w[2] for w in want]
+        latched |= {i for i, s in enumerate(got[1]) if s}
+        obs = got[0]
+    assert latched >= {2, 3, 4, 5}  # the expert's envs succeeded on the way (and kept stepping)
+    with pytest.raises(ValueError, match="non-finite"):
+        pusht_env.PushTEnv.step_many(many[:1], np.array([[np.nan, 0.0]], np.float32))
+
+
 def test_pusht_accessors_match_obs():
     env = pusht_env.PushTEnv()
     obs = env.reset(5)
