@@ -159,32 +159,53 @@ def pusher_clear(
     return t_signed_distance(pusher_x, pusher_y, block_x, block_y, block_yaw) >= PUSHER_RADIUS + clearance
 
 
+_STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # everything mj_step reads: a step from it repeats bit for bit
+
+
+class _Seat:
+    """Which of the envs sharing an MjData has its state loaded in it now."""
+
+    owner = None
+
+
+def _check(model: mujoco.MjModel) -> None:
+    """Refuse a pusht.xml whose timestep, damping or geometry differs from this module's constants."""
+    if abs(model.opt.timestep - PHYSICS_DT) > 1e-12:
+        raise ValueError(f"pusht.xml timestep {model.opt.timestep} != PHYSICS_DT {PHYSICS_DT}")
+    for name, value in (
+        ("block_x", BLOCK_SLIDE_DAMPING),
+        ("block_y", BLOCK_SLIDE_DAMPING),
+        ("block_yaw", BLOCK_YAW_DAMPING),
+    ):
+        if abs(float(model.joint(name).damping[0]) - value) > 1e-12:
+            raise ValueError(f"pusht.xml damping of {name} differs from pusht_env's {value}")
+    geo = model.geom
+    if (
+        abs(float(geo("pusher").size[0]) - PUSHER_RADIUS) > 1e-12
+        or not np.allclose(geo("block_bar").size[:2], BAR_HALF)
+        or not np.allclose(geo("block_stem").size[:2], STEM_HALF)
+        or not np.isclose(geo("block_stem").pos[1], STEM_CENTER_Y)
+    ):
+        raise ValueError("pusht.xml geometry differs from pusht_env's constants")
+
+
 class PushTEnv:
     """The PushT task. ``reset(seed)`` or ``set_start(...)``, then ``step(action)`` at 10 Hz."""
 
-    def __init__(self, model: mujoco.MjModel | None = None) -> None:
-        """model: another PushTEnv's compiled pusht.xml to share, else pusht.xml is loaded (~4 ms).
-        MuJoCo only reads a model while stepping, so envs sharing one step independently, each in
-        its own MjData (datagen.lockstep's lanes share one)."""
-        self.model = model if model is not None else mujoco.MjModel.from_xml_path(str(XML_PATH))
-        self.data = mujoco.MjData(self.model)
-        if abs(self.model.opt.timestep - PHYSICS_DT) > 1e-12:
-            raise ValueError(f"pusht.xml timestep {self.model.opt.timestep} != PHYSICS_DT {PHYSICS_DT}")
-        for name, value in (
-            ("block_x", BLOCK_SLIDE_DAMPING),
-            ("block_y", BLOCK_SLIDE_DAMPING),
-            ("block_yaw", BLOCK_YAW_DAMPING),
-        ):
-            if abs(float(self.model.joint(name).damping[0]) - value) > 1e-12:
-                raise ValueError(f"pusht.xml damping of {name} differs from pusht_env's {value}")
-        geo = self.model.geom
-        if (
-            abs(float(geo("pusher").size[0]) - PUSHER_RADIUS) > 1e-12
-            or not np.allclose(geo("block_bar").size[:2], BAR_HALF)
-            or not np.allclose(geo("block_stem").size[:2], STEM_HALF)
-            or not np.isclose(geo("block_stem").pos[1], STEM_CENTER_Y)
-        ):
-            raise ValueError("pusht.xml geometry differs from pusht_env's constants")
+    def __init__(self, share: PushTEnv | None = None) -> None:
+        """share: another PushTEnv whose compiled model and MjData this one borrows, else pusht.xml
+        is loaded (~4 ms) into a new MjData (~1 ms in MuJoCo's bindings). Envs sharing an MjData
+        keep their own state (``_STATE``) and load it before they touch the simulator, so each
+        steps as if it were alone, bit for bit: datagen.lockstep's lanes share one."""
+        if share is not None:  # a model already checked, an MjData already made
+            self.model, self.data, self._seat = share.model, share.data, share._seat
+        else:
+            self.model = mujoco.MjModel.from_xml_path(str(XML_PATH))
+            self.data = mujoco.MjData(self.model)
+            _check(self.model)
+            self._seat = _Seat()
+            self._seat.owner = self
+        self._state = np.zeros(mujoco.mj_stateSize(self.model, _STATE))  # this env's, while parked
         d = self.data
         # Named views into MjData (numpy views of length 1): reading/writing them touches the
         # simulator state directly, with no assumption about where each joint sits in qpos.
@@ -202,11 +223,13 @@ class PushTEnv:
     @property
     def pusher_pos(self) -> np.ndarray:
         """Pusher centre (x, y) in m, a copy."""
+        self._claim()
         return np.array([self._px[0], self._py[0]])
 
     @property
     def block_pose(self) -> np.ndarray:
         """Block (x m, y m, yaw rad wrapped to [-pi, pi)), a copy."""
+        self._claim()
         return np.array([self._bx[0], self._by[0], wrap_angle(float(self._byaw[0]))])
 
     @property
@@ -247,6 +270,7 @@ class PushTEnv:
         The caller keeps the pusher clear of the block (see ``pusher_clear``); an overlapping
         start is resolved by the contact solver pushing the two apart on the first step.
         """
+        self._claim()
         mujoco.mj_resetData(self.model, self.data)
         self._bx[0], self._by[0], self._byaw[0] = block_x, block_y, wrap_angle(float(block_yaw))
         self._px[0], self._py[0] = pusher_x, pusher_y
@@ -292,6 +316,7 @@ class PushTEnv:
     def _advance(self, vx: float, vy: float) -> tuple[float, float]:
         """One control step at the clipped velocity (vx, vy) m/s: the physics, the step count and the
         success hold. Returns the pose error after it (pos m, wrapped yaw rad)."""
+        self._claim()
         self._ctrl_x[0], self._ctrl_y[0] = vx, vy
         mujoco.mj_step(self.model, self.data, nstep=SUBSTEPS)
         self._steps += 1
@@ -304,6 +329,19 @@ class PushTEnv:
         if self._hold >= SUCCESS_HOLD:
             self._success = True
         return pos_err, yaw_err
+
+    def _claim(self) -> bool:
+        """Load this env's state into the MjData it shares if another env used it last (that env's
+        state is saved first). True if it loaded: MjData's derived quantities are then stale until the
+        next mj_step or mj_forward."""
+        seat = self._seat
+        if seat.owner is self:
+            return False
+        if seat.owner is not None:
+            mujoco.mj_getState(self.model, self.data, seat.owner._state, _STATE)
+        mujoco.mj_setState(self.model, self.data, self._state, _STATE)
+        seat.owner = self
+        return True
 
     def _observe(self) -> np.ndarray:
         self._fill(self._obs)
@@ -325,6 +363,8 @@ class PushTEnv:
         if renderer is None:
             renderer = mujoco.Renderer(self.model, height=size, width=size)
             self._renderers[size] = renderer
+        if self._claim():
+            mujoco.mj_forward(self.model, self.data)
         renderer.update_scene(self.data, camera="top")
         return renderer.render().copy()
 

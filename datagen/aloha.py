@@ -383,8 +383,8 @@ class Aloha(Task):
     def __init__(self):
         self._plans = {}  # (episode, sha256 of its frames) -> [Subtask]: a pure function of the source
 
-    def make_env(self, model=None):
-        return aloha_env.AlohaCubeEnv(model)
+    def make_env(self, share=None):
+        return aloha_env.AlohaCubeEnv(share.model if share is not None else None)
 
     def perturb(self, first_state, rng, how: Perturbation):
         return perturbed_start(first_state, rng, how.pos_sigma)

@@ -12,9 +12,11 @@ at its start, so its frames do not depend on what shares its batch, on the lane 
 it was started.
 
 The runner (run_lanes) knows no task. A mode hands it
-    make_env(model=None)         -> an env with step(action) -> (obs, reward, done, info["success"])
-                                    and .model, its compiled MuJoCo model, which the others share
-                                    (made once per process and reused: begin resets it fully)
+    make_env(share=None)         -> an env with step(action) -> (obs, reward, done, info["success"]),
+                                    and optionally step_many(envs, actions) -> (obs, success, done)
+                                    for a batch (PushTEnv's); the lanes' envs are made with
+                                    share=the first (its model, and PushT's MjData), once per
+                                    process and reused: begin resets an env fully
     begin(job, env)              -> a Lane placed at its start (lane.obs: its first observation), or a
                                     final result (a failure reason) when there is nothing to simulate
     decide(lanes, envs, obs)     -> (actions (N, act_dim) float32, stop (N,) bool or None): one call for
@@ -39,7 +41,7 @@ from datagen.task import Perturbation, Task
 
 __all__ = ["LANES", "Lane", "attempts_lockstep", "resolve_lanes", "run_lanes", "start_of_job"]
 
-LANES = 256  # attempts stepped together per worker; a lane is an MjData: 0.44 MiB, 1.4 ms to make
+LANES = 256  # attempts stepped together per worker (ALOHA's lane: an MjData, 0.44 MiB, ~1 ms to make)
 
 
 _POOL: dict = {}  # make_env -> envs made in this process; each attempt fully resets its env (begin)
@@ -65,8 +67,9 @@ def run_lanes(
     pool = _POOL.setdefault(make_env, [])  # this process's envs of this kind, kept between calls
     if not pool:
         pool.append(make_env())
-    # One compiled model for all (a load is ~4 ms, and 64 copies compete for the cache), an MjData each
-    pool += [make_env(model=pool[0].model) for _ in range(width - len(pool))]
+    # One compiled model for all (a load is ~4 ms), and where the env can, one MjData (~1 ms each to
+    # make, and 256 of them compete for the cache): the lanes share the first env's
+    pool += [make_env(share=pool[0]) for _ in range(width - len(pool))]
     envs = pool[:width]
     obs_buf = np.zeros((width, max_frames + 1, obs_dim), np.float32)  # +1: the obs after the last step
     act_buf = np.zeros((width, max_frames, act_dim), np.float32)

@@ -384,8 +384,8 @@ class PushT(Task):
         ),
     }
 
-    def make_env(self, model=None):
-        return pusht_env.PushTEnv(model)
+    def make_env(self, share=None):
+        return pusht_env.PushTEnv(share)
 
     def perturb(self, first_state, rng, how: Perturbation):
         return perturbed_start(first_state, rng, how.pos_sigma, how.yaw_sigma)

@@ -13,8 +13,9 @@ subclass; it provides
     state_ranges         {state name: (low, high)} as the env documents them: a source outside is refused
     env_module           the env's module: STATE_NAMES, ACTION_NAMES, ENV_STATE_NAMES, FPS, ROBOT_TYPE,
                          TASK (what a LeRobot set of this task records), OBS_DIM, ACT_DIM
-    make_env(model=None) a new simulator (one per worker process; place() fully resets it); model:
-                         another env's compiled model to share (lockstep's lanes: an MjData each)
+    make_env(share=None) a new simulator (one per worker process; place() fully resets it); share:
+                         an env of this task to share with: its compiled model, and where the env
+                         can (PushT) its MjData, each env keeping its own state (lockstep's lanes)
     perturb(state, rng, perturbation)
                          a start near the source's first observation `state`, drawn from `rng`, or
                          None when no valid draw was found (reason "no_valid_start")
@@ -183,7 +184,7 @@ class Task:
     env_module: object
     failures: dict[str, tuple[str, ...]]
 
-    def make_env(self, model=None):
+    def make_env(self, share=None):
         raise NotImplementedError
 
     def perturb(self, first_state, rng, how: Perturbation):

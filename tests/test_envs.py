@@ -84,12 +84,15 @@ def test_pusht_set_start_places_state_with_fresh_counters():
     )
 
 
-def test_pusht_step_many_is_step_bit_for_bit():
-    """step_many (datagen.lockstep's batched step) = step per env: the same obs, success and done bits,
-    clipped actions and the success latch included; a non-finite action is refused as step refuses it."""
+def test_pusht_step_many_on_a_shared_mjdata_is_step_bit_for_bit():
+    """step_many (datagen.lockstep's batched step) over envs sharing one MjData = step per env, each in
+    its own: the same obs, success and done bits, clipped actions and the success latch included, and
+    the same poses read between steps; a non-finite action is refused as step refuses it."""
     expert, rng = PushTExpert(), np.random.default_rng(0)
     one = [pusht_env.PushTEnv() for _ in range(6)]
-    many = [pusht_env.PushTEnv(model=one[0].model) for _ in range(6)]
+    many = [pusht_env.PushTEnv()]
+    many += [pusht_env.PushTEnv(share=many[0]) for _ in range(5)]
+    assert all(e.data is many[0].data for e in many) and one[0].data is not one[1].data
     obs = np.stack([e.reset(s) for e, s in zip(one, range(6))])
     assert np.array_equal(obs, np.stack([e.reset(s) for e, s in zip(many, range(6))]))
     latched = set()
@@ -103,6 +106,8 @@ def test_pusht_step_many_is_step_bit_for_bit():
         assert got[2].tolist() == [w[2] for w in want]
         latched |= {i for i, s in enumerate(got[1]) if s}
         obs = got[0]
+        if t % 7 == 0:  # an env's state read while another's was loaded last
+            assert [e.block_pose.tobytes() for e in many] == [e.block_pose.tobytes() for e in one]
     assert latched >= {2, 3, 4, 5}  # the expert's envs succeeded on the way (and kept stepping)
     with pytest.raises(ValueError, match="non-finite"):
         pusht_env.PushTEnv.step_many(many[:1], np.array([[np.nan, 0.0]], np.float32))

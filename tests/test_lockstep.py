@@ -102,7 +102,7 @@ def test_the_runner_is_task_agnostic_aloha_episodes_equal_rollout():
     seeds = list(range(12))
     got = lockstep.run_lanes(
         seeds,
-        make_env=aloha_env.AlohaCubeEnv,
+        make_env=ALOHA.make_env,
         begin=lambda seed, env: lockstep.Lane(seed, env.reset(seed)),
         decide=lambda lanes, envs, obs: (expert.act_batch(obs), None),
         finish=lambda lane, env, episode: episode | {"success": bool(episode["next.success"][-1, 0])},
