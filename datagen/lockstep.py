@@ -7,9 +7,10 @@ returns exactly what [datagen.engine.attempt(task, sources[e], k, how, ...) for 
 returns, frame for frame and bit for bit (tests/test_lockstep.py), at a fraction of the Python cost
 per frame: the engine's one-at-a-time path pays the expert's ~40 small numpy calls for every frame of
 every attempt, where here they are paid once per control step for up to `lanes` attempts (the task's
-expert's act_batch: PushTExpert, AlohaExpert). Each attempt still gets its own simulator, fully reset
-at its start, so its frames do not depend on what shares its batch, on the lane it runs in, or on when
-it was started.
+expert's act_batch: PushTExpert, AlohaExpert), and the env steps them all in one call where it can
+(PushTEnv.step_many). Each attempt still gets its own simulator state, fully reset at its start (PushT's
+lanes keep theirs apart in one shared MjData: PushTEnv(share=)), so its frames do not depend on what
+shares its batch, on the lane it runs in, or on when it was started.
 
 The runner (run_lanes) knows no task. A mode hands it
     make_env(share=None)         -> an env with step(action) -> (obs, reward, done, info["success"]),
