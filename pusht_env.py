@@ -196,7 +196,8 @@ class PushTEnv:
         """share: another PushTEnv whose compiled model and MjData this one borrows, else pusht.xml
         is loaded (~4 ms) into a new MjData (~1 ms in MuJoCo's bindings). Envs sharing an MjData
         keep their own state (``_STATE``) and load it before they touch the simulator, so each
-        steps as if it were alone, bit for bit: datagen.lockstep's lanes share one."""
+        steps as if it were alone, bit for bit: datagen.lockstep's lanes share one. Read a shared
+        env's state through its accessors: ``env.data`` holds whichever env's state was loaded last."""
         if share is not None:  # a model already checked, an MjData already made
             self.model, self.data, self._seat = share.model, share.data, share._seat
         else:
