@@ -298,8 +298,8 @@ class PushTEnv:
     def step_many(envs, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """envs[i].step(actions[i]) for every i, bit for bit, without a reward or info per env:
         (obs (N, OBS_DIM) float32, success (N,) bool, done (N,) bool). One check and one clip for the
-        batch, then only the control writes, the physics and the counters per env: datagen.lockstep
-        steps its lanes with it."""
+        batch, then only the control writes, the physics and the counters per env: ch37.parallel.step_envs
+        steps with it (the data engine's lanes, the lesson's evaluation)."""
         n = len(envs)
         a = np.asarray(actions, dtype=np.float64).reshape(n, ACT_DIM)
         if not np.all(np.isfinite(a)):

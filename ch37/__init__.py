@@ -7,7 +7,8 @@ plumbing (imported by the engine, the format's error type included, and the tool
   ownership     claim(): an output folder checked up front, locked, owned file by file (the Claim passed
                 to every write); stamps; write_atomic, publish_dir, dump_json, read_json: whole or none
   process       process hygiene: workers die with the run, stop signals around a fork, core and memory limits
-  parallel      map_jobs: the one map over jobs (forked processes or Ray); LockstepEnvs for evaluation
+  parallel      map_jobs: the one map over jobs (forked processes or Ray); LockstepEnvs for evaluation;
+                step_envs: a batch of envs stepped (theirs and the engine's lanes)
   seeds         env_seed: demos, augmentation and evaluation never share a start
   ensemble      several MLPs as one module: the arms of a training budget side by side
 presentation and flags (the lesson's and the tools'; never imported by datagen or lerobot_v3)

@@ -182,12 +182,25 @@ def _env_serve(envs, seeds, cmd, arg):
     if cmd == "reset":
         return np.stack([e.reset(s) for e, s in zip(envs, seeds)])
     local, actions = arg
-    obs, done, success = [], np.zeros(len(local), bool), np.zeros(len(local), bool)
-    for k, (j, a) in enumerate(zip(local, actions)):
-        o, _, done[k], info = envs[j].step(a)
+    obs, success, done = step_envs([envs[j] for j in local], actions)
+    return obs, done, success
+
+
+def step_envs(envs, actions):
+    """envs[i] stepped with actions[i] for every i: (obs (N, obs_dim), success (N,) bool, done (N,)
+    bool). In one call where the envs' class steps a batch (PushTEnv.step_many, the same bits), else
+    env.step per env. LockstepEnvs and the data engine's lanes (datagen.lockstep) step through it."""
+    import numpy as np
+
+    many = getattr(type(envs[0]), "step_many", None)
+    if many is not None:
+        return many(envs, actions)
+    obs, success, done = [], np.zeros(len(envs), bool), np.zeros(len(envs), bool)
+    for k, (env, a) in enumerate(zip(envs, actions)):
+        o, _, done[k], info = env.step(a)
         obs.append(o)
         success[k] = info["success"]
-    return np.stack(obs), done, success
+    return np.stack(obs), success, done
 
 
 def _env_worker(conn, make_env, seeds, rank: int, parent: int, inherited) -> None:

@@ -14,8 +14,8 @@ shares its batch, on the lane it runs in, or on when it was started.
 
 The runner (run_lanes) knows no task. A mode hands it
     make_env(share=None)         -> an env with step(action) -> (obs, reward, done, info["success"]),
-                                    and optionally step_many(envs, actions) -> (obs, success, done)
-                                    for a batch (PushTEnv's); the lanes' envs are made with
+                                    stepped through ch37.parallel.step_envs (in one call where its
+                                    class has step_many: PushTEnv's); the lanes' envs are made with
                                     share=the first (its model, and PushT's MjData), once per
                                     process and reused: begin resets an env fully
     begin(job, env)              -> a Lane placed at its start (lane.obs: its first observation), or a
@@ -37,6 +37,7 @@ from collections import deque
 
 import numpy as np
 
+from ch37.parallel import step_envs
 from datagen import engine
 from datagen.task import Perturbation, Task
 
@@ -102,12 +103,12 @@ def run_lanes(
 
     for slot in range(width):
         fill(slot)
-    step_many = getattr(type(envs[0]), "step_many", _step_each)
     while live:
         slots = np.fromiter(live, int, len(live))
         at = t[slots]
         obs = obs_buf[slots, at]  # (N, obs_dim): each live lane's current observation
-        actions, stop = decide([live[s][1] for s in slots.tolist()], [envs[s] for s in slots.tolist()], obs)
+        ids = slots.tolist()
+        actions, stop = decide([live[s][1] for s in ids], [envs[s] for s in ids], obs)
         act_buf[slots, at] = actions  # a stopped lane's row lies past its frames: never read
         if stop is not None and stop.any():  # ended before this step, not stepped
             for slot in slots[stop].tolist():
@@ -115,23 +116,13 @@ def run_lanes(
             slots, at, actions = slots[~stop], at[~stop], actions[~stop]
             if not len(slots):
                 continue
-        o, success, done = step_many([envs[s] for s in slots.tolist()], actions)
+        o, success, done = step_envs([envs[s] for s in slots.tolist()], actions)
         obs_buf[slots, at + 1] = o
         succ_buf[slots, at] = success
         t[slots] = at + 1
         for slot in slots[done].tolist():
             end(slot)
     return results
-
-
-def _step_each(envs, actions):
-    """An env's step_many where it has none: its step per env, (obs (N, obs_dim), success (N,), done (N,))."""
-    steps = [env.step(a) for env, a in zip(envs, actions)]
-    return (
-        np.array([s[0] for s in steps]),
-        np.array([s[3]["success"] for s in steps], bool),
-        np.array([s[2] for s in steps], bool),
-    )
 
 
 # ----------------------------------------------------------------------------------------------
