@@ -28,7 +28,7 @@ from ch37.seeds import MAX_SEED, SEED_BLOCK
 # A flag's bound (flag(bound=...)), each with its one-line error (check() below):
 POSITIVE = "positive"  # an integer > 0: "--NAME must be a positive integer, got V"
 NON_NEGATIVE = "non_negative"  # >= 0: "--NAME must be >= 0, got V"
-FINITE = "finite"  # a finite number >= 0: "--NAME must be a finite non-negative number, got V"
+FINITE = "finite"  # a finite number >= 0, not -0.0: "--NAME must be a finite non-negative number, got V"
 FINITE_POSITIVE = "finite_positive"  # a finite number > 0: "--NAME must be a finite positive number, got V"
 BOUNDS = (POSITIVE, NON_NEGATIVE, FINITE, FINITE_POSITIVE)
 # The largest --aug_pos_sigma (m) and --aug_yaw_sigma (rad): a kept start lies 0.08..0.26 m from the target
@@ -89,8 +89,31 @@ def parser_of(cls, prog: str | None = None, description: str | None = None) -> a
                 kw["type"] = type(default[0]) if isinstance(default, list) else type(default)
             if kw.get("type") is Path:
                 kw["type"] = _path
+            if m["aliases"] and "action" not in kw:  # each spelling's value kept: parse() refuses two
+                kw["action"] = _Spellings
             group.add_argument(f"--{f.name}", *(f"--{a}" for a in m["aliases"]), dest=f.name, **kw)
     return p
+
+
+class _Spellings(argparse._StoreAction):
+    """A flag with old spellings (flag(aliases=...)): stores its value and keeps each spelling's, so that
+    parse() refuses `--per_demo 2 --attempts_per_demo 3` instead of letting the last one win silently."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        self.given = {**getattr(self, "given", {}), option_string: values}
+        super().__call__(parser, namespace, values, option_string)
+
+
+def disagreement(p: argparse.ArgumentParser) -> str | None:
+    """One line naming the two spellings of one flag given with different values, else None."""
+    for action in p._actions:
+        given = list(getattr(action, "given", {}).items())
+        for (s1, v1), (s2, v2) in zip(given, given[1:]):
+            if v1 != v2:
+                shown = [" ".join(map(str, v)) if isinstance(v, list) else v for v in (v1, v2)]
+                said = f"{s1} {shown[0]} and {s2} {shown[1]}"
+                return f"{said} are one flag (an old and a new spelling) given two values; give it once"
+    return None
 
 
 def spelled(argv, cls) -> dict[str, str]:
@@ -133,6 +156,8 @@ def parse(
     if smoke and getattr(args, "smoke", False):
         p.set_defaults(**smoke)
         args = p.parse_args(argv)
+    if problem := disagreement(p):
+        raise DataError(problem)
     check_fields(args, cls, argv)
     return args
 
@@ -196,7 +221,8 @@ def check(args, positive=(), non_negative=(), finite=(), finite_positive=(), at_
     for kind, names in (("non-negative", finite), ("positive", finite_positive)):
         for name in names:
             for v in _values(args, name):
-                if not math.isfinite(v) or v < 0 or (kind == "positive" and v == 0):
+                # -0.0 passes `v < 0` but numpy's samplers refuse it as a negative scale: its sign bit counts
+                if not math.isfinite(v) or math.copysign(1.0, v) < 0 or (kind == "positive" and v == 0):
                     raise DataError(f"--{said.get(name, name)} must be a finite {kind} number, got {v}")
     for name, most in (at_most or {}).items():
         for v in _values(args, name):

@@ -62,7 +62,7 @@ def commands() -> dict[str, dict[str, dict]]:
 
 def out_of_bound(m: dict, is_int: bool) -> list[str]:
     """Values outside a field's declared range: below its bound, above its at_most."""
-    bad = {config.POSITIVE: ["0"], config.NON_NEGATIVE: ["-1"], config.FINITE: ["nan", "-1"]}
+    bad = {config.POSITIVE: ["0"], config.NON_NEGATIVE: ["-1"], config.FINITE: ["nan", "-0.0", "-1"]}
     bad[config.FINITE_POSITIVE] = ["0", "inf"]
     vals = list(bad.get(m["bound"], []))
     if m["at_most"] is not None:
@@ -148,6 +148,43 @@ def test_an_error_names_the_flag_as_it_was_typed():
     ):
         with pytest.raises(DataError, match=needle):
             parse_with(augment_demos, argv)
+
+
+def test_minus_zero_sigma_is_one_line_in_every_command(tmp_path):
+    """Issue 42 #4: -0.0 passed `v < 0`, then numpy's sampler refused it as a negative scale (a traceback
+    from the engine, tracebacks from the lesson's and the lab's workers): one line, exit 2, nothing made."""
+    for script, *extra in (
+        ("augment_demos.py", "--src", tmp_path / "absent"),
+        ("scale_data.py", "--smoke"),
+        ("scale_lab.py", "--smoke"),
+    ):
+        for flag in ("--aug_pos_sigma", "--yaw_sigma"):
+            p = run_script(script, *extra, flag, "-0.0", "--out", tmp_path / "o", check=False)
+            err = p.stderr.strip().splitlines()
+            assert p.returncode == 2 and len(err) == 1, (script, flag, p.stderr[-2000:])
+            assert err[0] == f"error: {flag} must be a finite non-negative number, got -0.0", err
+    assert not (tmp_path / "o").exists()
+
+
+DISAGREE = [
+    (augment_demos, "--per_demo", "2", "--attempts_per_demo", "3"),
+    (augment_demos, "--mode", "replay", "--aug_mode", "resolve"),
+    (augment_demos, "--pos_sigma", "0.01", "--aug_pos_sigma", "0.02"),
+    (scale_lab, "--aug_yaw_sigma", "0.1", "--yaw_sigma", "0.2"),
+    (lerobot_eval, "--episodes", "3", "--eval_episodes", "4"),
+]
+
+
+@pytest.mark.parametrize("mod,s1,v1,s2,v2", DISAGREE, ids=[f"{c[1]}-{c[3]}" for c in DISAGREE])
+def test_an_old_and_a_new_spelling_that_disagree_are_refused(mod, s1, v1, s2, v2):
+    """Issue 42 #12: both spellings of one flag with different values were accepted, the last one winning
+    silently; refused in one line naming both. The same value under both spellings is that value."""
+    for argv in ([s1, v1, s2, v2], [f"{s1}={v1}", s2, v2]):
+        with pytest.raises(DataError) as e:
+            parse_with(mod, argv)
+        assert str(e.value).startswith(f"{s1} {v1} and {s2} {v2} are one flag"), str(e.value)
+        assert "\n" not in str(e.value)
+    assert parse_with(mod, [s1, v1, s2, v1]) == parse_with(mod, [s2, v1])
 
 
 def test_a_shared_knob_has_one_name_default_and_bound_in_every_command():
