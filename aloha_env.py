@@ -91,6 +91,7 @@ through the ``holding`` accessor after each step.
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 
 import mujoco
@@ -154,6 +155,7 @@ ROBOT_TYPE = "aloha_planar_bimanual"
 TASK = "Pick the cube with the right arm, hand it to the left arm, and place it on the target."
 
 _ARMS = ("right", "left")
+_STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # everything mj_step reads: what a copy or a pickle carries
 
 
 class AlohaCubeEnv:
@@ -241,7 +243,10 @@ class AlohaCubeEnv:
 
     def step(self, action):
         """Apply one control step (SUBSTEPS physics steps). Returns (obs, reward, done, info)."""
-        a = np.clip(np.asarray(action, dtype=np.float64).reshape(ACT_DIM), -1.0, 1.0)
+        a = np.asarray(action, dtype=np.float64).reshape(ACT_DIM)
+        if not np.all(np.isfinite(a)):  # MuJoCo would zero the controls and write MUJOCO_LOG.TXT here
+            raise ValueError(f"non-finite action {a}")
+        a = np.clip(a, -1.0, 1.0)
         for i, arm in enumerate(_ARMS):
             self._act_vx[arm].ctrl[0] = a[3 * i]
             self._act_vy[arm].ctrl[0] = a[3 * i + 1]
@@ -349,6 +354,27 @@ class AlohaCubeEnv:
     def success(self) -> bool:
         """True once the success rule has been met in this episode (latched)."""
         return self._success
+
+    # ------------------------------------------------------------------ copy and pickle
+    def __getstate__(self) -> dict:
+        """What copy.deepcopy and pickle carry (Gymnasium's vector envs and RL libraries copy, pickle and
+        checkpoint envs): the model, this env's simulator state (mjSTATE_INTEGRATION: everything mj_step
+        reads) and its episode state. Not the MjData, its named views or the renderer: __setstate__
+        makes them anew, so the copy steps as the env would, bit for bit."""
+        state = np.empty(mujoco.mj_stateSize(self.model, _STATE))
+        mujoco.mj_getState(self.model, self.data, state, _STATE)
+        keep = ("_target", "_holding", "_offset", "_steps", "_in_tol", "_success")
+        return {"model": self.model, "state": state, **{k: getattr(self, k) for k in keep}}
+
+    def __setstate__(self, saved: dict) -> None:
+        """A new env on the saved model, put in the saved state."""
+        saved = dict(saved)
+        self.__init__(saved.pop("model"))
+        mujoco.mj_setState(self.model, self.data, saved.pop("state"), _STATE)
+        for k, v in copy.deepcopy(saved).items():
+            setattr(self, k, v)
+        self._target_site.pos[:2] = self._target
+        mujoco.mj_forward(self.model, self.data)  # derived quantities (render) from the loaded state
 
     # ------------------------------------------------------------------ rendering
     def render(self, size: int = 96) -> np.ndarray:

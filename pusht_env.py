@@ -357,6 +357,27 @@ class PushTEnv:
         o[6], o[7] = TARGET_POSE[0], TARGET_POSE[1]
         o[8], o[9] = math.sin(TARGET_POSE[2]), math.cos(TARGET_POSE[2])
 
+    # ----- copy and pickle (Gymnasium's vector envs and RL libraries copy, pickle and checkpoint envs) -----
+    def __getstate__(self) -> dict:
+        """What copy.deepcopy and pickle carry: this env's simulator state (_STATE) and its episode
+        counters. Not the MjData, its named views or the renderers: __setstate__ makes them anew, so the
+        copy steps as the env would, bit for bit. A copy of an env made with share= is a standalone env
+        with that env's state: it shares nothing with the envs the original shares with."""
+        state = self._state.copy()
+        if self._seat.owner is self:  # its state lives in the MjData, not (yet) in _state
+            mujoco.mj_getState(self.model, self.data, state, _STATE)
+        counters = {k: getattr(self, k) for k in ("_steps", "_hold", "_success", "_obs")}
+        return {"state": state, **counters}
+
+    def __setstate__(self, saved: dict) -> None:
+        """A new env (pusht.xml loaded: the env never changes its model) put in the saved state."""
+        saved = dict(saved)
+        self.__init__()
+        mujoco.mj_setState(self.model, self.data, saved.pop("state"), _STATE)
+        mujoco.mj_forward(self.model, self.data)  # derived quantities (render) from the loaded state
+        for k, v in saved.items():
+            setattr(self, k, v.copy() if isinstance(v, np.ndarray) else v)
+
     # ----- rendering (optional; needs an OpenGL backend such as EGL or OSMesa) -----
     def render(self, size: int = 96) -> np.ndarray:
         """Top-down RGB image, uint8 (size, size, 3), from the fixed camera "top" (MUJOCO_GL=egl)."""

@@ -147,3 +147,65 @@ def test_render_without_a_gl_backend_is_one_clear_line():
     assert p.returncode == 0, p.stderr
     line = p.stdout.strip()
     assert len(line.splitlines()) == 1 and "MUJOCO_GL=egl" in line and "apt-get install" in line, line
+
+
+@pytest.mark.parametrize("env_id,mod,Sim,Expert", SPECS)
+def test_a_copy_or_a_pickle_mid_episode_steps_as_the_env_bit_for_bit(env_id, mod, Sim, Expert):
+    """Issue 42 #2: a deep copy or a pickle round trip of an env was dead (PushT: its named views copied as
+    plain arrays, the pusher never moving) or refused with a MuJoCo traceback (ALOHA). Taken mid-episode,
+    each copy steps on as the original does, bit for bit, and apart from it."""
+    import copy
+    import pickle
+
+    env = gym.make(env_id).unwrapped
+    env.reset(seed=3)
+    actions = np.random.default_rng(0).uniform(-1, 1, (40, mod.ACT_DIM)).astype(np.float32)
+    for a in actions[:15]:
+        env.step(a)
+    copies = [copy.deepcopy(env), pickle.loads(pickle.dumps(env))]
+    assert all(c.sim.data is not env.sim.data for c in copies)
+    start = env.sim.steps
+    for a in actions[15:]:
+        want = env.step(a)
+        for c in copies:
+            got = c.step(a)
+            assert got[0].tobytes() == want[0].tobytes() and got[1:4] == want[1:4]
+    assert all(c.sim.steps == env.sim.steps == start + 25 for c in copies)
+    ones = np.ones(mod.ACT_DIM, np.float32)  # apart: the original and a copy step differently
+    assert env.step(ones)[0].tobytes() != copies[0].step(-ones)[0].tobytes()
+
+
+def test_a_copy_of_a_pusht_env_that_shares_an_mjdata_is_a_standalone_env():
+    """A PushTEnv made with share= borrows another's MjData; its copy carries its own state only, in an
+    MjData of its own, and steps as it does while the env it shared with steps too."""
+    import copy
+    import pickle
+
+    owner = pusht_env.PushTEnv()
+    owner.reset(1)
+    lane = pusht_env.PushTEnv(share=owner)
+    lane.reset(2)
+    actions = np.random.default_rng(1).uniform(-1, 1, (30, 2))
+    for a in actions[:10]:
+        lane.step(a)
+        owner.step(-a)  # the owner's state is loaded last: the lane's is parked when copied
+    copies = [copy.deepcopy(lane), pickle.loads(pickle.dumps(lane))]
+    assert all(c.data is not owner.data for c in copies)
+    for a in actions[10:]:
+        want = lane.step(a)[0].tobytes()
+        owner.step(-a)
+        assert all(c.step(a)[0].tobytes() == want for c in copies)
+
+
+@pytest.mark.parametrize("env_id,mod,Sim,Expert", SPECS)
+def test_a_nan_action_is_refused_and_nothing_is_written(env_id, mod, Sim, Expert, tmp_path, monkeypatch):
+    """Issue 42 #3: ALOHA took step(NaN): MuJoCo warned, zeroed the controls, returned a normal
+    observation and wrote MUJOCO_LOG.TXT into the current folder. Both envs, plain and through
+    Gymnasium, refuse it as PushT did (ValueError), and the current folder stays empty."""
+    monkeypatch.chdir(tmp_path)
+    for env in (Sim(), gym.make(env_id)):
+        env.reset(seed=0) if isinstance(env, gym.Env) else env.reset(0)
+        for bad in (np.full(mod.ACT_DIM, np.nan), np.r_[np.inf, np.zeros(mod.ACT_DIM - 1)]):
+            with pytest.raises(ValueError, match="non-finite action"):
+                env.step(bad)
+    assert list(tmp_path.iterdir()) == []
