@@ -130,6 +130,9 @@ STATE_RANGES = dict(
     )
 )
 
+# Every action entry is clipped to [-1, 1] by the env (aloha_env.py): the expert's and replay's are inside.
+ACTION_RANGES = {name: (-1.0, 1.0) for name in aloha_env.ACTION_NAMES}
+
 
 def start_of(state) -> tuple[float, ...]:
     """The START_NAMES values (m) an observation describes: cube, target, right and left end-effector."""
@@ -377,7 +380,7 @@ class Aloha(Task):
     name, title, generator = "aloha", "ALOHA", "gen_demos_aloha.py"
     start_names = START_NAMES
     env_module = aloha_env
-    state_ranges = STATE_RANGES
+    state_ranges, action_ranges = STATE_RANGES, ACTION_RANGES
     failures = FAILURES
 
     def __init__(self):

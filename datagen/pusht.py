@@ -74,6 +74,8 @@ _W = pusht_env.WALL_INNER
 STATE_RANGES = dict(
     zip(pusht_env.STATE_NAMES, [(-_W, _W)] * 4 + [(-1.0, 1.0)] * 2 + [(0.0, 0.0)] * 3 + [(1.0, 1.0)])
 )
+# The pusher velocity the env clips to (m/s): the expert's and replay's actions are inside.
+ACTION_RANGES = {name: (-pusht_env.ACTION_LIMIT, pusht_env.ACTION_LIMIT) for name in pusht_env.ACTION_NAMES}
 
 
 def perturbed_start(first_state, rng, pos_sigma: float, yaw_sigma: float, tries: int = TRIES):
@@ -372,7 +374,7 @@ class PushT(Task):
     name, title, generator = "pusht", "PushT", "gen_demos_pusht.py"
     start_names = START_NAMES
     env_module = pusht_env
-    state_ranges = STATE_RANGES
+    state_ranges, action_ranges = STATE_RANGES, ACTION_RANGES
     failures = {  # every reason a mode can return
         "resolve": ("expert_failed", "no_valid_start"),
         "replay": (

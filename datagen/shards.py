@@ -406,19 +406,26 @@ EPISODE_COLUMNS = ("episode_index", "length", "dataset_from_index", "dataset_to_
 EPISODE_COLUMNS += ("data/chunk_index", "data/file_index")
 
 
-def state_range_problem(task: Task, src: Path, states: np.ndarray) -> str | None:
-    """None if every state (N, obs_dim) lies in the task's documented ranges (task.state_ranges, 1e-6
-    of slack: float32 rounding), else the first state dimension outside, how many frames and the
-    first row. A value outside is no state of the task: its attempts could only fail."""
-    for i, (name, (lo, hi)) in enumerate(task.state_ranges.items()):
-        bad = (states[:, i] < lo - 1e-6) | (states[:, i] > hi + 1e-6)
-        if bad.any():
-            row = int(np.argmax(bad))
-            return (
-                f"--src {src}: observation.state {name} (index {i}) is {float(states[row, i]):g} in "
-                f"{int(bad.sum())} frames, the first at row {row}; the {task.title} env's range for it is "
-                f"[{lo:g}, {hi:g}]: this is not a {task.title} state"
-            )
+def state_range_problem(
+    task: Task, src: Path, states: np.ndarray, actions: np.ndarray | None = None
+) -> str | None:
+    """None if every state (N, obs_dim) and action (N, act_dim) lies in the task's documented ranges
+    (task.state_ranges, task.action_ranges; 1e-6 of slack: float32 rounding), else the first dimension
+    outside, how many frames and the first row. A value outside is no state or action of the task: its
+    attempts could only fail."""
+    for key, values, ranges in (
+        ("observation.state", states, task.state_ranges),
+        ("action", actions, task.action_ranges),
+    ):
+        for i, (name, (lo, hi)) in enumerate(ranges.items() if values is not None else ()):
+            bad = (values[:, i] < lo - 1e-6) | (values[:, i] > hi + 1e-6)
+            if bad.any():
+                row, what = int(np.argmax(bad)), key.split(".")[-1]
+                return (
+                    f"--src {src}: {key} {name} (index {i}) is {float(values[row, i]):g} in "
+                    f"{int(bad.sum())} frames, the first at row {row}; the {task.title} env's range for it "
+                    f"is [{lo:g}, {hi:g}]: this is not a {task.title} {what}"
+                )
     return None
 
 
@@ -501,7 +508,7 @@ def read_source(task: Task, src: Path) -> dict:
     problem = frames_problem(src, arrays)
     if problem:
         raise DataError(f"--src {problem}")
-    problem = state_range_problem(task, src, arrays["observation.state"])
+    problem = state_range_problem(task, src, arrays["observation.state"], arrays["action"])
     if problem:
         raise DataError(problem)
     if arrays["episode_index"].max() >= SEED_BLOCK:

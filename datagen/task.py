@@ -11,6 +11,7 @@ subclass; it provides
     start_names          the names of a start's numbers, in the order
                          place() takes them (stored on every kept frame as aug.start)
     state_ranges         {state name: (low, high)} as the env documents them: a source outside is refused
+    action_ranges        {action name: (low, high)}: the env's clip range, checked as the states are
     env_module           the env's module: STATE_NAMES, ACTION_NAMES, ENV_STATE_NAMES, FPS, ROBOT_TYPE,
                          TASK (what a LeRobot set of this task records), OBS_DIM, ACT_DIM
     make_env(share=None) a new simulator (one per worker process; place() fully resets it); share:
@@ -181,6 +182,7 @@ class Task:
     generator: str  # the command that makes a source set of this task ("gen_demos_pusht.py")
     start_names: tuple[str, ...]
     state_ranges: dict[str, tuple[float, float]]
+    action_ranges: dict[str, tuple[float, float]]
     env_module: object
     failures: dict[str, tuple[str, ...]]
 

@@ -599,6 +599,26 @@ def aloha_src(tmp_path_factory):
     return out
 
 
+@pytest.mark.parametrize(
+    "which,needle",
+    [
+        ("src", "action pusher_vx (index 0) is 1e+30 in 1 frames, the first at row 3"),
+        ("aloha_src", "action right_vx (index 0) is 1e+30 in 1 frames, the first at row 3"),
+    ],
+)
+def test_an_action_outside_the_envs_range_is_one_line(request, tmp_path, which, needle):
+    """Issue 42 #10: a source action of 1e30 (finite) was accepted without a word (ALOHA's replays then
+    failed as source_not_split): actions are checked against the env's range as states are."""
+    bad = tmp_path / "bad"
+    shutil.copytree(request.getfixturevalue(which), bad)
+    with_value(bad, "action", 3, 0, 1e30)
+    before = tree(bad, skip=())
+    p = augment("--src", bad, "--out", tmp_path / "out", "--workers", "1", "--quiet", check=False)
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(err) == 1 and err[0].startswith("error: --src") and needle in err[0], err
+    assert "[-1, 1]" in err[0] and tree(bad, skip=()) == before and not (tmp_path / "out").exists()
+
+
 def test_aloha_replay_nearest_same_bytes_for_workers_ray_and_resume(aloha_src, tmp_path):
     """MimicGen's subtask replay from the nearest source, on an ALOHA set: the attempts as
     datagen.engine.attempt makes them, provenance naming the source replayed, and the same bytes for
