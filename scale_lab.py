@@ -39,7 +39,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ch37 import config
+from ch37 import cli, config
 from ch37.config import CHAPTER as D
 from ch37.config import NON_NEGATIVE, POSITIVE, flag
 from ch37.errors import DataError, main
@@ -105,6 +105,9 @@ def parse(argv=None):
             f"({SOURCES} source demos, each grown by the same count), e.g. 12 36 108"
         )
     a.n, a.seeds = sorted(set(a.n)), sorted(set(a.seeds))
+    # one training task, checked as the lesson checks its own before any work: one arm on the largest
+    # point's frames (every episode at its step limit); a task that cannot fit alone fails in every worker
+    cli.check_memory(cli.training_memory(a, max(a.n) * cli.PUSHT_MAX_STEPS, "--n", arms=1))
     return a
 
 

@@ -27,16 +27,35 @@ ENV_BYTES = 1 << 20  # one evaluation env (a MuJoCo model and data), rounded up 
 def memory_estimate(args: argparse.Namespace) -> dict[str, int]:
     """Bytes a run needs at most, per flag that drives it (every episode at its step limit)."""
     frames = args.source_episodes * ((1 + args.aug_per_demo) * PUSHT_MAX_STEPS + ALOHA_MAX_STEPS)
-    h, arms = args.hidden_dim, 2  # the two data arms of a budget train side by side (measure)
+    return training_memory(args, frames, "--source_episodes/--aug_per_demo", arms=2)  # measure's two arms
+
+
+def training_memory(args: argparse.Namespace, frames: int, data_flags: str, arms: int) -> dict[str, int]:
+    """Bytes the BC recipe needs at most to train `arms` side by side on `frames` frames (the flags
+    `data_flags` set them) and evaluate on args.eval_episodes starts, per flag that drives it."""
+    h = args.hidden_dim
     params = h * h + 14 * h + 2  # 10 -> h -> h -> 2
     act_row = (2 * h + 12) * 4 * 3  # one row through the net: activations and their gradients, float32
     return {
-        "--source_episodes/--aug_per_demo": frames * 1024,  # ~10 copies of a frame's ~100 bytes
+        # ~10 copies of a frame's ~100 bytes, and each frame once through the net (the final fit)
+        data_flags: frames * (1024 + act_row),
         # per arm: weights, gradient, Adam's two moments, its policy's copy; plus the initial weights
-        "--hidden_dim": params * 4 * (5 * arms + 2) + (frames + args.eval_episodes) * act_row,
+        "--hidden_dim": params * 4 * (5 * arms + 2) + args.eval_episodes * act_row,
         "--batch_size": args.batch_size * arms * (act_row + 8 + 48),  # a batch: rows, indices, activations
         "--eval_episodes": args.eval_episodes * ENV_BYTES,
     }
+
+
+def check_memory(need: dict[str, int]) -> None:
+    """DataError (one line) when `need` ({flag: bytes}) is more than the memory available here, naming
+    the flag that drives most of it."""
+    free, total = available_memory(), sum(need.values())
+    if free is not None and total > free:
+        worst = max(need, key=need.get)
+        raise DataError(
+            f"this configuration needs up to {_gb(total)} of memory, more than the "
+            f"{_gb(free)} available here (most of it from {worst}); lower {worst}"
+        )
 
 
 def _gb(n: float) -> str:
@@ -61,13 +80,7 @@ def parse(cls, argv=None) -> argparse.Namespace:
         raise DataError(f"--workers must be at most {max_workers()} (4 per CPU core), got {args.workers}")
     if args.device not in ("auto", "cpu", "cuda", "mps"):
         raise DataError(f"--device must be auto, cpu, cuda or mps, got {args.device!r}")
-    need, free = memory_estimate(args), available_memory()
-    if free is not None and sum(need.values()) > free:
-        worst = max(need, key=need.get)
-        raise DataError(
-            f"this configuration needs up to {_gb(sum(need.values()))} of memory, more than the "
-            f"{_gb(free)} available here (most of it from {worst}); lower {worst}"
-        )
+    check_memory(memory_estimate(args))
     return args
 
 

@@ -294,6 +294,16 @@ def sweep_leftovers(folder: Path, name: str | None = None) -> list[str]:
     return removed
 
 
+def check_own_result(path: Path, kind: str, flag: str = "--out") -> None:
+    """DataError unless `path` is absent or a JSON result of this tool (its "kind" is `kind`): a tool's
+    re-run may replace its own result file, never a file of the user's."""
+    path = Path(path)
+    if path.exists() or path.is_symlink():
+        data = read_json(path) if path.is_file() and not path.is_symlink() else None
+        if not isinstance(data, dict) or data.get("kind") != kind:
+            raise DataError(f"{path} exists and was not written by this tool; pass another {flag}")
+
+
 def check_out_path(path: Path, flag: str = "--out") -> str | None:
     """None if `path` can hold this program's output, else one line saying why not. Creates nothing:
     it writes and removes a probe file in `path`, or in its nearest existing parent folder."""

@@ -424,6 +424,62 @@ CASES = [
         2,
         "the Hugging Face cache",
     ),
+    # issue 42 #1: aloha_value's --out holding the user's own aloha_value.json; a bad --device up front
+    (
+        "aloha-value-out-holds-users-json",
+        lambda tmp, ref: (
+            [
+                "-m",
+                "tools.aloha_value",
+                "--smoke",
+                "--seeds",
+                "1",
+                "--out",
+                _user_result(tmp, "aloha_value.json"),
+            ],
+            [tmp / "u" / "aloha_value.json"],
+            None,
+        ),
+        2,
+        "aloha_value.json exists and was not written by this tool; pass another --out",
+    ),
+    (
+        "aloha-value-device-bogus",
+        lambda tmp, ref: (
+            ["-m", "tools.aloha_value", "--smoke", "--device", "bogus", "--out", tmp / "av"],
+            [],
+            None,
+        ),
+        2,
+        "argument --device: invalid choice: 'bogus'",
+    ),
+    # issue 42 #6: the lab checks its memory as the lesson does; #8: the flag named is one that can help
+    (
+        "lab-hidden-dim-beyond-ram",
+        lambda tmp, ref: (
+            ["scale_lab.py", "--smoke", "--hidden_dim", str(10**12), "--out", tmp / "l"],
+            [],
+            None,
+        ),
+        2,
+        "lower --hidden_dim",
+    ),
+    (
+        "lab-batch-beyond-ram",
+        lambda tmp, ref: (
+            ["scale_lab.py", "--smoke", "--batch_size", str(10**12), "--out", tmp / "l"],
+            [],
+            None,
+        ),
+        2,
+        "lower --batch_size",
+    ),
+    (
+        "aug-per-demo-beyond-ram",
+        _sd("--aug_per_demo", str(10**12)),
+        2,
+        "lower --source_episodes/--aug_per_demo",
+    ),
     # the exercise checks (item 10)
     ("checks-ex2-output-aliases-input", _checks("ex2", ALIASING_MIX), 1, "shares memory with an input array"),
     ("checks-ex1-no-prediction", _checks("ex1", "WHY = 'no letter'\n"), 1, "PREDICTION is missing"),

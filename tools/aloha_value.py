@@ -29,8 +29,9 @@ import numpy as np
 
 import aloha_env
 from ch37 import ROOT, errors
+from ch37.cli import pick_device
 from ch37.config import DEFAULTS, SMOKE, check
-from ch37.ownership import dump_json, round_floats, write_atomic
+from ch37.ownership import check_out_path, check_own_result, dump_json, round_floats, write_atomic
 from ch37.seeds import env_seed
 from datagen import aloha as aloha_task
 from datagen import engine
@@ -38,6 +39,7 @@ from datagen.task import Source, rollout
 from scripted_expert import AlohaExpert
 from tools.common import parser, provenance, rel
 
+KIND = "aloha_value"  # marks the JSON as this tool's, so a re-run may replace it and nothing else
 ARMS = ("source", "replayed", "resolved", "fresh")
 DIFFS = (("replayed", "source"), ("resolved", "source"), ("resolved", "replayed"), ("fresh", "resolved"))
 DIFFS += (("fresh", "replayed"),)
@@ -137,7 +139,8 @@ def main(argv: list[str]) -> int:
     p.add_argument(
         "--device",
         default="cpu",
-        help="torch device for the training: cpu or cuda (see docs/replay.md for its cost)",
+        choices=("auto", "cpu", "cuda", "mps"),
+        help="torch device for the training (see docs/replay.md for its cost)",
     )
     p.add_argument(
         "--out", type=Path, help="default outputs/aloha_value (outputs/aloha_value-smoke with --smoke)"
@@ -146,15 +149,19 @@ def main(argv: list[str]) -> int:
     check(a, positive=["seeds", "workers"])
     c = config(a.smoke)
     out = a.out or ROOT / ("outputs/aloha_value-smoke" if a.smoke else "outputs/aloha_value")
+    if problem := check_out_path(out):  # every input checked before the demos are made
+        raise errors.DataError(problem)
+    check_own_result(out / "aloha_value.json", KIND)  # an earlier run's may be replaced, a user's never
+    device = pick_device(a.device)
     cmd = f"python -m tools.aloha_value --seeds {a.seeds}" + (" --smoke" if a.smoke else "")
     out.mkdir(parents=True, exist_ok=True)
     rows, prov = [], provenance(a.script)
     for s in range(a.seeds):  # the file is rewritten after every seed: a stopped run keeps its seeds
-        rows.append(r := one_seed(s, c, a.workers, a.device))
+        rows.append(r := one_seed(s, c, a.workers, device))
         rates = " ".join(f"{k} {v['success']:.2f}" for k, v in r["arms"].items())
         kept = f"{r['replay']['kept']}/{r['replay']['attempts']}"
         print(f"seed {s}: replay {kept} kept, {rates} ({r['seconds']} s)", flush=True)
-        res = {"kind": "aloha_value", "command": cmd, "config": c, "rows": rows}
+        res = {"kind": KIND, "command": cmd, "config": c, "rows": rows}
         res |= summarize(rows, c["eval_episodes"])
         f = write_atomic(out / "aloha_value.json", dump_json(round_floats(res | prov, 4)))
     print(f"wrote {rel(f)}")

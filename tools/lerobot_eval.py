@@ -16,7 +16,6 @@ Exit codes: 0 ok, 2 bad input (one `error:` line).
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,7 +27,7 @@ from ch37 import config
 from ch37.config import NON_NEGATIVE, POSITIVE, flag
 from ch37.errors import DataError
 from ch37.errors import main as run
-from ch37.ownership import dump_json, round_floats, write_atomic
+from ch37.ownership import check_own_result, dump_json, round_floats, write_atomic
 from ch37.seeds import MAX_SEED, SEED_BLOCK
 
 KIND = "lerobot_eval"  # marks the JSON as this tool's, so a re-run may replace it and nothing else
@@ -139,13 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     if not a.policy.is_dir():
         raise DataError(f"--policy {a.policy} is not a folder")
     out = a.out or a.policy.parent / f"{KIND}_seed{a.seed}_n{a.eval_episodes}.json"
-    if out.exists():  # ours from an earlier run may be replaced; anything else is the user's
-        try:
-            ours = json.loads(out.read_text()).get("kind") == KIND
-        except (OSError, ValueError, AttributeError):
-            ours = False
-        if not ours:
-            raise DataError(f"{out} exists and was not written by this tool; pass another --out")
+    check_own_result(out, KIND)  # ours from an earlier run may be replaced; anything else is the user's
     from ch37.cli import pick_device
     from ch37.seeds import env_seed
 
