@@ -25,7 +25,9 @@ with their 4-tuple step) and adds what Gymnasium asks for:
   info is the simulator's ("success", "steps", ...).
 * ``render()`` in "rgb_array" mode: the simulator's top-down renderer, uint8 (render_size, render_size, 3).
   It needs an OpenGL backend (EGL or OSMesa; on Linux MUJOCO_GL defaults to egl here); without one it
-  raises gymnasium.error.DependencyNotInstalled with one line saying what to install.
+  raises gymnasium.error.DependencyNotInstalled with one line saying what to install (and so does
+  ``import gym_envs`` where MUJOCO_GL names a backend whose library cannot even be loaded, such as
+  osmesa without libOSMesa: MuJoCo then fails as it is imported).
 
 Observation bounds: PushT positions within the walls (|x|, |y| <= WALL_INNER = 0.42 m), sin and cos in
 [-1, 1] (the target's too, though it is fixed at (0, 0, 0, 1)). ALOHA end-effectors within their reach
@@ -49,8 +51,23 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-import aloha_env
-import pusht_env
+
+def _no_gl(what: str, e: BaseException) -> str:
+    """The one line that says what to install when MUJOCO_GL's backend fails (at `what`)."""
+    backend = os.environ.get("MUJOCO_GL", "glfw")
+    return (
+        f"{what} needs an OpenGL backend; MUJOCO_GL={backend} failed ({type(e).__name__}): "
+        "use MUJOCO_GL=egl (apt-get install libegl1) or MUJOCO_GL=osmesa (apt-get install libosmesa6)"
+    )
+
+
+try:  # MUJOCO_GL=osmesa without libOSMesa fails inside PyOpenGL as mujoco is imported, not at render()
+    import mujoco  # noqa: F401
+except (AttributeError, OSError) as e:
+    raise gym.error.DependencyNotInstalled(_no_gl("importing mujoco", e)) from None
+
+import aloha_env  # noqa: E402
+import pusht_env  # noqa: E402
 
 __all__ = ["PUSHT_ID", "ALOHA_ID", "PushTGym", "AlohaHandoffGym", "LIMIT_SLACK"]
 
@@ -104,11 +121,7 @@ class _SimGym(gym.Env):
         try:
             return self.sim.render(self.render_size)
         except Exception as e:  # MuJoCo raises its own kinds (or AttributeError) when no GL context exists
-            backend = os.environ.get("MUJOCO_GL", "glfw")
-            raise gym.error.DependencyNotInstalled(
-                f"render() needs an OpenGL backend; MUJOCO_GL={backend} failed ({type(e).__name__}): "
-                "use MUJOCO_GL=egl (apt-get install libegl1) or MUJOCO_GL=osmesa (apt-get install libosmesa6)"
-            ) from e
+            raise gym.error.DependencyNotInstalled(_no_gl("render()", e)) from e
 
     def close(self) -> None:
         self.sim.close()
