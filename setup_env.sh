@@ -1,8 +1,10 @@
 # Sourced by run_chapter.sh and run_tests.sh: make .venv (Python 3.12) with the project installed.
-# Idempotent: a second call only checks that the install is still there.
+# Idempotent: a second call only checks that the install is still there. It recovers by itself from a
+# set-up that was stopped: a .venv without pip (killed while `python -m venv` ran) is completed in place,
+# and a stamped .venv missing a locked package (python -m tools.lock --missing) is installed again.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")"
-if [ ! -x .venv/bin/python ]; then
+if ! .venv/bin/python -c 'import pip' >/dev/null 2>&1; then
     PY=""
     for cand in python3.12 "$HOME/.pyenv/versions/3.12.1/bin/python" python3; do
         if command -v "$cand" >/dev/null 2>&1 && "$cand" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 12))' 2>/dev/null; then
@@ -13,10 +15,17 @@ if [ ! -x .venv/bin/python ]; then
         echo "error: Python 3.12 not found; install it (pyenv install 3.12) and run again" >&2
         exit 2
     fi
+    # a new .venv, or one a stopped set-up left without pip: venv completes an existing folder in place
+    [ -e .venv ] && echo "repairing .venv (no working pip in it: a set-up was stopped while making it)..."
     "$PY" -m venv .venv
 fi
-# the stamp keys on the lock: a new requirements.lock (bash tools/lock.sh) reinstalls, nothing else does
+# the stamp keys on the lock: a new requirements.lock (bash tools/lock.sh) reinstalls, and so does a
+# locked package gone missing since (a set-up stopped mid-install, a package removed by hand)
 stamp=.venv/.installed-$(sha256sum requirements.lock | cut -c1-16)
+if [ -f "$stamp" ] && ! gone=$(.venv/bin/python -m tools.lock --missing 2>&1); then
+    echo "reinstalling .venv from requirements.lock: $(echo "$gone" | head -n 1)"
+    rm -f "$stamp"
+fi
 if [ ! -f "$stamp" ]; then
     echo "setting up .venv from requirements.lock (first run downloads lerobot and torch, a few GB, a few minutes)..."
     # exactly the lock: every package the set-up installs (pyproject.toml's dependencies + dev, ray and

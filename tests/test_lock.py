@@ -2,6 +2,7 @@
 meta.yaml records the lock its numbers ran on."""
 
 import tomllib
+from pathlib import Path
 
 import pytest
 import yaml
@@ -76,3 +77,63 @@ def test_meta_records_the_lock_its_numbers_ran_on():
 @pytest.mark.parametrize("marker,here", [(None, True), ("sys_platform == 'emscripten'", False)])
 def test_markers_decide_what_applies_here(marker, here):
     assert lock.applies(marker) is here
+
+
+def _set_up(folder, env) -> tuple[int, str]:
+    """setup_env.sh sourced in `folder` (a copy of the set-up beside its own .venv): (exit code, output)."""
+    import subprocess
+
+    p = subprocess.run(
+        ["bash", "-c", "source setup_env.sh"], cwd=folder, env=env, capture_output=True, text=True
+    )
+    return p.returncode, p.stdout + p.stderr
+
+
+def test_the_set_up_recovers_from_a_stopped_set_up_by_itself(tmp_path):
+    """Issue 42 #9: a set-up killed while `python -m venv` ran left .venv/bin/python without pip, and every
+    later run failed with `No module named pip` until `rm -r .venv`; a stamped .venv missing a locked
+    package ended in a ModuleNotFoundError. The set-up completes the first in place and installs the
+    second again; a complete stamped .venv stays a no-op. A lock of one pin (pip, from Python's own
+    wheel, no index) stands for the real one: the repair decision is tested, not the multi-GB install."""
+    import ensurepip
+    import hashlib
+    import shutil
+    import subprocess
+    import sys
+
+    wheels = Path(ensurepip.__file__).parent / "_bundled"
+    wheel = next(wheels.glob("pip-*.whl"))
+    version = wheel.name.split("-")[1]
+    digest = hashlib.sha256(wheel.read_bytes()).hexdigest()
+    for name in ("setup_env.sh", "tools", "ch37"):
+        (shutil.copytree if name != "setup_env.sh" else shutil.copy)(ROOT / name, tmp_path / name)
+    (tmp_path / "requirements.lock").write_text(f"pip=={version} \\\n    --hash=sha256:{digest}\n")
+    base = Path(sys._base_executable).parent  # a Python 3.12 first on PATH; no uv: pip installs
+    env = {"PATH": f"{base}:/usr/bin:/bin", "HOME": str(tmp_path), "PIP_NO_INDEX": "1"}
+    env |= {"PIP_FIND_LINKS": str(wheels), "PIP_DISABLE_PIP_VERSION_CHECK": "1"}
+    venv = tmp_path / ".venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", venv], check=True)  # killed mid-venv
+    code, out = _set_up(tmp_path, env)
+    assert code == 0 and "repairing .venv" in out, out
+    stamps = list(venv.glob(".installed-*"))
+    assert len(stamps) == 1 and subprocess.run([venv / "bin" / "python", "-c", "import pip"]).returncode == 0
+    # stamped, but a locked package is gone (its metadata removed: installed nothing, as pip sees it)
+    site = next(venv.glob("lib/python3*/site-packages"))
+    shutil.rmtree(next(site.glob(f"pip-{version}.dist-info")))
+    code, out = _set_up(tmp_path, env)
+    assert code == 0 and f"pip: installed nothing, locked {version}" in out, out
+    assert next(site.glob(f"pip-{version}.dist-info")) and list(venv.glob(".installed-*")) == stamps
+    # complete and stamped: nothing said, nothing changed
+    before = {p: p.stat().st_mtime_ns for p in [venv, *stamps, *site.iterdir()]}
+    assert _set_up(tmp_path, env) == (0, "")
+    assert {p: p.stat().st_mtime_ns for p in before} == before
+    # issue 42 #7: tools.lock in such a .venv (no packaging) names what is missing instead of a traceback
+    p = subprocess.run(
+        [venv / "bin" / "python", "-m", "tools.lock", "--lock", ROOT / "requirements.lock"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+    )
+    lines = p.stdout.strip().splitlines()
+    assert p.returncode == 1 and "Traceback" not in p.stdout + p.stderr, p.stdout + p.stderr
+    assert "drift: packaging: installed nothing" in p.stdout and "rm -r .venv" in lines[-1], p.stdout

@@ -16,12 +16,10 @@ from __future__ import annotations
 
 import hashlib
 import importlib.metadata
+import importlib.util
 import platform
 import re
 from pathlib import Path
-
-from packaging.markers import InvalidMarker, Marker
-from packaging.utils import canonicalize_name
 
 from ch37 import ROOT, errors
 from ch37.errors import DataError
@@ -34,6 +32,12 @@ META_PACKAGES = ("torch", "numpy", "mujoco", "lerobot", "gymnasium", "ray")
 # installed by the venv itself, never by the lock: the installer
 UNLOCKED_OK = {"pip"}
 PIN = re.compile(r"^([A-Za-z0-9][A-Za-z0-9._-]*)==([^\s;\\]+)\s*(?:;\s*([^\\]+?))?\s*\\?$")
+
+
+def canonicalize_name(name: str) -> str:
+    """A distribution's name as PEP 503 compares it (packaging.utils.canonicalize_name, without needing
+    packaging: this module must diagnose a .venv whose set-up stopped before packaging was installed)."""
+    return re.sub(r"[-_.]+", "-", name).lower()
 
 
 def read_lock(path: Path = LOCK) -> dict[str, tuple[str, str | None]]:
@@ -59,8 +63,12 @@ def read_lock(path: Path = LOCK) -> dict[str, tuple[str, str | None]]:
 
 def applies(marker: str | None) -> bool:
     """Whether a pin's environment marker holds on this interpreter and platform."""
+    if marker is None:
+        return True
+    from packaging.markers import InvalidMarker, Marker  # installed by the lock; missing(): without it
+
     try:
-        return marker is None or Marker(marker).evaluate()
+        return Marker(marker).evaluate()
     except InvalidMarker as e:
         raise DataError(f"requirements.lock has a malformed marker ({e})") from None
 
@@ -89,6 +97,19 @@ def drift(path: Path = LOCK, have: dict[str, str] | None = None) -> list[str]:
         if n not in want.keys() | UNLOCKED_OK
     ]
     return out
+
+
+def missing(path: Path = LOCK) -> list[str]:
+    """One line per pin without a marker (it applies everywhere) that is not installed at its version;
+    stdlib only, so it runs in a .venv whose set-up stopped mid-install (setup_env.sh's check of a
+    stamped .venv, and this command's first pass)."""
+    have = installed()
+    pins = {n: v for n, (v, marker) in read_lock(path).items() if marker is None}
+    return [
+        f"{n}: installed {have.get(n, 'nothing')}, locked {v}"
+        for n, v in sorted(pins.items())
+        if have.get(n) != v
+    ]
 
 
 def lock_digest(path: Path = LOCK) -> str:
@@ -122,12 +143,17 @@ def environment_section(path: Path = LOCK, python: str | None = None) -> dict:
 def main(argv: list[str]) -> int:
     p = parser("lock", __doc__)
     p.add_argument("--lock", type=Path, default=LOCK, help="default requirements.lock")
+    p.add_argument("--missing", action="store_true", help="only the pins that apply everywhere (stdlib only)")
     a = p.parse_args(argv)
-    if bad := drift(a.lock):
+    incomplete = a.missing or importlib.util.find_spec("packaging") is None  # no markers can be read
+    if bad := (missing(a.lock) if incomplete else drift(a.lock)):
         for line in bad:
             print(f"drift: {line}")
         print(f"{len(bad)} difference(s) from {rel(a.lock)}; reinstall: rm -r .venv, then bash run_tests.sh")
         return 1
+    if a.missing:
+        print(f"ok: every pin of {rel(a.lock)} that applies everywhere is installed")
+        return 0
     print(f"ok: the installed packages are exactly {rel(a.lock)}'s {len(locked_here(a.lock))} pins for here")
     return 0
 
