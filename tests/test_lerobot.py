@@ -132,6 +132,53 @@ def test_lerobot_eval_bad_policy_is_one_line(tmp_path):
         assert len(p.stderr.strip().splitlines()) == 1
 
 
+def test_lerobot_eval_of_a_checkpoint_with_nan_weights_is_one_line(tmp_path):
+    """Issue 42 #5: a checkpoint whose weights are NaN ended in a 38-line traceback (the env's `ValueError:
+    non-finite action [nan nan]`): a policy that outputs NaN is a bad input, one line naming it. The
+    checkpoint is LeRobot's own diffusion policy saved untrained (no training: seconds), its weights NaN."""
+    import torch
+    from lerobot.configs.types import FeatureType, PolicyFeature
+    from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
+    from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+
+    widths = {"observation.state": 10, "observation.environment_state": 8, "action": 2}
+    kinds = {"observation.state": FeatureType.STATE, "observation.environment_state": FeatureType.ENV}
+    feats = {k: PolicyFeature(kinds[k], (n,)) for k, n in widths.items() if k in kinds}
+    act = {"action": PolicyFeature(FeatureType.ACTION, (2,))}
+    cfg = DiffusionConfig(
+        input_features=feats, output_features=act, down_dims=(32, 64), num_inference_steps=2
+    )
+    cfg.device = "cpu"
+    policy = get_policy_class(cfg.type)(cfg)
+    with torch.no_grad():
+        for w in policy.parameters():
+            w.fill_(float("nan"))
+    model = tmp_path / "pretrained_model"
+    policy.save_pretrained(model)
+    unit = {"min": 0.0, "max": 1.0, "mean": 0.0, "std": 1.0}  # statistics the processors normalize with
+    stats = {k: {s: torch.full((n,), v) for s, v in unit.items()} for k, n in widths.items()}
+    for processor in make_pre_post_processors(cfg, dataset_stats=stats):
+        processor.save_pretrained(model)
+    out = tmp_path / "eval.json"
+    p = run_script(
+        "-m",
+        "tools.lerobot_eval",
+        "--policy",
+        model,
+        "--episodes",
+        "1",
+        "--device",
+        "cpu",
+        "--out",
+        out,
+        check=False,
+    )
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(err) == 1 and "Traceback" not in p.stderr, p.stderr[-3000:]
+    assert err[0].startswith(f"error: --policy {model} gives a non-finite action"), err
+    assert not out.exists()
+
+
 def test_lerobot_lab_samples_are_lerobot_datasets_items(grown):
     """tools.lerobot_lab's own loader gives, for every training sample, what lerobot-train's loader
     gives: LeRobotDataset's item (observation windows, action chunk, pad flags) at the frames its

@@ -85,9 +85,10 @@ def observation_builder(policy):
     return build
 
 
-def evaluate(policy, pre, post, seeds) -> list[dict]:
+def evaluate(policy, pre, post, seeds, name: str = "the policy") -> list[dict]:
     """One episode per env seed through Gymnasium (gym_envs' ch37/PushT-v0, whose reset(seed=s) is the
-    lesson's start s): {"seed", "success", "steps"}, the lesson's success rule (terminated = success)."""
+    lesson's start s): {"seed", "success", "steps"}, the lesson's success rule (terminated = success).
+    A non-finite action is the checkpoint's problem (`name` it), a DataError, never the env's ValueError."""
     import gymnasium as gym
     import torch
 
@@ -101,8 +102,13 @@ def evaluate(policy, pre, post, seeds) -> list[dict]:
             policy.reset()  # empties the action queue and the observation history
             (obs, _), terminated, truncated, steps = env.reset(seed=s), False, False, 0
             while not (terminated or truncated):
-                action = post(policy.select_action(pre(build(obs))))  # (1, 2), m/s
-                obs, _, terminated, truncated, _ = env.step(action[0].cpu().numpy().astype(np.float32))
+                action = post(policy.select_action(pre(build(obs))))[0].cpu().numpy().astype(np.float32)
+                if not np.all(np.isfinite(action)):  # m/s
+                    raise DataError(
+                        f"{name} gives a non-finite action {action} (start seed {s}, step {steps}): its "
+                        "weights or normalization statistics hold NaN or inf; pass another checkpoint"
+                    )
+                obs, _, terminated, truncated, _ = env.step(action)
                 steps += 1
             episodes.append({"seed": s, "success": bool(terminated), "steps": steps})
     env.close()
@@ -146,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     policy, pre, post = load_policy(a.policy, device)
     seeds = [env_seed(a.seed, "eval", j) for j in range(a.eval_episodes)]
     t0 = time.perf_counter()
-    episodes = evaluate(policy, pre, post, seeds)
+    episodes = evaluate(policy, pre, post, seeds, name=f"--policy {a.policy}")
     k, n = sum(e["success"] for e in episodes), len(episodes)
     result = {
         "kind": KIND,
