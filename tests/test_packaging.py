@@ -7,6 +7,7 @@ import json
 import os
 import platform
 import shutil
+import subprocess
 import sys
 import textwrap
 
@@ -634,7 +635,7 @@ def test_wallclock_row_replaces_only_its_tier(tmp_path):
         path,
         {
             "chapter": CHAPTER_ID,
-            "tier": "cpu-2core",
+            "tier": "cpu-2core-amd",
             "minutes": "1.66",
             "config_hash": "def",
             "date": "2025-01-02",
@@ -653,16 +654,52 @@ def test_wallclock_row_replaces_only_its_tier(tmp_path):
         },
     )
     rows = {r["tier"]: r for r in csv.DictReader(path.open())}
-    assert len(rows) == len(wallclock.TIERS)
+    assert list(rows) == ["cpu-2core-amd", *wallclock.TIERS]  # a CPU's row first, then the fixed tiers
     assert (
         rows["t4"]["minutes"] == "1.40"
-        and rows["cpu-2core"]["minutes"] == "1.66"
+        and rows["cpu-2core-amd"]["minutes"] == "1.66"
         and rows["mps"]["status"] == "pending"
     )
     assert ch37.cli.expected_wallclock("t4", "abc", path).startswith("about 1.4 min for this configuration")
     # issue 33 #7: another configuration (a bigger --pusht_data, another seed) gets no estimate
     assert "not this configuration" in ch37.cli.expected_wallclock("t4", "def", path)
     assert "not yet measured" in ch37.cli.expected_wallclock("mps", "abc", path)
+
+
+INTEL = "processor\t: 0\nvendor_id\t: GenuineIntel\nmodel name\t: Intel(R) Xeon(R)\n\nprocessor\t: 1\n"
+AMD = "processor\t: 0\nvendor_id\t: AuthenticAMD\nmodel name\t: AMD EPYC 7B13\n"
+GRAVITON = "processor\t: 0\nBogoMIPS\t: 243.75\nCPU implementer\t: 0x41\nCPU part\t: 0xd0c\n"
+
+
+@pytest.mark.parametrize(
+    "cores, cpuinfo, system, machine, tier",
+    [
+        (8, INTEL, "Linux", "x86_64", "cpu-8core-intel"),
+        (2, AMD, "Linux", "x86_64", "cpu-2core-amd"),
+        (4, GRAVITON, "Linux", "aarch64", "cpu-4core-arm"),
+        (10, "", "Darwin", "arm64", "cpu-10core-apple"),  # macOS has no /proc/cpuinfo
+        (4, "", "Darwin", "x86_64", "cpu-4core-intel"),
+        (4, "processor\t: 0\nhart\t: 0\n", "Linux", "riscv64", "cpu-4core-riscv64"),  # no vendor: the arch
+        (1, "", "", "", "cpu-1core-unknown"),
+    ],
+)
+def test_cpu_tier_is_named_from_the_cores_and_vendor(cores, cpuinfo, system, machine, tier):
+    """Issue 41 #7: the banner's CPU tier from the machine, no longer cpu-2core for every CPU."""
+    assert ch37.cli.cpu_tier(cores, cpuinfo, system, machine) == tier
+
+
+def test_the_banners_cpu_tier_is_this_machines(tmp_path):
+    tier = ch37.cli.device_tier("cpu")
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    assert tier.startswith(f"cpu-{cores}core-") and not tier.endswith("-unknown"), tier
+    # the row measured before tiers named the vendor is kept under a name no machine gets: no banner
+    # shows its minutes as this machine's
+    rows = {r["tier"]: r for r in csv.DictReader(common.WALLCLOCK.open())}
+    assert rows["cpu-2core-vendor-unrecorded"]["status"] == "measured" and "cpu-2core" not in rows
+    row = rows["cpu-2core-vendor-unrecorded"]
+    assert "not yet measured" in ch37.cli.expected_wallclock(tier, row["config_hash"], common.WALLCLOCK)
+    wallclock.write_wallclock_row(tmp_path / "w.csv", wallclock._pending(tier) | {"status": "measured"})
+    assert "not this configuration" in ch37.cli.expected_wallclock(tier, "x", tmp_path / "w.csv")
 
 
 def test_wallclock_cli_smoke_never_writes(tmp_path, stub):
@@ -699,6 +736,65 @@ def test_wallclock_csv_in_repo_is_well_formed():
             assert len({bool(r[k]) for k in wallclock.VERSION_FIELDS}) == 1, r
         else:
             assert r["minutes"] == ""
+
+
+# ----------------------------------------------------------------------------------------------
+# run_tests.sh: Chromium for the poster's browser checks
+# ----------------------------------------------------------------------------------------------
+FAKE_APT = """#!{bash}
+echo "$*" >> "{log}"
+if [ "$1" = install ] && [ "{installs}" = yes ]; then
+    printf '#!{bash}\\n' > "{bin}/chromium"
+    {chmod} +x "{bin}/chromium"
+fi
+"""
+
+
+INSTALLING = "installing Chromium for tests/test_poster.py's browser checks: apt-get install -y chromium\n"
+MISSING = "error: Chromium is missing (tests/test_poster.py's browser checks need it); install it with: "
+
+
+@pytest.mark.parametrize(
+    "uid, apt, chromium, rc, out, err",
+    [
+        (0, None, True, 0, "", ""),  # there already: nothing to do
+        (0, "yes", False, 0, INSTALLING, ""),
+        (0, "no", False, 2, INSTALLING, "error: apt-get install -y chromium did not install Chromium"),
+        (0, None, False, 2, "", MISSING + "apt-get install -y chromium\n"),
+        (1000, "yes", False, 2, "", MISSING + "sudo apt-get install -y chromium\n"),
+    ],
+    ids=["present", "root-apt-installs", "root-apt-fails", "root-no-apt", "not-root"],
+)
+def test_run_tests_installs_chromium_only_as_root_with_apt(tmp_path, uid, apt, chromium, rc, out, err):
+    """Issue 41 #7: a fresh root machine with apt-get (CI, a container) gets Chromium from run_tests.sh
+    itself, in one line; elsewhere it is one error line and exit 2, and apt-get is never called. Run on
+    run_tests.sh's own ensure_chromium, with a PATH holding only a fake apt-get (and a chromium or not)."""
+    bin_, log, bash = tmp_path / "bin", tmp_path / "apt.log", shutil.which("bash")
+    bin_.mkdir()
+    if apt:
+        fake = FAKE_APT.format(bash=bash, log=log, bin=bin_, chmod=shutil.which("chmod"), installs=apt)
+        (bin_ / "apt-get").write_text(fake)
+        (bin_ / "apt-get").chmod(0o755)
+    if chromium:
+        (bin_ / "chromium").write_text(f"#!{bash}\n")
+        (bin_ / "chromium").chmod(0o755)
+    p = subprocess.run(
+        [bash, "-c", f"source run_tests.sh && ensure_chromium {uid}"],
+        cwd=ROOT,
+        env={"PATH": str(bin_), "HOME": str(tmp_path)},
+        capture_output=True,
+        text=True,
+    )
+    assert (p.returncode, p.stdout) == (rc, out) and p.stderr.startswith(err), p
+    assert p.stderr.count("\n") == bool(err), p.stderr  # one line or none
+    calls = log.read_text().splitlines() if log.exists() else []
+    assert calls == (["update -qq", "install -y -qq chromium"] if uid == 0 and apt else []), calls
+
+
+def test_ci_runs_run_tests_alone():
+    """One home for the Chromium install: .ci/run is the README's command and nothing else."""
+    lines = [ln for ln in (ROOT / ".ci" / "run").read_text().splitlines() if ln and not ln.startswith("#")]
+    assert lines[-1] == 'exec bash run_tests.sh "$@"' and not any("apt-get" in ln for ln in lines), lines
 
 
 # ----------------------------------------------------------------------------------------------
