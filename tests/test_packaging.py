@@ -1,8 +1,10 @@
 """Course tooling (tools/): region markers, the meta.yaml drift check, notebook, sweeps, meta, wall-clock."""
 
 import ast
+import base64
 import contextlib
 import csv
+import importlib.metadata
 import json
 import os
 import platform
@@ -526,17 +528,36 @@ def test_notebook_is_fresh_and_deterministic():
     code = [c for c in nb.cells if c.cell_type == "code"]
     parsed = common.parse_regions()
     assert [c.source for c in code[2 : 2 + len(parsed)]] == [r.code for r in parsed]
-    (poster,) = code[2 + len(parsed) :]  # after the emit region: the poster, inline
+    figure, poster, rerun = code[2 + len(parsed) :]  # after the emit region: what it wrote, inline
+    assert figure.metadata.tags == ["figure"] and '"scale_data.png"' in figure.source
     assert poster.metadata.tags == ["poster"] and '"scale_data.html"' in poster.source
+    assert rerun.metadata.tags == ["rerun"] and '"scale_data.rrd"' in rerun.source
+    intro = nb.cells[0].source
+    assert intro.startswith("# Chapter 3.7") and "by `python -m tools.notebook`" in intro
+    # issue 41 #6: it speaks to a notebook user: cells, not .venv or the command line
+    assert ".venv" not in intro and "Edit the script, not this notebook" not in intro and "Run all" in intro
+    flags = code[1].source
     assert (
-        nb.cells[0].source.startswith("# Chapter 3.7")
-        and "by `python -m tools.notebook`" in nb.cells[0].source
+        'sys.argv = ["scale_data.py", "--seed", "0", "--no-cache"] + (["--smoke"] if SMOKE else [])' in flags
     )
-    assert (
-        'sys.argv = ["scale_data.py", "--seed", "0", "--no-cache"]' in code[1].source
-        and "--smoke" in code[1].source
-    )
-    assert "%pip install -q -e ." in code[0].source and 'find_spec("lerobot") is None' in code[0].source
+    assert flags.count("SMOKE = False") == 1  # the smoke run is that line switched, --no-cache kept
+    assert "REPO_URL = None  # None: not published yet" in code[0].source  # pyproject.toml has no address yet
+    assert "from tools.install import ensure_packages" in code[0].source
+
+
+def test_notebook_clones_from_pyprojects_address_and_only_from_there(tmp_path):
+    """The repository's address has one home, pyproject.toml's [project.urls] Repository; the notebook's
+    first cell gets it at build time, so --check finds a notebook built before the address changed."""
+    assert notebook.repository_url() is None  # not published yet: no invented address
+    url = "https://example.org/course/ch37.git"
+    built = notebook.build_notebook(repo_url=url)
+    assert f"REPO_URL = {url!r}\\n" in built and "not published yet\\n" not in built.split("REPO_URL")[1]
+    pyproject = tmp_path / "pyproject.toml"
+    pyproject.write_text(f'[project]\nname = "x"\n\n[project.urls]\nRepository = "{url}"\n')
+    assert notebook.repository_url(pyproject) == url
+    pyproject.write_text('[project]\nname = "x"\n\n[project.urls]\nRepository = ""\n')
+    with pytest.raises(notebook.errors.DataError, match=r"\[project.urls\] Repository must be"):
+        notebook.repository_url(pyproject)
 
 
 def test_notebook_check_flags_a_stale_notebook(tmp_path):
@@ -549,60 +570,141 @@ def test_notebook_check_flags_a_stale_notebook(tmp_path):
     assert p.returncode == 1 and "stale" in p.stdout
 
 
-def test_notebook_runs_end_to_end_in_smoke_mode(tmp_path, smoke_sweep):
-    """Execute the committed notebook offline with nbclient; its metrics.json must equal the script's."""
-    import nbclient  # the dev extra, in requirements.lock
-    import nbformat
+def kernel_manager(tmp_path):
+    """A kernel of this very interpreter (the project's Python), so no installed kernel (or its absence)
+    matters."""
     from jupyter_client import KernelManager
     from jupyter_client.kernelspec import KernelSpecManager
 
-    # A kernel spec for this very interpreter, so no installed kernel (or its absence) matters.
     spec = tmp_path / "kernels" / "ch37-python"
     spec.mkdir(parents=True)
+    argv = [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"]
     (spec / "kernel.json").write_text(
-        json.dumps(
-            {
-                "argv": [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"],
-                "display_name": "ch3.7",
-                "language": "python",
-            }
-        )
+        json.dumps({"argv": argv, "display_name": "ch3.7", "language": "python"})
     )
-    km = KernelManager(
+    return KernelManager(
         kernel_name="ch37-python", kernel_spec_manager=KernelSpecManager(kernel_dirs=[str(spec.parent)])
     )
-    nb = nbformat.read(common.NOTEBOOK, as_version=4)
-    out = tmp_path / "out"
-    (argv_cell,) = [c for c in nb.cells if "argv" in c.metadata.get("tags", [])]
-    argv = ["scale_data.py", "--smoke", "--seed", "0", "--no-rerun", "--out", str(out)]
-    argv_cell.source = f"import sys\nsys.argv = {argv!r}"
-    env = dict(
-        os.environ,
-        HF_HUB_OFFLINE="1",
-        HF_DATASETS_OFFLINE="1",
-        MPLBACKEND="Agg",
-        CH37_CACHE_DIR=str(tmp_path / "cache"),
-    )  # an empty result cache: the notebook really runs
-    client = nbclient.NotebookClient(nb, km=km, timeout=600, resources={"metadata": {"path": str(ROOT)}})
-    client.execute(env=env)
-    text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs)
-    assert "lerobot ready" in text and "headline:" in text and "wrote" in text and "reusing" not in text
-    # issue 33 #9: no stray value (a PosixPath after the wrangle cell) and no tqdm IProgress warning
-    results = [
-        c.id
-        for c in nb.cells
-        if c.cell_type == "code"
-        for o in c.outputs
-        if o.output_type == "execute_result"
+
+
+NOTEBOOK_ENV = dict(HF_HUB_OFFLINE="1", HF_DATASETS_OFFLINE="1", MPLBACKEND="Agg", PYTHONHASHSEED="0")
+
+
+def texts(cell) -> str:
+    return "".join(o.get("text", "") for o in cell.outputs)
+
+
+def test_notebook_opened_alone_says_the_repository_is_unpublished_in_one_line(tmp_path):
+    """Issue 41 #6: the committed notebook alone in a folder (Colab before the repository is published):
+    its first cell prints one line, no traceback, and Run all stops there."""
+    import nbclient
+    import nbformat
+
+    alone = tmp_path / "content"
+    alone.mkdir()
+    shutil.copy(common.NOTEBOOK, alone / "scale_data.ipynb")
+    nb = nbformat.read(alone / "scale_data.ipynb", as_version=4)
+    client = nbclient.NotebookClient(
+        nb, km=kernel_manager(tmp_path), timeout=120, resources={"metadata": {"path": str(alone)}}
+    )
+    with pytest.raises(nbclient.exceptions.CellExecutionError):
+        client.execute(env=dict(os.environ, **NOTEBOOK_ENV))
+    install = nb.cells[1]
+    (error,) = install.outputs
+    assert error.output_type == "error" and error.ename == "Stop", error
+    assert error.traceback == [
+        "stopped: the course repository is not published yet, so this notebook has no address to clone "
+        f"it from: put a copy of its folder in {alone} and run this cell again"
     ]
-    assert results == ["poster"], results
-    assert "IProgress" not in text and "TqdmWarning" not in text, text
-    (poster,) = [c for c in nb.cells if "poster" in c.metadata.get("tags", [])]
-    shown = "".join(o.get("data", {}).get("text/html", "") for o in poster.outputs)
-    assert shown == (out / "scale_data.html").read_text(encoding="utf-8") and "<svg" in shown
+    assert [c.execution_count for c in nb.cells[2:] if c.cell_type == "code"] == [None] * 9  # stopped there
+    assert sorted(os.listdir(alone)) == ["scale_data.ipynb"]  # nothing written beside it
+
+
+def published_copy(tmp_path):
+    """The course repository as a learner would clone it: this checkout's files (committed or not, less
+    what git ignores) in a git repository of their own; returns its file:// address."""
+    src = tmp_path / "published" / "ch37-course"
+    names = subprocess.run(
+        ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split("\0")
+    for name in filter(None, names):
+        if (ROOT / name).is_file():  # a file deleted but not yet committed is listed too
+            (src / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, src / name)
+    git = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-c", "commit.gpgsign=false"]
+    for cmd in (["init", "-q"], ["add", "-A"], ["commit", "-q", "-m", "published"]):
+        subprocess.run([*git, *cmd], cwd=src, check=True, capture_output=True)
+    return src.as_uri()
+
+
+def test_notebook_runs_alone_from_a_fresh_folder_twice_in_smoke_mode(tmp_path, smoke_sweep):
+    """Issue 41 #6, Colab stood in for: a folder holding only the notebook, its first cell clones the
+    repository (from a published copy of this checkout), the kernel is the project's Python so lerobot is
+    importable and nothing is installed, the flags cell switched to the smoke run the way a learner
+    does, Run all twice in one kernel: the second reruns, never stops at setup. The figure, the poster and
+    the recording's line show; metrics.json equals the script's own run with the same flags."""
+    import nbclient
+    import nbformat
+
+    url = published_copy(tmp_path)
+    committed = nbformat.read(common.NOTEBOOK, as_version=4)
+    nb = nbformat.reads(notebook.build_notebook(repo_url=url), as_version=4)
+    install = nb.cells[1]
+    assert install.source.replace(repr(url), "None  # None: not published yet") == committed.cells[1].source
+    assert [c.source for c in nb.cells[2:]] == [c.source for c in committed.cells[2:]]  # the committed cells
+    (argv_cell,) = [c for c in nb.cells if "argv" in c.metadata.get("tags", [])]
+    argv_cell.source = argv_cell.source.replace("SMOKE = False", "SMOKE = True")
+    content = tmp_path / "content"
+    content.mkdir()
+    env = dict(os.environ, **NOTEBOOK_ENV, CH37_CACHE_DIR=str(tmp_path / "cache"))  # an empty result cache
+    client = nbclient.NotebookClient(
+        nb, km=kernel_manager(tmp_path), timeout=600, resources={"metadata": {"path": str(content)}}
+    )
+    repo = content / "ch37-course"
+    runs = []
+    with client.setup_kernel(env=env):
+        for _ in range(2):  # Run all, then Run all again in the same kernel
+            for i, cell in enumerate(nb.cells):
+                client.execute_cell(cell, i)
+            runs.append(
+                {
+                    c.id: (texts(c), [o.output_type for o in c.outputs])
+                    for c in nb.cells
+                    if c.cell_type == "code"
+                }
+            )
+            out = repo / "outputs" / "ch3.7-scale-data-smoke"
+            got = {c.id: c.outputs for c in nb.cells if c.cell_type == "code"}
+            png = [o.data["image/png"] for o in got["figure"] if o.output_type == "execute_result"]
+            assert png == [base64.b64encode((out / "scale_data.png").read_bytes()).decode()]
+            html = [o.data["text/html"] for o in got["poster"] if o.output_type == "execute_result"]
+            assert html == [(out / "scale_data.html").read_text(encoding="utf-8")] and "<svg" in html[0]
+    first, second = runs
+    assert first["install"][0] == (
+        f"cloning {url} into {repo}\nrepository {repo}; lerobot "
+        f"{importlib.metadata.version('lerobot')} is importable: nothing installed\n"
+    )
+    assert second["install"][0] == first["install"][0].split("\n", 1)[1]  # found, not cloned again
+    assert sorted(os.listdir(content)) == ["ch37-course"]  # the clone, nothing else beside the notebook
+    for run in runs:
+        text = "".join(t for t, _ in run.values())
+        assert "headline:" in text and "reusing" not in text and "SystemExit" not in text
+        assert "smoke run: tiny configuration" in run["setup-code"][0]
+        # issue 33 #9: no stray value (a PosixPath after the wrangle cell) and no tqdm IProgress warning
+        assert [k for k, (_, kinds) in run.items() if "execute_result" in kinds] == ["figure", "poster"], run
+        assert "IProgress" not in text and "TqdmWarning" not in text, text
+        assert not [k for k, (_, kinds) in run.items() if "error" in kinds]
+        rrd = (repo / "outputs" / "ch3.7-scale-data-smoke" / "scale_data.rrd").resolve()
+        assert run["rerun"][0].startswith(f"recording: {rrd} (") and rrd.is_file()
     sweep_out, _ = smoke_sweep
-    same_run = sweep_out / "seeds" / "seed0" / "metrics.json"  # the script itself, same flags
-    assert (out / "metrics.json").read_bytes() == same_run.read_bytes()
+    same_run = json.loads((sweep_out / "seeds" / "seed0" / "metrics.json").read_text())  # the script's
+    metrics = json.loads((repo / "outputs" / "ch3.7-scale-data-smoke" / "metrics.json").read_text())
+    assert metrics["config"].pop("rerun") is True and same_run["config"].pop("rerun") is False
+    assert metrics == same_run
 
 
 # ----------------------------------------------------------------------------------------------
