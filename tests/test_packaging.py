@@ -570,6 +570,43 @@ def test_notebook_check_flags_a_stale_notebook(tmp_path):
     assert p.returncode == 1 and "stale" in p.stdout
 
 
+def test_install_says_what_it_changed_and_whether_to_restart():
+    """Issue 41 #6: on a runtime whose torch, numpy and pandas are newer than lerobot 0.6's pins, the one
+    line names what pip replaced, and asks for a restart only when the kernel had imported one of them."""
+    from tools import install
+
+    before = {"torch": "2.15.0", "numpy": "2.5.0", "pandas": "3.0.1", "requests": "2.32.3"}
+    after = before | {
+        "torch": "2.11.0",
+        "numpy": "2.2.6",
+        "pandas": "2.3.3",
+        "lerobot": "0.6.1",
+        "mujoco": "4.0.0",
+    }
+    added, replaced = install.changes(before, after)
+    assert added == {"lerobot": "0.6.1", "mujoco": "4.0.0"} and set(replaced) == {"torch", "numpy", "pandas"}
+    assert install.imported(replaced, {"numpy": None, "yaml": None}) == ["numpy"]  # numpy's module: numpy
+    line = install.summary(added, replaced, ["numpy"])
+    assert line == (
+        "the install added 2 packages; replaced numpy 2.5.0 -> 2.2.6, pandas 3.0.1 -> 2.3.3, torch 2.15.0 -> "
+        "2.11.0; restart the runtime now (Colab: Runtime > Restart session), then Run all: this Python had "
+        "already imported the replaced numpy"
+    )
+    assert install.summary(added, replaced, []).endswith(
+        "; no restart needed (no replaced package was imported yet)"
+    )
+    assert install.summary(added, {}, []) == (
+        "the install added 2 packages; kept every preinstalled package; no restart needed"
+    )
+    assert install.summary({}, {}, []).startswith("pip installed nothing")
+    assert "lerobot[dataset]>=0.6,<0.7" in install.dependencies(ROOT)  # pyproject.toml's, no more
+    # it runs before anything is installed: the standard library only
+    tree = ast.parse((ROOT / "tools" / "install.py").read_text())
+    mods = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    mods |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    assert {m.split(".")[0] for m in mods} <= set(sys.stdlib_module_names) | {"__future__"}, mods
+
+
 def kernel_manager(tmp_path):
     """A kernel of this very interpreter (the project's Python), so no installed kernel (or its absence)
     matters."""
