@@ -135,12 +135,27 @@ def cpu_tier(cores: int, cpuinfo: str = "", system: str = "", machine: str = "")
     return f"cpu-{cores}core-{vendor or machine.lower() or 'unknown'}"
 
 
+def quota_cores(cpu_max: str) -> int | None:
+    """The cores a cgroup v2 CPU quota allows (/sys/fs/cgroup/cpu.max: "QUOTA PERIOD", or "max PERIOD"
+    for none), rounded up; None without a quota."""
+    quota, _, period = cpu_max.strip().partition(" ")
+    if not quota.isdigit() or not period.isdigit() or int(period) == 0:
+        return None
+    return max(1, -(-int(quota) // int(period)))
+
+
 def usable_cores() -> int:
-    """The cores this process may run on (its affinity, where the platform has one), else all of them."""
+    """The cores this process may run on: its affinity (where the platform has one, else all of them),
+    capped by a container's CPU quota (cgroup v2), as a container given 2 CPUs of a 64-core host has 2."""
     try:
-        return len(os.sched_getaffinity(0))
+        cores = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):  # macOS, Windows
-        return os.cpu_count() or 1
+        cores = os.cpu_count() or 1
+    try:
+        quota = quota_cores(Path("/sys/fs/cgroup/cpu.max").read_text())
+    except OSError:  # no cgroup v2 here
+        quota = None
+    return min(cores, quota or cores)
 
 
 def device_tier(device: str) -> str:

@@ -827,9 +827,18 @@ def test_cpu_tier_is_named_from_the_cores_and_vendor(cores, cpuinfo, system, mac
     assert ch37.cli.cpu_tier(cores, cpuinfo, system, machine) == tier
 
 
+@pytest.mark.parametrize(
+    "cpu_max, cores", [("max 100000\n", None), ("200000 100000\n", 2), ("150000 100000", 2), ("", None)]
+)
+def test_a_containers_cpu_quota_counts_its_cores(cpu_max, cores):
+    assert ch37.cli.quota_cores(cpu_max) == cores
+
+
 def test_the_banners_cpu_tier_is_this_machines(tmp_path):
     tier = ch37.cli.device_tier("cpu")
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    with contextlib.suppress(OSError):  # a container's CPU quota caps them
+        cores = min(cores, ch37.cli.quota_cores(open("/sys/fs/cgroup/cpu.max").read()) or cores)
     assert tier.startswith(f"cpu-{cores}core-") and not tier.endswith("-unknown"), tier
     # the row measured before tiers named the vendor is kept under a name no machine gets: no banner
     # shows its minutes as this machine's
