@@ -98,8 +98,13 @@ def ensure_packages(root: Path) -> str:
         flush=True,
     )
     before = installed()
-    done = subprocess.run([sys.executable, "-m", "pip", "install", "-q", *deps])
+    # captured, then printed: a subprocess's own output does not reach every notebook front end
+    done = subprocess.run(
+        [sys.executable, "-m", "pip", "install", "-q", *deps], capture_output=True, text=True
+    )
     importlib.invalidate_caches()
+    if said := (done.stdout + done.stderr).strip():  # pip's warnings (conflicts with other packages), errors
+        print(said, flush=True)
     if done.returncode != 0:
         raise InstallError(f"pip install exited {done.returncode} (its messages are above); then run again")
     added, replaced = changes(before, installed())
