@@ -6,15 +6,30 @@ import argparse
 import csv
 import hashlib
 import json
+import os
+import platform
 from pathlib import Path
 
 from ch37 import ROOT, config
 from ch37.errors import DataError
 from ch37.process import available_memory, max_workers
 
-# wallclock.csv's tiers: two CPU-side ones, then GPUs matched by a substring of the device name.
+# wallclock.csv's tiers: a CPU's is named from the machine (cpu_tier: cpu-<cores>core-<vendor>, one row per
+# kind of machine measured); the fixed ones are Apple's GPU, then GPUs matched by a substring of the
+# device name (a pending row each until measured).
 GPU_TIERS = ("t4", "l4", "4090", "a100", "h100", "h200")
-TIERS = ("cpu-2core", "mps", *GPU_TIERS)
+TIERS = ("mps", *GPU_TIERS)
+# /proc/cpuinfo's vendor_id (x86) and "CPU implementer" (ARM, hex) -> the vendor in a CPU tier's name
+CPU_VENDORS = {
+    "GenuineIntel": "intel",
+    "AuthenticAMD": "amd",
+    "HygonGenuine": "hygon",
+    "0x41": "arm",
+    "0x4e": "nvidia",
+    "0x51": "qualcomm",
+    "0x61": "apple",
+    "0xc0": "ampere",
+}
 # not in config_hash: the tier names the device; workers, cache and the .rrd change speed only
 HASH_EXCLUDE = ("device", "workers", "cache", "rerun")
 # Every flag's bound is declared with the flag (ch37.config.flag): the experiment's in config.Chapter,
@@ -118,14 +133,58 @@ def pick_device(name: str) -> str:
     return name
 
 
+def cpu_tier(cores: int, cpuinfo: str = "", system: str = "", machine: str = "") -> str:
+    """cpu-<cores>core-<vendor>, e.g. cpu-2core-amd, cpu-8core-intel, cpu-10core-apple: the vendor from
+    /proc/cpuinfo's text (x86's vendor_id, ARM's CPU implementer), else on macOS from the architecture
+    (arm64: Apple silicon, else Intel), else the architecture itself (cpu-4core-aarch64) or "unknown"."""
+    fields = {}
+    for line in cpuinfo.splitlines():
+        key, sep, value = line.partition(":")
+        if sep:
+            fields.setdefault(key.strip(), value.strip())
+    vendor = CPU_VENDORS.get(fields.get("vendor_id") or fields.get("CPU implementer", "").lower())
+    if vendor is None and system == "Darwin":
+        vendor = "apple" if machine == "arm64" else "intel"
+    return f"cpu-{cores}core-{vendor or machine.lower() or 'unknown'}"
+
+
+def quota_cores(cpu_max: str) -> int | None:
+    """The cores a cgroup v2 CPU quota allows (/sys/fs/cgroup/cpu.max: "QUOTA PERIOD", or "max PERIOD"
+    for none), rounded up; None without a quota."""
+    quota, _, period = cpu_max.strip().partition(" ")
+    if not quota.isdigit() or not period.isdigit() or int(period) == 0:
+        return None
+    return max(1, -(-int(quota) // int(period)))
+
+
+def usable_cores() -> int:
+    """The cores this process may run on: its affinity (where the platform has one, else all of them),
+    capped by a container's CPU quota (cgroup v2), as a container given 2 CPUs of a 64-core host has 2."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # macOS, Windows
+        cores = os.cpu_count() or 1
+    try:
+        quota = quota_cores(Path("/sys/fs/cgroup/cpu.max").read_text())
+    except OSError:  # no cgroup v2 here
+        quota = None
+    return min(cores, quota or cores)
+
+
 def device_tier(device: str) -> str:
-    """wallclock.csv tier name for the device in use."""
+    """wallclock.csv tier name for the device in use; a CPU's from this machine's cores and vendor."""
     if device == "cuda":
         import torch
 
         name = torch.cuda.get_device_name(0).lower()
         return next((t for t in GPU_TIERS if t in name), "cuda-other")
-    return {"mps": "mps"}.get(device, "cpu-2core")
+    if device == "mps":
+        return "mps"
+    try:
+        cpuinfo = Path("/proc/cpuinfo").read_text(errors="replace")
+    except OSError:  # not Linux
+        cpuinfo = ""
+    return cpu_tier(usable_cores(), cpuinfo, platform.system(), platform.machine())
 
 
 def config_hash(config: dict) -> str:

@@ -360,6 +360,34 @@ def test_the_first_runs_banner_reminds_of_the_ex1_prediction(monkeypatch, tmp_pa
     assert ex1_reminder() is not None
 
 
+def test_checks_and_the_reminder_work_without_pytest(tmp_path):
+    """Issue 41 #6: a notebook runtime has no pytest. `python -m exercises.checks ex2` (offered as "without
+    pytest") passes the reference answer, and exercise 1's reminder still shows, with `import pytest`
+    failing in that interpreter (sys.modules['pytest'] = None: an ImportError, as where it is missing)."""
+    (tmp_path / checks.FILES["ex1"]).write_text('PREDICTION = ""\nWHY = ""\n')  # not written yet
+    env = {k: v for k, v in os.environ.items() if k not in EXERCISE_VARS}
+    env.update(CH37_META=str(META), PYTHONHASHSEED="0")
+    no_pytest = "import runpy, sys; sys.modules['pytest'] = None; sys.argv[0] = 'checks'; "
+    run = "runpy.run_module('exercises.checks', run_name='__main__')"
+    p = subprocess.run(
+        [sys.executable, "-c", no_pytest + run, "ex2"],
+        cwd=ROOT,
+        env=dict(env, CH37_EXERCISE_DIR="exercises/solutions"),
+        capture_output=True,
+        text=True,
+    )
+    assert p.returncode == 0 and "matches the specification" in p.stdout, p.stdout + p.stderr
+    reminder = "from exercises import ex1_reminder; print(ex1_reminder())"
+    p = subprocess.run(
+        [sys.executable, "-c", no_pytest + reminder],
+        cwd=ROOT,
+        env=dict(env, CH37_EXERCISE_DIR=str(tmp_path)),
+        capture_output=True,
+        text=True,
+    )
+    assert p.returncode == 0 and "exercise 1: this run answers its question" in p.stdout, p.stdout + p.stderr
+
+
 @pytest.mark.parametrize(
     "answer",
     ["import sys\nsys.exit(0)\n", "import sys\n\ndef mix_embodiments(p, a):\n    sys.exit(0)\n"],

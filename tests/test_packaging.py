@@ -1,12 +1,15 @@
 """Course tooling (tools/): region markers, the meta.yaml drift check, notebook, sweeps, meta, wall-clock."""
 
 import ast
+import base64
 import contextlib
 import csv
+import importlib.metadata
 import json
 import os
 import platform
 import shutil
+import subprocess
 import sys
 import textwrap
 
@@ -525,17 +528,36 @@ def test_notebook_is_fresh_and_deterministic():
     code = [c for c in nb.cells if c.cell_type == "code"]
     parsed = common.parse_regions()
     assert [c.source for c in code[2 : 2 + len(parsed)]] == [r.code for r in parsed]
-    (poster,) = code[2 + len(parsed) :]  # after the emit region: the poster, inline
+    figure, poster, rerun = code[2 + len(parsed) :]  # after the emit region: what it wrote, inline
+    assert figure.metadata.tags == ["figure"] and '"scale_data.png"' in figure.source
     assert poster.metadata.tags == ["poster"] and '"scale_data.html"' in poster.source
+    assert rerun.metadata.tags == ["rerun"] and '"scale_data.rrd"' in rerun.source
+    intro = nb.cells[0].source
+    assert intro.startswith("# Chapter 3.7") and "by `python -m tools.notebook`" in intro
+    # issue 41 #6: it speaks to a notebook user: cells, not .venv or the command line
+    assert ".venv" not in intro and "Edit the script, not this notebook" not in intro and "Run all" in intro
+    flags = code[1].source
     assert (
-        nb.cells[0].source.startswith("# Chapter 3.7")
-        and "by `python -m tools.notebook`" in nb.cells[0].source
+        'sys.argv = ["scale_data.py", "--seed", "0", "--no-cache"] + (["--smoke"] if SMOKE else [])' in flags
     )
-    assert (
-        'sys.argv = ["scale_data.py", "--seed", "0", "--no-cache"]' in code[1].source
-        and "--smoke" in code[1].source
-    )
-    assert "%pip install -q -e ." in code[0].source and 'find_spec("lerobot") is None' in code[0].source
+    assert flags.count("SMOKE = False") == 1  # the smoke run is that line switched, --no-cache kept
+    assert "REPO_URL = None  # None: not published yet" in code[0].source  # pyproject.toml has no address yet
+    assert "from tools.install import ensure_packages" in code[0].source
+
+
+def test_notebook_clones_from_pyprojects_address_and_only_from_there(tmp_path):
+    """The repository's address has one home, pyproject.toml's [project.urls] Repository; the notebook's
+    first cell gets it at build time, so --check finds a notebook built before the address changed."""
+    assert notebook.repository_url() is None  # not published yet: no invented address
+    url = "https://example.org/course/ch37.git"
+    built = notebook.build_notebook(repo_url=url)
+    assert f"REPO_URL = {url!r}\\n" in built and "not published yet\\n" not in built.split("REPO_URL")[1]
+    pyproject = tmp_path / "pyproject.toml"
+    pyproject.write_text(f'[project]\nname = "x"\n\n[project.urls]\nRepository = "{url}"\n')
+    assert notebook.repository_url(pyproject) == url
+    pyproject.write_text('[project]\nname = "x"\n\n[project.urls]\nRepository = ""\n')
+    with pytest.raises(notebook.errors.DataError, match=r"\[project.urls\] Repository must be"):
+        notebook.repository_url(pyproject)
 
 
 def test_notebook_check_flags_a_stale_notebook(tmp_path):
@@ -548,60 +570,178 @@ def test_notebook_check_flags_a_stale_notebook(tmp_path):
     assert p.returncode == 1 and "stale" in p.stdout
 
 
-def test_notebook_runs_end_to_end_in_smoke_mode(tmp_path, smoke_sweep):
-    """Execute the committed notebook offline with nbclient; its metrics.json must equal the script's."""
-    import nbclient  # the dev extra, in requirements.lock
-    import nbformat
+def test_install_says_what_it_changed_and_whether_to_restart():
+    """Issue 41 #6: on a runtime whose torch, numpy and pandas are newer than lerobot 0.6's pins, the one
+    line names what pip replaced, and asks for a restart only when the kernel had imported one of them."""
+    from tools import install
+
+    before = {"torch": "2.15.0", "numpy": "2.5.0", "pandas": "3.0.1", "requests": "2.32.3"}
+    after = before | {
+        "torch": "2.11.0",
+        "numpy": "2.2.6",
+        "pandas": "2.3.3",
+        "lerobot": "0.6.1",
+        "mujoco": "4.0.0",
+    }
+    added, replaced = install.changes(before, after)
+    assert added == {"lerobot": "0.6.1", "mujoco": "4.0.0"} and set(replaced) == {"torch", "numpy", "pandas"}
+    assert install.imported(replaced, {"numpy": None, "yaml": None}) == ["numpy"]  # numpy's module: numpy
+    line = install.summary(added, replaced, ["numpy"])
+    assert line == (
+        "the install added 2 packages; replaced numpy 2.5.0 -> 2.2.6, pandas 3.0.1 -> 2.3.3, torch 2.15.0 -> "
+        "2.11.0; restart the runtime now (Colab: Runtime > Restart session), then Run all: this Python had "
+        "already imported the replaced numpy"
+    )
+    assert install.summary(added, replaced, []).endswith(
+        "; no restart needed (no replaced package was imported yet)"
+    )
+    assert install.summary(added, {}, []) == (
+        "the install added 2 packages; kept every preinstalled package; no restart needed"
+    )
+    assert install.summary({}, {}, []).startswith("pip installed nothing")
+    assert "lerobot[dataset]>=0.6,<0.7" in install.dependencies(ROOT)  # pyproject.toml's, no more
+    # it runs before anything is installed: the standard library only
+    tree = ast.parse((ROOT / "tools" / "install.py").read_text())
+    mods = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    mods |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    assert {m.split(".")[0] for m in mods} <= set(sys.stdlib_module_names) | {"__future__"}, mods
+
+
+def kernel_manager(tmp_path):
+    """A kernel of this very interpreter (the project's Python), so no installed kernel (or its absence)
+    matters."""
     from jupyter_client import KernelManager
     from jupyter_client.kernelspec import KernelSpecManager
 
-    # A kernel spec for this very interpreter, so no installed kernel (or its absence) matters.
     spec = tmp_path / "kernels" / "ch37-python"
     spec.mkdir(parents=True)
+    argv = [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"]
     (spec / "kernel.json").write_text(
-        json.dumps(
-            {
-                "argv": [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"],
-                "display_name": "ch3.7",
-                "language": "python",
-            }
-        )
+        json.dumps({"argv": argv, "display_name": "ch3.7", "language": "python"})
     )
-    km = KernelManager(
+    return KernelManager(
         kernel_name="ch37-python", kernel_spec_manager=KernelSpecManager(kernel_dirs=[str(spec.parent)])
     )
-    nb = nbformat.read(common.NOTEBOOK, as_version=4)
-    out = tmp_path / "out"
-    (argv_cell,) = [c for c in nb.cells if "argv" in c.metadata.get("tags", [])]
-    argv = ["scale_data.py", "--smoke", "--seed", "0", "--no-rerun", "--out", str(out)]
-    argv_cell.source = f"import sys\nsys.argv = {argv!r}"
-    env = dict(
-        os.environ,
-        HF_HUB_OFFLINE="1",
-        HF_DATASETS_OFFLINE="1",
-        MPLBACKEND="Agg",
-        CH37_CACHE_DIR=str(tmp_path / "cache"),
-    )  # an empty result cache: the notebook really runs
-    client = nbclient.NotebookClient(nb, km=km, timeout=600, resources={"metadata": {"path": str(ROOT)}})
-    client.execute(env=env)
-    text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs)
-    assert "lerobot ready" in text and "headline:" in text and "wrote" in text and "reusing" not in text
-    # issue 33 #9: no stray value (a PosixPath after the wrangle cell) and no tqdm IProgress warning
-    results = [
-        c.id
-        for c in nb.cells
-        if c.cell_type == "code"
-        for o in c.outputs
-        if o.output_type == "execute_result"
+
+
+NOTEBOOK_ENV = dict(HF_HUB_OFFLINE="1", HF_DATASETS_OFFLINE="1", MPLBACKEND="Agg", PYTHONHASHSEED="0")
+
+
+def texts(cell) -> str:
+    return "".join(o.get("text", "") for o in cell.outputs)
+
+
+def test_notebook_opened_alone_says_the_repository_is_unpublished_in_one_line(tmp_path):
+    """Issue 41 #6: the committed notebook alone in a folder (Colab before the repository is published):
+    its first cell prints one line, no traceback, and Run all stops there."""
+    import nbclient
+    import nbformat
+
+    alone = tmp_path / "content"
+    alone.mkdir()
+    shutil.copy(common.NOTEBOOK, alone / "scale_data.ipynb")
+    nb = nbformat.read(alone / "scale_data.ipynb", as_version=4)
+    client = nbclient.NotebookClient(
+        nb, km=kernel_manager(tmp_path), timeout=120, resources={"metadata": {"path": str(alone)}}
+    )
+    with pytest.raises(nbclient.exceptions.CellExecutionError):
+        client.execute(env=dict(os.environ, **NOTEBOOK_ENV))
+    install = nb.cells[1]
+    (error,) = install.outputs
+    assert error.output_type == "error" and error.ename == "Stop", error
+    assert error.traceback == [
+        "stopped: the course repository is not published yet, so this notebook has no address to clone "
+        f"it from: put a copy of its folder in {alone} and run this cell again"
     ]
-    assert results == ["poster"], results
-    assert "IProgress" not in text and "TqdmWarning" not in text, text
-    (poster,) = [c for c in nb.cells if "poster" in c.metadata.get("tags", [])]
-    shown = "".join(o.get("data", {}).get("text/html", "") for o in poster.outputs)
-    assert shown == (out / "scale_data.html").read_text(encoding="utf-8") and "<svg" in shown
+    assert [c.execution_count for c in nb.cells[2:] if c.cell_type == "code"] == [None] * 9  # stopped there
+    assert sorted(os.listdir(alone)) == ["scale_data.ipynb"]  # nothing written beside it
+
+
+def published_copy(tmp_path):
+    """The course repository as a learner would clone it: this checkout's files (committed or not, less
+    what git ignores) in a git repository of their own; returns its file:// address."""
+    src = tmp_path / "published" / "ch37-course"
+    names = subprocess.run(
+        ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split("\0")
+    for name in filter(None, names):
+        if (ROOT / name).is_file():  # a file deleted but not yet committed is listed too
+            (src / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, src / name)
+    git = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-c", "commit.gpgsign=false"]
+    for cmd in (["init", "-q"], ["add", "-A"], ["commit", "-q", "-m", "published"]):
+        subprocess.run([*git, *cmd], cwd=src, check=True, capture_output=True)
+    return src.as_uri()
+
+
+def test_notebook_runs_alone_from_a_fresh_folder_twice_in_smoke_mode(tmp_path, smoke_sweep):
+    """Issue 41 #6, Colab stood in for: a folder holding only the notebook, its first cell clones the
+    repository (from a published copy of this checkout), the kernel is the project's Python so lerobot is
+    importable and nothing is installed, the flags cell switched to the smoke run the way a learner
+    does, Run all twice in one kernel: the second reruns, never stops at setup. The figure, the poster and
+    the recording's line show; metrics.json equals the script's own run with the same flags."""
+    import nbclient
+    import nbformat
+
+    url = published_copy(tmp_path)
+    committed = nbformat.read(common.NOTEBOOK, as_version=4)
+    nb = nbformat.reads(notebook.build_notebook(repo_url=url), as_version=4)
+    install = nb.cells[1]
+    assert install.source.replace(repr(url), "None  # None: not published yet") == committed.cells[1].source
+    assert [c.source for c in nb.cells[2:]] == [c.source for c in committed.cells[2:]]  # the committed cells
+    (argv_cell,) = [c for c in nb.cells if "argv" in c.metadata.get("tags", [])]
+    argv_cell.source = argv_cell.source.replace("SMOKE = False", "SMOKE = True")
+    content = tmp_path / "content"
+    content.mkdir()
+    env = dict(os.environ, **NOTEBOOK_ENV, CH37_CACHE_DIR=str(tmp_path / "cache"))  # an empty result cache
+    client = nbclient.NotebookClient(
+        nb, km=kernel_manager(tmp_path), timeout=600, resources={"metadata": {"path": str(content)}}
+    )
+    repo = content / "ch37-course"
+    runs = []
+    with client.setup_kernel(env=env):
+        for _ in range(2):  # Run all, then Run all again in the same kernel
+            for i, cell in enumerate(nb.cells):
+                client.execute_cell(cell, i)
+            runs.append(
+                {
+                    c.id: (texts(c), [o.output_type for o in c.outputs])
+                    for c in nb.cells
+                    if c.cell_type == "code"
+                }
+            )
+            out = repo / "outputs" / "ch3.7-scale-data-smoke"
+            got = {c.id: c.outputs for c in nb.cells if c.cell_type == "code"}
+            png = [o.data["image/png"] for o in got["figure"] if o.output_type == "execute_result"]
+            assert png == [base64.b64encode((out / "scale_data.png").read_bytes()).decode()]
+            html = [o.data["text/html"] for o in got["poster"] if o.output_type == "execute_result"]
+            assert html == [(out / "scale_data.html").read_text(encoding="utf-8")] and "<svg" in html[0]
+    first, second = runs
+    assert first["install"][0] == (
+        f"cloning {url} into {repo}\nrepository {repo}; lerobot "
+        f"{importlib.metadata.version('lerobot')} is importable: nothing installed\n"
+    )
+    assert second["install"][0] == first["install"][0].split("\n", 1)[1]  # found, not cloned again
+    assert sorted(os.listdir(content)) == ["ch37-course"]  # the clone, nothing else beside the notebook
+    for run in runs:
+        text = "".join(t for t, _ in run.values())
+        assert "headline:" in text and "reusing" not in text and "SystemExit" not in text
+        assert "smoke run: tiny configuration" in run["setup-code"][0]
+        # issue 33 #9: no stray value (a PosixPath after the wrangle cell) and no tqdm IProgress warning
+        assert [k for k, (_, kinds) in run.items() if "execute_result" in kinds] == ["figure", "poster"], run
+        assert "IProgress" not in text and "TqdmWarning" not in text, text
+        assert not [k for k, (_, kinds) in run.items() if "error" in kinds]
+        rrd = (repo / "outputs" / "ch3.7-scale-data-smoke" / "scale_data.rrd").resolve()
+        assert run["rerun"][0].startswith(f"recording: {rrd} (") and rrd.is_file()
     sweep_out, _ = smoke_sweep
-    same_run = sweep_out / "seeds" / "seed0" / "metrics.json"  # the script itself, same flags
-    assert (out / "metrics.json").read_bytes() == same_run.read_bytes()
+    same_run = json.loads((sweep_out / "seeds" / "seed0" / "metrics.json").read_text())  # the script's
+    metrics = json.loads((repo / "outputs" / "ch3.7-scale-data-smoke" / "metrics.json").read_text())
+    assert metrics["config"].pop("rerun") is True and same_run["config"].pop("rerun") is False
+    assert metrics == same_run
 
 
 # ----------------------------------------------------------------------------------------------
@@ -634,7 +774,7 @@ def test_wallclock_row_replaces_only_its_tier(tmp_path):
         path,
         {
             "chapter": CHAPTER_ID,
-            "tier": "cpu-2core",
+            "tier": "cpu-2core-amd",
             "minutes": "1.66",
             "config_hash": "def",
             "date": "2025-01-02",
@@ -653,16 +793,61 @@ def test_wallclock_row_replaces_only_its_tier(tmp_path):
         },
     )
     rows = {r["tier"]: r for r in csv.DictReader(path.open())}
-    assert len(rows) == len(wallclock.TIERS)
+    assert list(rows) == ["cpu-2core-amd", *wallclock.TIERS]  # a CPU's row first, then the fixed tiers
     assert (
         rows["t4"]["minutes"] == "1.40"
-        and rows["cpu-2core"]["minutes"] == "1.66"
+        and rows["cpu-2core-amd"]["minutes"] == "1.66"
         and rows["mps"]["status"] == "pending"
     )
     assert ch37.cli.expected_wallclock("t4", "abc", path).startswith("about 1.4 min for this configuration")
     # issue 33 #7: another configuration (a bigger --pusht_data, another seed) gets no estimate
     assert "not this configuration" in ch37.cli.expected_wallclock("t4", "def", path)
     assert "not yet measured" in ch37.cli.expected_wallclock("mps", "abc", path)
+
+
+INTEL = "processor\t: 0\nvendor_id\t: GenuineIntel\nmodel name\t: Intel(R) Xeon(R)\n\nprocessor\t: 1\n"
+AMD = "processor\t: 0\nvendor_id\t: AuthenticAMD\nmodel name\t: AMD EPYC 7B13\n"
+GRAVITON = "processor\t: 0\nBogoMIPS\t: 243.75\nCPU implementer\t: 0x41\nCPU part\t: 0xd0c\n"
+
+
+@pytest.mark.parametrize(
+    "cores, cpuinfo, system, machine, tier",
+    [
+        (8, INTEL, "Linux", "x86_64", "cpu-8core-intel"),
+        (2, AMD, "Linux", "x86_64", "cpu-2core-amd"),
+        (4, GRAVITON, "Linux", "aarch64", "cpu-4core-arm"),
+        (10, "", "Darwin", "arm64", "cpu-10core-apple"),  # macOS has no /proc/cpuinfo
+        (4, "", "Darwin", "x86_64", "cpu-4core-intel"),
+        (4, "processor\t: 0\nhart\t: 0\n", "Linux", "riscv64", "cpu-4core-riscv64"),  # no vendor: the arch
+        (1, "", "", "", "cpu-1core-unknown"),
+    ],
+)
+def test_cpu_tier_is_named_from_the_cores_and_vendor(cores, cpuinfo, system, machine, tier):
+    """Issue 41 #7: the banner's CPU tier from the machine, no longer cpu-2core for every CPU."""
+    assert ch37.cli.cpu_tier(cores, cpuinfo, system, machine) == tier
+
+
+@pytest.mark.parametrize(
+    "cpu_max, cores", [("max 100000\n", None), ("200000 100000\n", 2), ("150000 100000", 2), ("", None)]
+)
+def test_a_containers_cpu_quota_counts_its_cores(cpu_max, cores):
+    assert ch37.cli.quota_cores(cpu_max) == cores
+
+
+def test_the_banners_cpu_tier_is_this_machines(tmp_path):
+    tier = ch37.cli.device_tier("cpu")
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    with contextlib.suppress(OSError):  # a container's CPU quota caps them
+        cores = min(cores, ch37.cli.quota_cores(open("/sys/fs/cgroup/cpu.max").read()) or cores)
+    assert tier.startswith(f"cpu-{cores}core-") and not tier.endswith("-unknown"), tier
+    # the row measured before tiers named the vendor is kept under a name no machine gets: no banner
+    # shows its minutes as this machine's
+    rows = {r["tier"]: r for r in csv.DictReader(common.WALLCLOCK.open())}
+    assert rows["cpu-2core-vendor-unrecorded"]["status"] == "measured" and "cpu-2core" not in rows
+    row = rows["cpu-2core-vendor-unrecorded"]
+    assert "not yet measured" in ch37.cli.expected_wallclock(tier, row["config_hash"], common.WALLCLOCK)
+    wallclock.write_wallclock_row(tmp_path / "w.csv", wallclock._pending(tier) | {"status": "measured"})
+    assert "not this configuration" in ch37.cli.expected_wallclock(tier, "x", tmp_path / "w.csv")
 
 
 def test_wallclock_cli_smoke_never_writes(tmp_path, stub):
@@ -699,6 +884,65 @@ def test_wallclock_csv_in_repo_is_well_formed():
             assert len({bool(r[k]) for k in wallclock.VERSION_FIELDS}) == 1, r
         else:
             assert r["minutes"] == ""
+
+
+# ----------------------------------------------------------------------------------------------
+# run_tests.sh: Chromium for the poster's browser checks
+# ----------------------------------------------------------------------------------------------
+FAKE_APT = """#!{bash}
+echo "$*" >> "{log}"
+if [ "$1" = install ] && [ "{installs}" = yes ]; then
+    printf '#!{bash}\\n' > "{bin}/chromium"
+    {chmod} +x "{bin}/chromium"
+fi
+"""
+
+
+INSTALLING = "installing Chromium for tests/test_poster.py's browser checks: apt-get install -y chromium\n"
+MISSING = "error: Chromium is missing (tests/test_poster.py's browser checks need it); install it with: "
+
+
+@pytest.mark.parametrize(
+    "uid, apt, chromium, rc, out, err",
+    [
+        (0, None, True, 0, "", ""),  # there already: nothing to do
+        (0, "yes", False, 0, INSTALLING, ""),
+        (0, "no", False, 2, INSTALLING, "error: apt-get install -y chromium did not install Chromium"),
+        (0, None, False, 2, "", MISSING + "apt-get install -y chromium\n"),
+        (1000, "yes", False, 2, "", MISSING + "sudo apt-get install -y chromium\n"),
+    ],
+    ids=["present", "root-apt-installs", "root-apt-fails", "root-no-apt", "not-root"],
+)
+def test_run_tests_installs_chromium_only_as_root_with_apt(tmp_path, uid, apt, chromium, rc, out, err):
+    """Issue 41 #7: a fresh root machine with apt-get (CI, a container) gets Chromium from run_tests.sh
+    itself, in one line; elsewhere it is one error line and exit 2, and apt-get is never called. Run on
+    run_tests.sh's own ensure_chromium, with a PATH holding only a fake apt-get (and a chromium or not)."""
+    bin_, log, bash = tmp_path / "bin", tmp_path / "apt.log", shutil.which("bash")
+    bin_.mkdir()
+    if apt:
+        fake = FAKE_APT.format(bash=bash, log=log, bin=bin_, chmod=shutil.which("chmod"), installs=apt)
+        (bin_ / "apt-get").write_text(fake)
+        (bin_ / "apt-get").chmod(0o755)
+    if chromium:
+        (bin_ / "chromium").write_text(f"#!{bash}\n")
+        (bin_ / "chromium").chmod(0o755)
+    p = subprocess.run(
+        [bash, "-c", f"source run_tests.sh && ensure_chromium {uid}"],
+        cwd=ROOT,
+        env={"PATH": str(bin_), "HOME": str(tmp_path)},
+        capture_output=True,
+        text=True,
+    )
+    assert (p.returncode, p.stdout) == (rc, out) and p.stderr.startswith(err), p
+    assert p.stderr.count("\n") == bool(err), p.stderr  # one line or none
+    calls = log.read_text().splitlines() if log.exists() else []
+    assert calls == (["update -qq", "install -y -qq chromium"] if uid == 0 and apt else []), calls
+
+
+def test_ci_runs_run_tests_alone():
+    """One home for the Chromium install: .ci/run is the README's command and nothing else."""
+    lines = [ln for ln in (ROOT / ".ci" / "run").read_text().splitlines() if ln and not ln.startswith("#")]
+    assert lines[-1] == 'exec bash run_tests.sh "$@"' and not any("apt-get" in ln for ln in lines), lines
 
 
 # ----------------------------------------------------------------------------------------------

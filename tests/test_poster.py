@@ -1,5 +1,6 @@
 """The posters (ch37.poster): scale_data.html and scale_lab.html, self-contained and deterministic,
-rendered in a real headless Chromium where one is installed (.ci/run installs Debian's chromium).
+rendered in a real headless Chromium where one is installed (run_tests.sh installs Debian's chromium
+as root with apt-get).
 
 The pages hold no script, so what Chromium shows here is what a reader with JavaScript off sees."""
 
@@ -19,7 +20,7 @@ from ch37 import poster
 CHROMIUM = next(filter(None, map(shutil.which, ("chromium", "chromium-browser", "google-chrome"))), None)
 needs_chromium = pytest.mark.skipif(
     CHROMIUM is None,
-    reason="Chromium is not installed (Debian: apt-get install chromium; .ci/run installs it)",
+    reason="Chromium is not installed (Debian: apt-get install chromium; run_tests.sh installs it as root)",
 )
 WIDTHS = {"laptop": (1200, 900), "phone": (390, 844)}
 

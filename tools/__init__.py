@@ -17,6 +17,7 @@
     python -m tools.lerobot_lab [FLAGS]          LeRobot's own policies trained on the lab's data points
     python -m tools.lock                         .venv against requirements.lock (bash tools/lock.sh makes it)
     (tools.common holds what they share: the parser, regions, provenance)
+    (tools.install: the notebook's first cell installs the course's packages with it, standard library only)
 
 Exit codes: 0 ok, 1 a check failed (drift, a stale notebook), 2 bad input (one `error:` line).
 """

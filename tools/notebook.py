@@ -4,7 +4,9 @@
     python -m tools.notebook --check    exit 1 if scale_data.ipynb does not match the script
 
 The notebook is deterministic (fixed cell ids, no timestamps, no outputs), so --check is a byte
-comparison. Edit the script, not the notebook.
+comparison. Edit the script, not the notebook. Its first cell clones the course repository from
+pyproject.toml's [project.urls] Repository (copied in at build time: a notebook opened alone has no
+pyproject.toml); without that entry (not published yet) the cell says so in one line and stops.
 
 Exit codes: 0 ok, 1 stale notebook, 2 bad input (malformed markers, bad flags).
 """
@@ -13,50 +15,119 @@ from __future__ import annotations
 
 import json
 import re
+import tomllib
 from pathlib import Path
 
-from ch37 import errors
+from ch37 import ROOT, errors
 from ch37.ownership import write_atomic
 from tools.common import NOTEBOOK, SCRIPT, module_docstring, parse_regions, parser, rel, supports_flag
 
+# The course repository's git address: pyproject.toml's [project.urls] Repository, its one home. Copied
+# into the install cell at build time, since a notebook opened alone (Colab) has no pyproject.toml.
+URL_KEY = "Repository"
 INSTALL_CELL = """\
-# Install (idempotent). Open this notebook from a clone of the course repository, or on Colab first
-# upload/clone the repository into the working folder. This cell finds it (here or one folder down),
-# moves into it, and installs the project only when lerobot is not importable yet.
-# If pip upgraded numpy or torch, Colab asks to restart the runtime: restart, then run from here again.
-import importlib.util
+# The course's code and packages: run this cell first (Run all does). Opened alone (Colab, a fresh
+# runtime), this notebook clones the course repository beside itself and moves into it; opened from a
+# clone, it finds it. Then pip installs the course's packages unless lerobot is importable already,
+# keeping every preinstalled package that satisfies the course's pins; one line says what the install
+# changed and whether to restart the runtime. Safe to run again.
 import os
+import subprocess
 import sys
 from pathlib import Path
 
+# the repository's address: {where}
+REPO_URL = {url!r}{unset}
+
+
+class Stop(Exception):
+    \"\"\"Stops Run all with one line and no traceback (IPython shows what _render_traceback_ returns).\"\"\"
+
+    def _render_traceback_(self):
+        return [f"stopped: {{self}}"]
+
+
+def find_repo(here):
+    \"\"\"The course repository: this folder, or one folder below it (a clone beside the notebook).\"\"\"
+    found = [here, *sorted(p.parent for p in here.glob("*/scale_data.py"))]
+    return next((d for d in found if (d / "scale_data.py").is_file() and (d / "tools").is_dir()), None)
+
+
 here = Path.cwd()
-candidates = [here, *sorted(p.parent for p in here.glob("*/scale_data.py"))]
-repo = next((d for d in candidates if (d / "scale_data.py").is_file()), None)
+repo = find_repo(here)
+if repo is None and REPO_URL is None:
+    raise Stop(
+        "the course repository is not published yet, so this notebook has no address to clone it from: "
+        f"put a copy of its folder in {{here}} and run this cell again"
+    )
 if repo is None:
-    raise FileNotFoundError(f"scale_data.py is not in {here} or a folder below it: get the course repository")
+    repo = here / REPO_URL.rstrip("/").rsplit("/", 1)[-1].removesuffix(".git")
+    print(f"cloning {{REPO_URL}} into {{repo}}", flush=True)
+    clone = ["git", "clone", "--quiet", "--depth", "1", REPO_URL, str(repo)]
+    got = subprocess.run(clone, capture_output=True, text=True)
+    if got.returncode != 0:
+        why = (got.stderr.strip().splitlines() or [f"exit {{got.returncode}}"])[-1]
+        raise Stop(f"git clone {{REPO_URL}} failed: {{why}}")
 os.chdir(repo)
 if str(repo) not in sys.path:
     sys.path.insert(0, str(repo))
-if importlib.util.find_spec("lerobot") is None:
-    %pip install -q -e .
-print(f"repository {repo}; lerobot {'ready' if importlib.util.find_spec('lerobot') else 'missing'}")"""
+from tools.install import ensure_packages
+
+print(f"repository {{repo}}; {{ensure_packages(repo)}}")"""
 
 ARGV_CELL = """\
-# The script's flags, exactly as on the command line (python scale_data.py --help lists them).
-# Smoke run, seconds, numbers not meaningful:  sys.argv = ["scale_data.py", "--smoke", "--seed", "0"]
+# The run's flags, as scale_data.py takes them on its command line: edit this cell, then Run all. Every
+# flag, with its unit and default: run  !{{sys.executable}} scale_data.py --help  in a cell.
 {cache_note}import sys
 
-sys.argv = ["scale_data.py", "--seed", "0", "--no-cache"]"""
+SMOKE = False  # True: the smoke run (a tiny configuration, seconds; its numbers are not meaningful)
+sys.argv = ["scale_data.py", "--seed", "0"{no_cache}] + (["--smoke"] if SMOKE else [])"""
+FIGURE_CELL = """\
+# The figure this run wrote, scale_data.png: block starts over the spawn annulus, and the 2x2's bars.
+from IPython.display import Image
+
+Image(filename=str(args.out / "scale_data.png"))"""
 POSTER_CELL = """\
 # The poster this run wrote beside its PNG: scale_data.html, one self-contained page (inline SVG and
 # CSS, no script, nothing fetched), shown here inline. The file opens in any browser, shared as is.
 from IPython.display import HTML
 
 HTML((args.out / "scale_data.html").read_text(encoding="utf-8"))"""
+RERUN_CELL = """\
+# The Rerun recording, scale_data.rrd: the data-scale curve, block-start coverage, a few augmented
+# trajectories. It is not shown in this notebook: Rerun's notebook viewer (rerun-sdk[notebook]) is not
+# among the course's packages, and by default it fetches the viewer from app.rerun.io while it runs,
+# where this chapter runs offline. Download the file (Colab: the Files panel) and open it with Rerun's
+# desktop viewer (pip install rerun-sdk, then: rerun scale_data.rrd), as the emit cell's "open with" says.
+rrd = args.out / "scale_data.rrd"
+shown = f"recording: {rrd.resolve()} ({rrd.stat().st_size / 1e6:.1f} MB)" if rrd.is_file() else ""
+print(shown or "no recording: this run had --no-rerun")"""
 CACHE_NOTE = """\
-# --no-cache: every cell really runs. Without it an identical earlier run (same flags, same code)
-# is replayed from the result cache and the setup cell stops the notebook early ("SystemExit: 0").
+# --no-cache: every Run all really runs the chapter, a second one too. Without it an identical earlier
+# run is replayed from the result cache and the setup cell stops the notebook there ("SystemExit: 0").
 """
+NOTEBOOK_INTRO = """\
+**In this notebook.** The first cell gets the course's code and packages; the second holds the run's \
+flags, the one cell to edit before Run all (`SMOKE = True` runs the seconds-long smoke configuration). \
+The five sections after it are the five regions of `scale_data.py`, the lesson, cell for cell: change \
+one to experiment and run again; Run all again reruns the whole chapter. The exercises' files are in \
+the repository's folder, `exercises/` (on Colab: the Files panel).
+
+*Course maintainers: this notebook is built from `{script}` by `python -m tools.notebook`; \
+edit the script and rebuild it.*"""
+
+
+def repository_url(pyproject: Path = ROOT / "pyproject.toml") -> str | None:
+    """pyproject.toml's [project.urls] Repository: where the notebook clones the course from; None while the
+    repository is not published (no entry)."""
+    try:
+        urls = tomllib.loads(Path(pyproject).read_text(encoding="utf-8")).get("project", {}).get("urls", {})
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise errors.DataError(f"{rel(pyproject)}: {e}") from None
+    url = urls.get(URL_KEY)
+    if url is not None and (not isinstance(url, str) or not url.strip() or "\n" in url):
+        raise errors.DataError(f"{rel(pyproject)}: [project.urls] {URL_KEY} must be the repository's address")
+    return url
 
 
 def _prose(text: str) -> str:
@@ -77,26 +148,37 @@ def _cell(kind: str, cid: str, source: str, tags: list[str] | None = None) -> di
     return cell | (dict(execution_count=None, outputs=[]) if kind == "code" else {})
 
 
-def build_notebook(script: Path = SCRIPT) -> str:
-    """The notebook JSON text: deterministic (fixed ids, no timestamps, no outputs)."""
+def _docstring_for_notebook(text: str) -> str:
+    """The script's docstring less its command lines (Run:, Smoke:): a notebook runs it with Run all."""
+    return "\n".join(ln for ln in text.splitlines() if not re.match(r"(Run|Smoke):\s", ln))
+
+
+def build_notebook(script: Path = SCRIPT, repo_url: str | None = ...) -> str:
+    """The notebook JSON text: deterministic (fixed ids, no timestamps, no outputs). repo_url: the address
+    the install cell clones from (default: pyproject.toml's, repository_url)."""
+    url = repository_url() if repo_url is ... else repo_url
     regions = parse_regions(script)
     title, _, rest = module_docstring(script).partition("\n")
-    intro = (
-        f"# {title.strip()}\n\n{_prose(rest)}\n\n"
-        f"*Built from `{Path(script).name}` by `python -m tools.notebook`: one section per region of the "
-        "script. Edit the script, not this notebook.*"
-    )
-    argv = ARGV_CELL.format(cache_note=CACHE_NOTE if supports_flag(script, "--cache") else "")
+    intro = f"# {title.strip()}\n\n{_prose(_docstring_for_notebook(rest))}\n\n"
+    intro += NOTEBOOK_INTRO.format(script=Path(script).name)
+    where = f"pyproject.toml's [project.urls] {URL_KEY}, copied here by python -m tools.notebook"
+    unset = "  # None: not published yet" if url is None else ""
+    install = INSTALL_CELL.format(url=url, where=where, unset=unset)
+    cache = supports_flag(script, "--cache")
+    no_cache = ', "--no-cache"' if cache else ""
+    argv = ARGV_CELL.format(cache_note=CACHE_NOTE if cache else "", no_cache=no_cache)
     cells = [
         _cell("markdown", "intro", intro),
-        _cell("code", "install", INSTALL_CELL, ["install"]),
+        _cell("code", "install", install, ["install"]),
         _cell("code", "argv", argv, ["argv"]),
     ]
     for i, r in enumerate(regions, 1):
         cells.append(_cell("markdown", f"{r.name}-md", f"## {i}. {r.name}\n\n{' '.join(r.intent)}"))
         cells.append(_cell("code", f"{r.name}-code", r.code, [f"region-{r.name}"]))
-        if r.name == "emit":  # after the emit region: the poster it wrote, inline
+        if r.name == "emit":  # after the emit region: what it wrote, inline
+            cells.append(_cell("code", "figure", FIGURE_CELL, ["figure"]))
             cells.append(_cell("code", "poster", POSTER_CELL, ["poster"]))
+            cells.append(_cell("code", "rerun", RERUN_CELL, ["rerun"]))
     kernel = {"display_name": "Python 3 (ipykernel)", "language": "python", "name": "python3"}
     meta = {"colab": {"provenance": [], "toc_visible": True}, "kernelspec": kernel}
     meta["language_info"] = {"name": "python"}

@@ -5,8 +5,10 @@
     python -m tools.wallclock --smoke      time the --smoke run instead (printed only, never written)
     python -m tools.wallclock --tier t4    name the tier instead of reading it from the device
 
-The run is cold (a fresh output folder, demos generated, the result cache off). The tiers are
-ch37.cli.TIERS, the list the banner of scale_data.py reads its expected wall-clock from. config_hash
+The run is cold (a fresh output folder, demos generated, the result cache off). The row's tier is the
+one the banner of scale_data.py reads its expected wall-clock from (ch37.cli.device_tier): on a CPU
+named from the machine, cpu-<cores>core-<vendor> (cpu-2core-amd, cpu-8core-intel), one row per kind of
+machine measured; mps and the GPUs (ch37.cli.TIERS) keep a pending row until measured. config_hash
 is ch37.cli.config_hash: the first 12 hex of sha256 over the run's config without the device, workers,
 cache and rerun, so the same configuration hashes the same on every tier; the banner shows a row's
 minutes only to a run of that configuration. python, torch, numpy, mujoco and lerobot are the versions
@@ -60,10 +62,11 @@ def read_wallclock(path: Path) -> list[dict]:
 
 
 def write_wallclock_row(path: Path, row: dict) -> list[dict]:
-    """Replace (or add) the row for row['tier']; keep every other row; known tiers first, in order."""
+    """Replace (or add) the row for row['tier']; keep every other row; CPU tiers first (by name), then the
+    fixed tiers in order, then any other."""
     rows = [r for r in read_wallclock(path) if r["tier"] != row["tier"]] + [dict(row)]
     order = {t: i for i, t in enumerate(TIERS)}
-    rows.sort(key=lambda r: (order.get(r["tier"], len(TIERS)), r["tier"]))
+    rows.sort(key=lambda r: (not r["tier"].startswith("cpu-"), order.get(r["tier"], len(TIERS)), r["tier"]))
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=WALLCLOCK_FIELDS, lineterminator="\n")
     w.writeheader()
@@ -96,7 +99,11 @@ def main(argv: list[str]) -> int:
     p = parser("wallclock", __doc__)
     p.add_argument("--dry-run", action="store_true", help="print the row, write nothing")
     p.add_argument("--smoke", action="store_true", help="time the --smoke run (printed only, never written)")
-    p.add_argument("--tier", help=f"default: the tier of the device the run used; known: {', '.join(TIERS)}")
+    p.add_argument(
+        "--tier",
+        help=f"default: the tier of the device the run used (on this CPU {device_tier('cpu')}); "
+        f"fixed ones: {', '.join(TIERS)}",
+    )
     p.add_argument("--csv", type=Path, default=WALLCLOCK, help="default wallclock.csv")
     a = p.parse_args(argv)
     row = measure_wallclock(a.script, a.smoke, a.tier)
