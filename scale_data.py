@@ -27,10 +27,18 @@ Before the first run, write your prediction in exercises/ex1_predict_scale.py: t
 # recipe --epochs --batch_size --lr --hidden_dim, the perturbation --aug_pos_sigma --aug_yaw_sigma),
 # Mode (--aug_mode), Parallel (--workers). --help lists them all with their defaults; --smoke sets tiny
 # CPU defaults.
+import os
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+
+# One path through the matrix kernels on every x86-64 CPU, Intel or AMD. MKL does torch's CPU matrix
+# products and picks its kernels by the CPU's maker and instruction set; kernels round differently, so
+# one seed would train another policy on another machine (docs/reproducibility.md). MKL's conditional
+# numerical reproducibility holds it to one branch: COMPATIBLE runs the same code on Intel and AMD (its
+# AVX2 branch is Intel's alone). Set before torch loads MKL; an MKL_CBWR of yours is kept.
+os.environ.setdefault("MKL_CBWR", "COMPATIBLE")
 
 import numpy as np
 
@@ -349,7 +357,7 @@ from ch37 import poster, viz  # noqa: E402  (the drawing code: PNG, HTML poster,
 
 written.append(viz.figure(args.out / "scale_data.png", src_starts, aug_starts, metrics, bc.ANNULUS, claim))
 ref = cli.five_seed_reference(metrics["config"])  # meta.yaml's sweep, None unless this configuration
-ref_words = cli.reference_words(ref, args.seed, effects["data_full"]) if ref else ""
+ref_words = "" if args.smoke else cli.reference_words(ref, args.seed, effects["data_full"])
 written.append(
     poster.chapter(
         args.out / "scale_data.html", metrics, cross, src_starts, aug_starts, bc.ANNULUS, ref_words, claim

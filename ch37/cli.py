@@ -238,27 +238,58 @@ def five_seed_reference(run_config: dict, meta_path: Path = READS[0]) -> dict | 
     }
 
 
-def reference_words(ref: dict, seed: int, effect: float) -> str:
-    """One sentence placing this run's data effect (a success difference) beside the five-seed reference."""
+def reference_words(ref: dict | None, seed: int, effect: float) -> str:
+    """One sentence placing this run's data effect (a success difference) among the five-seed reference's
+    (five_seed_reference), or saying that the reference ran another configuration (ref None)."""
+    if ref is None:
+        return (
+            "meta.yaml's five-seed reference ran the default configuration, not this one, so there is "
+            "nothing to place this run beside (python -m tools.sweep --seeds 5 with these flags makes one)"
+        )
     effects = ref["effects"]
     lo, hi = min(effects.values()), max(effects.values())
     seeds = ", ".join(map(str, sorted(effects)))
     text = (
-        f"this seed {effect * 100:+.0f} points beside the five-seed reference (meta.yaml, {ref['command']}): "
+        f"this run {effect * 100:+.0f} points beside the five-seed reference (meta.yaml, {ref['command']}): "
         f"mean {ref['mean'] * 100:+.1f} over seeds {seeds}, from {lo * 100:+.0f} to {hi * 100:+.0f}, "
         f"up on {ref['up']} of {ref['n']}"
     )
-    if seed in effects:
-        rank = sorted(effects.values(), reverse=True).index(effects[seed]) + 1
-        place = {1: "the largest", len(effects): "the smallest"}.get(rank, f"number {rank} from the top")
-        text += f"; seed {seed} is {place} of the {len(effects)}"
+    above = sum(e > effect + 1e-9 for e in effects.values())  # reference seeds with a larger effect
+    ties = sum(abs(e - effect) <= 1e-9 for e in effects.values())
+    if not above:
+        place = "the largest" if not ties else "tied with the largest"
+    elif above == len(effects):
+        place = "below every one"
+    else:
+        place = f"below {above} of them" + (f", tied with {ties}" if ties else "")
+    text += f"; this run's effect is {place}"
+    if effects.get(seed) is not None and abs(effects[seed] - effect) > 1e-9:
+        text += f" (the reference's own seed {seed} gave {effects[seed] * 100:+.0f})"
     return text
 
 
+# The kernel path the published numbers ran on: an x86-64 CPU, MKL held to this branch (MKL_CBWR, set by
+# scale_data.py's setup region before torch loads). docs/reproducibility.md says why and what it costs.
+PUBLISHED_MKL_CBWR = "COMPATIBLE"
+
+
+def other_draw(device: str) -> str | None:
+    """Why this run cannot reproduce the published numbers bit for bit (a CUDA or MPS device, a CPU that
+    is not x86-64, another MKL branch), or None when it runs on the published kernel path."""
+    if device != "cpu":
+        return f"device {device}"
+    if platform.machine().lower() not in ("x86_64", "amd64"):
+        return f"a {platform.machine() or 'non-x86'} CPU (MKL runs on x86-64 only)"
+    if os.environ.get("MKL_CBWR") != PUBLISHED_MKL_CBWR:
+        return f"MKL_CBWR={os.environ.get('MKL_CBWR', '')} (published: {PUBLISHED_MKL_CBWR})"
+    return None
+
+
 def banner(args: argparse.Namespace, reminder=None) -> None:
-    """Two lines: what runs where, and how long this configuration takes on this tier; in the default
-    configuration (exercise 1's experiment), a third: `reminder()`, when it has a line (the exercises'
-    ex1_reminder: a learner who has not written a prediction yet)."""
+    """Two lines: what runs where, and how long this configuration takes on this tier; a third when this
+    run cannot take the published kernel path (other_draw); in the default configuration (exercise 1's
+    experiment), a last: `reminder()`, when it has a line (the exercises' ex1_reminder: a learner who has
+    not written a prediction yet)."""
     import torch
 
     tier = device_tier(args.device)
@@ -267,5 +298,10 @@ def banner(args: argparse.Namespace, reminder=None) -> None:
     smoke = "smoke run: tiny configuration, seconds, numbers not meaningful"
     print(smoke if args.smoke else expected_wallclock(tier, config_hash(result_config(args))))
     default = not args.smoke and five_seed_reference(result_config(args)) is not None  # ex1's experiment
+    if default and (why := other_draw(args.device)):
+        print(
+            f"another draw: {why} rounds differently from the published runs (x86-64 CPU, MKL_CBWR="
+            f"{PUBLISHED_MKL_CBWR}), so this seed's numbers differ; compare with the five-seed mean"
+        )
     if default and reminder and (line := reminder()):
         print(line)

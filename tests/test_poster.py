@@ -143,9 +143,15 @@ def test_the_headline_places_the_default_seed_beside_the_five_seed_reference(run
     ref = cli.five_seed_reference(default)
     assert ref["effects"] == {r["seed"]: r["data_full"] for r in seeds["rows"]}
     assert (ref["mean"], ref["up"], ref["n"]) == (seeds["paired"]["data_full"]["mean"], 5, 5)
-    words = cli.reference_words(ref, 0, 0.24)
-    assert "mean +11.2 over seeds 0, 1, 2, 3, 4, from +2 to +24, up on 5 of 5" in words
-    assert "seed 0 is the largest of the 5" in words and "python -m tools.sweep --seeds 5" in words
+    lo, hi = min(ref["effects"].values()), max(ref["effects"].values())
+    words = cli.reference_words(ref, 0, hi)  # this run's own effect is what is placed, not seed 0's
+    summary = (
+        f"mean {ref['mean'] * 100:+.1f} over seeds 0, 1, 2, 3, 4, from {lo * 100:+.0f} to {hi * 100:+.0f}"
+    )
+    assert summary in words and "python -m tools.sweep --seeds 5" in words
+    assert "this run's effect is the largest" in words or "tied with the largest" in words
+    assert "this run's effect is below every one" in cli.reference_words(ref, 0, lo - 0.02)
+    assert "not this one" in cli.reference_words(None, 0, 0.1)  # another configuration: said so
     for other in ({"aug_mode": "replay"}, {"pusht_data": "big"}, {"epochs": 499}, {"smoke": True}):
         assert cli.five_seed_reference(dict(default, **other)) is None, other
     _, a, _ = runs  # a smoke run: no reference on its page or in its headline

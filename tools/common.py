@@ -21,7 +21,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from ch37 import ROOT, config
+from ch37 import ROOT, cli, config
 from ch37.errors import DataError
 
 SCRIPT = ROOT / "scale_data.py"
@@ -202,6 +202,16 @@ def _version(pkg: str) -> str | None:
         return None
 
 
+def _mkl_branch(script: Path) -> str:
+    """The MKL branch (MKL_CBWR) the runs of `script` take: one set here is theirs, else scale_data.py's
+    setup region holds its runs to ch37.cli.PUBLISHED_MKL_CBWR (docs/reproducibility.md)."""
+    if os.environ.get("MKL_CBWR"):
+        return os.environ["MKL_CBWR"]
+    if Path(script).name == "scale_data.py":
+        return f"{cli.PUBLISHED_MKL_CBWR} (scale_data.py's setup region)"
+    return "unset: MKL's own branch for this CPU"
+
+
 def provenance(script: Path) -> dict:
     """Where and with what a run happened: date, git commit, platform, package versions, region hashes."""
     try:
@@ -217,6 +227,7 @@ def provenance(script: Path) -> dict:
             "machine": platform.machine(),
             "cpu_count": os.cpu_count(),
             "cpu_model": _cpu_model(),
+            "mkl_cbwr": _mkl_branch(script),
         },
         "packages": {p: _version(p) for p in ("torch", "lerobot", "mujoco", "numpy")},
         "script_region_hashes": hashes,

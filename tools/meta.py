@@ -127,10 +127,17 @@ def _read_json(path: Path, what: str, again: str):
         raise DataError(f"{rel(path)} is not a readable {what} ({e}); {again}") from None
 
 
-def run_python(meta: dict) -> str | None:
-    """The Python version the reference run recorded (None when meta.yaml has none)."""
-    prov = meta.get("reference_run", {}).get("seeds", {}).get("provenance", {})
-    return prov.get("platform", {}).get("python")
+def run_platform(meta: dict) -> dict:
+    """The platform the reference run recorded: Python, CPU, MKL branch ({} when meta.yaml has none)."""
+    return meta.get("reference_run", {}).get("seeds", {}).get("provenance", {}).get("platform", {})
+
+
+def environment(meta: dict, lock: Path = LOCK) -> dict:
+    """meta.yaml's `environment`: the lock's versions, and the CPU and MKL kernel branch the reference
+    run's numbers came from (docs/reproducibility.md: the same branch gives the same bits on any x86-64)."""
+    ran = run_platform(meta)
+    where = {"cpu": ran.get("cpu_model"), "kernel_path": ran.get("mkl_cbwr")}
+    return environment_section(lock, ran.get("python")) | {k: v for k, v in where.items() if v}
 
 
 def lock_mismatch(sweep: dict, lock: Path = LOCK) -> list[str]:
@@ -288,7 +295,7 @@ def main(argv: list[str]) -> int:
     a = p.parse_args(argv)
     if a.environment:
         meta = load_yaml(a.meta)
-        meta["environment"] = environment_section(a.lock, run_python(meta))
+        meta["environment"] = environment(meta, a.lock)
         write_meta(a.meta, meta if meta.get("id") else {**META_STATIC, **meta})
         print(f"wrote environment of {rel(a.lock)} to {rel(a.meta)}")
         return 0
@@ -315,7 +322,7 @@ def main(argv: list[str]) -> int:
     if (replay := replay_section(a.replay)) is not None:
         meta["replay"] = replay
     meta["region_hashes"] = current
-    meta["environment"] = environment_section(LOCK, run_python(meta))
+    meta["environment"] = environment(meta)
     write_meta(a.meta, meta)
     ex = meta["exercise_checks"]
     smoke = " (provisional: smoke sweep)" if meta["reference_run"]["provisional"] else ""
