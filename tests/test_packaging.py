@@ -624,6 +624,7 @@ def kernel_manager(tmp_path):
     )
 
 
+WIDGET_VIEW = "application/vnd.jupyter.widget-view+json"  # a notebook output showing a Jupyter widget
 NOTEBOOK_ENV = dict(HF_HUB_OFFLINE="1", HF_DATASETS_OFFLINE="1", MPLBACKEND="Agg", PYTHONHASHSEED="0")
 
 
@@ -683,7 +684,9 @@ def test_notebook_runs_alone_from_a_fresh_folder_twice_in_smoke_mode(tmp_path, s
     repository (from a published copy of this checkout), the kernel is the project's Python so lerobot is
     importable and nothing is installed, the flags cell switched to the smoke run the way a learner
     does, Run all twice in one kernel: the second reruns, never stops at setup. The figure, the poster and
-    the recording's line show; metrics.json equals the script's own run with the same flags."""
+    the recording in Rerun's notebook viewer show (issue 41: its widget, holding the .rrd's bytes; the
+    viewer's code left to the browser, from app.rerun.io); metrics.json equals the script's own run with
+    the same flags."""
     import nbclient
     import nbformat
 
@@ -698,10 +701,12 @@ def test_notebook_runs_alone_from_a_fresh_folder_twice_in_smoke_mode(tmp_path, s
     content = tmp_path / "content"
     content.mkdir()
     env = dict(os.environ, **NOTEBOOK_ENV, CH37_CACHE_DIR=str(tmp_path / "cache"))  # an empty result cache
+    env.pop("RERUN_NOTEBOOK_ASSET", None)  # the viewer's default: its code from app.rerun.io
     client = nbclient.NotebookClient(
         nb, km=kernel_manager(tmp_path), timeout=600, resources={"metadata": {"path": str(content)}}
     )
     repo = content / "ch37-course"
+    rrd = (repo / "outputs" / "ch3.7-scale-data-smoke" / "scale_data.rrd").resolve()
     runs = []
     with client.setup_kernel(env=env):
         for _ in range(2):  # Run all, then Run all again in the same kernel
@@ -720,6 +725,35 @@ def test_notebook_runs_alone_from_a_fresh_folder_twice_in_smoke_mode(tmp_path, s
             assert png == [base64.b64encode((out / "scale_data.png").read_bytes()).decode()]
             html = [o.data["text/html"] for o in got["poster"] if o.output_type == "execute_result"]
             assert html == [(out / "scale_data.html").read_text(encoding="utf-8")] and "<svg" in html[0]
+            # issue 41: the recording in Rerun's notebook viewer, a widget (no value, no error), whose
+            # code the browser loads from app.rerun.io; the kernel fetches nothing
+            views = [
+                o.data[WIDGET_VIEW]["model_id"] for o in got["rerun"] if WIDGET_VIEW in o.get("data", {})
+            ]
+            assert [o.output_type for o in got["rerun"]] == ["stream", "display_data", "display_data"]
+            viewer = client.widget_state[views[-1]]
+            assert viewer["_model_name"] == "AnyModel"  # anywidget's: rerun_notebook.Viewer
+            assert (viewer["_width"], viewer["_height"]) == ("auto", 640)
+            rerun_notebook = importlib.metadata.version("rerun-notebook")
+            assert viewer["_esm"] == f"https://app.rerun.io/version/{rerun_notebook}/notebook/widget.js"
+        # the viewer widget holds this run's .rrd, as it is, for the browser (sent once the viewer's code
+        # has loaded there: rerun_notebook.Viewer keeps it in its queue, _event_queue, till then, and no
+        # browser is here)
+        probe = nbformat.v4.new_code_cell(
+            "print(viewer.model_id, viewer._event_queue == [({'type': 'rrd'}, [rrd.read_bytes()])])"
+        )
+        nb.cells.append(probe)  # after the notebook's cells, in the same kernel
+        client.execute_cell(probe, len(nb.cells) - 1)
+        assert texts(probe) == f"{views[-1]} True\n"
+        # the same cell after a run with --no-rerun (a recording from an earlier run left there): one line
+        (rerun,) = [c for c in nb.cells if c.id == "rerun"]
+        no_rerun = nbformat.v4.new_code_cell("args.rerun = False\n" + rerun.source)
+        nb.cells.append(no_rerun)  # after the notebook's cells, in the same kernel
+        client.execute_cell(no_rerun, len(nb.cells) - 1)
+        assert [o.output_type for o in no_rerun.outputs] == ["stream"] and rrd.is_file()
+        line = texts(no_rerun)
+        assert line.startswith("no recording: this run had --no-rerun (") and line.count("\n") == 1
+        assert "rerun scale_data.rrd" in line  # how to open the file with the desktop viewer
     first, second = runs
     assert first["install"][0] == (
         f"cloning {url} into {repo}\nrepository {repo}; lerobot "
@@ -735,8 +769,8 @@ def test_notebook_runs_alone_from_a_fresh_folder_twice_in_smoke_mode(tmp_path, s
         assert [k for k, (_, kinds) in run.items() if "execute_result" in kinds] == ["figure", "poster"], run
         assert "IProgress" not in text and "TqdmWarning" not in text, text
         assert not [k for k, (_, kinds) in run.items() if "error" in kinds]
-        rrd = (repo / "outputs" / "ch3.7-scale-data-smoke" / "scale_data.rrd").resolve()
         assert run["rerun"][0].startswith(f"recording: {rrd} (") and rrd.is_file()
+        assert run["rerun"][0].endswith(" MB), in Rerun's notebook viewer below\n")
     sweep_out, _ = smoke_sweep
     same_run = json.loads((sweep_out / "seeds" / "seed0" / "metrics.json").read_text())  # the script's
     metrics = json.loads((repo / "outputs" / "ch3.7-scale-data-smoke" / "metrics.json").read_text())

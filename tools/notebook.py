@@ -94,14 +94,40 @@ from IPython.display import HTML
 
 HTML((args.out / "scale_data.html").read_text(encoding="utf-8"))"""
 RERUN_CELL = """\
-# The Rerun recording, scale_data.rrd: the data-scale curve, block-start coverage, a few augmented
-# trajectories. It is not shown in this notebook: Rerun's notebook viewer (rerun-sdk[notebook]) is not
-# among the course's packages, and by default it fetches the viewer from app.rerun.io while it runs,
-# where this chapter runs offline. Download the file (Colab: the Files panel) and open it with Rerun's
-# desktop viewer (pip install rerun-sdk, then: rerun scale_data.rrd), as the emit cell's "open with" says.
-rrd = args.out / "scale_data.rrd"
-shown = f"recording: {rrd.resolve()} ({rrd.stat().st_size / 1e6:.1f} MB)" if rrd.is_file() else ""
-print(shown or "no recording: this run had --no-rerun")"""
+# The Rerun recording this run wrote, scale_data.rrd (the data-scale curve, block-start coverage, a few
+# augmented trajectories), shown below in Rerun's notebook viewer (rerun-notebook, among the course's
+# packages): the kernel hands the file's bytes to the viewer's widget, which plays them in the browser.
+# The viewer's own code (JavaScript and WebAssembly, 67 MB installed) is not sent by the kernel: by
+# default the browser loads it from app.rerun.io, which needs the browser online (Colab is). Offline,
+# have it served from the installed package instead: RERUN_NOTEBOOK_ASSET=inline (the code goes into the
+# widget, about 23 MB the kernel sends to the browser) or serve-local (a server in the kernel on localhost,
+# which the browser must reach: a local Jupyter, not Colab), set before this cell first runs in the
+# kernel (it is read once): restart the kernel, run  %env RERUN_NOTEBOOK_ASSET=inline  in a cell, Run all.
+# Rerun's desktop viewer opens the file too (pip install rerun-sdk, then: rerun scale_data.rrd).
+import importlib.util
+
+from IPython.display import display
+
+rrd = (args.out / "scale_data.rrd").resolve()
+if not args.rerun or not rrd.is_file():
+    print(
+        "no recording: this run had --no-rerun (without it, the run writes scale_data.rrd, shown here; "
+        "Rerun's desktop viewer opens it too: rerun scale_data.rrd)"
+    )
+elif importlib.util.find_spec("rerun_notebook") is None:
+    print(
+        f"recording: {rrd} ({rrd.stat().st_size / 1e6:.1f} MB), not shown: Rerun's notebook viewer "
+        f"(rerun-notebook) is not installed; open the file with Rerun's desktop viewer: rerun {rrd}"
+    )
+else:
+    import rerun_notebook
+
+    print(f"recording: {rrd} ({rrd.stat().st_size / 1e6:.1f} MB), in Rerun's notebook viewer below")
+    # rerun.notebook.Viewer shows what a live recording logs; its widget, rerun_notebook.Viewer, takes
+    # a .rrd file's bytes as they are, kept in the kernel until the viewer has loaded in the browser
+    viewer = rerun_notebook.Viewer(width="auto", height=640)
+    viewer.send_rrd(rrd.read_bytes())
+    display(rerun_notebook.ErrorWidget(), viewer)  # the first says so if the viewer's code cannot load"""
 CACHE_NOTE = """\
 # --no-cache: every Run all really runs the chapter, a second one too. Without it an identical earlier
 # run is replayed from the result cache and the setup cell stops the notebook there ("SystemExit: 0").
