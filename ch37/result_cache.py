@@ -65,6 +65,9 @@ def result_key(config: dict) -> str:
         json.dumps({k: str(v) for k, v in config.items() if k not in NOT_IN_KEY}, sort_keys=True).encode()
     )
     h.update(f"cache format {CACHE_FORMAT}".encode())
+    # MKL's kernel branch decides the trained weights' bits (docs/reproducibility.md): a run on another
+    # branch is another result, never this one replayed
+    h.update(f"MKL_CBWR={os.environ.get('MKL_CBWR', '')}".encode())
     for pkg in ("torch", "lerobot", "mujoco", "numpy"):
         h.update(f"{pkg}=={version(pkg)}".encode())
     for key in ("pusht_data", "aloha_data"):  # a user's own set: its bytes are part of the input

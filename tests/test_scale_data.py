@@ -267,8 +267,10 @@ def test_result_cache_reuses_only_the_same_configuration(tmp_path, monkeypatch):
     ).read_bytes()
 
 
-def test_result_key_changes_with_every_input():
+def test_result_key_changes_with_every_input(monkeypatch):
     from ch37 import result_cache
+
+    monkeypatch.setenv("MKL_CBWR", "COMPATIBLE")
 
     base = {
         "seed": 0,
@@ -285,6 +287,8 @@ def test_result_key_changes_with_every_input():
     )  # where and how fast: same result
     for field, value in (("seed", 1), ("epochs", 499), ("smoke", True), ("device", "cuda"), ("lr", 0.01)):
         assert result_cache.result_key(dict(base, **{field: value})) != k, field
+    monkeypatch.setenv("MKL_CBWR", "AVX2")  # another MKL kernel branch: other bits, another result
+    assert result_cache.result_key(base) != k
 
 
 def test_a_cached_result_goes_stale_when_any_imported_file_changes(tmp_path, monkeypatch):
