@@ -1,7 +1,8 @@
 """The data engine: grow a demo set of any task that implements datagen.task.Task, MimicGen-style.
 
 task       Task (what a task provides: env, start names, perturbation, place, expert, segments,
-           replay, success), Perturbation, Source, Segment, rollout, write_dataset (a stamped set)
+           replay, success), Outcome (what one attempt came to), Perturbation, Source, Segment,
+           rollout, write_dataset (a stamped set)
 demos      expert demo sets: Embodiment, generate, ensure_demos (the chapter's private demo cache),
            check_given (a set you name, checked and never modified)
 pusht      PUSHT: PushT as a task (the only module here that imports pusht_env and its expert)
@@ -30,7 +31,7 @@ from datagen.engine import (
     sources,
 )
 from datagen.pusht import PUSHT
-from datagen.task import Perturbation, Segment, Source, Task, rollout, write_dataset
+from datagen.task import Outcome, Perturbation, Segment, Source, Task, rollout, write_dataset
 
 TASKS = {PUSHT.name: PUSHT, ALOHA.name: ALOHA}
 
@@ -41,6 +42,7 @@ __all__ = [
     "KEPT_KEYS",
     "PUSHT",
     "TASKS",
+    "Outcome",
     "Perturbation",
     "Segment",
     "Source",

@@ -1,7 +1,7 @@
 """The data engine's unit of work, for any task (datagen.task.Task): one attempt = perturb a source
 start, re-solve or replay it, keep it if it succeeds.
 
-    attempt(task, source, k, how, mode="resolve") -> a kept episode or a reason
+    attempt(task, source, k, how, mode="resolve") -> an Outcome (datagen.task.Outcome: kept or why not)
 
 is a pure function of its arguments: attempt k of source episode e draws from its own generator,
 np.random.default_rng([env_seed(seed, "aug", e), k]), and the sim is fully reset at the perturbed
@@ -18,12 +18,13 @@ successes in k order, whatever batches the attempts ran in. grow() is keep_first
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from ch37.parallel import map_jobs
 from ch37.seeds import env_seed
-from datagen.task import Perturbation, Source, Task
+from datagen.task import Outcome, Perturbation, Source, Task
 
 __all__ = [
     "ATTEMPTS_PER_KEPT",
@@ -82,17 +83,17 @@ _ENVS: dict[str, object] = {}  # task name -> this process's simulator, fully re
 
 def attempt(
     task: Task, source: Source, k: int, how: Perturbation, *, mode: str = "resolve", env=None, pool=None
-):
-    """Attempt k from `source`: a kept episode (arrays per frame, with provenance) or a failure reason.
+) -> Outcome:
+    """Attempt k from `source`: its Outcome, a kept one's episode with its provenance on every frame
+    (arrays per frame), a failed one's without frames (episode None; steps says how many ran).
     pool: {episode: Source} a replay chooses its source from (the nearest, MimicGen's selection);
     None replays the attempt's own. aug.source_episode is the source actually replayed."""
     if env is None:
         env = _ENVS.get(task.name) or _ENVS.setdefault(task.name, task.make_env())
     got = task.run_mode(mode, source, attempt_rng(how.seed, source.episode, k), how, env, pool)
-    if isinstance(got, str):
-        return got
-    ep, start, used = got
-    return with_provenance(ep, used, start)
+    if not got.kept:
+        return replace(got, episode=None)
+    return replace(got, episode=with_provenance(got.episode, got.source_episode, got.start))
 
 
 def with_provenance(ep: dict, source_episode: int, start) -> dict:
@@ -107,7 +108,7 @@ def with_provenance(ep: dict, source_episode: int, start) -> dict:
 def keep_first(episodes, per_source: int, run_jobs, *, reasons, cap: int = ATTEMPTS_PER_KEPT):
     """The first `per_source` kept attempts (k = 0, 1, ...) of each source episode, the MimicGen way.
 
-    run_jobs([(episode, k), ...]) -> [attempt result, ...] in the same order (any executor).
+    run_jobs([(episode, k), ...]) -> [Outcome, ...] in the same order (any executor).
     Attempts run in rounds: k < per_source first, then, for an episode still short, more k's sized by
     its yield so far. Whatever the rounds, the kept set is the first per_source successes in k order
     and `attempts` counts k's up to the last one kept (all cap x per_source when an episode falls
@@ -119,7 +120,7 @@ def keep_first(episodes, per_source: int, run_jobs, *, reasons, cap: int = ATTEM
     while True:
         jobs = []
         for e, got in done.items():
-            n_kept = sum(not isinstance(r, str) for r in got)
+            n_kept = sum(r.kept for r in got)
             if n_kept >= per_source or len(got) >= limit:
                 continue
             rate = max(n_kept / len(got), 1 / cap) if got else 1.0
@@ -136,11 +137,11 @@ def keep_first(episodes, per_source: int, run_jobs, *, reasons, cap: int = ATTEM
             if n == per_source:
                 break  # attempted in a round, but beyond the last one this episode keeps: not counted
             attempts += 1
-            if isinstance(r, str):
-                failures[r] += 1
-            else:
-                kept.append(r)
+            if r.kept:
+                kept.append(r.episode)
                 n += 1
+            else:
+                failures[r.reason] += 1
     return kept, attempts, failures
 
 

@@ -19,7 +19,7 @@ The runner (run_lanes) knows no task. A mode hands it
                                     share=the first (its model, and PushT's MjData), once per
                                     process and reused: begin resets an env fully
     begin(job, env)              -> a Lane placed at its start (lane.obs: its first observation), or a
-                                    final result (a failure reason) when there is nothing to simulate
+                                    final result (an Outcome) when there is nothing to simulate
     decide(lanes, envs, obs)     -> (actions (N, act_dim) float32, stop (N,) bool or None): one call for
                                     every live lane; a stopped lane ends before this step (replay's
                                     segment ran out) and is not stepped
@@ -39,9 +39,9 @@ import numpy as np
 
 from ch37.parallel import step_envs
 from datagen import engine
-from datagen.task import Perturbation, Task
+from datagen.task import Outcome, Perturbation, Task
 
-__all__ = ["LANES", "Lane", "attempts_lockstep", "resolve_lanes", "run_lanes", "start_of_job"]
+__all__ = ["LANES", "Lane", "attempts_lockstep", "kept_or_not", "resolve_lanes", "run_lanes", "start_of_job"]
 
 LANES = 256  # attempts stepped together per worker (ALOHA's lane: an MjData, 0.44 MiB, ~1 ms to make)
 
@@ -134,6 +134,16 @@ def start_of_job(task: Task, sources: dict, job, how: Perturbation):
     return task.perturb(sources[e].states[0], engine.attempt_rng(how.seed, e, k), how)
 
 
+def kept_or_not(lane: Lane, episode: dict, success: bool, reason: str) -> Outcome:
+    """The Outcome datagen.engine.attempt gives for the frames `episode` recorded for `lane`: kept with
+    its provenance when `success` (for resolve: the last frame's, as rollout's), else `reason`."""
+    e, steps = lane.job[0], len(episode["action"])
+    if not success:
+        return Outcome(reason, None, lane.start, e, steps)
+    episode = engine.with_provenance(episode | {"success": success}, e, lane.start)
+    return Outcome(None, episode, lane.start, e, steps)
+
+
 def resolve_lanes(task: Task, sources: dict, how: Perturbation) -> dict:
     """Mode "resolve": the task's noise-free expert from each perturbed start, kept on success."""
     expert = task.expert()
@@ -141,17 +151,14 @@ def resolve_lanes(task: Task, sources: dict, how: Perturbation) -> dict:
     def begin(job, env):
         start = start_of_job(task, sources, job, how)
         if start is None:
-            return "no_valid_start"
+            return Outcome("no_valid_start", source_episode=job[0])
         return Lane(job, task.place(env, start), start=start)
 
     def decide(lanes, envs, obs):
         return expert.act_batch(obs), None
 
     def finish(lane, env, episode):
-        success = bool(episode["next.success"][-1, 0])  # rollout's success: the last frame's
-        if not success:
-            return "expert_failed"
-        return engine.with_provenance(episode | {"success": success}, lane.job[0], lane.start)
+        return kept_or_not(lane, episode, bool(episode["next.success"][-1, 0]), "expert_failed")
 
     return {"begin": begin, "decide": decide, "finish": finish}
 

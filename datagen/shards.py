@@ -217,11 +217,11 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
     results = lockstep.attempts_lockstep(
         task, sources, jobs, how, mode=config["mode"], select=config["select"]
     )
-    kept = [r for r in results if not isinstance(r, str)]
+    kept = [r.episode for r in results if r.kept]
     per_source = {}  # source episode -> [attempts, kept]
     for (e, _), r in zip(jobs, results):
         tally = per_source.setdefault(str(e), [0, 0])
-        tally[0], tally[1] = tally[0] + 1, tally[1] + (not isinstance(r, str))
+        tally[0], tally[1] = tally[0] + 1, tally[1] + r.kept
     stamp = {
         "made_by": MADE_BY,
         "kind": "engine-shard",
@@ -230,7 +230,7 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
         "attempts": len(jobs),
         "kept": len(kept),
         "frames": sum(len(r["action"]) for r in kept),
-        "failures": dict(Counter(r for r in results if isinstance(r, str))),
+        "failures": dict(Counter(r.reason for r in results if not r.kept)),
         "per_source": per_source,
         "lengths": dict(Counter(str(len(r["action"])) for r in kept)),
         "versions": versions(),

@@ -30,7 +30,7 @@ subclass; it provides
                          new start's frame
     replay(env, start, source)
                          the source's segments re-expressed for `start` and executed open-loop:
-                         (episode, None) on success, else (episode, reason)
+                         an Outcome (reason None on success)
     success(env)         whether the env reports the task done
     failures             {mode: every reason an attempt of that mode can return}
 
@@ -52,10 +52,12 @@ from ch37.ownership import publish_dir
 from lerobot_v3 import IMAGE_KEY, IMAGE_SIZE, write_set
 
 __all__ = [
+    "Outcome",
     "Perturbation",
     "Segment",
     "Source",
     "Task",
+    "ended",
     "recorded",
     "rollout",
     "rotation",
@@ -71,6 +73,36 @@ class Perturbation:
     seed: int  # >= 0; seeds draw disjoint perturbations (datagen.engine.attempt_rng)
     pos_sigma: float  # m; std of the object's and the robot's xy moves
     yaw_sigma: float  # rad; std of the object's yaw move
+
+
+@dataclass(frozen=True, eq=False)
+class Outcome:
+    """What one attempt came to: the one shape every mode, replay and executor returns.
+
+    reason          None when the attempt is kept (the env reported success), else why not (one of
+                    the task's failures[mode])
+    episode         the frames executed (observation.state, action, next.success arrays, success);
+                    from datagen.engine a kept attempt's carry their provenance and a failed one's are
+                    dropped (None), so a shard holds only what it writes
+    start           the perturbed start (task.start_names), None when no valid draw was found
+    source_episode  the source demo the attempt was made from (the one replayed, under --select nearest)
+    steps           control steps simulated (frames recorded), 0 when nothing was simulated
+    """
+
+    reason: str | None
+    episode: dict | None = None
+    start: tuple | None = None
+    source_episode: int | None = None
+    steps: int = 0
+
+    @property
+    def kept(self) -> bool:
+        return self.reason is None
+
+
+def ended(ep: dict, reason: str | None, start, source_episode: int) -> Outcome:
+    """The Outcome of an attempt that simulated the episode `ep` (its reason None: kept)."""
+    return Outcome(reason, ep, start, source_episode, len(ep["action"]))
 
 
 @dataclass(frozen=True)
@@ -207,7 +239,7 @@ class Task:
     def segments(self, source: Source) -> list:
         raise NotImplementedError
 
-    def replay(self, env, start, source: Source) -> tuple[dict, str | None]:
+    def replay(self, env, start, source: Source) -> Outcome:
         raise NotImplementedError
 
     def success(self, env) -> bool:
@@ -219,30 +251,27 @@ class Task:
         return None
 
     # ---- the modes, the same for every task ----
-    def resolve(self, source: Source, rng, how: Perturbation, env, pool=None):
+    def resolve(self, source: Source, rng, how: Perturbation, env, pool=None) -> Outcome:
         """1. perturb the source's first state, 2. re-solve with the expert, 3. keep only on success.
         The expert solves the start itself: no source is replayed, so `pool` is not read."""
         start = self.perturb(source.states[0], rng, how)
         if start is None:
-            return "no_valid_start"
+            return Outcome("no_valid_start", source_episode=source.episode)
         ep = rollout(env, self.expert(), self.place(env, start))
-        if not ep["success"]:
-            return "expert_failed"
-        return ep, start, source.episode
+        return ended(ep, None if ep["success"] else "expert_failed", start, source.episode)
 
-    def replay_mode(self, source: Source, rng, how: Perturbation, env, pool=None):
+    def replay_mode(self, source: Source, rng, how: Perturbation, env, pool=None) -> Outcome:
         """1. perturb (the same draw as resolve), 2. replay the transformed source (the attempt's own, or
         given `pool` ({episode: Source}) the pool's nearest to the new start), 3. keep on success."""
         start = self.perturb(source.states[0], rng, how)
         if start is None:
-            return "no_valid_start"
+            return Outcome("no_valid_start", source_episode=source.episode)
         chosen = pool[self.nearest(pool, start)] if pool else source
-        ep, why = self.replay(env, start, chosen)
-        return why or (ep, start, chosen.episode)
+        return self.replay(env, start, chosen)
 
-    def run_mode(self, mode: str, source: Source, rng, how: Perturbation, env, pool=None):
-        """(episode, start, the source episode it was made from) for a kept attempt of `mode`, else the
-        reason it was not kept. pool: the sources --select nearest chooses from (None: the attempt's own)."""
+    def run_mode(self, mode: str, source: Source, rng, how: Perturbation, env, pool=None) -> Outcome:
+        """The Outcome of one attempt of `mode` (its source_episode: the source it was made from). pool:
+        the sources --select nearest chooses from (None: the attempt's own)."""
         return {"resolve": self.resolve, "replay": self.replay_mode}[mode](source, rng, how, env, pool)
 
     @property

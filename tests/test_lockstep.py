@@ -10,7 +10,7 @@ import aloha_env
 import gen_demos_aloha
 import gen_demos_pusht
 import pusht_env
-from datagen import ALOHA, PUSHT, Perturbation, engine, lockstep
+from datagen import ALOHA, PUSHT, Outcome, Perturbation, engine, lockstep
 from datagen.task import rollout
 from lerobot_v3.dataset import load_arrays
 from scripted_expert import AlohaExpert, PushTExpert
@@ -61,10 +61,16 @@ def sources(tmp_path_factory):
 
 
 def assert_same_results(one_at_a_time: list, together: list) -> None:
+    """Outcomes (or episodes) equal field for field, every array byte for byte."""
     assert len(one_at_a_time) == len(together)
     for i, (a, b) in enumerate(zip(one_at_a_time, together)):
-        if isinstance(a, str) or isinstance(b, str):
-            assert a == b, f"attempt {i}: {a!r} one at a time, {b!r} in lockstep"
+        if isinstance(a, Outcome) or isinstance(b, Outcome):
+            fields = ("reason", "start", "source_episode", "steps")
+            same = [getattr(a, f) for f in fields] == [getattr(b, f) for f in fields]
+            assert same, f"attempt {i}: {a} / {b}"
+            assert (a.episode is None) == (b.episode is None), f"attempt {i}"
+            if a.episode is not None:
+                assert_same_results([a.episode], [b.episode])
             continue
         assert list(a) == list(b), f"attempt {i}: keys differ"
         assert a["success"] is b["success"]
@@ -84,7 +90,7 @@ def test_lockstep_attempts_equal_one_at_a_time(sources, mode, sigmas, lanes):
     jobs = [(e, k) for e in sorted(sources) for k in range(50)]  # 200 attempts
     one = [engine.attempt(PUSHT, sources[e], k, how, mode=mode) for e, k in jobs]
     together = lockstep.attempts_lockstep(PUSHT, sources, jobs, how, mode=mode, lanes=lanes)
-    kept = sum(not isinstance(r, str) for r in one)
+    kept = sum(r.kept for r in one)
     assert kept >= 10 and (mode == "resolve" or kept < len(jobs))  # both outcomes are compared
     assert_same_results(one, together)
 
@@ -92,7 +98,9 @@ def test_lockstep_attempts_equal_one_at_a_time(sources, mode, sigmas, lanes):
 def test_lockstep_reasons_without_a_start(sources):
     jobs = [(0, 0), (1, 3)]
     how = Perturbation(0, 10.0, 0.1)  # no draw lands on the band
-    assert lockstep.attempts_lockstep(PUSHT, sources, jobs, how) == ["no_valid_start"] * 2
+    got = lockstep.attempts_lockstep(PUSHT, sources, jobs, how)
+    want = [("no_valid_start", 0, 0), ("no_valid_start", 1, 0)]
+    assert [(r.reason, r.source_episode, r.steps) for r in got] == want
 
 
 def test_the_runner_is_task_agnostic_aloha_episodes_equal_rollout():
@@ -127,5 +135,5 @@ def test_aloha_resolve_in_lockstep_equals_one_at_a_time(tmp_path):
     jobs = [(e, k) for e in sorted(srcs) for k in range(10)]  # 30 attempts
     one = [engine.attempt(ALOHA, srcs[e], k, how) for e, k in jobs]
     together = lockstep.attempts_lockstep(ALOHA, srcs, jobs, how, lanes=8)
-    assert sum(not isinstance(r, str) for r in one) >= 10
+    assert sum(r.kept for r in one) >= 10
     assert_same_results(one, together)

@@ -226,8 +226,8 @@ def per_demo_costs(
         t1 = time.perf_counter()
         together = lockstep.attempts_lockstep(task, sources, jobs, how, mode=mode)
         t2 = time.perf_counter()
-        kept = [ep for ep in together if not isinstance(ep, str)]
-        if sum(not isinstance(ep, str) for ep in one) != len(kept):
+        kept = [r.episode for r in together if r.kept]
+        if sum(r.kept for r in one) != len(kept):
             raise DataError("lockstep kept another set than one attempt at a time")
         physics = physics_floor(task, ((ep["aug.start"][0], ep["action"]) for ep in kept))
         with tempfile.TemporaryDirectory() as tmp:  # the engine's own writer, whatever columns it adds
