@@ -49,7 +49,17 @@ from dataclasses import dataclass
 import numpy as np
 
 import aloha_env
-from datagen.task import Outcome, Perturbation, Source, Task, ended, recorded, rollout, transform_segment
+from datagen.task import (
+    Outcome,
+    Perturbation,
+    Source,
+    Task,
+    ended,
+    recorded,
+    register,
+    rollout,
+    transform_segment,
+)
 from scripted_expert import AlohaExpert
 
 __all__ = [
@@ -426,4 +436,4 @@ class Aloha(Task):
         return bool(env.success)
 
 
-ALOHA = Aloha()
+ALOHA = register(Aloha())

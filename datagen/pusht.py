@@ -51,6 +51,7 @@ from datagen.task import (
     Task,
     ended,
     recorded,
+    register,
     rotation,
     transform_segment,
 )
@@ -431,4 +432,4 @@ class PushT(Task):
         return replay_lanes(sources, how)
 
 
-PUSHT = PushT()
+PUSHT = register(PushT())

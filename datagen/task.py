@@ -42,7 +42,9 @@ same parts (place, expert, success) over a batch.
 
 from __future__ import annotations
 
+import importlib
 import math
+import pkgutil
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -58,7 +60,9 @@ __all__ = [
     "Source",
     "Task",
     "ended",
+    "known_tasks",
     "recorded",
+    "register",
     "rollout",
     "rotation",
     "transform_segment",
@@ -209,7 +213,7 @@ def rollout(env, policy, obs, *, render: bool = False) -> dict:
 class Task:
     """The parts a task provides (see the module docstring); the modes are built from them here."""
 
-    name: str  # "pusht": the key in datagen.TASKS, recorded in a run's settings
+    name: str  # "pusht": its key in known_tasks(), recorded in a run's settings
     title: str  # "PushT": how messages name it
     generator: str  # the command that makes a source set of this task ("gen_demos_pusht.py")
     start_names: tuple[str, ...]
@@ -277,3 +281,25 @@ class Task:
     @property
     def modes(self) -> tuple[str, ...]:
         return tuple(self.failures)
+
+
+# ---- the tasks the engine knows: each registers itself when its module is imported ----
+_REGISTERED: dict[str, Task] = {}
+
+
+def register(task: Task) -> Task:
+    """Make `task` known to the engine under task.name; a task module calls it as it is imported
+    (PUSHT = register(PushT())), as MimicGen's env interfaces register through their metaclass."""
+    old = _REGISTERED.setdefault(task.name, task)
+    if old is not task and type(old) is not type(task):
+        raise ValueError(f"two tasks named {task.name!r}: {type(old).__name__} and {type(task).__name__}")
+    return old
+
+
+def known_tasks() -> dict[str, Task]:
+    """{name: task} of every task the engine knows, by name. Every module of this package is imported
+    first, so a task module found here registers itself: a new task is one module in datagen/, listed
+    nowhere else."""
+    for m in pkgutil.iter_modules([str(Path(__file__).parent)]):
+        importlib.import_module(f"{__package__}.{m.name}")
+    return dict(sorted(_REGISTERED.items()))
