@@ -393,6 +393,7 @@ class Aloha(Task):
     env_module = aloha_env
     state_ranges, action_ranges = STATE_RANGES, ACTION_RANGES
     failures = FAILURES
+    max_steps = aloha_env.MAX_STEPS
 
     def __init__(self):
         self._plans = {}  # (episode, sha256 of its frames) -> [Subtask]: a pure function of the source
@@ -408,6 +409,9 @@ class Aloha(Task):
 
     def expert(self):
         return AlohaExpert(noise=0.0)
+
+    def batch_expert(self):
+        return AlohaExpert(noise=0.0).act_batch
 
     def object_pose(self, state) -> np.ndarray:
         return np.array([float(state[6]), float(state[7]), 0.0])  # the cube (x, y m); it never turns

@@ -13,11 +13,12 @@ lanes keep theirs apart in one shared MjData: PushTEnv(share=)), so its frames d
 shares its batch, on the lane it runs in, or on when it was started.
 
 The runner (run_lanes) knows no task. A mode hands it
-    make_env(share=None)         -> an env with step(action) -> (obs, reward, done, info["success"]),
-                                    stepped through ch37.parallel.step_envs (in one call where its
-                                    class has step_many: PushTEnv's); the lanes' envs are made with
-                                    share=the first (its model, and PushT's MjData), once per
-                                    process and reused: begin resets an env fully
+    make_env(share=None)         -> an env with step(action) -> (obs, reward, done, info["success"]);
+                                    the lanes' envs are made with share=the first (its model, and
+                                    PushT's MjData), once per process and reused: begin resets an env
+    step(envs, actions)          -> (obs, success, done) for the live lanes' envs in one call: the
+                                    task's step_batch (PushT's: PushTEnv.step_many; by default env.step
+                                    per env), ch37.parallel.step_envs when not given
     begin(job, env)              -> a Lane placed at its start (lane.obs: its first observation), or a
                                     final result (an Outcome) when there is nothing to simulate
     decide(lanes, envs, obs)     -> (actions (N, act_dim) float32, stop (N,) bool or None): one call for
@@ -26,9 +27,10 @@ The runner (run_lanes) knows no task. A mode hands it
     finish(lane, env, episode)   -> the attempt's result, from the frames recorded for it
 and the runner keeps `lanes` envs busy, refilling a lane as soon as its attempt ends, recording every
 frame into preallocated arrays (lanes x max_frames), and returns the results in job order.
-Mode "resolve" is built here for every task from its parts (perturb, place, expert().act_batch);
-mode "replay" from task.replay_lanes (PushT's one-segment replay) where the task has it, else (ALOHA's
-subtask replay, and --select nearest) the attempts run one at a time through datagen.engine.attempt.
+Mode "resolve" is built here for every task from its parts (perturb, place, batch_expert, step_batch,
+max_steps: the Task contract, datagen.task); mode "replay" from task.replay_lanes (PushT's one-segment
+replay) where the task has it. A task without a batch expert or replay lanes (ALOHA's subtask replay,
+and --select nearest) runs those attempts one at a time through datagen.engine.attempt, the same bytes.
 """
 
 from __future__ import annotations
@@ -58,7 +60,17 @@ class Lane:
 
 
 def run_lanes(
-    jobs, *, make_env, begin, decide, finish, max_frames: int, obs_dim: int, act_dim: int, lanes: int
+    jobs,
+    *,
+    make_env,
+    begin,
+    decide,
+    finish,
+    max_frames: int,
+    obs_dim: int,
+    act_dim: int,
+    lanes: int,
+    step=step_envs,
 ):
     """[result of job] for every job, in order, with up to `lanes` attempts stepped together (see the
     module docstring). Frame t of a lane pairs the observation before action t with action t and
@@ -116,7 +128,7 @@ def run_lanes(
             slots, at, actions = slots[~stop], at[~stop], actions[~stop]
             if not len(slots):
                 continue
-        o, success, done = step_envs([envs[s] for s in slots.tolist()], actions)
+        o, success, done = step([envs[s] for s in slots.tolist()], actions)
         obs_buf[slots, at + 1] = o
         succ_buf[slots, at] = success
         t[slots] = at + 1
@@ -146,7 +158,7 @@ def kept_or_not(lane: Lane, episode: dict, success: bool, reason: str) -> Outcom
 
 def resolve_lanes(task: Task, sources: dict, how: Perturbation) -> dict:
     """Mode "resolve": the task's noise-free expert from each perturbed start, kept on success."""
-    expert = task.expert()
+    act_batch = task.batch_expert()
 
     def begin(job, env):
         start = start_of_job(task, sources, job, how)
@@ -155,7 +167,7 @@ def resolve_lanes(task: Task, sources: dict, how: Perturbation) -> dict:
         return Lane(job, task.place(env, start), start=start)
 
     def decide(lanes, envs, obs):
-        return expert.act_batch(obs), None
+        return act_batch(obs), None
 
     def finish(lane, env, episode):
         return kept_or_not(lane, episode, bool(episode["next.success"][-1, 0]), "expert_failed")
@@ -169,17 +181,20 @@ def attempts_lockstep(
     """[datagen.engine.attempt(task, sources[e], k, how, mode=mode, pool=...) for (e, k) in jobs], the
     same bytes, stepped in lockstep where the mode has lanes (else one attempt at a time)."""
     jobs = list(jobs)
-    parts = resolve_lanes(task, sources, how) if mode == "resolve" else None
+    parts = None
+    if mode == "resolve" and task.batch_expert() is not None:
+        parts = resolve_lanes(task, sources, how)
     if mode == "replay" and select == "own":
         parts = task.replay_lanes(sources, how)
-    if parts is None:
+    if parts is None:  # the task offers no lanes for this mode: the same results, one at a time
         return engine.run_attempts(task, sources, jobs, how, mode=mode, select=select, workers=1)
     m = task.env_module
     return run_lanes(
         jobs,
         make_env=task.make_env,
+        step=task.step_batch,
         **parts,
-        max_frames=m.MAX_STEPS,
+        max_frames=task.max_steps,
         obs_dim=m.OBS_DIM,
         act_dim=m.ACT_DIM,
         lanes=lanes,

@@ -389,6 +389,7 @@ class PushT(Task):
     start_names = START_NAMES
     env_module = pusht_env
     state_ranges, action_ranges = STATE_RANGES, ACTION_RANGES
+    max_steps = pusht_env.MAX_STEPS
     failures = {  # every reason a mode can return
         "resolve": ("expert_failed", "no_valid_start"),
         "replay": (
@@ -430,6 +431,12 @@ class PushT(Task):
 
     def replay_lanes(self, sources: dict, how: Perturbation) -> dict:
         return replay_lanes(sources, how)
+
+    def batch_expert(self):
+        return PushTExpert(noise=0.0).act_batch
+
+    def step_batch(self, envs, actions):
+        return pusht_env.PushTEnv.step_many(envs, actions)
 
 
 PUSHT = register(PushT())

@@ -34,6 +34,20 @@ subclass; it provides
     success(env)         whether the env reports the task done
     failures             {mode: every reason an attempt of that mode can return}
 
+What lockstep (datagen.lockstep: a shard's attempts stepped together) needs, each with a default that
+gives the same bytes one attempt at a time:
+
+    max_steps            control steps an episode may last (the env's limit); sizes lockstep's buffers
+    batch_expert()       the noise-free expert over a batch: obs (N, obs_dim) float32 -> actions (N,
+                         act_dim) float32, row i bit for bit expert().act(obs[i]); None (the default):
+                         mode "resolve" runs one attempt at a time
+    step_batch(envs, actions)
+                         envs[i] stepped with actions[i] -> (obs (N, obs_dim), success (N,), done (N,)),
+                         bit for bit env.step per env, which the default does (ch37.parallel.step_each)
+    replay_lanes(sources, how)
+                         mode "replay" as lanes (begin, decide, finish), or None (the default): replay
+                         runs one attempt at a time
+
 A mode is a method name: "resolve" (perturb, re-solve with the expert, keep on success) and
 "replay" (perturb, replay the transformed source, keep on success) are defined here once for every
 task from the parts above. An executor that steps many attempts in lockstep decides through the
@@ -51,6 +65,7 @@ from pathlib import Path
 import numpy as np
 
 from ch37.ownership import publish_dir
+from ch37.parallel import step_each
 from lerobot_v3 import IMAGE_KEY, IMAGE_SIZE, write_set
 
 __all__ = [
@@ -221,6 +236,7 @@ class Task:
     action_ranges: dict[str, tuple[float, float]]
     env_module: object
     failures: dict[str, tuple[str, ...]]
+    max_steps: int  # control steps an episode may last: the env's limit
 
     def make_env(self, share=None):
         raise NotImplementedError
@@ -248,6 +264,17 @@ class Task:
 
     def success(self, env) -> bool:
         raise NotImplementedError
+
+    # ---- what lockstep needs; each default runs the same bytes one attempt (or one env) at a time ----
+    def batch_expert(self):
+        """expert() over a batch, obs (N, obs_dim) float32 -> actions (N, act_dim) float32, each row bit for
+        bit expert().act of that row; None: mode "resolve" is run one attempt at a time."""
+        return None
+
+    def step_batch(self, envs, actions):
+        """envs[i] stepped with actions[i]: (obs (N, obs_dim), success (N,) bool, done (N,) bool), bit for
+        bit env.step per env (what this default does)."""
+        return step_each(envs, actions)
 
     def replay_lanes(self, sources: dict, how: Perturbation) -> dict | None:
         """Mode "replay" as lockstep lanes (datagen.lockstep: begin, decide, finish), bit-identical to

@@ -11,7 +11,7 @@ import gen_demos_aloha
 import gen_demos_pusht
 import pusht_env
 from datagen import ALOHA, PUSHT, Outcome, Perturbation, engine, lockstep
-from datagen.task import rollout
+from datagen.task import Task, rollout
 from lerobot_v3.dataset import load_arrays
 from scripted_expert import AlohaExpert, PushTExpert
 
@@ -137,3 +137,31 @@ def test_aloha_resolve_in_lockstep_equals_one_at_a_time(tmp_path):
     together = lockstep.attempts_lockstep(ALOHA, srcs, jobs, how, lanes=8)
     assert sum(r.kept for r in one) >= 10
     assert_same_results(one, together)
+
+
+class PlainPushT(type(PUSHT)):
+    """PushT with lockstep's hooks removed: the Task contract's defaults (no batch expert, no replay
+    lanes, each env stepped by its own step)."""
+
+    batch_expert = Task.batch_expert
+    step_batch = Task.step_batch
+    replay_lanes = Task.replay_lanes
+
+
+class PerEnvPushT(type(PUSHT)):
+    """PushT's batch expert and replay lanes, its envs stepped one by one (the default step_batch)."""
+
+    step_batch = Task.step_batch
+
+
+@pytest.mark.parametrize("mode, sigmas", [("resolve", (0.08, 0.5)), ("replay", (0.02, 0.2))])
+def test_a_task_without_the_batch_hooks_gives_the_same_results(sources, mode, sigmas):
+    """What lockstep needs is part of the Task contract with a default: a task that offers none runs one
+    attempt at a time, and one that steps its envs one by one steps the same bits."""
+    how = Perturbation(1, *sigmas)
+    jobs = [(e, k) for e in sorted(sources) for k in range(12)]  # 48 attempts
+    want = lockstep.attempts_lockstep(PUSHT, sources, jobs, how, mode=mode, lanes=9)
+    assert sum(r.kept for r in want) >= 3
+    for task in (PlainPushT(), PerEnvPushT()):
+        assert_same_results(want, lockstep.attempts_lockstep(task, sources, jobs, how, mode=mode, lanes=9))
+    assert PlainPushT().batch_expert() is None and PlainPushT().replay_lanes(sources, how) is None
