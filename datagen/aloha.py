@@ -395,9 +395,6 @@ class Aloha(Task):
     failures = FAILURES
     max_steps = aloha_env.MAX_STEPS
 
-    def __init__(self):
-        self._plans = {}  # (episode, sha256 of its frames) -> [Subtask]: a pure function of the source
-
     def make_env(self, share=None):
         return aloha_env.AlohaCubeEnv(share.model if share is not None else None)
 
@@ -419,19 +416,22 @@ class Aloha(Task):
     def nearest(self, pool: dict, start) -> int:
         return nearest(pool, start)
 
-    def segments(self, source: Source) -> list[Subtask]:
-        """The source's subtasks (plan), re-simulated once per source and process. Raises ValueError
-        for a source without a grasp and a handoff, or one that does not re-simulate."""
+    def segments(self, source: Source, plans: dict | None = None) -> list[Subtask]:
+        """The source's subtasks (plan), re-simulated once per source in `plans` (the caller's cache,
+        keyed by the task, the episode and the sha256 of its frames: a plan is a pure function of the
+        source). Raises ValueError for a source without a grasp and a handoff, or one that does not
+        re-simulate."""
         h = hashlib.sha256(np.ascontiguousarray(source.states).tobytes())
         h.update(np.ascontiguousarray(source.actions).tobytes())
-        key = (source.episode, h.hexdigest())
-        if key not in self._plans:
-            self._plans[key] = plan(self.make_env(), source)
-        return self._plans[key]
+        key = (self.name, source.episode, h.hexdigest())
+        plans = {} if plans is None else plans
+        if key not in plans:
+            plans[key] = plan(self.make_env(), source)
+        return plans[key]
 
-    def replay(self, env, start, source: Source) -> Outcome:
+    def replay(self, env, start, source: Source, plans: dict | None = None) -> Outcome:
         try:
-            steps = self.segments(source)
+            steps = self.segments(source, plans)
         except ValueError:
             return Outcome(SOURCE_UNSPLIT, None, start, source.episode)
         return replay(env, start, source, steps)

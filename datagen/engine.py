@@ -28,6 +28,7 @@ from datagen.task import Outcome, Perturbation, Source, Task
 
 __all__ = [
     "ATTEMPTS_PER_KEPT",
+    "Simulators",
     "KEPT_KEYS",
     "SELECTS",
     "attempt",
@@ -78,19 +79,61 @@ def empty_kept(task: Task) -> dict:
     return out | {"episode_index": np.zeros(0, np.int64), "aug.source_episode": np.zeros((0, 1), np.int64)}
 
 
-_ENVS: dict[str, object] = {}  # task name -> this process's simulator, fully reset by place() per attempt
+class Simulators:
+    """What a worker keeps between the attempts it runs: per task, the env of attempts one at a time
+    (env), the envs of lockstep's lanes (lanes), and the sources' replay plans (plans, a cache the task's
+    replay fills: ALOHA's subtasks). Each attempt fully resets its env (task.place), so reuse changes no
+    bit. Made by whoever runs the attempts (run_attempts, a run's shards) and passed down explicitly;
+    a copy sent to another process (pickled: Ray) arrives empty, and a forked worker fills its own."""
+
+    def __init__(self):
+        self._env: dict[str, object] = {}  # task name -> its env for attempts one at a time
+        self._lanes: dict[str, list] = {}  # task name -> lockstep's envs, the first shared by the rest
+        self.plans: dict = {}  # the task's key for a source -> its replay plan
+
+    def env(self, task: Task):
+        if task.name not in self._env:
+            self._env[task.name] = task.make_env()
+        return self._env[task.name]
+
+    def lanes(self, task: Task, n: int) -> list:
+        """n envs of `task` for lockstep's lanes, made once and reused. One compiled model for all (a load
+        is ~4 ms), and where the env can, one MjData (~1 ms each to make, and 256 of them compete for
+        the cache): the lanes share the first env (task.make_env(share=))."""
+        pool = self._lanes.setdefault(task.name, [])
+        if not pool:
+            pool.append(task.make_env())
+        pool += [task.make_env(share=pool[0]) for _ in range(n - len(pool))]
+        return pool[:n]
+
+    def __getstate__(self):
+        return {}
+
+    def __setstate__(self, state):
+        self.__init__()
 
 
 def attempt(
-    task: Task, source: Source, k: int, how: Perturbation, *, mode: str = "resolve", env=None, pool=None
+    task: Task,
+    source: Source,
+    k: int,
+    how: Perturbation,
+    *,
+    mode: str = "resolve",
+    env=None,
+    pool=None,
+    sims: Simulators | None = None,
 ) -> Outcome:
     """Attempt k from `source`: its Outcome, a kept one's episode with its provenance on every frame
     (arrays per frame), a failed one's without frames (episode None; steps says how many ran).
     pool: {episode: Source} a replay chooses its source from (the nearest, MimicGen's selection);
-    None replays the attempt's own. aug.source_episode is the source actually replayed."""
+    None replays the attempt's own. aug.source_episode is the source actually replayed.
+    env: the simulator to use (else sims' env for the task, else a new one); sims: what a worker keeps
+    between attempts (Simulators: its env and the replay plans). Neither changes a bit of the result."""
     if env is None:
-        env = _ENVS.get(task.name) or _ENVS.setdefault(task.name, task.make_env())
-    got = task.run_mode(mode, source, attempt_rng(how.seed, source.episode, k), how, env, pool)
+        env = sims.env(task) if sims is not None else task.make_env()
+    plans = sims.plans if sims is not None else None
+    got = task.run_mode(mode, source, attempt_rng(how.seed, source.episode, k), how, env, pool, plans)
     if not got.kept:
         return replace(got, episode=None)
     return replace(got, episode=with_provenance(got.episode, got.source_episode, got.start))
@@ -161,15 +204,26 @@ def first_per_source(episode_index, source_episode, take) -> np.ndarray:
 
 
 def run_attempts(
-    task: Task, sources: dict, jobs, how: Perturbation, *, mode="resolve", select="own", workers=1, bar=None
+    task: Task,
+    sources: dict,
+    jobs,
+    how: Perturbation,
+    *,
+    mode="resolve",
+    select="own",
+    workers=1,
+    bar=None,
+    sims: Simulators | None = None,
 ):
     """[attempt(task, sources[e], k, how, mode=mode) for (e, k) in jobs], in order, on `workers` processes.
-    select "nearest": each replay transforms the source of `sources` nearest its start (SELECTS)."""
+    select "nearest": each replay transforms the source of `sources` nearest its start (SELECTS).
+    sims: the Simulators the attempts reuse (a new one when None; a forked worker fills its own copy)."""
     pool = sources if select == "nearest" else None
+    sims = Simulators() if sims is None else sims
 
     def one(job):
         e, k = job
-        return attempt(task, sources[e], k, how, mode=mode, pool=pool)
+        return attempt(task, sources[e], k, how, mode=mode, pool=pool, sims=sims)
 
     return list(map_jobs(one, jobs, workers=workers, bar=bar))
 

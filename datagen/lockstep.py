@@ -13,9 +13,10 @@ lanes keep theirs apart in one shared MjData: PushTEnv(share=)), so its frames d
 shares its batch, on the lane it runs in, or on when it was started.
 
 The runner (run_lanes) knows no task. A mode hands it
-    make_env(share=None)         -> an env with step(action) -> (obs, reward, done, info["success"]);
-                                    the lanes' envs are made with share=the first (its model, and
-                                    PushT's MjData), once per process and reused: begin resets an env
+    envs                         the lanes' envs, each with step(action) -> (obs, reward, done,
+                                    info["success"]); made by the caller (datagen.engine.Simulators:
+                                    sharing the first's model, and PushT's MjData) and reused between
+                                    calls: begin resets an env fully
     step(envs, actions)          -> (obs, success, done) for the live lanes' envs in one call: the
                                     task's step_batch (PushT's: PushTEnv.step_many; by default env.step
                                     per env), ch37.parallel.step_envs when not given
@@ -48,9 +49,6 @@ __all__ = ["LANES", "Lane", "attempts_lockstep", "kept_or_not", "resolve_lanes",
 LANES = 256  # attempts stepped together per worker (ALOHA's lane: an MjData, 0.44 MiB, ~1 ms to make)
 
 
-_POOL: dict = {}  # make_env -> envs made in this process; each attempt fully resets its env (begin)
-
-
 class Lane:
     """One live attempt: its job, its first observation, and what its task keeps between steps."""
 
@@ -62,7 +60,7 @@ class Lane:
 def run_lanes(
     jobs,
     *,
-    make_env,
+    envs: list,
     begin,
     decide,
     finish,
@@ -77,14 +75,8 @@ def run_lanes(
     next.success after it, as datagen.task.rollout records them."""
     results = [None] * len(jobs)
     todo = deque(range(len(jobs)))
-    width = max(1, min(lanes, len(jobs)))
-    pool = _POOL.setdefault(make_env, [])  # this process's envs of this kind, kept between calls
-    if not pool:
-        pool.append(make_env())
-    # One compiled model for all (a load is ~4 ms), and where the env can, one MjData (~1 ms each to
-    # make, and 256 of them compete for the cache): the lanes share the first env's
-    pool += [make_env(share=pool[0]) for _ in range(width - len(pool))]
-    envs = pool[:width]
+    width = max(1, min(lanes, len(jobs), len(envs)))
+    envs = envs[:width]
     obs_buf = np.zeros((width, max_frames + 1, obs_dim), np.float32)  # +1: the obs after the last step
     act_buf = np.zeros((width, max_frames, act_dim), np.float32)
     succ_buf = np.zeros((width, max_frames), bool)
@@ -176,10 +168,20 @@ def resolve_lanes(task: Task, sources: dict, how: Perturbation) -> dict:
 
 
 def attempts_lockstep(
-    task: Task, sources: dict, jobs, how: Perturbation, *, mode="resolve", select="own", lanes=LANES
+    task: Task,
+    sources: dict,
+    jobs,
+    how: Perturbation,
+    *,
+    mode="resolve",
+    select="own",
+    lanes=LANES,
+    sims: engine.Simulators | None = None,
 ) -> list:
     """[datagen.engine.attempt(task, sources[e], k, how, mode=mode, pool=...) for (e, k) in jobs], the
-    same bytes, stepped in lockstep where the mode has lanes (else one attempt at a time)."""
+    same bytes, stepped in lockstep where the mode has lanes (else one attempt at a time). sims: the
+    worker's Simulators (its lanes' envs, kept between shards; a new one when None)."""
+    sims = engine.Simulators() if sims is None else sims
     jobs = list(jobs)
     parts = None
     if mode == "resolve" and task.batch_expert() is not None:
@@ -187,11 +189,11 @@ def attempts_lockstep(
     if mode == "replay" and select == "own":
         parts = task.replay_lanes(sources, how)
     if parts is None:  # the task offers no lanes for this mode: the same results, one at a time
-        return engine.run_attempts(task, sources, jobs, how, mode=mode, select=select, workers=1)
+        return engine.run_attempts(task, sources, jobs, how, mode=mode, select=select, workers=1, sims=sims)
     m = task.env_module
     return run_lanes(
         jobs,
-        make_env=task.make_env,
+        envs=sims.lanes(task, max(1, min(lanes, len(jobs)))),
         step=task.step_batch,
         **parts,
         max_frames=task.max_steps,

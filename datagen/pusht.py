@@ -422,7 +422,7 @@ class PushT(Task):
     def segments(self, source: Source) -> list[Segment]:
         return [Segment(0, len(source.actions), tuple(float(v) for v in block_pose(source.states[0])))]
 
-    def replay(self, env, start, source: Source) -> Outcome:
+    def replay(self, env, start, source: Source, plans: dict | None = None) -> Outcome:
         (segment,) = self.segments(source)
         return replay(env, start, source, segment)
 

@@ -196,9 +196,10 @@ def shard_dir(out: Path, index: int) -> Path:
 # ----------------------------------------------------------------------------------------------
 # Worker side: one shard, returned as bytes
 # ----------------------------------------------------------------------------------------------
-def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | None = None) -> dict:
+def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | None = None, sims=None) -> dict:
     """Run the shard's attempts and write its kept episodes as a LeRobot v3 set (in a temp folder
-    under `scratch`, the system's when None), then read it back as bytes.
+    under `scratch`, the system's when None), then read it back as bytes. sims: the worker's
+    datagen.engine.Simulators, kept between its shards (a new one when None).
 
     Returns {"files": {relative path: bytes}, "stamp": the shard's stamp}. The stamp holds the
     counts the report needs (attempts, kept, failures by reason, per source, episode lengths) and
@@ -207,7 +208,7 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
     how = Perturbation(config["seed"], config["pos_sigma"], config["yaw_sigma"])
     # = engine.run_attempts', bit for bit (tests/test_lockstep.py), attempts stepped together
     results = lockstep.attempts_lockstep(
-        task, sources, jobs, how, mode=config["mode"], select=config["select"]
+        task, sources, jobs, how, mode=config["mode"], select=config["select"], sims=sims
     )
     kept = [r.episode for r in results if r.kept]
     per_source = {}  # source episode -> [attempts, kept]
@@ -627,8 +628,18 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
     # A shard gets the sources its attempts start from; with --select nearest a replay may choose any
     # source, so every shard gets them all.
     pool = sources if config["select"] == "nearest" else None
+    # One Simulators for every shard: a forked worker fills its own copy and keeps it between its shards
+    # (its lanes' envs are made once); on Ray each shard's task gets an empty one.
+    sims = engine.Simulators()
     tasks = [
-        (i, shards[i], pool or {e: sources[e] for e in sorted({e for e, _ in shards[i]})}, config, scratch)
+        (
+            i,
+            shards[i],
+            pool or {e: sources[e] for e in sorted({e for e, _ in shards[i]})},
+            config,
+            scratch,
+            sims,
+        )
         for i in todo
     ]
     timing = {"start_s": 0.0}  # of seconds_generate: starting or joining Ray

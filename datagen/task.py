@@ -28,9 +28,10 @@ subclass; it provides
     segments(source)     the source demo cut into segments, each relative to one object frame
                          (Segment, or the task's own subtask type); replay re-expresses each in the
                          new start's frame
-    replay(env, start, source)
+    replay(env, start, source, plans=None)
                          the source's segments re-expressed for `start` and executed open-loop:
-                         an Outcome (reason None on success)
+                         an Outcome (reason None on success); plans: a dict the caller keeps between
+                         attempts (datagen.engine.Simulators.plans) where a task caches its plans
     success(env)         whether the env reports the task done
     failures             {mode: every reason an attempt of that mode can return}
 
@@ -259,7 +260,7 @@ class Task:
     def segments(self, source: Source) -> list:
         raise NotImplementedError
 
-    def replay(self, env, start, source: Source) -> Outcome:
+    def replay(self, env, start, source: Source, plans: dict | None = None) -> Outcome:
         raise NotImplementedError
 
     def success(self, env) -> bool:
@@ -282,7 +283,7 @@ class Task:
         return None
 
     # ---- the modes, the same for every task ----
-    def resolve(self, source: Source, rng, how: Perturbation, env, pool=None) -> Outcome:
+    def resolve(self, source: Source, rng, how: Perturbation, env, pool=None, plans=None) -> Outcome:
         """1. perturb the source's first state, 2. re-solve with the expert, 3. keep only on success.
         The expert solves the start itself: no source is replayed, so `pool` is not read."""
         start = self.perturb(source.states[0], rng, how)
@@ -291,19 +292,24 @@ class Task:
         ep = rollout(env, self.expert(), self.place(env, start))
         return ended(ep, None if ep["success"] else "expert_failed", start, source.episode)
 
-    def replay_mode(self, source: Source, rng, how: Perturbation, env, pool=None) -> Outcome:
+    def replay_mode(self, source: Source, rng, how: Perturbation, env, pool=None, plans=None) -> Outcome:
         """1. perturb (the same draw as resolve), 2. replay the transformed source (the attempt's own, or
-        given `pool` ({episode: Source}) the pool's nearest to the new start), 3. keep on success."""
+        given `pool` ({episode: Source}) the pool's nearest to the new start), 3. keep on success.
+        plans: the caller's cache of replay plans (datagen.engine.Simulators.plans), None: none kept."""
         start = self.perturb(source.states[0], rng, how)
         if start is None:
             return Outcome("no_valid_start", source_episode=source.episode)
         chosen = pool[self.nearest(pool, start)] if pool else source
-        return self.replay(env, start, chosen)
+        return self.replay(env, start, chosen, plans)
 
-    def run_mode(self, mode: str, source: Source, rng, how: Perturbation, env, pool=None) -> Outcome:
+    def run_mode(
+        self, mode: str, source: Source, rng, how: Perturbation, env, pool=None, plans=None
+    ) -> Outcome:
         """The Outcome of one attempt of `mode` (its source_episode: the source it was made from). pool:
-        the sources --select nearest chooses from (None: the attempt's own)."""
-        return {"resolve": self.resolve, "replay": self.replay_mode}[mode](source, rng, how, env, pool)
+        the sources --select nearest chooses from (None: the attempt's own); plans: the caller's cache
+        of replay plans (None: none kept)."""
+        run = {"resolve": self.resolve, "replay": self.replay_mode}[mode]
+        return run(source, rng, how, env, pool, plans)
 
     @property
     def modes(self) -> tuple[str, ...]:

@@ -110,7 +110,7 @@ def test_the_runner_is_task_agnostic_aloha_episodes_equal_rollout():
     seeds = list(range(12))
     got = lockstep.run_lanes(
         seeds,
-        make_env=ALOHA.make_env,
+        envs=engine.Simulators().lanes(ALOHA, 5),
         begin=lambda seed, env: lockstep.Lane(seed, env.reset(seed)),
         decide=lambda lanes, envs, obs: (expert.act_batch(obs), None),
         finish=lambda lane, env, episode: episode | {"success": bool(episode["next.success"][-1, 0])},
@@ -165,3 +165,18 @@ def test_a_task_without_the_batch_hooks_gives_the_same_results(sources, mode, si
     for task in (PlainPushT(), PerEnvPushT()):
         assert_same_results(want, lockstep.attempts_lockstep(task, sources, jobs, how, mode=mode, lanes=9))
     assert PlainPushT().batch_expert() is None and PlainPushT().replay_lanes(sources, how) is None
+
+
+def test_the_simulators_a_worker_keeps_are_passed_not_hidden():
+    """No module keeps simulators: a Simulators owns them, reuses its lanes between calls, and a copy
+    sent to another process (pickled, as Ray sends a shard's arguments) arrives empty."""
+    import pickle
+
+    from datagen import lockstep as ls
+
+    assert not hasattr(engine, "_ENVS") and not hasattr(ls, "_POOL")
+    sims = engine.Simulators()
+    lanes = sims.lanes(PUSHT, 3)
+    assert sims.lanes(PUSHT, 2) == lanes[:2] and sims.env(PUSHT) is sims.env(PUSHT)
+    copy = pickle.loads(pickle.dumps(sims))
+    assert copy.lanes(PUSHT, 1)[0] is not lanes[0] and copy.plans == {}

@@ -220,13 +220,14 @@ def per_demo_costs(
     sources = engine.sources(load_arrays(src))
     jobs = [(e, k) for e in sorted(sources) for k in range(attempts_per_demo)]
     how = Perturbation(seed=seed, pos_sigma=DEFAULTS["aug_pos_sigma"], yaw_sigma=DEFAULTS["aug_yaw_sigma"])
-    engine.attempt(task, sources[jobs[0][0]], 10**6, how, mode=mode)  # warm up
+    sims = engine.Simulators()  # the envs (and plans) both sides reuse, made once
+    engine.attempt(task, sources[jobs[0][0]], 10**6, how, mode=mode, sims=sims)  # warm up
     times = {"one_at_a_time_s": [], "lockstep_s": [], "physics_s": [], "write_s": []}
     for _ in range(repeats):
         t0 = time.perf_counter()
-        one = [engine.attempt(task, sources[e], k, how, mode=mode) for e, k in jobs]
+        one = [engine.attempt(task, sources[e], k, how, mode=mode, sims=sims) for e, k in jobs]
         t1 = time.perf_counter()
-        together = lockstep.attempts_lockstep(task, sources, jobs, how, mode=mode)
+        together = lockstep.attempts_lockstep(task, sources, jobs, how, mode=mode, sims=sims)
         t2 = time.perf_counter()
         kept = [r.episode for r in together if r.kept]
         if sum(r.kept for r in one) != len(kept):
