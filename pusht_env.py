@@ -125,21 +125,6 @@ def t_sdf(q: np.ndarray) -> np.ndarray:
     return out
 
 
-# The T's two boxes along a leading axis (2, 1, 1), bar first as t_sdf loops: centre y, half x, half y.
-_T_CY, _T_HX, _T_HY = np.array([(0.0, *BAR_HALF), (STEM_CENTER_Y, *STEM_HALF)]).T[:, :, None, None]
-
-
-def t_sdf_xy(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """t_sdf of the points (x, y), for x and y (A, B) of one shape -> (A, B): the bar and the stem
-    broadcast along a leading axis, so every point goes through t_sdf's elementwise operations in
-    the same order (the same bits) in 12 numpy calls instead of 23, for callers that evaluate many
-    small point sets."""
-    ex = np.abs(x) - _T_HX  # (2, A, B): bar, stem
-    ey = np.abs(y - _T_CY) - _T_HY
-    d = np.hypot(np.maximum(ex, 0.0), np.maximum(ey, 0.0)) + np.minimum(np.maximum(ex, ey), 0.0)
-    return np.minimum(d[0], d[1])
-
-
 def t_signed_distance(px: float, py: float, block_x: float, block_y: float, block_yaw: float) -> float:
     """Signed distance (m) from the world point (px, py) to the T at the given pose; negative inside."""
     c, s = math.cos(block_yaw), math.sin(block_yaw)

@@ -49,6 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 import aloha_env
+from datagen.fast_experts import AlohaBatch
 from datagen.task import (
     Outcome,
     Perturbation,
@@ -408,7 +409,7 @@ class Aloha(Task):
         return AlohaExpert(noise=0.0)
 
     def batch_expert(self):
-        return AlohaExpert(noise=0.0).act_batch
+        return AlohaBatch().act_batch
 
     def object_pose(self, state) -> np.ndarray:
         return np.array([float(state[6]), float(state[7]), 0.0])  # the cube (x, y m); it never turns

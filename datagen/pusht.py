@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 import pusht_env
+from datagen.fast_experts import PushTBatch
 from datagen.task import (
     Outcome,
     Perturbation,
@@ -433,7 +434,7 @@ class PushT(Task):
         return replay_lanes(sources, how)
 
     def batch_expert(self):
-        return PushTExpert(noise=0.0).act_batch
+        return PushTBatch().act_batch
 
     def step_batch(self, envs, actions):
         return pusht_env.PushTEnv.step_many(envs, actions)

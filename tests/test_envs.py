@@ -5,6 +5,7 @@ import pytest
 
 import aloha_env
 import pusht_env
+from datagen.fast_experts import PushTBatch
 from scripted_expert import AlohaExpert, PushTExpert
 
 SPECS = [
@@ -88,7 +89,7 @@ def test_pusht_step_many_on_a_shared_mjdata_is_step_bit_for_bit():
     """step_many (datagen.lockstep's batched step) over envs sharing one MjData = step per env, each in
     its own: the same obs, success and done bits, clipped actions and the success latch included, and
     the same poses read between steps; a non-finite action is refused as step refuses it."""
-    expert, rng = PushTExpert(), np.random.default_rng(0)
+    expert, rng = PushTBatch(), np.random.default_rng(0)
     one = [pusht_env.PushTEnv() for _ in range(6)]
     many = [pusht_env.PushTEnv()]
     many += [pusht_env.PushTEnv(share=many[0]) for _ in range(5)]

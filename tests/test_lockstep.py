@@ -1,5 +1,5 @@
 """Lockstep attempts and batched experts give today's one-at-a-time bytes: every decision of
-PushTExpert.act_batch and AlohaExpert.act_batch equals act's bit for bit along real episodes, and
+datagen.fast_experts' PushTBatch and AlohaBatch equals the expert's act bit for bit along real episodes, and
 datagen.lockstep.attempts_lockstep returns exactly what datagen.engine.attempt returns, for both modes
 on PushT and for ALOHA's re-solve."""
 
@@ -11,6 +11,7 @@ import gen_demos_aloha
 import gen_demos_pusht
 import pusht_env
 from datagen import ALOHA, PUSHT, Outcome, Perturbation, engine, lockstep
+from datagen.fast_experts import AlohaBatch, PushTBatch
 from datagen.task import Task, rollout
 from lerobot_v3.dataset import load_arrays
 from scripted_expert import AlohaExpert, PushTExpert
@@ -26,9 +27,9 @@ def states_along(env, expert_class, seeds, noise: float) -> np.ndarray:
     return np.concatenate(obs)
 
 
-def assert_same_decisions(expert, states: np.ndarray, chunk: int) -> None:
+def assert_same_decisions(expert, batch, states: np.ndarray, chunk: int) -> None:
     scalar = np.stack([expert.act(o) for o in states])
-    batched = np.concatenate([expert.act_batch(states[i : i + chunk]) for i in range(0, len(states), chunk)])
+    batched = np.concatenate([batch.act_batch(states[i : i + chunk]) for i in range(0, len(states), chunk)])
     assert batched.dtype == scalar.dtype == np.float32 and batched.shape == scalar.shape
     differ = np.flatnonzero((batched.view(np.uint32) != scalar.view(np.uint32)).any(axis=1))
     assert differ.size == 0, f"{differ.size} of {len(states)} decisions differ, first at row {differ[:1]}"
@@ -37,20 +38,20 @@ def assert_same_decisions(expert, states: np.ndarray, chunk: int) -> None:
 def test_pusht_batched_expert_is_bit_identical():
     states = states_along(pusht_env.PushTEnv(), PushTExpert, range(240), noise=0.3)
     assert len(states) > 3000
-    assert_same_decisions(PushTExpert(), states, chunk=37)  # 37: the batches mix every kind of state
+    assert_same_decisions(PushTExpert(), PushTBatch(), states, chunk=37)  # 37: batches mix every kind
 
 
 def test_aloha_batched_expert_is_bit_identical():
     states = states_along(aloha_env.AlohaCubeEnv(), AlohaExpert, range(16), noise=0.3)
     assert len(states) > 2000
-    assert_same_decisions(AlohaExpert(), states, chunk=29)
+    assert_same_decisions(AlohaExpert(), AlohaBatch(), states, chunk=29)
 
 
 def test_batched_experts_refuse_noise():
     with pytest.raises(ValueError):
-        PushTExpert(noise=0.1).act_batch(np.zeros((2, 10), np.float32))
+        PushTBatch(PushTExpert(noise=0.1))
     with pytest.raises(ValueError):
-        AlohaExpert(noise=0.1).act_batch(np.zeros((2, 10), np.float32))
+        AlohaBatch(AlohaExpert(noise=0.1))
 
 
 @pytest.fixture(scope="module")
@@ -104,9 +105,9 @@ def test_lockstep_reasons_without_a_start(sources):
 
 
 def test_the_runner_is_task_agnostic_aloha_episodes_equal_rollout():
-    """run_lanes with ALOHA's env and AlohaExpert.act_batch (the shape an ALOHA engine task plugs in):
+    """run_lanes with ALOHA's env and AlohaBatch.act_batch (the shape an ALOHA engine task plugs in):
     each episode from env.reset(seed) equals datagen.task.rollout's, frame for frame and bit for bit."""
-    expert = AlohaExpert()
+    expert = AlohaBatch()
     seeds = list(range(12))
     got = lockstep.run_lanes(
         seeds,
@@ -127,7 +128,7 @@ def test_the_runner_is_task_agnostic_aloha_episodes_equal_rollout():
 
 def test_aloha_resolve_in_lockstep_equals_one_at_a_time(tmp_path):
     """ALOHA's re-solve through the engine's lockstep (the generic resolve lanes over the task's parts,
-    AlohaExpert.act_batch deciding) returns exactly datagen.engine.attempt's results."""
+    AlohaBatch.act_batch deciding) returns exactly datagen.engine.attempt's results."""
     out = tmp_path / "aloha3"
     assert gen_demos_aloha.main(["--episodes", "3", "--seed", "0", "--out", str(out), "--quiet"]) == 0
     srcs = engine.sources(load_arrays(out))
