@@ -7,10 +7,10 @@ returns exactly what [datagen.engine.attempt(task, sources[e], k, how, ...) for 
 returns, frame for frame and bit for bit (tests/test_lockstep.py), at a fraction of the Python cost
 per frame: the engine's one-at-a-time path pays the expert's ~40 small numpy calls for every frame of
 every attempt, where here they are paid once per control step for up to `lanes` attempts (the task's
-expert's act_batch: PushTExpert, AlohaExpert), and the env steps them all in one call where it can
-(PushTEnv.step_many). Each attempt still gets its own simulator state, fully reset at its start (PushT's
-lanes keep theirs apart in one shared MjData: PushTEnv(share=)), so its frames do not depend on what
-shares its batch, on the lane it runs in, or on when it was started.
+batch_expert: datagen.fast_experts), and the env steps them all in one call where it can (the task's
+step_batch: datagen.fast_pusht.step_many). Each attempt still gets its own simulator state, fully
+reset at its start (PushT's lanes keep theirs apart in one shared MjData: fast_pusht.SharedPushTEnv),
+so its frames do not depend on what shares its batch, on the lane it runs in, or on when it was started.
 
 The runner (run_lanes) knows no task. A mode hands it
     envs                         the lanes' envs, each with step(action) -> (obs, reward, done,
@@ -18,8 +18,8 @@ The runner (run_lanes) knows no task. A mode hands it
                                     sharing the first's model, and PushT's MjData) and reused between
                                     calls: begin resets an env fully
     step(envs, actions)          -> (obs, success, done) for the live lanes' envs in one call: the
-                                    task's step_batch (PushT's: PushTEnv.step_many; by default env.step
-                                    per env), ch37.parallel.step_envs when not given
+                                    task's step_batch (PushT's: datagen.fast_pusht.step_many; by
+                                    default env.step per env), ch37.parallel.step_envs when not given
     begin(job, env)              -> a Lane placed at its start (lane.obs: its first observation), or a
                                     final result (an Outcome) when there is nothing to simulate
     decide(lanes, envs, obs)     -> (actions (N, act_dim) float32, stop (N,) bool or None): one call for

@@ -44,6 +44,7 @@ import numpy as np
 
 import pusht_env
 from datagen.fast_experts import PushTBatch
+from datagen.fast_pusht import SharedPushTEnv, step_many
 from datagen.task import (
     Outcome,
     Perturbation,
@@ -403,7 +404,7 @@ class PushT(Task):
     }
 
     def make_env(self, share=None):
-        return pusht_env.PushTEnv(share)
+        return SharedPushTEnv(share)
 
     def perturb(self, first_state, rng, how: Perturbation):
         return perturbed_start(first_state, rng, how.pos_sigma, how.yaw_sigma)
@@ -437,7 +438,7 @@ class PushT(Task):
         return PushTBatch().act_batch
 
     def step_batch(self, envs, actions):
-        return pusht_env.PushTEnv.step_many(envs, actions)
+        return step_many(envs, actions)
 
 
 PUSHT = register(PushT())

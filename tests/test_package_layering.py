@@ -35,7 +35,7 @@ PRESENTATION = {"ch37.cli", "ch37.config", "ch37.viz", "ch37.poster", "ch37.resu
 # The engine's fast copies of code in the learner's files (issue 39: the learner's files stay plain),
 # each bit for bit what it copies: a fast copy reads the very constants and state of what it copies (a
 # number copied by hand could drift), so it alone may import the private names of those modules.
-FAST_COPIES = {"datagen.fast_experts": {"scripted_expert", "pusht_env"}}
+FAST_COPIES = {"datagen.fast_experts": {"scripted_expert", "pusht_env"}, "datagen.fast_pusht": {"pusht_env"}}
 ERROR_TYPE = "ch37.errors"
 
 
