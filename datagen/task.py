@@ -1,9 +1,11 @@
 """What a task gives the data engine: MimicGen's env interface, made small.
 
 The engine (datagen.engine: one attempt, keep_first; datagen.shards: the run, its shards, report and
-merge) knows no task. Everything about one task lives in one module named for it (datagen/pusht.py
-today), and only that module imports its env and its expert. A task is an instance of a Task
-subclass; it provides
+merge) knows no task. Everything about one task lives in one module named for it (datagen/pusht.py,
+datagen/aloha.py), and only that module (and the engine's bit-identical fast copies, datagen/fast_*.py)
+imports its env and its expert. A task is an instance of a Task subclass that the module registers as
+it is imported (TASK = register(MyTask()): known_tasks() finds it; no list names it, and the digests
+that guard resumed shards and cached demo sets read its code from what it imports); it provides
 
     name, title, generator
                          the task's key ("pusht"), its name in messages, the command that
