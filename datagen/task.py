@@ -229,7 +229,11 @@ def rollout(env, policy, obs, *, render: bool = False) -> dict:
 
 
 class Task:
-    """The parts a task provides (see the module docstring); the modes are built from them here."""
+    """The contract between the engine and a task, in MimicGen's division of work: the task describes
+    (its env, starts and their perturbation, the expert, the source's segments and their replay,
+    success), the engine runs (the modes below, lockstep, shards, resume, report, merge). A subclass sets
+    the attributes and defines every method that raises NotImplementedError; the lockstep hooks below
+    them have defaults. See the module docstring."""
 
     name: str  # "pusht": its key in known_tasks(), recorded in a run's settings
     title: str  # "PushT": how messages name it
@@ -241,31 +245,51 @@ class Task:
     failures: dict[str, tuple[str, ...]]
     max_steps: int  # control steps an episode may last: the env's limit
 
+    # ---- what every task must provide (each raises until the task defines it) ----
     def make_env(self, share=None):
+        """A new simulator of this task: reset(seed) and step(action) -> (obs (obs_dim,) float32,
+        reward, done, info["success"]). share: an env of this task whose compiled model (and, where the
+        env can, simulator memory) the new one may share; every env keeps its own state."""
         raise NotImplementedError
 
     def perturb(self, first_state, rng, how: Perturbation):
+        """A start near a source's first observation `first_state` ((obs_dim,) float32): a tuple of
+        floats in start_names' order and units (m, rad), drawn from `rng` alone with how.pos_sigma (m)
+        and how.yaw_sigma (rad); None when no valid draw was found (reason "no_valid_start")."""
         raise NotImplementedError
 
     def place(self, env, start):
+        """Put `env` at `start` (perturb's tuple) with fresh counters, fully (nothing of an earlier attempt
+        may survive); returns the first observation ((obs_dim,) float32)."""
         raise NotImplementedError
 
     def expert(self):
+        """The noise-free expert that re-solves a placed start: reset() and act(obs) -> (act_dim,)
+        float32 action, in the env's action units (velocities, m/s, for our two robots)."""
         raise NotImplementedError
 
     def object_pose(self, state) -> np.ndarray:
+        """(x m, y m, yaw rad) of the object the task is about, read from an observation."""
         raise NotImplementedError
 
     def nearest(self, pool: dict, start) -> int:
+        """The episode of the source in `pool` ({episode: Source}) whose objects start nearest `start`'s
+        (MimicGen's nearest source selection); ties to the lowest episode."""
         raise NotImplementedError
 
     def segments(self, source: Source) -> list:
+        """The source demo cut into subtasks, each with its frames [start, stop) and the object frame
+        its motion is relative to (Segment, or the task's own subtask type)."""
         raise NotImplementedError
 
     def replay(self, env, start, source: Source, plans: dict | None = None) -> Outcome:
+        """The source's segments re-expressed for `start` and executed open-loop in `env` (placed here):
+        an Outcome whose episode holds the frames actually executed, reason None when the env reports
+        success, else one of failures["replay"]. plans: the caller's cache for segments (may be None)."""
         raise NotImplementedError
 
     def success(self, env) -> bool:
+        """Whether `env` reports the task done (its latched success)."""
         raise NotImplementedError
 
     # ---- what lockstep needs; each default runs the same bytes one attempt (or one env) at a time ----
