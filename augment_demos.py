@@ -3,7 +3,7 @@ success.
 
     python augment_demos.py --src my_pusht --attempts_per_demo 100 --out big [--workers N | --ray [ADDRESS]]
 
---src is any LeRobot v3 set of a task the engine knows (datagen.TASKS), the task read from the set's
+--src is any LeRobot v3 set of a task the engine knows (datagen.known_tasks()), the task read from the set's
 robot_type (or its widths): PushT (observation.state float32[10], action float32[2], laid out as in
 pusht_env.py; gen_demos_pusht.py) or the ALOHA handoff (float32[10], float32[6], aloha_env.py;
 gen_demos_aloha.py), one made by those commands or your own. It is only read. --out becomes a

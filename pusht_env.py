@@ -125,21 +125,6 @@ def t_sdf(q: np.ndarray) -> np.ndarray:
     return out
 
 
-# The T's two boxes along a leading axis (2, 1, 1), bar first as t_sdf loops: centre y, half x, half y.
-_T_CY, _T_HX, _T_HY = np.array([(0.0, *BAR_HALF), (STEM_CENTER_Y, *STEM_HALF)]).T[:, :, None, None]
-
-
-def t_sdf_xy(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """t_sdf of the points (x, y), for x and y (A, B) of one shape -> (A, B): the bar and the stem
-    broadcast along a leading axis, so every point goes through t_sdf's elementwise operations in
-    the same order (the same bits) in 12 numpy calls instead of 23, for callers that evaluate many
-    small point sets."""
-    ex = np.abs(x) - _T_HX  # (2, A, B): bar, stem
-    ey = np.abs(y - _T_CY) - _T_HY
-    d = np.hypot(np.maximum(ex, 0.0), np.maximum(ey, 0.0)) + np.minimum(np.maximum(ex, ey), 0.0)
-    return np.minimum(d[0], d[1])
-
-
 def t_signed_distance(px: float, py: float, block_x: float, block_y: float, block_yaw: float) -> float:
     """Signed distance (m) from the world point (px, py) to the T at the given pose; negative inside."""
     c, s = math.cos(block_yaw), math.sin(block_yaw)
@@ -159,13 +144,7 @@ def pusher_clear(
     return t_signed_distance(pusher_x, pusher_y, block_x, block_y, block_yaw) >= PUSHER_RADIUS + clearance
 
 
-_STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # everything mj_step reads: a step from it repeats bit for bit
-
-
-class _Seat:
-    """Which of the envs sharing an MjData has its state loaded in it now."""
-
-    owner = None
+_STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # everything mj_step reads: what a copy or a pickle carries
 
 
 def _check(model: mujoco.MjModel) -> None:
@@ -192,22 +171,18 @@ def _check(model: mujoco.MjModel) -> None:
 class PushTEnv:
     """The PushT task. ``reset(seed)`` or ``set_start(...)``, then ``step(action)`` at 10 Hz."""
 
-    def __init__(self, share: PushTEnv | None = None) -> None:
-        """share: another PushTEnv whose compiled model and MjData this one borrows, else pusht.xml
-        is loaded (~4 ms) into a new MjData (~1 ms in MuJoCo's bindings). Envs sharing an MjData
-        keep their own state (``_STATE``) and load it before they touch the simulator, so each
-        steps as if it were alone, bit for bit: datagen.lockstep's lanes share one. Read a shared
-        env's state through its accessors: ``env.data`` holds whichever env's state was loaded last."""
-        if share is not None:  # a model already checked, an MjData already made
-            self.model, self.data, self._seat = share.model, share.data, share._seat
-        else:
-            self.model = mujoco.MjModel.from_xml_path(str(XML_PATH))
-            self.data = mujoco.MjData(self.model)
-            _check(self.model)
-            self._seat = _Seat()
-            self._seat.owner = self
-        self._state = np.zeros(mujoco.mj_stateSize(self.model, _STATE))  # this env's, while parked
-        d = self.data
+    def __init__(self, model: mujoco.MjModel | None = None) -> None:
+        """model: another PushTEnv's compiled pusht.xml to share (MuJoCo only reads a model while it
+        steps), else pusht.xml is loaded (~4 ms) and checked. Each env steps in its own MjData."""
+        if model is None:
+            model = mujoco.MjModel.from_xml_path(str(XML_PATH))
+            _check(model)
+        self.model = model
+        self._attach(mujoco.MjData(model))
+
+    def _attach(self, data: mujoco.MjData) -> None:
+        """Use `data` as this env's simulator: named views into it, fresh counters, the default start."""
+        self.data = d = data
         # Named views into MjData (numpy views of length 1): reading/writing them touches the
         # simulator state directly, with no assumption about where each joint sits in qpos.
         self._bx, self._by, self._byaw = (d.joint(n).qpos for n in ("block_x", "block_y", "block_yaw"))
@@ -224,13 +199,11 @@ class PushTEnv:
     @property
     def pusher_pos(self) -> np.ndarray:
         """Pusher centre (x, y) in m, a copy."""
-        self._claim()
         return np.array([self._px[0], self._py[0]])
 
     @property
     def block_pose(self) -> np.ndarray:
         """Block (x m, y m, yaw rad wrapped to [-pi, pi)), a copy."""
-        self._claim()
         return np.array([self._bx[0], self._by[0], wrap_angle(float(self._byaw[0]))])
 
     @property
@@ -271,7 +244,6 @@ class PushTEnv:
         The caller keeps the pusher clear of the block (see ``pusher_clear``); an overlapping
         start is resolved by the contact solver pushing the two apart on the first step.
         """
-        self._claim()
         mujoco.mj_resetData(self.model, self.data)
         self._bx[0], self._by[0], self._byaw[0] = block_x, block_y, wrap_angle(float(block_yaw))
         self._px[0], self._py[0] = pusher_x, pusher_y
@@ -294,30 +266,9 @@ class PushTEnv:
         info = {"success": self._success, "steps": self._steps, "pos_error": pos_err, "yaw_error": yaw_err}
         return self._observe(), reward, done, info
 
-    @staticmethod
-    def step_many(envs, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """envs[i].step(actions[i]) for every i, bit for bit, without a reward or info per env:
-        (obs (N, OBS_DIM) float32, success (N,) bool, done (N,) bool). One check and one clip for the
-        batch, then only the control writes, the physics and the counters per env: ch37.parallel.step_envs
-        steps with it (the data engine's lanes, the lesson's evaluation)."""
-        n = len(envs)
-        a = np.asarray(actions, dtype=np.float64).reshape(n, ACT_DIM)
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"non-finite action in {a}")
-        a = np.clip(a, -ACTION_LIMIT, ACTION_LIMIT).tolist()  # step's min(max()) for finite values
-        obs = np.empty((n, OBS_DIM), np.float32)
-        success, done = np.empty(n, bool), np.empty(n, bool)
-        for i, env in enumerate(envs):
-            env._advance(*a[i])
-            env._fill(obs[i])
-            success[i] = env._success
-            done[i] = env._success or env._steps >= MAX_STEPS
-        return obs, success, done
-
     def _advance(self, vx: float, vy: float) -> tuple[float, float]:
         """One control step at the clipped velocity (vx, vy) m/s: the physics, the step count and the
         success hold. Returns the pose error after it (pos m, wrapped yaw rad)."""
-        self._claim()
         self._ctrl_x[0], self._ctrl_y[0] = vx, vy
         mujoco.mj_step(self.model, self.data, nstep=SUBSTEPS)
         self._steps += 1
@@ -330,19 +281,6 @@ class PushTEnv:
         if self._hold >= SUCCESS_HOLD:
             self._success = True
         return pos_err, yaw_err
-
-    def _claim(self) -> bool:
-        """Load this env's state into the MjData it shares if another env used it last (that env's
-        state is saved first). True if it loaded: MjData's derived quantities are then stale until the
-        next mj_step or mj_forward."""
-        seat = self._seat
-        if seat.owner is self:
-            return False
-        if seat.owner is not None:
-            mujoco.mj_getState(self.model, self.data, seat.owner._state, _STATE)
-        mujoco.mj_setState(self.model, self.data, self._state, _STATE)
-        seat.owner = self
-        return True
 
     def _observe(self) -> np.ndarray:
         self._fill(self._obs)
@@ -361,11 +299,9 @@ class PushTEnv:
     def __getstate__(self) -> dict:
         """What copy.deepcopy and pickle carry: this env's simulator state (_STATE) and its episode
         counters. Not the MjData, its named views or the renderers: __setstate__ makes them anew, so the
-        copy steps as the env would, bit for bit. A copy of an env made with share= is a standalone env
-        with that env's state: it shares nothing with the envs the original shares with."""
-        state = self._state.copy()
-        if self._seat.owner is self:  # its state lives in the MjData, not (yet) in _state
-            mujoco.mj_getState(self.model, self.data, state, _STATE)
+        copy steps as the env would, bit for bit."""
+        state = np.empty(mujoco.mj_stateSize(self.model, _STATE))
+        mujoco.mj_getState(self.model, self.data, state, _STATE)
         counters = {k: getattr(self, k) for k in ("_steps", "_hold", "_success", "_obs")}
         return {"state": state, **counters}
 
@@ -385,8 +321,6 @@ class PushTEnv:
         if renderer is None:
             renderer = mujoco.Renderer(self.model, height=size, width=size)
             self._renderers[size] = renderer
-        if self._claim():
-            mujoco.mj_forward(self.model, self.data)
         renderer.update_scene(self.data, camera="top")
         return renderer.render().copy()
 

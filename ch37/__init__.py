@@ -24,7 +24,9 @@ ownership.claim (or ownership.check_out_path), ownership.replace_own_dir and pro
 """
 
 import hashlib
+import inspect
 import os
+import sys
 import warnings
 from pathlib import Path
 
@@ -50,23 +52,71 @@ __all__ = [  # the face: the modules above, and the repository's root and code l
     "seeds",
     "viz",
     "CHAPTER_ID",
-    "DATA_CODE",
     "ROOT",
     "code_digest",
+    "code_files",
 ]
 
-# The files that shape the frames of a demo set (paths from ROOT): a set's stamp carries their digest
-# (datagen.demos.generator_version), so a cached set never outlives its code; the engine adds its own
-# (datagen.shards.engine_version). The result cache needs no list: it records what a run imported.
-DATA_CODE = tuple(
-    "pusht_env.py pusht.xml aloha_env.py aloha.xml scripted_expert.py datagen/demos.py datagen/task.py "
-    "lerobot_v3/dataset.py lerobot_v3/chunks.py ch37/seeds.py".split()
-)
+SKIP = (".venv", "tests", "outputs")  # under ROOT, never the code of a result
 
 
-def code_digest(names=DATA_CODE) -> str:
-    """First 12 hex of sha256 over the bytes of `names` (paths from the repository root)."""
+def _ours(f) -> str | None:
+    """The path from ROOT of a project file (SKIP aside), else None."""
+    p = Path(f).resolve() if isinstance(f, (str, Path)) else None
+    if p and p.is_file() and p.is_relative_to(ROOT) and p.relative_to(ROOT).parts[0] not in SKIP:
+        return p.relative_to(ROOT).as_posix()
+    return None
+
+
+def _imported_by(module) -> list:
+    """The modules `module` uses, read from its namespace: the modules it holds and the modules its
+    functions and classes come from. A package's own submodules are not followed: which of them are
+    attributes of it depends on what else this process imported."""
+    out, pkg = [], getattr(module, "__name__", "") + "."
+    for v in list(vars(module).values()):
+        if inspect.ismodule(v):
+            if not v.__name__.startswith(pkg):
+                out.append(v)
+        elif isinstance(getattr(v, "__module__", None), str):  # a function, a class, an instance
+            m = sys.modules.get(v.__module__)
+            if m is not None:
+                out.append(m)
+    return out
+
+
+def code_files(roots=None) -> dict[str, str]:
+    """{path from ROOT: sha256} of the project code loaded in this process, the one home of "the code
+    a result depends on", read from what was imported, never from a list kept by hand.
+
+    roots None: the file of every imported module under the repository (its virtualenv and tests aside):
+    the result cache's record of what a run imported (ch37.result_cache). roots (modules): those modules
+    and every project module they import, transitively (_imported_by), so the same roots give the same
+    files whatever else the process imported: a demo set's digest (datagen.demos.generator_version: the
+    task's env and expert) and a run's (datagen.shards.engine_version: the engine and the task module).
+    Each module brings its file, the model file it names (XML_PATH) and the files it says it reads (READS).
+    """
+    if roots is None:
+        modules = [m for m in list(sys.modules.values()) if _ours(getattr(m, "__file__", None))]
+    else:
+        modules, todo = [], list(roots)
+        seen = set()
+        while todo:
+            m = todo.pop()
+            if id(m) in seen or not _ours(getattr(m, "__file__", None)):
+                continue
+            seen.add(id(m))
+            modules.append(m)
+            todo += _imported_by(m)
+    found = set()
+    for module in modules:  # only our modules are asked what they read
+        named = (module.__dict__.get("XML_PATH"), *module.__dict__.get("READS", ()))
+        found |= {_ours(module.__file__)} | {f for f in map(_ours, named) if f}
+    return {rel: hashlib.sha256((ROOT / rel).read_bytes()).hexdigest() for rel in sorted(found)}
+
+
+def code_digest(roots) -> str:
+    """First 12 hex of sha256 over code_files(roots): the modules `roots` and what they import."""
     h = hashlib.sha256()
-    for name in names:
-        h.update((ROOT / name).read_bytes())
+    for rel, digest in code_files(roots).items():
+        h.update(f"{rel}\0{digest}\n".encode())
     return h.hexdigest()[:12]

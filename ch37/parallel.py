@@ -188,13 +188,20 @@ def _env_serve(envs, seeds, cmd, arg):
 
 def step_envs(envs, actions):
     """envs[i] stepped with actions[i] for every i: (obs (N, obs_dim), success (N,) bool, done (N,)
-    bool). In one call where the envs' class steps a batch (PushTEnv.step_many, the same bits), else
-    env.step per env. LockstepEnvs and the data engine's lanes (datagen.lockstep) step through it."""
-    import numpy as np
-
+    bool). In one call where the envs' class steps a batch (a step_many, the same bits: the engine's
+    datagen.fast_pusht.SharedPushTEnv), else env.step per env (step_each). LockstepEnvs steps through
+    it; the data engine's lanes step through their task's step_batch (datagen.task.Task)."""
     many = getattr(type(envs[0]), "step_many", None)
     if many is not None:
         return many(envs, actions)
+    return step_each(envs, actions)
+
+
+def step_each(envs, actions):
+    """envs[i] stepped with actions[i] by env.step, one env after the other: (obs (N, obs_dim), success
+    (N,) bool, done (N,) bool). Any env with the Gym-like step(action) -> (obs, reward, done, info)."""
+    import numpy as np
+
     obs, success, done = [], np.zeros(len(envs), bool), np.zeros(len(envs), bool)
     for k, (env, a) in enumerate(zip(envs, actions)):
         o, _, done[k], info = env.step(a)

@@ -22,7 +22,7 @@ import sys
 from importlib.metadata import version
 from pathlib import Path
 
-from ch37 import ROOT
+from ch37 import ROOT, code_files
 from ch37.config import NOT_IN_KEY, RESULT_FILES
 from ch37.errors import DataError
 from ch37.ownership import (
@@ -36,7 +36,6 @@ from ch37.ownership import (
 )
 
 MANIFEST, SUMMARY, CODE = "manifest.json", "summary.txt", "code.json"
-SKIP = (".venv", "tests", "outputs")  # under ROOT, never the code of a result
 # summary.txt keeps each written file as NUL + its name + NUL (NUL is in no path and no number), so a
 # replay rebuilds exactly the paths under its own --out, whatever --out's name also matches in the text.
 # Part of the key: an entry in an older summary format is never replayed.
@@ -74,26 +73,6 @@ def result_key(config: dict) -> str:
         if config.get(key):
             _tree_digest(h, Path(config[key]))
     return h.hexdigest()[:24]
-
-
-def code_files() -> dict[str, str]:
-    """{path from ROOT: sha256} of the project files loaded in this process: the file of every imported
-    module under the repository (its virtualenv and tests aside), the model file an env module names
-    (XML_PATH) and the files a module says it reads (READS). Read when a run ends, so it is what that
-    run actually imported."""
-
-    def ours(f) -> str | None:  # path from ROOT of a project file, else None
-        p = Path(f).resolve() if isinstance(f, (str, Path)) else None
-        if p and p.is_file() and p.is_relative_to(ROOT) and p.relative_to(ROOT).parts[0] not in SKIP:
-            return p.relative_to(ROOT).as_posix()
-        return None
-
-    found = set()
-    for module in list(sys.modules.values()):
-        if rel := ours(getattr(module, "__file__", None)):  # only our modules are asked what they read
-            named = (module.__dict__.get("XML_PATH"), *module.__dict__.get("READS", ()))
-            found |= {rel} | {f for f in map(ours, named) if f}
-    return {rel: sha256_bytes((ROOT / rel).read_bytes()) for rel in sorted(found)}
 
 
 def recorded_code(entry: Path):

@@ -1,7 +1,8 @@
 """The data engine: grow a demo set of any task that implements datagen.task.Task, MimicGen-style.
 
 task       Task (what a task provides: env, start names, perturbation, place, expert, segments,
-           replay, success), Perturbation, Source, Segment, rollout, write_dataset (a stamped set)
+           replay, success), Outcome (what one attempt came to), Perturbation, Source, Segment,
+           rollout, write_dataset (a stamped set)
 demos      expert demo sets: Embodiment, generate, ensure_demos (the chapter's private demo cache),
            check_given (a set you name, checked and never modified)
 pusht      PUSHT: PushT as a task (the only module here that imports pusht_env and its expert)
@@ -11,7 +12,8 @@ engine     one attempt, keep_first, grow, run_attempts, save: task-agnostic
 shards     a run on disk: fixed shards on local processes or Ray (ch37.parallel.map_jobs), resume,
            the generation report, the merge (lerobot_v3.merge_sets)
 
-TASKS maps a task's name to it.
+A task registers itself when its module is imported (datagen.task.register); known_tasks() imports every
+module of the package and returns them by name, so a new task is one module here, listed nowhere else.
 """
 
 from datagen.aloha import ALOHA
@@ -30,9 +32,17 @@ from datagen.engine import (
     sources,
 )
 from datagen.pusht import PUSHT
-from datagen.task import Perturbation, Segment, Source, Task, rollout, write_dataset
-
-TASKS = {PUSHT.name: PUSHT, ALOHA.name: ALOHA}
+from datagen.task import (
+    Outcome,
+    Perturbation,
+    Segment,
+    Source,
+    Task,
+    known_tasks,
+    register,
+    rollout,
+    write_dataset,
+)
 
 __all__ = [
     "ALOHA",
@@ -40,7 +50,7 @@ __all__ = [
     "Embodiment",
     "KEPT_KEYS",
     "PUSHT",
-    "TASKS",
+    "Outcome",
     "Perturbation",
     "Segment",
     "Source",
@@ -55,6 +65,8 @@ __all__ = [
     "generate",
     "grow",
     "keep_first",
+    "known_tasks",
+    "register",
     "rollout",
     "run_attempts",
     "save",

@@ -6,7 +6,7 @@ imports aloha_env and its expert.
     ep = resolve(env, start)                                    # the noise-free AlohaExpert
     steps = plan(env, source)                                   # the source's subtasks, by grasp signals
                                                                 # (whole(source): one segment, for contrast)
-    ep, why = replay(env, start, source, steps)                 # why: None (kept) or a REPLAY_FAILURES entry
+    got = replay(env, start, source, steps)                     # an Outcome: reason None (kept) or why not
     e = nearest(sources, start)                                 # MimicGen's nearest source selection
 
 Every function is a pure function of its arguments (the env is fully placed by set_start first).
@@ -49,7 +49,18 @@ from dataclasses import dataclass
 import numpy as np
 
 import aloha_env
-from datagen.task import Perturbation, Source, Task, recorded, rollout, transform_segment
+from datagen.fast_experts import AlohaBatch
+from datagen.task import (
+    Outcome,
+    Perturbation,
+    Source,
+    Task,
+    ended,
+    recorded,
+    register,
+    rollout,
+    transform_segment,
+)
 from scripted_expert import AlohaExpert
 
 __all__ = [
@@ -265,12 +276,12 @@ def bridge(now, first: dict, grips: dict) -> list[tuple[dict, dict, dict]]:
     return steps
 
 
-def replay(env, start, source: Source, steps: list[Subtask] | None = None) -> tuple[dict, str | None]:
+def replay(env, start, source: Source, steps: list[Subtask] | None = None) -> Outcome:
     """Replay `source` from `start` (START_NAMES) subtask by subtask, open-loop, in the real physics.
 
-    steps: the source's plan (computed here when None). Returns the episode (the frames and actions
-    actually executed, as datagen.task.rollout returns them) and None when the env reports success,
-    else the first REPLAY_FAILURES reason that applies, in that order."""
+    steps: the source's plan (computed here when None). Returns the Outcome (its episode: the frames and
+    actions actually executed, as datagen.task.rollout returns them), its reason None when the env
+    reports success, else the first REPLAY_FAILURES reason that applies, in that order."""
     steps = plan(env, source) if steps is None else steps
     obs = env.set_start(*start)
     states, actions, succ = [], [], []
@@ -318,16 +329,18 @@ def replay(env, start, source: Source, steps: list[Subtask] | None = None) -> tu
         act(here, {a: np.zeros(2) for a in ARMS}, grips)
     ep = recorded(aloha_env, states, actions, succ, env.success)
     if env.success:
-        return ep, None
-    if out_of_reach:
-        return ep, "path_out_of_reach"
-    if not held[0]:
-        return ep, "grasp_missed"
-    if not held[1]:
-        return ep, "handoff_missed"
-    if not planned:
-        return ep, "out_of_time"
-    return ep, "finished_off_target"
+        why = None
+    elif out_of_reach:
+        why = "path_out_of_reach"
+    elif not held[0]:
+        why = "grasp_missed"
+    elif not held[1]:
+        why = "handoff_missed"
+    elif not planned:
+        why = "out_of_time"
+    else:
+        why = "finished_off_target"
+    return ended(ep, why, start, source.episode)
 
 
 # ---------------------------------------------------------------------------------------- selection
@@ -352,23 +365,22 @@ def attempt(
     mode: str = "resolve",
     pool: dict | None = None,
     plans: dict | None = None,
-):
-    """One attempt from `source` with the generator `rng`: (episode, start, replayed source episode) or
-    a FAILURES[mode] reason.
+) -> Outcome:
+    """One attempt from `source` with the generator `rng`: its Outcome (reason None, or a FAILURES[mode]
+    entry; source_episode: the source replayed).
 
     mode "resolve": the expert re-solves the perturbed start. Mode "replay": the perturbed start (the
     same draw) replayed from `source` itself, or, given `pool` ({episode: Source}), from the pool's
     source nearest the new start (MimicGen's selection). plans: {episode: [Subtask]} to reuse."""
     start = perturbed_start(source.states[0], rng, pos_sigma)
     if start is None:
-        return "no_valid_start"
+        return Outcome("no_valid_start", source_episode=source.episode)
     if mode == "resolve":
         ep = resolve(env, start)
-        return (ep, start, source.episode) if ep["success"] else "expert_failed"
+        return ended(ep, None if ep["success"] else "expert_failed", start, source.episode)
     chosen = pool[nearest(pool, start)] if pool else source
     steps = plans.get(chosen.episode) if plans else None
-    ep, why = replay(env, start, chosen, steps)
-    return why or (ep, start, chosen.episode)
+    return replay(env, start, chosen, steps)
 
 
 # ---------------------------------------------------------------------------------------- the task
@@ -382,9 +394,7 @@ class Aloha(Task):
     env_module = aloha_env
     state_ranges, action_ranges = STATE_RANGES, ACTION_RANGES
     failures = FAILURES
-
-    def __init__(self):
-        self._plans = {}  # (episode, sha256 of its frames) -> [Subtask]: a pure function of the source
+    max_steps = aloha_env.MAX_STEPS
 
     def make_env(self, share=None):
         return aloha_env.AlohaCubeEnv(share.model if share is not None else None)
@@ -398,31 +408,37 @@ class Aloha(Task):
     def expert(self):
         return AlohaExpert(noise=0.0)
 
+    def batch_expert(self):
+        return AlohaBatch().act_batch
+
     def object_pose(self, state) -> np.ndarray:
         return np.array([float(state[6]), float(state[7]), 0.0])  # the cube (x, y m); it never turns
 
     def nearest(self, pool: dict, start) -> int:
         return nearest(pool, start)
 
-    def segments(self, source: Source) -> list[Subtask]:
-        """The source's subtasks (plan), re-simulated once per source and process. Raises ValueError
-        for a source without a grasp and a handoff, or one that does not re-simulate."""
+    def segments(self, source: Source, plans: dict | None = None) -> list[Subtask]:
+        """The source's subtasks (plan), re-simulated once per source in `plans` (the caller's cache,
+        keyed by the task, the episode and the sha256 of its frames: a plan is a pure function of the
+        source). Raises ValueError for a source without a grasp and a handoff, or one that does not
+        re-simulate."""
         h = hashlib.sha256(np.ascontiguousarray(source.states).tobytes())
         h.update(np.ascontiguousarray(source.actions).tobytes())
-        key = (source.episode, h.hexdigest())
-        if key not in self._plans:
-            self._plans[key] = plan(self.make_env(), source)
-        return self._plans[key]
+        key = (self.name, source.episode, h.hexdigest())
+        plans = {} if plans is None else plans
+        if key not in plans:
+            plans[key] = plan(self.make_env(), source)
+        return plans[key]
 
-    def replay(self, env, start, source: Source) -> tuple[dict, str | None]:
+    def replay(self, env, start, source: Source, plans: dict | None = None) -> Outcome:
         try:
-            steps = self.segments(source)
+            steps = self.segments(source, plans)
         except ValueError:
-            return {}, SOURCE_UNSPLIT
+            return Outcome(SOURCE_UNSPLIT, None, start, source.episode)
         return replay(env, start, source, steps)
 
     def success(self, env) -> bool:
         return bool(env.success)
 
 
-ALOHA = Aloha()
+ALOHA = register(Aloha())

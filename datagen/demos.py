@@ -34,11 +34,13 @@ if sys.platform.startswith("linux"):  # headless rendering: EGL unless the user 
 os.environ.setdefault("SVT_LOG", "1")  # the AV1 encoder's banner: errors only
 
 
-# Any edit to the files that shape frames, or another lerobot (the writer of its files), changes the
-# version, so a cached set can never outlive the code that made it.
+# Any edit to the code that shapes a set's frames (this module, the env and the expert, and every project
+# module they import: ch37.code_files reads them from what was imported), or another lerobot (the writer
+# of its files), changes the version, so a cached set can never outlive the code that made it.
 @functools.cache
-def generator_version() -> str:  # computed at the first set made or checked, not at import
-    return f"3+{code_digest()}+lerobot{version('lerobot')}"
+def generator_version(env_module, expert_class) -> str:  # at the first set made or checked, not at import
+    roots = (sys.modules[__name__], env_module, sys.modules[expert_class.__module__])
+    return f"3+{code_digest(roots)}+lerobot{version('lerobot')}"
 
 
 @dataclass(frozen=True)
@@ -93,7 +95,7 @@ def stamp_for(emb: Embodiment, *, episodes: int, seed: int, noise: float, video:
         "seed": int(seed),
         "noise": float(noise),
         "video": bool(video),
-        "generator_version": generator_version(),
+        "generator_version": generator_version(emb.env_module, emb.expert_class),
     }
 
 

@@ -1,7 +1,7 @@
 """The data engine's unit of work, for any task (datagen.task.Task): one attempt = perturb a source
 start, re-solve or replay it, keep it if it succeeds.
 
-    attempt(task, source, k, how, mode="resolve") -> a kept episode or a reason
+    attempt(task, source, k, how, mode="resolve") -> an Outcome (datagen.task.Outcome: kept or why not)
 
 is a pure function of its arguments: attempt k of source episode e draws from its own generator,
 np.random.default_rng([env_seed(seed, "aug", e), k]), and the sim is fully reset at the perturbed
@@ -18,15 +18,17 @@ successes in k order, whatever batches the attempts ran in. grow() is keep_first
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from ch37.parallel import map_jobs
 from ch37.seeds import env_seed
-from datagen.task import Perturbation, Source, Task
+from datagen.task import Outcome, Perturbation, Source, Task
 
 __all__ = [
     "ATTEMPTS_PER_KEPT",
+    "Simulators",
     "KEPT_KEYS",
     "SELECTS",
     "attempt",
@@ -77,22 +79,64 @@ def empty_kept(task: Task) -> dict:
     return out | {"episode_index": np.zeros(0, np.int64), "aug.source_episode": np.zeros((0, 1), np.int64)}
 
 
-_ENVS: dict[str, object] = {}  # task name -> this process's simulator, fully reset by place() per attempt
+class Simulators:
+    """What a worker keeps between the attempts it runs: per task, the env of attempts one at a time
+    (env), the envs of lockstep's lanes (lanes), and the sources' replay plans (plans, a cache the task's
+    replay fills: ALOHA's subtasks). Each attempt fully resets its env (task.place), so reuse changes no
+    bit. Made by whoever runs the attempts (run_attempts, a run's shards) and passed down explicitly;
+    a copy sent to another process (pickled: Ray) arrives empty, and a forked worker fills its own."""
+
+    def __init__(self):
+        self._env: dict[str, object] = {}  # task name -> its env for attempts one at a time
+        self._lanes: dict[str, list] = {}  # task name -> lockstep's envs, the first shared by the rest
+        self.plans: dict = {}  # the task's key for a source -> its replay plan
+
+    def env(self, task: Task):
+        if task.name not in self._env:
+            self._env[task.name] = task.make_env()
+        return self._env[task.name]
+
+    def lanes(self, task: Task, n: int) -> list:
+        """n envs of `task` for lockstep's lanes, made once and reused. One compiled model for all (a load
+        is ~4 ms), and where the env can, one MjData (~1 ms each to make, and 256 of them compete for
+        the cache): the lanes share the first env (task.make_env(share=))."""
+        pool = self._lanes.setdefault(task.name, [])
+        if not pool:
+            pool.append(task.make_env())
+        pool += [task.make_env(share=pool[0]) for _ in range(n - len(pool))]
+        return pool[:n]
+
+    def __getstate__(self):
+        return {}
+
+    def __setstate__(self, state):
+        self.__init__()
 
 
 def attempt(
-    task: Task, source: Source, k: int, how: Perturbation, *, mode: str = "resolve", env=None, pool=None
-):
-    """Attempt k from `source`: a kept episode (arrays per frame, with provenance) or a failure reason.
+    task: Task,
+    source: Source,
+    k: int,
+    how: Perturbation,
+    *,
+    mode: str = "resolve",
+    env=None,
+    pool=None,
+    sims: Simulators | None = None,
+) -> Outcome:
+    """Attempt k from `source`: its Outcome, a kept one's episode with its provenance on every frame
+    (arrays per frame), a failed one's without frames (episode None; steps says how many ran).
     pool: {episode: Source} a replay chooses its source from (the nearest, MimicGen's selection);
-    None replays the attempt's own. aug.source_episode is the source actually replayed."""
+    None replays the attempt's own. aug.source_episode is the source actually replayed.
+    env: the simulator to use (else sims' env for the task, else a new one); sims: what a worker keeps
+    between attempts (Simulators: its env and the replay plans). Neither changes a bit of the result."""
     if env is None:
-        env = _ENVS.get(task.name) or _ENVS.setdefault(task.name, task.make_env())
-    got = task.run_mode(mode, source, attempt_rng(how.seed, source.episode, k), how, env, pool)
-    if isinstance(got, str):
-        return got
-    ep, start, used = got
-    return with_provenance(ep, used, start)
+        env = sims.env(task) if sims is not None else task.make_env()
+    plans = sims.plans if sims is not None else None
+    got = task.run_mode(mode, source, attempt_rng(how.seed, source.episode, k), how, env, pool, plans)
+    if not got.kept:
+        return replace(got, episode=None)
+    return replace(got, episode=with_provenance(got.episode, got.source_episode, got.start))
 
 
 def with_provenance(ep: dict, source_episode: int, start) -> dict:
@@ -107,7 +151,7 @@ def with_provenance(ep: dict, source_episode: int, start) -> dict:
 def keep_first(episodes, per_source: int, run_jobs, *, reasons, cap: int = ATTEMPTS_PER_KEPT):
     """The first `per_source` kept attempts (k = 0, 1, ...) of each source episode, the MimicGen way.
 
-    run_jobs([(episode, k), ...]) -> [attempt result, ...] in the same order (any executor).
+    run_jobs([(episode, k), ...]) -> [Outcome, ...] in the same order (any executor).
     Attempts run in rounds: k < per_source first, then, for an episode still short, more k's sized by
     its yield so far. Whatever the rounds, the kept set is the first per_source successes in k order
     and `attempts` counts k's up to the last one kept (all cap x per_source when an episode falls
@@ -119,7 +163,7 @@ def keep_first(episodes, per_source: int, run_jobs, *, reasons, cap: int = ATTEM
     while True:
         jobs = []
         for e, got in done.items():
-            n_kept = sum(not isinstance(r, str) for r in got)
+            n_kept = sum(r.kept for r in got)
             if n_kept >= per_source or len(got) >= limit:
                 continue
             rate = max(n_kept / len(got), 1 / cap) if got else 1.0
@@ -136,11 +180,11 @@ def keep_first(episodes, per_source: int, run_jobs, *, reasons, cap: int = ATTEM
             if n == per_source:
                 break  # attempted in a round, but beyond the last one this episode keeps: not counted
             attempts += 1
-            if isinstance(r, str):
-                failures[r] += 1
-            else:
-                kept.append(r)
+            if r.kept:
+                kept.append(r.episode)
                 n += 1
+            else:
+                failures[r.reason] += 1
     return kept, attempts, failures
 
 
@@ -160,15 +204,26 @@ def first_per_source(episode_index, source_episode, take) -> np.ndarray:
 
 
 def run_attempts(
-    task: Task, sources: dict, jobs, how: Perturbation, *, mode="resolve", select="own", workers=1, bar=None
+    task: Task,
+    sources: dict,
+    jobs,
+    how: Perturbation,
+    *,
+    mode="resolve",
+    select="own",
+    workers=1,
+    bar=None,
+    sims: Simulators | None = None,
 ):
     """[attempt(task, sources[e], k, how, mode=mode) for (e, k) in jobs], in order, on `workers` processes.
-    select "nearest": each replay transforms the source of `sources` nearest its start (SELECTS)."""
+    select "nearest": each replay transforms the source of `sources` nearest its start (SELECTS).
+    sims: the Simulators the attempts reuse (a new one when None; a forked worker fills its own copy)."""
     pool = sources if select == "nearest" else None
+    sims = Simulators() if sims is None else sims
 
     def one(job):
         e, k = job
-        return attempt(task, sources[e], k, how, mode=mode, pool=pool)
+        return attempt(task, sources[e], k, how, mode=mode, pool=pool, sims=sims)
 
     return list(map_jobs(one, jobs, workers=workers, bar=bar))
 

@@ -7,28 +7,31 @@ returns exactly what [datagen.engine.attempt(task, sources[e], k, how, ...) for 
 returns, frame for frame and bit for bit (tests/test_lockstep.py), at a fraction of the Python cost
 per frame: the engine's one-at-a-time path pays the expert's ~40 small numpy calls for every frame of
 every attempt, where here they are paid once per control step for up to `lanes` attempts (the task's
-expert's act_batch: PushTExpert, AlohaExpert), and the env steps them all in one call where it can
-(PushTEnv.step_many). Each attempt still gets its own simulator state, fully reset at its start (PushT's
-lanes keep theirs apart in one shared MjData: PushTEnv(share=)), so its frames do not depend on what
-shares its batch, on the lane it runs in, or on when it was started.
+batch_expert: datagen.fast_experts), and the env steps them all in one call where it can (the task's
+step_batch: datagen.fast_pusht.step_many). Each attempt still gets its own simulator state, fully
+reset at its start (PushT's lanes keep theirs apart in one shared MjData: fast_pusht.SharedPushTEnv),
+so its frames do not depend on what shares its batch, on the lane it runs in, or on when it was started.
 
 The runner (run_lanes) knows no task. A mode hands it
-    make_env(share=None)         -> an env with step(action) -> (obs, reward, done, info["success"]),
-                                    stepped through ch37.parallel.step_envs (in one call where its
-                                    class has step_many: PushTEnv's); the lanes' envs are made with
-                                    share=the first (its model, and PushT's MjData), once per
-                                    process and reused: begin resets an env fully
+    envs                         the lanes' envs, each with step(action) -> (obs, reward, done,
+                                    info["success"]); made by the caller (datagen.engine.Simulators:
+                                    sharing the first's model, and PushT's MjData) and reused between
+                                    calls: begin resets an env fully
+    step(envs, actions)          -> (obs, success, done) for the live lanes' envs in one call: the
+                                    task's step_batch (PushT's: datagen.fast_pusht.step_many; by
+                                    default env.step per env), ch37.parallel.step_envs when not given
     begin(job, env)              -> a Lane placed at its start (lane.obs: its first observation), or a
-                                    final result (a failure reason) when there is nothing to simulate
+                                    final result (an Outcome) when there is nothing to simulate
     decide(lanes, envs, obs)     -> (actions (N, act_dim) float32, stop (N,) bool or None): one call for
                                     every live lane; a stopped lane ends before this step (replay's
                                     segment ran out) and is not stepped
     finish(lane, env, episode)   -> the attempt's result, from the frames recorded for it
 and the runner keeps `lanes` envs busy, refilling a lane as soon as its attempt ends, recording every
 frame into preallocated arrays (lanes x max_frames), and returns the results in job order.
-Mode "resolve" is built here for every task from its parts (perturb, place, expert().act_batch);
-mode "replay" from task.replay_lanes (PushT's one-segment replay) where the task has it, else (ALOHA's
-subtask replay, and --select nearest) the attempts run one at a time through datagen.engine.attempt.
+Mode "resolve" is built here for every task from its parts (perturb, place, batch_expert, step_batch,
+max_steps: the Task contract, datagen.task); mode "replay" from task.replay_lanes (PushT's one-segment
+replay) where the task has it. A task without a batch expert or replay lanes (ALOHA's subtask replay,
+and --select nearest) runs those attempts one at a time through datagen.engine.attempt, the same bytes.
 """
 
 from __future__ import annotations
@@ -39,14 +42,11 @@ import numpy as np
 
 from ch37.parallel import step_envs
 from datagen import engine
-from datagen.task import Perturbation, Task
+from datagen.task import Outcome, Perturbation, Task
 
-__all__ = ["LANES", "Lane", "attempts_lockstep", "resolve_lanes", "run_lanes", "start_of_job"]
+__all__ = ["LANES", "Lane", "attempts_lockstep", "kept_or_not", "resolve_lanes", "run_lanes", "start_of_job"]
 
 LANES = 256  # attempts stepped together per worker (ALOHA's lane: an MjData, 0.44 MiB, ~1 ms to make)
-
-
-_POOL: dict = {}  # make_env -> envs made in this process; each attempt fully resets its env (begin)
 
 
 class Lane:
@@ -58,21 +58,25 @@ class Lane:
 
 
 def run_lanes(
-    jobs, *, make_env, begin, decide, finish, max_frames: int, obs_dim: int, act_dim: int, lanes: int
+    jobs,
+    *,
+    envs: list,
+    begin,
+    decide,
+    finish,
+    max_frames: int,
+    obs_dim: int,
+    act_dim: int,
+    lanes: int,
+    step=step_envs,
 ):
     """[result of job] for every job, in order, with up to `lanes` attempts stepped together (see the
     module docstring). Frame t of a lane pairs the observation before action t with action t and
     next.success after it, as datagen.task.rollout records them."""
     results = [None] * len(jobs)
     todo = deque(range(len(jobs)))
-    width = max(1, min(lanes, len(jobs)))
-    pool = _POOL.setdefault(make_env, [])  # this process's envs of this kind, kept between calls
-    if not pool:
-        pool.append(make_env())
-    # One compiled model for all (a load is ~4 ms), and where the env can, one MjData (~1 ms each to
-    # make, and 256 of them compete for the cache): the lanes share the first env's
-    pool += [make_env(share=pool[0]) for _ in range(width - len(pool))]
-    envs = pool[:width]
+    width = max(1, min(lanes, len(jobs), len(envs)))
+    envs = envs[:width]
     obs_buf = np.zeros((width, max_frames + 1, obs_dim), np.float32)  # +1: the obs after the last step
     act_buf = np.zeros((width, max_frames, act_dim), np.float32)
     succ_buf = np.zeros((width, max_frames), bool)
@@ -116,7 +120,7 @@ def run_lanes(
             slots, at, actions = slots[~stop], at[~stop], actions[~stop]
             if not len(slots):
                 continue
-        o, success, done = step_envs([envs[s] for s in slots.tolist()], actions)
+        o, success, done = step([envs[s] for s in slots.tolist()], actions)
         obs_buf[slots, at + 1] = o
         succ_buf[slots, at] = success
         t[slots] = at + 1
@@ -134,45 +138,65 @@ def start_of_job(task: Task, sources: dict, job, how: Perturbation):
     return task.perturb(sources[e].states[0], engine.attempt_rng(how.seed, e, k), how)
 
 
+def kept_or_not(lane: Lane, episode: dict, success: bool, reason: str) -> Outcome:
+    """The Outcome datagen.engine.attempt gives for the frames `episode` recorded for `lane`: kept with
+    its provenance when `success` (for resolve: the last frame's, as rollout's), else `reason`."""
+    e, steps = lane.job[0], len(episode["action"])
+    if not success:
+        return Outcome(reason, None, lane.start, e, steps)
+    episode = engine.with_provenance(episode | {"success": success}, e, lane.start)
+    return Outcome(None, episode, lane.start, e, steps)
+
+
 def resolve_lanes(task: Task, sources: dict, how: Perturbation) -> dict:
     """Mode "resolve": the task's noise-free expert from each perturbed start, kept on success."""
-    expert = task.expert()
+    act_batch = task.batch_expert()
 
     def begin(job, env):
         start = start_of_job(task, sources, job, how)
         if start is None:
-            return "no_valid_start"
+            return Outcome("no_valid_start", source_episode=job[0])
         return Lane(job, task.place(env, start), start=start)
 
     def decide(lanes, envs, obs):
-        return expert.act_batch(obs), None
+        return act_batch(obs), None
 
     def finish(lane, env, episode):
-        success = bool(episode["next.success"][-1, 0])  # rollout's success: the last frame's
-        if not success:
-            return "expert_failed"
-        return engine.with_provenance(episode | {"success": success}, lane.job[0], lane.start)
+        return kept_or_not(lane, episode, bool(episode["next.success"][-1, 0]), "expert_failed")
 
     return {"begin": begin, "decide": decide, "finish": finish}
 
 
 def attempts_lockstep(
-    task: Task, sources: dict, jobs, how: Perturbation, *, mode="resolve", select="own", lanes=LANES
+    task: Task,
+    sources: dict,
+    jobs,
+    how: Perturbation,
+    *,
+    mode="resolve",
+    select="own",
+    lanes=LANES,
+    sims: engine.Simulators | None = None,
 ) -> list:
     """[datagen.engine.attempt(task, sources[e], k, how, mode=mode, pool=...) for (e, k) in jobs], the
-    same bytes, stepped in lockstep where the mode has lanes (else one attempt at a time)."""
+    same bytes, stepped in lockstep where the mode has lanes (else one attempt at a time). sims: the
+    worker's Simulators (its lanes' envs, kept between shards; a new one when None)."""
+    sims = engine.Simulators() if sims is None else sims
     jobs = list(jobs)
-    parts = resolve_lanes(task, sources, how) if mode == "resolve" else None
+    parts = None
+    if mode == "resolve" and task.batch_expert() is not None:
+        parts = resolve_lanes(task, sources, how)
     if mode == "replay" and select == "own":
         parts = task.replay_lanes(sources, how)
-    if parts is None:
-        return engine.run_attempts(task, sources, jobs, how, mode=mode, select=select, workers=1)
+    if parts is None:  # the task offers no lanes for this mode: the same results, one at a time
+        return engine.run_attempts(task, sources, jobs, how, mode=mode, select=select, workers=1, sims=sims)
     m = task.env_module
     return run_lanes(
         jobs,
-        make_env=task.make_env,
+        envs=sims.lanes(task, max(1, min(lanes, len(jobs)))),
+        step=task.step_batch,
         **parts,
-        max_frames=m.MAX_STEPS,
+        max_frames=task.max_steps,
         obs_dim=m.OBS_DIM,
         act_dim=m.ACT_DIM,
         lanes=lanes,

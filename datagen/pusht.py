@@ -43,7 +43,20 @@ from dataclasses import dataclass
 import numpy as np
 
 import pusht_env
-from datagen.task import Perturbation, Segment, Source, Task, recorded, rotation, transform_segment
+from datagen.fast_experts import PushTBatch
+from datagen.fast_pusht import SharedPushTEnv, step_many
+from datagen.task import (
+    Outcome,
+    Perturbation,
+    Segment,
+    Source,
+    Task,
+    ended,
+    recorded,
+    register,
+    rotation,
+    transform_segment,
+)
 from scripted_expert import PushTExpert
 
 __all__ = [
@@ -106,13 +119,13 @@ MOVED_TOL = (0.002, 0.02)  # m, rad: the approach "hit the block" if it moved it
 REACH = pusht_env.WALL_INNER - pusht_env.PUSHER_RADIUS  # m: the pusher centre's reach from the centre
 
 
-def replay(env, start, source: Source, segment: Segment | None = None) -> tuple[dict, str | None]:
+def replay(env, start, source: Source, segment: Segment | None = None) -> Outcome:
     """Replay `source` from `start` (see START_NAMES): approach, then its transformed commands open-loop.
 
-    Returns the episode (the frames and actions actually executed, as datagen.task.rollout returns them)
-    and, when the env did not report success, the reason: approach_blocked (the approach moved the
-    block), path_off_table (a transformed waypoint lies beyond the walls), out_of_time (the episode
-    ended before the segment did), or finished_off_target (the segment ran to its end off target).
+    Returns the Outcome, its episode the frames and actions actually executed (as datagen.task.rollout
+    returns them) and, when the env did not report success, its reason: approach_blocked (the approach
+    moved the block), path_off_table (a transformed waypoint lies beyond the walls), out_of_time (the
+    episode ended before the segment did), or finished_off_target (the segment ran to its end off target).
     """
     seg = segment or Segment(0, len(source.actions), tuple(block_pose(source.states[0])))
     path, commands = transform_segment(
@@ -149,14 +162,16 @@ def replay(env, start, source: Source, segment: Segment | None = None) -> tuple[
         executed += 1
     ep = recorded(pusht_env, states, actions, succ, env.success)
     if env.success:
-        return ep, None
-    if blocked:
-        return ep, "approach_blocked"
-    if np.any(np.abs(path) > REACH):
-        return ep, "path_off_table"
-    if executed < len(commands):
-        return ep, "out_of_time"
-    return ep, "finished_off_target"
+        why = None
+    elif blocked:
+        why = "approach_blocked"
+    elif np.any(np.abs(path) > REACH):
+        why = "path_off_table"
+    elif executed < len(commands):
+        why = "out_of_time"
+    else:
+        why = "finished_off_target"
+    return ended(ep, why, start, source.episode)
 
 
 # ---------------------------------------------------------------- MimicGen by subtasks, nearest selection
@@ -217,14 +232,13 @@ def subtask_segment(source: Source, sub: Subtask, now, push_frame: str = "block+
     return out_p, out_v
 
 
-def replay_subtasks(
-    env, start, source: Source, steps=None, push_frame: str = "block+target"
-) -> tuple[dict, str | None]:
+def replay_subtasks(env, start, source: Source, steps=None, push_frame: str = "block+target") -> Outcome:
     """Replay `source` from `start` (START_NAMES) subtask by subtask in the real physics.
 
-    Returns the episode (frames and actions executed, as datagen.task.rollout returns them) and None on the
-    env's success, else the first replay failure that applies: approach_blocked (a bridge into a subtask
-    moved the block), path_off_table (a waypoint beyond the walls), out_of_time, finished_off_target."""
+    Returns the Outcome (its episode: frames and actions executed, as datagen.task.rollout returns them),
+    its reason None on the env's success, else the first replay failure that applies: approach_blocked (a
+    bridge into a subtask moved the block), path_off_table (a waypoint beyond the walls), out_of_time,
+    finished_off_target."""
     steps = split(source) if steps is None else steps
     obs = env.set_start(*start)
     states, actions, succ = [], [], []
@@ -264,14 +278,16 @@ def replay_subtasks(
     planned = not done or env.success
     ep = recorded(pusht_env, states, actions, succ, env.success)
     if env.success:
-        return ep, None
-    if blocked:
-        return ep, "approach_blocked"
-    if off_table:
-        return ep, "path_off_table"
-    if not planned:
-        return ep, "out_of_time"
-    return ep, "finished_off_target"
+        why = None
+    elif blocked:
+        why = "approach_blocked"
+    elif off_table:
+        why = "path_off_table"
+    elif not planned:
+        why = "out_of_time"
+    else:
+        why = "finished_off_target"
+    return ended(ep, why, start, source.episode)
 
 
 def pose_distance(a, b) -> float:
@@ -289,13 +305,12 @@ def nearest(sources: dict, start) -> int:
 def replay_lanes(sources: dict, how: Perturbation) -> dict:
     """Mode "replay" as datagen.lockstep lanes: replay()'s approach and open-loop segment, decided for
     all lanes at once, bit for bit what replay() does one attempt at a time (tests/test_lockstep.py)."""
-    from datagen.engine import with_provenance
-    from datagen.lockstep import Lane, start_of_job
+    from datagen.lockstep import Lane, kept_or_not, start_of_job
 
     def begin(job, env):
         start = start_of_job(PUSHT, sources, job, how)
         if start is None:
-            return "no_valid_start"
+            return Outcome("no_valid_start", source_episode=job[0])
         src = sources[job[0]]
         path, commands = transform_segment(
             src.states[:, :2], src.actions, block_pose(src.states[0]), start[:3]
@@ -354,16 +369,17 @@ def replay_lanes(sources: dict, how: Perturbation) -> dict:
     def finish(lane, env, episode):
         if lane.blocked is None:  # the episode ended during the approach
             end_approach(lane, env)
-        success = env.success
-        if success:
-            return with_provenance(episode | {"success": success}, lane.job[0], lane.start)
-        if lane.blocked:
-            return "approach_blocked"
-        if np.any(np.abs(lane.path) > REACH):
-            return "path_off_table"
-        if lane.executed < len(lane.commands):
-            return "out_of_time"
-        return "finished_off_target"
+        if env.success:
+            why = None
+        elif lane.blocked:
+            why = "approach_blocked"
+        elif np.any(np.abs(lane.path) > REACH):
+            why = "path_off_table"
+        elif lane.executed < len(lane.commands):
+            why = "out_of_time"
+        else:
+            why = "finished_off_target"
+        return kept_or_not(lane, episode, env.success, why)
 
     return {"begin": begin, "decide": decide, "finish": finish}
 
@@ -375,6 +391,7 @@ class PushT(Task):
     start_names = START_NAMES
     env_module = pusht_env
     state_ranges, action_ranges = STATE_RANGES, ACTION_RANGES
+    max_steps = pusht_env.MAX_STEPS
     failures = {  # every reason a mode can return
         "resolve": ("expert_failed", "no_valid_start"),
         "replay": (
@@ -387,7 +404,7 @@ class PushT(Task):
     }
 
     def make_env(self, share=None):
-        return pusht_env.PushTEnv(share)
+        return SharedPushTEnv(share)
 
     def perturb(self, first_state, rng, how: Perturbation):
         return perturbed_start(first_state, rng, how.pos_sigma, how.yaw_sigma)
@@ -407,7 +424,7 @@ class PushT(Task):
     def segments(self, source: Source) -> list[Segment]:
         return [Segment(0, len(source.actions), tuple(float(v) for v in block_pose(source.states[0])))]
 
-    def replay(self, env, start, source: Source) -> tuple[dict, str | None]:
+    def replay(self, env, start, source: Source, plans: dict | None = None) -> Outcome:
         (segment,) = self.segments(source)
         return replay(env, start, source, segment)
 
@@ -417,5 +434,11 @@ class PushT(Task):
     def replay_lanes(self, sources: dict, how: Perturbation) -> dict:
         return replay_lanes(sources, how)
 
+    def batch_expert(self):
+        return PushTBatch().act_batch
 
-PUSHT = PushT()
+    def step_batch(self, envs, actions):
+        return step_many(envs, actions)
+
+
+PUSHT = register(PushT())

@@ -51,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ch37 import DATA_CODE, code_digest
+from ch37 import code_digest
 from ch37.errors import DataError
 from ch37.ownership import (
     LEFTOVER,
@@ -76,8 +76,8 @@ from ch37.ownership import (
 from ch37.parallel import map_jobs
 from ch37.process import available_memory
 from ch37.seeds import SEED_BLOCK
-from datagen import TASKS, engine, lockstep
-from datagen.task import Perturbation, Task
+from datagen import engine, lockstep
+from datagen.task import Perturbation, Task, known_tasks
 from lerobot_v3.dataset import check_hf_cache, fps_problem, frames_problem, load_arrays, schema_problem
 from lerobot_v3.merge import merge_sets
 
@@ -108,20 +108,12 @@ def attempts_per_demo(config: dict) -> int:
     return config[STORED["attempts_per_demo"]]
 
 
-def engine_version() -> str:
-    """A digest of the engine's own code (and the code that shapes frames): a shard made by other code
-    is never mixed into a run. Computed when a run starts, not at import."""
-    files = (
-        "datagen/engine.py",
-        "datagen/lockstep.py",
-        "datagen/task.py",
-        "datagen/pusht.py",
-        "datagen/aloha.py",
-        "datagen/shards.py",
-        "lerobot_v3/merge.py",
-        "lerobot_v3/frame_stats.py",
-    )
-    return code_digest(DATA_CODE + files)
+def engine_version(task: Task) -> str:
+    """A digest of the code a run of `task` runs: this module, the task's module and every project module
+    either imports (the engine, the writer and merge, the task's env and expert: ch37.code_files reads
+    them from what was imported, no list), so a shard made by other code is never mixed into a run.
+    Computed when a run starts, not at import."""
+    return code_digest((sys.modules[__name__], sys.modules[type(task).__module__]))
 
 
 def versions() -> dict:
@@ -204,24 +196,25 @@ def shard_dir(out: Path, index: int) -> Path:
 # ----------------------------------------------------------------------------------------------
 # Worker side: one shard, returned as bytes
 # ----------------------------------------------------------------------------------------------
-def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | None = None) -> dict:
+def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | None = None, sims=None) -> dict:
     """Run the shard's attempts and write its kept episodes as a LeRobot v3 set (in a temp folder
-    under `scratch`, the system's when None), then read it back as bytes.
+    under `scratch`, the system's when None), then read it back as bytes. sims: the worker's
+    datagen.engine.Simulators, kept between its shards (a new one when None).
 
     Returns {"files": {relative path: bytes}, "stamp": the shard's stamp}. The stamp holds the
     counts the report needs (attempts, kept, failures by reason, per source, episode lengths) and
     seconds_write, the seconds the worker spent writing the set and reading it back."""
-    task = TASKS[config["task"]]
+    task = known_tasks()[config["task"]]
     how = Perturbation(config["seed"], config["pos_sigma"], config["yaw_sigma"])
     # = engine.run_attempts', bit for bit (tests/test_lockstep.py), attempts stepped together
     results = lockstep.attempts_lockstep(
-        task, sources, jobs, how, mode=config["mode"], select=config["select"]
+        task, sources, jobs, how, mode=config["mode"], select=config["select"], sims=sims
     )
-    kept = [r for r in results if not isinstance(r, str)]
+    kept = [r.episode for r in results if r.kept]
     per_source = {}  # source episode -> [attempts, kept]
     for (e, _), r in zip(jobs, results):
         tally = per_source.setdefault(str(e), [0, 0])
-        tally[0], tally[1] = tally[0] + 1, tally[1] + (not isinstance(r, str))
+        tally[0], tally[1] = tally[0] + 1, tally[1] + r.kept
     stamp = {
         "made_by": MADE_BY,
         "kind": "engine-shard",
@@ -230,7 +223,7 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
         "attempts": len(jobs),
         "kept": len(kept),
         "frames": sum(len(r["action"]) for r in kept),
-        "failures": dict(Counter(r for r in results if isinstance(r, str))),
+        "failures": dict(Counter(r.reason for r in results if not r.kept)),
         "per_source": per_source,
         "lengths": dict(Counter(str(len(r["action"])) for r in kept)),
         "versions": versions(),
@@ -356,7 +349,7 @@ def finished(out: Path, config: dict, shards: list) -> dict[int, dict]:
             damaged = changed_files(path, stamp)  # its files against the sha256 its stamp recorded
             why = f"{names(damaged)} differs from its stamp" if damaged else None
             why = why or stamp_problem(
-                path, stamp, shards[int(m.group(1))], TASKS[config["task"]].failures[config["mode"]]
+                path, stamp, shards[int(m.group(1))], known_tasks()[config["task"]].failures[config["mode"]]
             )
             if not why:
                 done[int(m.group(1))] = stamp
@@ -430,27 +423,30 @@ def state_range_problem(
 
 
 def task_of(src: Path) -> Task:
-    """The task whose sets `src` is (datagen.TASKS), read from its meta/info.json: the task whose env's
-    ROBOT_TYPE the set records, or, for a set without one, the one task whose state and action widths it
-    has. DataError (one line) for a set that fits no task. A folder without a readable info.json is left
-    to read_source's checks (as PushT's, the engine's first task), which name what is wrong with it."""
+    """The task whose sets `src` is (of datagen.task.known_tasks()), read from its meta/info.json: the task
+    whose env's ROBOT_TYPE the set records, or, for a set without one, the one task whose state and action
+    widths it has. DataError (one line) for a set that fits no task. A folder without a readable
+    info.json is left to read_source's checks (as PushT's, the engine's first task), which name what is
+    wrong with it."""
     try:
         info = json.loads((Path(src) / "meta" / "info.json").read_text())
         feats = info["features"]
         shapes = tuple(list(feats[k]["shape"]) for k in ("observation.state", "action"))
     except (OSError, ValueError, KeyError, TypeError):
-        return TASKS["pusht"]
+        return known_tasks()["pusht"]
     robot = info.get("robot_type")
     if robot:
-        fits = [t for t in TASKS.values() if t.env_module.ROBOT_TYPE == robot]
+        fits = [t for t in known_tasks().values() if t.env_module.ROBOT_TYPE == robot]
     else:
-        fits = [t for t in TASKS.values() if shapes == ([t.env_module.OBS_DIM], [t.env_module.ACT_DIM])]
+        fits = [
+            t for t in known_tasks().values() if shapes == ([t.env_module.OBS_DIM], [t.env_module.ACT_DIM])
+        ]
     if len(fits) == 1:
         return fits[0]
     known = "; ".join(
         f"{t.title}: robot_type '{t.env_module.ROBOT_TYPE}', observation.state [{t.env_module.OBS_DIM}], "
         f"action [{t.env_module.ACT_DIM}] (make one with {t.generator})"
-        for t in TASKS.values()
+        for t in known_tasks().values()
     )
     raise DataError(
         f"--src {src} fits no task of the engine (robot_type {robot!r}, observation.state {shapes[0]}, "
@@ -592,7 +588,7 @@ def run(
     config = stored(settings) | {
         "task": task.name,
         "source": source_identity(arrays),
-        "engine": engine_version(),
+        "engine": engine_version(task),
     }
     config["versions"] = versions()
     check_out(out, src, config)  # every refusal comes before anything is created
@@ -632,8 +628,18 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
     # A shard gets the sources its attempts start from; with --select nearest a replay may choose any
     # source, so every shard gets them all.
     pool = sources if config["select"] == "nearest" else None
+    # One Simulators for every shard: a forked worker fills its own copy and keeps it between its shards
+    # (its lanes' envs are made once); on Ray each shard's task gets an empty one.
+    sims = engine.Simulators()
     tasks = [
-        (i, shards[i], pool or {e: sources[e] for e in sorted({e for e, _ in shards[i]})}, config, scratch)
+        (
+            i,
+            shards[i],
+            pool or {e: sources[e] for e in sorted({e for e, _ in shards[i]})},
+            config,
+            scratch,
+            sims,
+        )
         for i in todo
     ]
     timing = {"start_s": 0.0}  # of seconds_generate: starting or joining Ray
@@ -656,7 +662,7 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
     task = config["task"]
     report = report_of(
         [done[i] for i in range(len(shards))],
-        TASKS[task].failures[config["mode"]],
+        known_tasks()[task].failures[config["mode"]],
         {
             "source": {"path": str(src.resolve()), **config["source"]},
             "settings": {k: config[k] for k in STORED_SETTINGS},

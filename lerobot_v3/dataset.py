@@ -58,29 +58,35 @@ def _probe_cache(cache: Path) -> None:  # once per folder and process: every rea
 def _lerobot_dataset_class():
     """LeRobotDataset, with Hugging Face datasets' per-episode "Map" bars silenced (our own bar is enough)."""
     import datasets
-    from lerobot.datasets import dataset_writer
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     datasets.disable_progress_bars()
     check_hf_cache()
-    if not getattr(dataset_writer.embed_images, "skips_imageless", False):
-        dataset_writer.embed_images = _embed_images_if_any(dataset_writer.embed_images)
     return LeRobotDataset
 
 
-def _embed_images_if_any(embed):
+@contextlib.contextmanager
+def _embed_only_images():
     """lerobot 0.6 runs embed_images on every saved episode, a row-by-row map that costs ~0.1 s per
-    episode even when the table holds no image column, where it returns the table unchanged.
-    Skip it exactly then; any table with an image column goes through lerobot's own code."""
+    episode even when the table holds no image column, where it returns the table unchanged. Inside
+    this block (our writes through LeRobot's per-frame path) it is skipped exactly then; any table with
+    an image column goes through lerobot's own code. Put back on leaving: nothing else in the process
+    sees the change."""
     import datasets
+    from lerobot.datasets import dataset_writer
+
+    embed = dataset_writer.embed_images
 
     def embed_images(ds):
         if any(isinstance(f, datasets.Image) for f in ds.features.values()):
             return embed(ds)
         return ds
 
-    embed_images.skips_imageless = True
-    return embed_images
+    dataset_writer.embed_images = embed_images
+    try:
+        yield
+    finally:
+        dataset_writer.embed_images = embed
 
 
 def features(
@@ -199,7 +205,7 @@ def _write_lerobot(tmp: Path, *, repo_id, fps, robot_type, task, feats, episodes
         use_videos=any(f["dtype"] == "video" for f in feats.values()),
         video_backend=VIDEO_BACKEND,
     )
-    with _fast_fingerprints():
+    with _fast_fingerprints(), _embed_only_images():
         for ep in episodes:
             for t in range(len(ep["action"])):
                 ds.add_frame({k: ep[k][t] for k in feats} | {"task": task})

@@ -171,8 +171,9 @@ def test_identity_replay_reproduces_the_source_frames(env):
     """A source replayed from its own start, with no perturbation, is its own frames, byte for byte:
     every frame pose equals its source pose, no bridge is needed, and the tracking term is exactly 0."""
     src = aloha_source(env, 2)
-    ep, why = at.replay(env, at.start_of(src.states[0]), src)
-    assert why is None and ep["success"]
+    got = at.replay(env, at.start_of(src.states[0]), src)
+    ep = got.episode
+    assert got.reason is None and ep["success"]
     assert ep["observation.state"].tobytes() == src.states.tobytes()
     assert ep["action"].tobytes() == src.actions.tobytes()
 
@@ -181,8 +182,9 @@ def test_identity_replay_of_a_reset_source_is_its_frames_to_float32_rounding(env
     """A source rolled out from reset(seed) started from float64 values its float32 first frame
     rounds; replayed from that frame, it differs from its source by rounding alone."""
     src = aloha_source(env, 2, placed=False)
-    ep, why = at.replay(env, at.start_of(src.states[0]), src)
-    assert why is None and len(ep["action"]) == len(src.actions)
+    got = at.replay(env, at.start_of(src.states[0]), src)
+    ep = got.episode
+    assert got.reason is None and len(ep["action"]) == len(src.actions) == got.steps
     np.testing.assert_allclose(ep["observation.state"], src.states, atol=1e-6)
     np.testing.assert_allclose(ep["action"], src.actions, atol=1e-5)
 
@@ -195,9 +197,9 @@ def test_replay_keeps_what_re_executes_and_names_every_rejection(env):
         for e in srcs
         for k in range(4)
     ]
-    kept = [r for r in results if not isinstance(r, str)]
-    assert kept and all(r in at.FAILURES["replay"] for r in results if isinstance(r, str))
-    ep, start, used = kept[0]
+    kept = [r for r in results if r.kept]
+    assert kept and all(r.reason in at.FAILURES["replay"] for r in results if not r.kept)
+    ep, start = kept[0].episode, kept[0].start
     obs = env.set_start(*start)  # the recorded actions from the recorded start give the same frames
     for s, a in zip(ep["observation.state"], ep["action"]):
         assert obs.tobytes() == s.tobytes()
@@ -213,10 +215,10 @@ def test_subtasks_carry_the_cube_where_one_cube_frame_cannot(env):
     start[2] += 0.06  # target x: still inside its spawn region for this source
     start[3] = -start[3] * 0.5
     assert aloha_env.TARGET_X_RANGE[0] <= start[2] <= aloha_env.TARGET_X_RANGE[1]
-    ep, why = at.replay(env, start, src, at.whole(src))
-    assert why == "finished_off_target" and not ep["success"]
-    ep, why = at.replay(env, start, src)
-    assert why is None and ep["success"]
+    got = at.replay(env, start, src, at.whole(src))
+    assert got.reason == "finished_off_target" and not got.episode["success"]
+    got = at.replay(env, start, src)
+    assert got.reason is None and got.episode["success"]
 
 
 def test_nearest_picks_the_source_with_the_nearest_objects(env):
@@ -246,8 +248,9 @@ def test_pusht_split_and_identity_replay():
     d = [pusht_env.t_signed_distance(r[0], r[1], r[2], r[3], math.atan2(r[4], r[5])) for r in s]
     assert min(d[: push.start]) > pusht_env.PUSHER_RADIUS + pt.CONTACT_TOL >= d[push.start]
     start = tuple(float(v) for v in pt.block_pose(s[0])) + (float(s[0][0]), float(s[0][1]))
-    ep, why = pt.replay_subtasks(env, start, src)
-    assert why is None
+    got = pt.replay_subtasks(env, start, src)
+    ep = got.episode
+    assert got.reason is None
     assert (
         ep["observation.state"].tobytes() == s.tobytes() and ep["action"].tobytes() == src.actions.tobytes()
     )

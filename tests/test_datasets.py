@@ -157,8 +157,9 @@ def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
     d = lerobot_io.load_arrays(old)
     assert d["observation.state"].tobytes() == b"".join(ep["observation.state"].tobytes() for ep in eps)
     src = shards.read_source(PUSHT, old)
-    kept = engine.attempt(PUSHT, engine.sources(src)[0], 0, Perturbation(0, 0.0, 0.0))
-    assert not isinstance(kept, str)  # the unperturbed start re-solved
+    got = engine.attempt(PUSHT, engine.sources(src)[0], 0, Perturbation(0, 0.0, 0.0))
+    assert got.kept  # the unperturbed start re-solved
+    kept = got.episode
     engine.save(PUSHT, tmp_path / "grown", [kept], repo_id="local/grown", stamp={})
     grown = lerobot_io.load_arrays(tmp_path / "grown", keys=("observation.state", lerobot_io.ENV_STATE_KEY))
     assert grown[lerobot_io.ENV_STATE_KEY].tobytes() == grown["observation.state"][:, 2:].tobytes()

@@ -62,11 +62,12 @@ def reference(src, tmp_path_factory):
 def test_attempt_is_a_pure_function_with_provenance(src):
     sources = engine.sources(load_arrays(src))
     how = Perturbation(seed=0, pos_sigma=0.08, yaw_sigma=0.5)
-    a = engine.attempt(PUSHT, sources[1], 2, how, env=pusht_env.PushTEnv())
+    got = engine.attempt(PUSHT, sources[1], 2, how, env=pusht_env.PushTEnv())
     shared = pusht_env.PushTEnv()
     engine.attempt(PUSHT, sources[0], 0, how, env=shared)  # another attempt first, on the same simulator
-    b = engine.attempt(PUSHT, sources[1], 2, how, env=shared)
-    assert not isinstance(a, str) and a["success"]
+    b = engine.attempt(PUSHT, sources[1], 2, how, env=shared).episode
+    a = got.episode
+    assert got.kept and a["success"] and got.source_episode == 1 and got.steps == len(a["action"])
     assert all(a[k].tobytes() == b[k].tobytes() for k in ("observation.state", "action", "aug.start"))
     n = len(a["action"])
     assert a["aug.source_episode"].shape == (n, 1) and (a["aug.source_episode"] == 1).all()
@@ -79,7 +80,7 @@ def test_attempt_is_a_pure_function_with_provenance(src):
     )
     assert a["observation.state"][0].tobytes() == first.tobytes()
     assert np.abs(start[:2] - sources[1].states[0][2:4]).max() > 1e-4
-    other_k = engine.attempt(PUSHT, sources[1], 3, how)
+    other_k = engine.attempt(PUSHT, sources[1], 3, how).episode
     assert other_k["aug.start"][0].tobytes() != start.tobytes()
 
 
@@ -95,7 +96,8 @@ def test_perturbed_starts_stay_on_the_band_and_clear_of_the_block():
 
 def test_an_impossible_perturbation_is_a_reason_not_a_demo(src):
     sources = engine.sources(load_arrays(src))
-    assert engine.attempt(PUSHT, sources[0], 0, Perturbation(0, 5.0, 0.5)) == "no_valid_start"
+    got = engine.attempt(PUSHT, sources[0], 0, Perturbation(0, 5.0, 0.5))
+    assert not got.kept and got.reason == "no_valid_start" and got.episode is None and got.steps == 0
     assert "no_valid_start" in PUSHT.failures["resolve"]
 
 
@@ -107,7 +109,7 @@ def test_run_writes_the_attempts_in_order_loadable_with_provenance(src, referenc
     want = [
         engine.attempt(PUSHT, sources[e], k, Perturbation(0, 0.08, 0.5)) for e in range(3) for k in range(4)
     ]
-    want = [w for w in want if not isinstance(w, str)]
+    want = [w.episode for w in want if w.kept]
     keys = ("observation.state", "action", "episode_index", "aug.start", "aug.source_episode")
     got = load_arrays(reference, keys=keys)
     for key in ("observation.state", "action", "aug.start", "aug.source_episode"):
@@ -630,14 +632,15 @@ def test_aloha_replay_nearest_same_bytes_for_workers_ray_and_resume(aloha_src, t
     how = Perturbation(0, 0.08, 0.5)
     jobs = [(e, k) for e in range(3) for k in range(2)]
     want = [engine.attempt(ALOHA, sources[e], k, how, mode="replay", pool=sources) for e, k in jobs]
-    kept = [w for w in want if not isinstance(w, str)]
+    kept = [w.episode for w in want if w.kept]
     keys = ("observation.state", "action", "aug.start", "aug.source_episode")
     got = load_arrays(ref, keys=keys)
     assert kept and got["action"].shape[1] == 6 and got["aug.start"].shape[1] == len(ALOHA.start_names)
     for key in keys:
         assert got[key].tobytes() == np.concatenate([w[key] for w in kept]).reshape(got[key].shape).tobytes()
     own = [e for e, _ in jobs]
-    chosen = [int(w["aug.source_episode"][0, 0]) if not isinstance(w, str) else e for w, e in zip(want, own)]
+    chosen = [w.source_episode for w in want]
+    assert all(int(w.episode["aug.source_episode"][0, 0]) == w.source_episode for w in want if w.kept)
     assert chosen != own  # nearest chose another source for some attempt (else this test shows nothing)
     rep = json.loads((ref / shards.REPORT_NAME).read_text())
     assert set(rep["failures"]) == set(ALOHA.failures["replay"]) and rep["settings"]["select"] == "nearest"

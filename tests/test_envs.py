@@ -5,6 +5,8 @@ import pytest
 
 import aloha_env
 import pusht_env
+from datagen.fast_experts import PushTBatch
+from datagen.fast_pusht import SharedPushTEnv, step_many
 from scripted_expert import AlohaExpert, PushTExpert
 
 SPECS = [
@@ -85,13 +87,14 @@ def test_pusht_set_start_places_state_with_fresh_counters():
 
 
 def test_pusht_step_many_on_a_shared_mjdata_is_step_bit_for_bit():
-    """step_many (datagen.lockstep's batched step) over envs sharing one MjData = step per env, each in
+    """datagen.fast_pusht's step_many (lockstep's batched step) over SharedPushTEnvs sharing one MjData =
+    PushTEnv.step per env, each in
     its own: the same obs, success and done bits, clipped actions and the success latch included, and
     the same poses read between steps; a non-finite action is refused as step refuses it."""
-    expert, rng = PushTExpert(), np.random.default_rng(0)
+    expert, rng = PushTBatch(), np.random.default_rng(0)
     one = [pusht_env.PushTEnv() for _ in range(6)]
-    many = [pusht_env.PushTEnv()]
-    many += [pusht_env.PushTEnv(share=many[0]) for _ in range(5)]
+    many = [SharedPushTEnv()]
+    many += [SharedPushTEnv(share=many[0]) for _ in range(5)]
     assert all(e.data is many[0].data for e in many) and one[0].data is not one[1].data
     obs = np.stack([e.reset(s) for e, s in zip(one, range(6))])
     assert np.array_equal(obs, np.stack([e.reset(s) for e, s in zip(many, range(6))]))
@@ -99,7 +102,7 @@ def test_pusht_step_many_on_a_shared_mjdata_is_step_bit_for_bit():
     for t in range(pusht_env.MAX_STEPS):
         act = expert.act_batch(obs)
         act[:2] = rng.uniform(-3, 3, (2, 2))  # two envs on random actions, beyond the clip
-        got = pusht_env.PushTEnv.step_many(many, act)
+        got = step_many(many, act)
         want = [e.step(a) for e, a in zip(one, act)]
         assert got[0].tobytes() == np.stack([w[0] for w in want]).tobytes()
         assert got[1].tolist() == [w[3]["success"] for w in want]
@@ -110,7 +113,7 @@ def test_pusht_step_many_on_a_shared_mjdata_is_step_bit_for_bit():
             assert [e.block_pose.tobytes() for e in many] == [e.block_pose.tobytes() for e in one]
     assert latched >= {2, 3, 4, 5}  # the expert's envs succeeded on the way (and kept stepping)
     with pytest.raises(ValueError, match="non-finite"):
-        pusht_env.PushTEnv.step_many(many[:1], np.array([[np.nan, 0.0]], np.float32))
+        step_many(many[:1], np.array([[np.nan, 0.0]], np.float32))
 
 
 def test_pusht_accessors_match_obs():

@@ -186,14 +186,17 @@ def test_a_copy_or_a_pickle_mid_episode_steps_as_the_env_bit_for_bit(env_id, mod
 
 
 def test_a_copy_of_a_pusht_env_that_shares_an_mjdata_is_a_standalone_env():
-    """A PushTEnv made with share= borrows another's MjData; its copy carries its own state only, in an
-    MjData of its own, and steps as it does while the env it shared with steps too."""
+    """A lockstep lane (datagen.fast_pusht.SharedPushTEnv made with share=) borrows another's MjData; its
+    copy carries its own state only, in an MjData of its own, and steps as it does while the env it
+    shared with steps too."""
     import copy
     import pickle
 
-    owner = pusht_env.PushTEnv()
+    from datagen.fast_pusht import SharedPushTEnv
+
+    owner = SharedPushTEnv()
     owner.reset(1)
-    lane = pusht_env.PushTEnv(share=owner)
+    lane = SharedPushTEnv(share=owner)
     lane.reset(2)
     actions = np.random.default_rng(1).uniform(-1, 1, (30, 2))
     for a in actions[:10]:

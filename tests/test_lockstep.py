@@ -1,5 +1,5 @@
 """Lockstep attempts and batched experts give today's one-at-a-time bytes: every decision of
-PushTExpert.act_batch and AlohaExpert.act_batch equals act's bit for bit along real episodes, and
+datagen.fast_experts' PushTBatch and AlohaBatch equals the expert's act bit for bit along real episodes, and
 datagen.lockstep.attempts_lockstep returns exactly what datagen.engine.attempt returns, for both modes
 on PushT and for ALOHA's re-solve."""
 
@@ -10,8 +10,9 @@ import aloha_env
 import gen_demos_aloha
 import gen_demos_pusht
 import pusht_env
-from datagen import ALOHA, PUSHT, Perturbation, engine, lockstep
-from datagen.task import rollout
+from datagen import ALOHA, PUSHT, Outcome, Perturbation, engine, lockstep
+from datagen.fast_experts import AlohaBatch, PushTBatch
+from datagen.task import Task, rollout
 from lerobot_v3.dataset import load_arrays
 from scripted_expert import AlohaExpert, PushTExpert
 
@@ -26,9 +27,9 @@ def states_along(env, expert_class, seeds, noise: float) -> np.ndarray:
     return np.concatenate(obs)
 
 
-def assert_same_decisions(expert, states: np.ndarray, chunk: int) -> None:
+def assert_same_decisions(expert, batch, states: np.ndarray, chunk: int) -> None:
     scalar = np.stack([expert.act(o) for o in states])
-    batched = np.concatenate([expert.act_batch(states[i : i + chunk]) for i in range(0, len(states), chunk)])
+    batched = np.concatenate([batch.act_batch(states[i : i + chunk]) for i in range(0, len(states), chunk)])
     assert batched.dtype == scalar.dtype == np.float32 and batched.shape == scalar.shape
     differ = np.flatnonzero((batched.view(np.uint32) != scalar.view(np.uint32)).any(axis=1))
     assert differ.size == 0, f"{differ.size} of {len(states)} decisions differ, first at row {differ[:1]}"
@@ -37,20 +38,20 @@ def assert_same_decisions(expert, states: np.ndarray, chunk: int) -> None:
 def test_pusht_batched_expert_is_bit_identical():
     states = states_along(pusht_env.PushTEnv(), PushTExpert, range(240), noise=0.3)
     assert len(states) > 3000
-    assert_same_decisions(PushTExpert(), states, chunk=37)  # 37: the batches mix every kind of state
+    assert_same_decisions(PushTExpert(), PushTBatch(), states, chunk=37)  # 37: batches mix every kind
 
 
 def test_aloha_batched_expert_is_bit_identical():
     states = states_along(aloha_env.AlohaCubeEnv(), AlohaExpert, range(16), noise=0.3)
     assert len(states) > 2000
-    assert_same_decisions(AlohaExpert(), states, chunk=29)
+    assert_same_decisions(AlohaExpert(), AlohaBatch(), states, chunk=29)
 
 
 def test_batched_experts_refuse_noise():
     with pytest.raises(ValueError):
-        PushTExpert(noise=0.1).act_batch(np.zeros((2, 10), np.float32))
+        PushTBatch(PushTExpert(noise=0.1))
     with pytest.raises(ValueError):
-        AlohaExpert(noise=0.1).act_batch(np.zeros((2, 10), np.float32))
+        AlohaBatch(AlohaExpert(noise=0.1))
 
 
 @pytest.fixture(scope="module")
@@ -61,10 +62,16 @@ def sources(tmp_path_factory):
 
 
 def assert_same_results(one_at_a_time: list, together: list) -> None:
+    """Outcomes (or episodes) equal field for field, every array byte for byte."""
     assert len(one_at_a_time) == len(together)
     for i, (a, b) in enumerate(zip(one_at_a_time, together)):
-        if isinstance(a, str) or isinstance(b, str):
-            assert a == b, f"attempt {i}: {a!r} one at a time, {b!r} in lockstep"
+        if isinstance(a, Outcome) or isinstance(b, Outcome):
+            fields = ("reason", "start", "source_episode", "steps")
+            same = [getattr(a, f) for f in fields] == [getattr(b, f) for f in fields]
+            assert same, f"attempt {i}: {a} / {b}"
+            assert (a.episode is None) == (b.episode is None), f"attempt {i}"
+            if a.episode is not None:
+                assert_same_results([a.episode], [b.episode])
             continue
         assert list(a) == list(b), f"attempt {i}: keys differ"
         assert a["success"] is b["success"]
@@ -84,7 +91,7 @@ def test_lockstep_attempts_equal_one_at_a_time(sources, mode, sigmas, lanes):
     jobs = [(e, k) for e in sorted(sources) for k in range(50)]  # 200 attempts
     one = [engine.attempt(PUSHT, sources[e], k, how, mode=mode) for e, k in jobs]
     together = lockstep.attempts_lockstep(PUSHT, sources, jobs, how, mode=mode, lanes=lanes)
-    kept = sum(not isinstance(r, str) for r in one)
+    kept = sum(r.kept for r in one)
     assert kept >= 10 and (mode == "resolve" or kept < len(jobs))  # both outcomes are compared
     assert_same_results(one, together)
 
@@ -92,17 +99,19 @@ def test_lockstep_attempts_equal_one_at_a_time(sources, mode, sigmas, lanes):
 def test_lockstep_reasons_without_a_start(sources):
     jobs = [(0, 0), (1, 3)]
     how = Perturbation(0, 10.0, 0.1)  # no draw lands on the band
-    assert lockstep.attempts_lockstep(PUSHT, sources, jobs, how) == ["no_valid_start"] * 2
+    got = lockstep.attempts_lockstep(PUSHT, sources, jobs, how)
+    want = [("no_valid_start", 0, 0), ("no_valid_start", 1, 0)]
+    assert [(r.reason, r.source_episode, r.steps) for r in got] == want
 
 
 def test_the_runner_is_task_agnostic_aloha_episodes_equal_rollout():
-    """run_lanes with ALOHA's env and AlohaExpert.act_batch (the shape an ALOHA engine task plugs in):
+    """run_lanes with ALOHA's env and AlohaBatch.act_batch (the shape an ALOHA engine task plugs in):
     each episode from env.reset(seed) equals datagen.task.rollout's, frame for frame and bit for bit."""
-    expert = AlohaExpert()
+    expert = AlohaBatch()
     seeds = list(range(12))
     got = lockstep.run_lanes(
         seeds,
-        make_env=ALOHA.make_env,
+        envs=engine.Simulators().lanes(ALOHA, 5),
         begin=lambda seed, env: lockstep.Lane(seed, env.reset(seed)),
         decide=lambda lanes, envs, obs: (expert.act_batch(obs), None),
         finish=lambda lane, env, episode: episode | {"success": bool(episode["next.success"][-1, 0])},
@@ -119,7 +128,7 @@ def test_the_runner_is_task_agnostic_aloha_episodes_equal_rollout():
 
 def test_aloha_resolve_in_lockstep_equals_one_at_a_time(tmp_path):
     """ALOHA's re-solve through the engine's lockstep (the generic resolve lanes over the task's parts,
-    AlohaExpert.act_batch deciding) returns exactly datagen.engine.attempt's results."""
+    AlohaBatch.act_batch deciding) returns exactly datagen.engine.attempt's results."""
     out = tmp_path / "aloha3"
     assert gen_demos_aloha.main(["--episodes", "3", "--seed", "0", "--out", str(out), "--quiet"]) == 0
     srcs = engine.sources(load_arrays(out))
@@ -127,5 +136,48 @@ def test_aloha_resolve_in_lockstep_equals_one_at_a_time(tmp_path):
     jobs = [(e, k) for e in sorted(srcs) for k in range(10)]  # 30 attempts
     one = [engine.attempt(ALOHA, srcs[e], k, how) for e, k in jobs]
     together = lockstep.attempts_lockstep(ALOHA, srcs, jobs, how, lanes=8)
-    assert sum(not isinstance(r, str) for r in one) >= 10
+    assert sum(r.kept for r in one) >= 10
     assert_same_results(one, together)
+
+
+class PlainPushT(type(PUSHT)):
+    """PushT with lockstep's hooks removed: the Task contract's defaults (no batch expert, no replay
+    lanes, each env stepped by its own step)."""
+
+    batch_expert = Task.batch_expert
+    step_batch = Task.step_batch
+    replay_lanes = Task.replay_lanes
+
+
+class PerEnvPushT(type(PUSHT)):
+    """PushT's batch expert and replay lanes, its envs stepped one by one (the default step_batch)."""
+
+    step_batch = Task.step_batch
+
+
+@pytest.mark.parametrize("mode, sigmas", [("resolve", (0.08, 0.5)), ("replay", (0.02, 0.2))])
+def test_a_task_without_the_batch_hooks_gives_the_same_results(sources, mode, sigmas):
+    """What lockstep needs is part of the Task contract with a default: a task that offers none runs one
+    attempt at a time, and one that steps its envs one by one steps the same bits."""
+    how = Perturbation(1, *sigmas)
+    jobs = [(e, k) for e in sorted(sources) for k in range(12)]  # 48 attempts
+    want = lockstep.attempts_lockstep(PUSHT, sources, jobs, how, mode=mode, lanes=9)
+    assert sum(r.kept for r in want) >= 3
+    for task in (PlainPushT(), PerEnvPushT()):
+        assert_same_results(want, lockstep.attempts_lockstep(task, sources, jobs, how, mode=mode, lanes=9))
+    assert PlainPushT().batch_expert() is None and PlainPushT().replay_lanes(sources, how) is None
+
+
+def test_the_simulators_a_worker_keeps_are_passed_not_hidden():
+    """No module keeps simulators: a Simulators owns them, reuses its lanes between calls, and a copy
+    sent to another process (pickled, as Ray sends a shard's arguments) arrives empty."""
+    import pickle
+
+    from datagen import lockstep as ls
+
+    assert not hasattr(engine, "_ENVS") and not hasattr(ls, "_POOL")
+    sims = engine.Simulators()
+    lanes = sims.lanes(PUSHT, 3)
+    assert sims.lanes(PUSHT, 2) == lanes[:2] and sims.env(PUSHT) is sims.env(PUSHT)
+    copy = pickle.loads(pickle.dumps(sims))
+    assert copy.lanes(PUSHT, 1)[0] is not lanes[0] and copy.plans == {}

@@ -9,7 +9,7 @@ import pytest
 
 import pusht_env
 from ch37.seeds import env_seed
-from datagen import PUSHT, Perturbation, Source, engine, pusht, rollout
+from datagen import PUSHT, Outcome, Perturbation, Source, engine, pusht, rollout
 from scripted_expert import PushTExpert
 
 
@@ -66,8 +66,9 @@ def expert_source(env, i):
 
 def test_identity_replay_reproduces_the_source(env):
     source, start = expert_source(env, 0)
-    ep, why = pusht.replay(env, start, source)
-    assert why is None and ep["success"]
+    got = pusht.replay(env, start, source)
+    ep = got.episode
+    assert got.kept and got.reason is None and ep["success"] and got.steps == len(source.actions)
     assert len(ep["action"]) == len(source.actions)  # no approach: the pusher is on the first waypoint
     np.testing.assert_allclose(ep["observation.state"], source.states, atol=1e-6)
     np.testing.assert_allclose(ep["action"], source.actions, atol=1e-6)
@@ -78,9 +79,9 @@ def test_a_moved_block_makes_the_replay_miss_and_names_why(env):
     would be; the filter rejects it and says it ran to its end off target."""
     source, start = expert_source(env, 0)
     shifted = (start[0] + 0.06, start[1], start[2], start[3] + 0.06, start[4])
-    ep, why = pusht.replay(env, shifted, source)
-    assert not ep["success"]
-    assert why == "finished_off_target"
+    got = pusht.replay(env, shifted, source)
+    assert not got.kept and not got.episode["success"]
+    assert got.reason == "finished_off_target"
     assert math.hypot(*env.block_pose[:2]) > pusht_env.SUCCESS_POS_TOL
 
 
@@ -92,11 +93,12 @@ def test_kept_replays_hold_the_actions_actually_executed(env):
         engine.attempt(PUSHT, source, k, Perturbation(0, 0.004, 0.02), mode="replay", env=env)
         for k in range(12)
     ]
-    kept = [r for r in results if not isinstance(r, str)]
-    assert kept, results
-    assert all(r in PUSHT.failures["replay"] for r in results if isinstance(r, str))
-    k = next(k for k, r in enumerate(results) if not isinstance(r, str))
-    ep = results[k]
+    kept = [r for r in results if r.kept]
+    assert kept, [r.reason for r in results]
+    assert all(r.reason in PUSHT.failures["replay"] and r.episode is None for r in results if not r.kept)
+    k = next(k for k, r in enumerate(results) if r.kept)
+    ep = results[k].episode
+    assert results[k].steps == len(ep["action"]) and results[k].source_episode == source.episode
     start = pusht.perturbed_start(source.states[0], engine.attempt_rng(0, source.episode, k), 0.004, 0.02)
     np.testing.assert_allclose(ep["aug.start"][0], start, atol=1e-6)  # the provenance names this start
     obs = env.set_start(*start)
@@ -115,8 +117,8 @@ def test_replay_rejects_most_attempts_at_the_chapter_sigmas(env):
         m: [engine.attempt(PUSHT, source, k, Perturbation(0, 0.08, 0.5), mode=m, env=env) for k in range(10)]
         for m in ("resolve", "replay")
     }
-    assert all(not isinstance(r, str) for r in modes["resolve"])
-    assert sum(not isinstance(r, str) for r in modes["replay"]) <= 3
+    assert all(r.kept for r in modes["resolve"])
+    assert sum(r.kept for r in modes["replay"]) <= 3
 
 
 def table_runner(table, log):
@@ -133,7 +135,7 @@ def test_keep_first_takes_the_first_successes_in_k_order():
     ok = {"action": np.zeros((1, 2))}
     pattern = {0: "x.xx.x.x..", 1: "..........", 2: "xxxxxxxxxx"}  # x = kept, . = failed
     table = {
-        (e, k): ("miss" if c == "." else {**ok, "k": k, "e": e})
+        (e, k): (Outcome("miss") if c == "." else Outcome(None, {**ok, "k": k, "e": e}))
         for e, p in pattern.items()
         for k, c in enumerate(p)
     }
@@ -155,7 +157,7 @@ def test_keep_first_matches_one_attempt_at_a_time():
         per_demo, cap = int(rng.integers(1, 5)), int(rng.integers(1, 6))
         rates = rng.uniform(0, 1, size=4)
         table = {
-            (e, k): ({"k": k} if rng.uniform() < rates[e] else "miss")
+            (e, k): (Outcome(None, {"k": k}) if rng.uniform() < rates[e] else Outcome("miss"))
             for e in range(4)
             for k in range(cap * per_demo)
         }
@@ -166,7 +168,7 @@ def test_keep_first_matches_one_attempt_at_a_time():
                 if n == per_demo:
                     break
                 want_attempts += 1
-                if table[e, k] == "miss":
+                if not table[e, k].kept:
                     want_miss += 1
                 else:
                     want_kept.append((e, k))

@@ -67,10 +67,11 @@ def write_lerobots(root, feats, eps):
     ds = lerobot_io._lerobot_dataset_class().create(
         "local/theirs", fps=10, features=feats, root=root, robot_type="r", use_videos=False
     )
-    for ep in lerobot_io._with_env_state(eps, feats):
-        for t in range(len(ep["action"])):
-            ds.add_frame({k: ep[k][t] for k in feats} | {"task": TASK})
-        ds.save_episode()
+    with lerobot_io._embed_only_images():  # as the project's own per-frame writes run it (same bytes)
+        for ep in lerobot_io._with_env_state(eps, feats):
+            for t in range(len(ep["action"])):
+                ds.add_frame({k: ep[k][t] for k in feats} | {"task": TASK})
+            ds.save_episode()
     ds.finalize()
 
 
@@ -286,3 +287,16 @@ def test_one_chunk_rule_for_every_file_of_the_layout():
     assert got == [(0, 0), (0, 0), (0, 1), (1, 0), (1, 1), (2, 0)]
     assert rows_below(100, 10) == 9 and rows_below(101, 10) == 10 and rows_below(5, 10) == 0
     assert rows_within(100, 10) == 10 and rows_within(109, 10) == 10 and rows_within(5, 10) == 1
+
+
+def test_lerobots_embed_images_is_changed_only_inside_our_write():
+    """The skip of embed_images for image-less tables holds inside the project's per-frame writes only:
+    nothing else in the process sees lerobot's function changed."""
+    from lerobot.datasets import dataset_writer
+
+    before = dataset_writer.embed_images
+    lerobot_io._lerobot_dataset_class()  # once patched the whole process
+    assert dataset_writer.embed_images is before
+    with lerobot_io._embed_only_images():
+        assert dataset_writer.embed_images is not before
+    assert dataset_writer.embed_images is before

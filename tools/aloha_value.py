@@ -74,11 +74,11 @@ def grow(env, sources: dict, mode: str, seed: int, c: dict) -> tuple[list[dict],
             attempts += 1
             how = dict(pos_sigma=c["aug_pos_sigma"], mode=mode, plans=plans)
             r = aloha_task.attempt(src, engine.attempt_rng(seed, e, k), env, **how)
-            if isinstance(r, str):
-                failures[r] = failures.get(r, 0) + 1
-            else:
-                kept.append(r[0])
+            if r.kept:
+                kept.append(r.episode)
                 n += 1
+            else:
+                failures[r.reason] = failures.get(r.reason, 0) + 1
     return kept, {"attempts": attempts, "kept": len(kept), "failures": failures}
 
 

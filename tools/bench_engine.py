@@ -49,7 +49,7 @@ from ch37 import ROOT, errors
 from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
 from ch37.ownership import dump_json, is_ours, read_stamp, round_floats, write_atomic
-from datagen import TASKS, Perturbation, engine, lockstep, shards
+from datagen import Perturbation, engine, known_tasks, lockstep, shards
 from lerobot_v3.dataset import load_arrays
 from tools.common import parser, provenance
 
@@ -174,7 +174,9 @@ def point(src: Path, out: Path, n: int, executor: str, a) -> dict:
     row |= {"shard_size": rep["settings"]["shard_size"], "sha256": tree_digest(run_dir)}
     # the run's generation worker-seconds (its shard writes included) over its kept frames' physics
     kept = rep["kept"]
-    row["physics_s"] = physics_floor(TASKS[a.task], kept_runs(run_dir), FLOOR_REPEATS) if kept else math.nan
+    row["physics_s"] = (
+        physics_floor(known_tasks()[a.task], kept_runs(run_dir), FLOOR_REPEATS) if kept else math.nan
+    )
     row["gen_over_physics"] = (gen - start) * workers / row["physics_s"]
     row |= {"summary": m.pop("stdout").strip().splitlines()[-1], **m}  # m: the peak RSS
     remove_run(run_dir)
@@ -218,16 +220,17 @@ def per_demo_costs(
     sources = engine.sources(load_arrays(src))
     jobs = [(e, k) for e in sorted(sources) for k in range(attempts_per_demo)]
     how = Perturbation(seed=seed, pos_sigma=DEFAULTS["aug_pos_sigma"], yaw_sigma=DEFAULTS["aug_yaw_sigma"])
-    engine.attempt(task, sources[jobs[0][0]], 10**6, how, mode=mode)  # warm up
+    sims = engine.Simulators()  # the envs (and plans) both sides reuse, made once
+    engine.attempt(task, sources[jobs[0][0]], 10**6, how, mode=mode, sims=sims)  # warm up
     times = {"one_at_a_time_s": [], "lockstep_s": [], "physics_s": [], "write_s": []}
     for _ in range(repeats):
         t0 = time.perf_counter()
-        one = [engine.attempt(task, sources[e], k, how, mode=mode) for e, k in jobs]
+        one = [engine.attempt(task, sources[e], k, how, mode=mode, sims=sims) for e, k in jobs]
         t1 = time.perf_counter()
-        together = lockstep.attempts_lockstep(task, sources, jobs, how, mode=mode)
+        together = lockstep.attempts_lockstep(task, sources, jobs, how, mode=mode, sims=sims)
         t2 = time.perf_counter()
-        kept = [ep for ep in together if not isinstance(ep, str)]
-        if sum(not isinstance(ep, str) for ep in one) != len(kept):
+        kept = [r.episode for r in together if r.kept]
+        if sum(r.kept for r in one) != len(kept):
             raise DataError("lockstep kept another set than one attempt at a time")
         physics = physics_floor(task, ((ep["aug.start"][0], ep["action"]) for ep in kept))
         with tempfile.TemporaryDirectory() as tmp:  # the engine's own writer, whatever columns it adds
@@ -300,7 +303,7 @@ def estimate(rows: list[dict], cores_list=(64, 1024)) -> dict:
 def main(argv: list[str]) -> int:
     p = parser("bench_engine", __doc__)
     p.add_argument(
-        "--task", choices=sorted(TASKS), default="pusht", help="the task grown (its generator's set)"
+        "--task", choices=sorted(known_tasks()), default="pusht", help="the task grown (its generator's set)"
     )
     p.add_argument(
         "--mode", choices=("resolve", "replay"), default="resolve", help="augment_demos.py's --mode"
@@ -327,7 +330,7 @@ def main(argv: list[str]) -> int:
         raise DataError(f"--checkout {a.checkout} has no augment_demos.py")
     if min(a.sizes) < 1:
         raise DataError("--sizes must be positive")
-    task = TASKS[a.task]
+    task = known_tasks()[a.task]
     src = a.src or a.out / f"src_{task.name}_seed0_ep{SOURCE_EPISODES}"
     if a.src is None and not (src / "meta" / "info.json").exists():
         generator = {"pusht": gen_demos_pusht, "aloha": gen_demos_aloha}[task.name]  # task.generator's main

@@ -169,12 +169,13 @@ def sigma_row(srcs: dict, m: float, mode: str, attempts: int, workers: int) -> d
             got := datagen.run_attempts(datagen.PUSHT, sources, jobs, how, mode=mode, workers=workers)
         )
         for (e, _), r in zip(jobs, got):
-            if not isinstance(r, str):
-                shift.append(math.hypot(*(r["aug.start"][0][:2] - sources[e].states[0][2:4])))
+            if r.kept:
+                shift.append(math.hypot(*(r.episode["aug.start"][0][:2] - sources[e].states[0][2:4])))
     n, kept = len(results), len(shift)
     row = {"multiplier": m, "pos_sigma": m * POS_SIGMA, "yaw_sigma": m * YAW_SIGMA, "mode": mode}
     row |= {"attempts": n, "kept": kept, "yield": kept / n, "ci95": bc.wilson(kept / n, n)}
-    row["failures"] = {why: results.count(why) for why in datagen.PUSHT.failures[mode]}
+    reasons = [r.reason for r in results]
+    row["failures"] = {why: reasons.count(why) for why in datagen.PUSHT.failures[mode]}
     stats = {"median": np.median, "max": np.max}
     row["kept_block_shift_m"] = {k: float(f(shift)) if shift else None for k, f in stats.items()}
     return row | {"seconds": round(time.perf_counter() - t, 1)}

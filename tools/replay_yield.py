@@ -83,7 +83,7 @@ def one(job) -> tuple[str, int]:
         plans = work["plans"] if mode != "replay" else {x: aloha_task.whole(s) for x, s in pool.items()}
         how = dict(pos_sigma=m * POS_SIGMA, mode="resolve" if mode == "resolve" else "replay", plans=plans)
         r = aloha_task.attempt(src, rng, env, pool=pool if mode.endswith("nearest") else None, **how)
-        return (r, 0) if isinstance(r, str) else ("kept", len(r[0]["action"]))
+        return ("kept", r.steps) if r.kept else (r.reason, 0)
     start = pusht_task.perturbed_start(src.states[0], rng, m * POS_SIGMA, m * YAW_SIGMA)
     if start is None:
         return "no_valid_start", 0
@@ -91,11 +91,13 @@ def one(job) -> tuple[str, int]:
         ep = rollout(env, pusht_task.PUSHT.expert(), env.set_start(*start))
         why = None if ep["success"] else "expert_failed"
     elif mode == "replay":
-        ep, why = pusht_task.replay(env, start, src)
+        got = pusht_task.replay(env, start, src)
+        ep, why = got.episode, got.reason
     else:
         chosen = pool[pusht_task.nearest(pool, start)] if mode.endswith("nearest") else src
         frame = "block" if mode == "subtasks_block_nearest" else "block+target"
-        ep, why = pusht_task.replay_subtasks(env, start, chosen, push_frame=frame)
+        got = pusht_task.replay_subtasks(env, start, chosen, push_frame=frame)
+        ep, why = got.episode, got.reason
     return (why, 0) if why else ("kept", len(ep["action"]))
 
 

@@ -1,0 +1,49 @@
+"""A task registers itself when its module is imported, and the digests that guard resumed shards
+(datagen.shards.engine_version) and cached demo sets (datagen.demos.generator_version) are read from
+the modules a task imports (ch37.code_files), so no list of files can forget a task's code."""
+
+import sys
+from pathlib import Path
+
+import pytest
+
+import datagen
+from datagen import ALOHA, PUSHT, demos, shards
+from datagen.task import known_tasks, register
+
+
+def test_every_task_module_registers_itself_and_no_list_names_them():
+    assert known_tasks() == {"aloha": ALOHA, "pusht": PUSHT}
+    assert not hasattr(datagen, "TASKS")
+    assert register(PUSHT) is PUSHT  # registering again is harmless
+
+
+def _edited(monkeypatch, target: Path) -> None:
+    """Every read of `target` from now on sees it with one more line (an edit of its source)."""
+    real = Path.read_bytes
+    target = target.resolve()
+    monkeypatch.setattr(
+        Path, "read_bytes", lambda self: real(self) + (b"\n# edited\n" if self.resolve() == target else b"")
+    )
+
+
+@pytest.mark.parametrize("name", ["pusht", "aloha"])
+def test_an_edit_to_a_task_module_its_env_or_its_expert_changes_the_digests(monkeypatch, name):
+    task = known_tasks()[name]
+    expert = type(task.expert())
+    module = sys.modules[type(task).__module__]
+    digest_run = lambda: shards.engine_version(task)  # noqa: E731
+    digest_demos = lambda: demos.generator_version.__wrapped__(task.env_module, expert)  # noqa: E731
+    before = digest_run(), digest_demos()
+    for f, guards_demos in (
+        (module.__file__, False),  # the task module: resumed shards (a demo set is made without it)
+        (task.env_module.__file__, True),
+        (task.env_module.XML_PATH, True),
+        (sys.modules[expert.__module__].__file__, True),
+    ):
+        with monkeypatch.context() as m:
+            _edited(m, Path(f))
+            assert digest_run() != before[0], f"an edit of {f} leaves the {name} run digest as it was"
+            if guards_demos:
+                assert digest_demos() != before[1], f"an edit of {f} leaves the {name} demo digest as it was"
+    assert (digest_run(), digest_demos()) == before
