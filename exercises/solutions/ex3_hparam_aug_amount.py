@@ -1,7 +1,7 @@
 """Reference answer to exercises/ex3_hparam_aug_amount.py: the task is that file's docstring."""
 
-PREDICTION = "climb"  # "climb", "plateau" or "fall"
+PREDICTION = "plateau"  # "climb", "plateau" or "fall"
 WHY = (
-    "Twelve demos leave most of the start space empty, and the nested sets at 4 and 8 keep filling new cells "
-    "with real expert solutions, so each step should still add coverage the policy can use."
+    "Four perturbed starts per demo already put a block start in 31 of the 36 cells where twelve demos "
+    "reach 12, so doubling to eight adds one cell and little the policy has not seen at this budget."
 )
