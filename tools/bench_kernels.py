@@ -17,11 +17,14 @@ import statistics
 import subprocess
 import sys
 
-from ch37 import ROOT, config, errors
-from tools.common import parser
+import yaml
 
-# One measurement: the default recipe's shapes (hidden 512, batch 128, two arms of 420 and 3,420 frames:
-# the seed-0 source and source + augmented sizes), `steps` timed after a warm-up of 50.
+from ch37 import ROOT, config, errors
+from tools.common import META, parser
+
+# One measurement: the default recipe's shapes (hidden 512, batch 128, two arms of 420 and 3,490 frames:
+# the seed-0 source and source + augmented sizes, from its budgets; a step's time does not depend on
+# them), `steps` timed after a warm-up of 50.
 CHILD = """
 import json, sys, time
 import numpy as np, torch
@@ -29,7 +32,7 @@ import bc_recipe as bc
 steps, hidden, batch = map(int, sys.argv[1:4])
 rng = np.random.default_rng(0)
 data = [(rng.normal(size=(n, 10)).astype(np.float32), rng.normal(size=(n, 2)).astype(np.float32))
-        for n in (420, 3420)]
+        for n in (420, 3490)]
 init = bc.init_weights(hidden, 0)
 bc.train(data, 50, init, batch_size=batch, lr=1e-3, seed=0)
 t0 = time.perf_counter()
@@ -61,7 +64,8 @@ def main(argv: list[str]) -> int:
     for r in range(a.rounds):
         for b in a.branches if r % 2 == 0 else reversed(a.branches):  # alternate the order each round
             times[b].append(measure(b, a.steps, recipe.hidden_dim, recipe.batch_size)["s_per_step"])
-    full = 13633 + 1641  # the default run's steps at seed 0: full + short budget (meta.yaml's seed-0 row)
+    seed0 = yaml.safe_load(META.read_text())["reference_run"]["seeds"]["rows"][0]["steps"]
+    full = seed0["full"] + seed0["short"]  # the default run's steps at seed 0, both budgets
     base = statistics.median(times[a.branches[0]])
     print(f"training steps, {a.steps} per measurement, {a.rounds} rounds alternated, medians:")
     for b, ts in times.items():
