@@ -13,7 +13,7 @@ from ch37 import config
 from ch37.config import FINITE, NON_NEGATIVE, POSITIVE, flag
 from ch37.errors import DataError, run_main
 from ch37.seeds import MAX_SEED, SEED_BLOCK
-from datagen import Embodiment, check_gl, generate
+from datagen import Task, check_gl, generate
 from lerobot_v3 import IMAGE_SIZE
 
 
@@ -45,12 +45,12 @@ class Args:
     quiet: bool = flag(False, "no progress bar")
 
 
-def main(emb: Embodiment, argv=None) -> int:
+def main(emb: Task, argv=None) -> int:
     """The generators' command line; every problem a user can fix is one line and exit 2, Ctrl-C 130."""
     return run_main(_main, emb, argv)
 
 
-def _main(emb: Embodiment, argv=None) -> int:
+def _main(emb: Task, argv=None) -> int:
     from ch37.ownership import check_out_path, holds_data
 
     doc = f"Generate {emb.name} expert demos as a local LeRobot v3 dataset."

@@ -1,14 +1,17 @@
 """The data engine: grow a demo set of any task that implements datagen.task.Task, MimicGen-style.
 
-task       Task (what a task provides: env, start names, perturbation, place, expert, segments,
-           replay, success), Outcome (what one attempt came to), Perturbation, Source, Segment,
-           rollout, write_dataset (a stamped set)
-demos      expert demo sets: Embodiment, generate, ensure_demos (the chapter's private demo cache),
+task       Task (what a task describes, in MimicGen's division: its env, starts and their
+           perturbation, its arms and reach, object frames, subtasks and their signals, the action
+           conversion, an optional expert), Subtask, Outcome (what one attempt came to), Perturbation,
+           Source, rollout, write_dataset (a stamped set)
+demos      expert demo sets of a task: generate, ensure_demos (the chapter's private demo cache),
            check_given (a set you name, checked and never modified)
-pusht      PUSHT: PushT as a task (the only module here that imports pusht_env and its expert)
-aloha      ALOHA: the ALOHA cube handoff as a task (perturbation in the spawn regions, re-solve,
-           replay by grasp-signal subtasks; the only module here that imports aloha_env)
-engine     one attempt, keep_first, grow, run_attempts, save: task-agnostic
+pusht      PUSHT: PushT described as a task (the only module here that imports pusht_env and its expert)
+aloha      ALOHA: the ALOHA cube handoff described as a task (the only module here that imports aloha_env)
+engine     one attempt in either mode, keep_first, grow, run_attempts, save: task-agnostic
+replay     the one replay for every task (MimicGen's generation loop): cut a source at its subtask
+           signals, re-express each segment in the new object frames, bridge, execute, keep on success
+lockstep   a worker's attempts stepped together (resolve and replay), the same bytes
 shards     a run on disk: fixed shards on local processes or Ray (ch37.parallel.map_jobs), resume,
            the generation report, the merge (lerobot_v3.merge_sets)
 
@@ -17,7 +20,7 @@ module of the package and returns them by name, so a new task is one module here
 """
 
 from datagen.aloha import ALOHA
-from datagen.demos import Embodiment, check_given, check_gl, ensure_demos, generate
+from datagen.demos import check_given, check_gl, ensure_demos, generate
 from datagen.engine import (
     ATTEMPTS_PER_KEPT,
     KEPT_KEYS,
@@ -35,8 +38,8 @@ from datagen.pusht import PUSHT
 from datagen.task import (
     Outcome,
     Perturbation,
-    Segment,
     Source,
+    Subtask,
     Task,
     known_tasks,
     register,
@@ -47,12 +50,11 @@ from datagen.task import (
 __all__ = [
     "ALOHA",
     "ATTEMPTS_PER_KEPT",
-    "Embodiment",
     "KEPT_KEYS",
     "PUSHT",
     "Outcome",
     "Perturbation",
-    "Segment",
+    "Subtask",
     "Source",
     "Task",
     "attempt",

@@ -11,7 +11,6 @@ from __future__ import annotations
 import functools
 import os
 import sys
-from dataclasses import dataclass
 from importlib.metadata import version
 from pathlib import Path
 
@@ -34,29 +33,19 @@ if sys.platform.startswith("linux"):  # headless rendering: EGL unless the user 
 os.environ.setdefault("SVT_LOG", "1")  # the AV1 encoder's banner: errors only
 
 
-# Any edit to the code that shapes a set's frames (this module, the env and the expert, and every project
-# module they import: ch37.code_files reads them from what was imported), or another lerobot (the writer
-# of its files), changes the version, so a cached set can never outlive the code that made it.
+# Any edit to the code that shapes a set's frames (this module, the task's module, its env and its expert,
+# and every project module they import: ch37.code_files reads them from what was imported), or another
+# lerobot (the writer of its files), changes the version, so a cached set can never outlive the code that
+# made it.
 @functools.cache
-def generator_version(env_module, expert_class) -> str:  # at the first set made or checked, not at import
-    roots = (sys.modules[__name__], env_module, sys.modules[expert_class.__module__])
+def generator_version(task) -> str:  # at the first set made or checked, not at import
+    classes = (task.expert_class, type(task))
+    roots = (sys.modules[__name__], task.env_module) + tuple(sys.modules[c.__module__] for c in classes)
     return f"3+{code_digest(roots)}+lerobot{version('lerobot')}"
 
 
-@dataclass(frozen=True)
-class Embodiment:
-    name: str  # "pusht" | "aloha"
-    env_module: object  # the Env class, STATE_NAMES, ENV_STATE_NAMES, ACTION_NAMES, FPS, ROBOT_TYPE, TASK
-    env_class: str
-    expert_class: type
-    default_noise: float  # action noise std (m/s) when --noise is not given
-
-    def make_env(self):
-        return getattr(self.env_module, self.env_class)()
-
-
 def generate(
-    emb: Embodiment,
+    emb,
     out: Path,
     *,
     episodes: int,
@@ -65,7 +54,8 @@ def generate(
     video: bool = False,
     quiet: bool = False,
 ) -> dict:
-    """Write a demo set to `out` and return its summary (episodes, frames, successes)."""
+    """Write a demo set of the task `emb` (datagen.task.Task: its env, expert_class, name) to `out` and
+    return its summary (episodes, frames, successes)."""
     env = emb.make_env()
     m = emb.env_module
     summary = {"episodes": 0, "frames": 0, "successes": 0}
@@ -86,7 +76,7 @@ def generate(
     return summary
 
 
-def stamp_for(emb: Embodiment, *, episodes: int, seed: int, noise: float, video: bool) -> dict:
+def stamp_for(emb, *, episodes: int, seed: int, noise: float, video: bool) -> dict:
     """Everything the frames of a generated set depend on; a cached set is reused only on equality."""
     return {
         "made_by": MADE_BY,
@@ -95,7 +85,7 @@ def stamp_for(emb: Embodiment, *, episodes: int, seed: int, noise: float, video:
         "seed": int(seed),
         "noise": float(noise),
         "video": bool(video),
-        "generator_version": generator_version(emb.env_module, emb.expert_class),
+        "generator_version": generator_version(emb),
     }
 
 

@@ -7,7 +7,8 @@ is a pure function of its arguments: attempt k of source episode e draws from it
 np.random.default_rng([env_seed(seed, "aug", e), k]), and the sim is fully reset at the perturbed
 start (task.place), so the result never depends on which process runs it, in what order, or with
 what else. scale_data.py's augment region and augment_demos.py (through datagen.shards) call the
-same function. The modes' moves are the task's (datagen.task, datagen.pusht); the kept episode
+same function. The modes are the engine's (resolve here, replay: datagen.replay), the parts they use
+the task's (datagen.task.Task); the kept episode
 carries its provenance on every frame: aug.source_episode and aug.start (the start it was made from).
 
 keep_first(...) grows a set the MimicGen way: attempts k = 0, 1, 2, ... per source demo until
@@ -24,7 +25,8 @@ import numpy as np
 
 from ch37.parallel import map_jobs
 from ch37.seeds import env_seed
-from datagen.task import Outcome, Perturbation, Source, Task
+from datagen import replay
+from datagen.task import Outcome, Perturbation, Source, Task, ended, rollout
 
 __all__ = [
     "ATTEMPTS_PER_KEPT",
@@ -133,7 +135,15 @@ def attempt(
     if env is None:
         env = sims.env(task) if sims is not None else task.make_env()
     plans = sims.plans if sims is not None else None
-    got = task.run_mode(mode, source, attempt_rng(how.seed, source.episode, k), how, env, pool, plans)
+    start = task.perturb(source.states[0], attempt_rng(how.seed, source.episode, k), how)
+    if start is None:
+        got = Outcome("no_valid_start", source_episode=source.episode)
+    elif mode == "resolve":  # the expert solves the start itself: no source is replayed
+        ep = rollout(env, task.expert(), task.place(env, start))
+        got = ended(ep, None if ep["success"] else "expert_failed", start, source.episode)
+    else:  # MimicGen's replay of the attempt's own source, or of the pool's nearest to the start
+        chosen = pool[replay.nearest(task, pool, start)] if pool else source
+        got = replay.replay(task, env, start, chosen, plans)
     if not got.kept:
         return replace(got, episode=None)
     return replace(got, episode=with_provenance(got.episode, got.source_episode, got.start))

@@ -25,13 +25,16 @@ The runner (run_lanes) knows no task. A mode hands it
     decide(lanes, envs, obs)     -> (actions (N, act_dim) float32, stop (N,) bool or None): one call for
                                     every live lane; a stopped lane ends before this step (replay's
                                     segment ran out) and is not stepped
-    finish(lane, env, episode)   -> the attempt's result, from the frames recorded for it
+    finish(lane, env, episode, last_obs)
+                                 -> the attempt's result, from the frames recorded for it (last_obs: the
+                                    observation after its last step)
 and the runner keeps `lanes` envs busy, refilling a lane as soon as its attempt ends, recording every
 frame into preallocated arrays (lanes x max_frames), and returns the results in job order.
 Mode "resolve" is built here for every task from its parts (perturb, place, batch_expert, step_batch,
-max_steps: the Task contract, datagen.task); mode "replay" from task.replay_lanes (PushT's one-segment
-replay) where the task has it. A task without a batch expert or replay lanes (ALOHA's subtask replay,
-and --select nearest) runs those attempts one at a time through datagen.engine.attempt, the same bytes.
+max_steps: the Task contract, datagen.task); mode "replay" is the engine's one replay as lanes
+(datagen.replay.lanes: each lane runs the same generator as one attempt does), for every task and both
+--select. A task without a batch expert runs "resolve" one attempt at a time through
+datagen.engine.attempt, the same bytes.
 """
 
 from __future__ import annotations
@@ -41,7 +44,7 @@ from collections import deque
 import numpy as np
 
 from ch37.parallel import step_envs
-from datagen import engine
+from datagen import engine, replay
 from datagen.task import Outcome, Perturbation, Task
 
 __all__ = ["LANES", "Lane", "attempts_lockstep", "kept_or_not", "resolve_lanes", "run_lanes", "start_of_job"]
@@ -102,7 +105,7 @@ def run_lanes(
             "action": act_buf[slot, :n].copy(),
             "next.success": succ_buf[slot, :n, None].copy(),
         }
-        results[i] = finish(lane, envs[slot], episode)
+        results[i] = finish(lane, envs[slot], episode, obs_buf[slot, n])
         fill(slot)
 
     for slot in range(width):
@@ -161,7 +164,7 @@ def resolve_lanes(task: Task, sources: dict, how: Perturbation) -> dict:
     def decide(lanes, envs, obs):
         return act_batch(obs), None
 
-    def finish(lane, env, episode):
+    def finish(lane, env, episode, last_obs):
         return kept_or_not(lane, episode, bool(episode["next.success"][-1, 0]), "expert_failed")
 
     return {"begin": begin, "decide": decide, "finish": finish}
@@ -186,8 +189,8 @@ def attempts_lockstep(
     parts = None
     if mode == "resolve" and task.batch_expert() is not None:
         parts = resolve_lanes(task, sources, how)
-    if mode == "replay" and select == "own":
-        parts = task.replay_lanes(sources, how)
+    if mode == "replay":
+        parts = replay.lanes(task, sources, how, sources if select == "nearest" else None, sims.plans)
     if parts is None:  # the task offers no lanes for this mode: the same results, one at a time
         return engine.run_attempts(task, sources, jobs, how, mode=mode, select=select, workers=1, sims=sims)
     m = task.env_module

@@ -1,60 +1,32 @@
 """What a task gives the data engine: MimicGen's env interface, made small.
 
-The engine (datagen.engine: one attempt, keep_first; datagen.shards: the run, its shards, report and
-merge) knows no task. Everything about one task lives in one module named for it (datagen/pusht.py,
-datagen/aloha.py), and only that module (and the engine's bit-identical fast copies, datagen/fast_*.py)
-imports its env and its expert. A task is an instance of a Task subclass that the module registers as
-it is imported (TASK = register(MyTask()): known_tasks() finds it; no list names it, and the digests
-that guard resumed shards and cached demo sets read its code from what it imports); it provides
+The engine (datagen.engine: one attempt in either mode; datagen.replay: the one replay; datagen.lockstep;
+datagen.shards: the run, its shards, report and merge) knows no task. Everything about one task lives in
+one module named for it (datagen/pusht.py, datagen/aloha.py), and only that module (and the engine's
+bit-identical fast copies, datagen/fast_*.py) imports its env and its expert. A task is an instance of a
+Task subclass that its module registers as it is imported (TASK = register(MyTask())): known_tasks()
+finds it, no list names it, and the digests that guard resumed shards and cached demo sets read its
+code from what the run imported.
 
-    name, title, generator
-                         the task's key ("pusht"), its name in messages, the command that
-                         makes a source set of it
-    start_names          the names of a start's numbers, in the order
-                         place() takes them (stored on every kept frame as aug.start)
-    state_ranges         {state name: (low, high)} as the env documents them: a source outside is refused
-    action_ranges        {action name: (low, high)}: the env's clip range, checked as the states are
-    env_module           the env's module: STATE_NAMES, ACTION_NAMES, ENV_STATE_NAMES, FPS, ROBOT_TYPE,
-                         TASK (what a LeRobot set of this task records), OBS_DIM, ACT_DIM
-    make_env(share=None) a new simulator (one per worker process; place() fully resets it); share:
-                         an env of this task to share with: its compiled model, and where the env
-                         can (PushT) its MjData, each env keeping its own state (lockstep's lanes)
-    perturb(state, rng, perturbation)
-                         a start near the source's first observation `state`, drawn from `rng`, or
-                         None when no valid draw was found (reason "no_valid_start")
-    place(env, start)    the simulator put at `start` with fresh counters; returns the observation
-    expert()             the noise-free expert that re-solves a placed start
-    object_pose(state)   the pose of the object the task is about, from an observation
-    nearest(pool, start) the episode of the source in `pool` ({episode: Source}) whose objects lie
-                         nearest `start`'s (MimicGen's nearest source selection, --select nearest)
-    segments(source)     the source demo cut into segments, each relative to one object frame
-                         (Segment, or the task's own subtask type); replay re-expresses each in the
-                         new start's frame
-    replay(env, start, source, plans=None)
-                         the source's segments re-expressed for `start` and executed open-loop:
-                         an Outcome (reason None on success); plans: a dict the caller keeps between
-                         attempts (datagen.engine.Simulators.plans) where a task caches its plans
-    success(env)         whether the env reports the task done
-    failures             {mode: every reason an attempt of that mode can return}
+In MimicGen's division of work, a task only describes (Task below: each attribute and method with its
+inputs, outputs and units):
 
-What lockstep (datagen.lockstep: a shard's attempts stepped together) needs, each with a default that
-gives the same bytes one attempt at a time:
+    its env              make_env, place (a start, fully), success, max_steps, the ranges of its states
+                         and actions; start_of (the start an observation shows), perturb (a start near
+                         a source's first observation), start_names (a start's numbers: aug.start)
+    its robot            arms (each controlled point's columns in an observation), reach,
+                         action_to_target and target_to_action (how an action becomes a world-frame
+                         target and back: a velocity command, or a position target)
+    its objects          object_pose, frame_pose (the object frames its subtasks live in),
+                         start_distance (what "nearest source" means)
+    its subtasks         subtasks (per arm, the frame each lives in; the signal that ends it; whether
+                         it is entered by interpolation), signals (the env's subtask-end signals)
+    its expert           expert_class (optional: a task without one only replays; the demo generators
+                         roll it out with default_noise), batch_expert (optional)
 
-    max_steps            control steps an episode may last (the env's limit); sizes lockstep's buffers
-    batch_expert()       the noise-free expert over a batch: obs (N, obs_dim) float32 -> actions (N,
-                         act_dim) float32, row i bit for bit expert().act(obs[i]); None (the default):
-                         mode "resolve" runs one attempt at a time
-    step_batch(envs, actions)
-                         envs[i] stepped with actions[i] -> (obs (N, obs_dim), success (N,), done (N,)),
-                         bit for bit env.step per env, which the default does (ch37.parallel.step_each)
-    replay_lanes(sources, how)
-                         mode "replay" as lanes (begin, decide, finish), or None (the default): replay
-                         runs one attempt at a time
-
-A mode is a method name: "resolve" (perturb, re-solve with the expert, keep on success) and
-"replay" (perturb, replay the transformed source, keep on success) are defined here once for every
-task from the parts above. An executor that steps many attempts in lockstep decides through the
-same parts (place, expert, success) over a batch.
+and the engine does the rest: the modes ("resolve": perturb, the expert re-solves, keep on success;
+"replay": perturb, the source's subtasks re-expressed in the new object frames and executed, keep on
+success: datagen.replay), lockstep, shards, resume, report and merge.
 """
 
 from __future__ import annotations
@@ -74,8 +46,8 @@ from lerobot_v3 import IMAGE_KEY, IMAGE_SIZE, write_set
 __all__ = [
     "Outcome",
     "Perturbation",
-    "Segment",
     "Source",
+    "Subtask",
     "Task",
     "ended",
     "known_tasks",
@@ -134,15 +106,6 @@ class Source:
     episode: int
     states: np.ndarray  # (T, obs_dim) observation.state; resolve reads only the first row
     actions: np.ndarray  # (T, act_dim) action; kept for modes that reuse the source path
-
-
-@dataclass(frozen=True)
-class Segment:
-    """Frames [start, stop) of a source demo, made relative to the object at `pose` (x m, y m, yaw rad)."""
-
-    start: int
-    stop: int
-    pose: tuple[float, float, float]
 
 
 def rotation(yaw: float) -> np.ndarray:
@@ -228,68 +191,105 @@ def rollout(env, policy, obs, *, render: bool = False) -> dict:
     return ep
 
 
-class Task:
-    """The contract between the engine and a task, in MimicGen's division of work: the task describes
-    (its env, starts and their perturbation, the expert, the source's segments and their replay,
-    success), the engine runs (the modes below, lockstep, shards, resume, report, merge). A subclass sets
-    the attributes and defines every method that raises NotImplementedError; the lockstep hooks below
-    them have defaults. See the module docstring."""
+@dataclass(frozen=True)
+class Subtask:
+    """One of a task's subtasks, as MimicGen's task config names them: its name, the object frame each arm's
+    motion is relative to (task.arms order; a name of task.frame_pose, or (a, b): a frame that slides
+    from a onto b over the subtask), the signal (task.signals) whose rise ends it (None: it runs to the
+    source's end), and whether it is entered by interpolation from where the arms are (bridge). Every
+    arm moves through every subtask in step (a coordination subtask is one whose frames all agree)."""
 
+    name: str
+    frames: tuple
+    ends: str | None = None
+    bridge: bool = True
+
+
+class Task:
+    """The contract between the engine and a task, in MimicGen's division of work: the task describes,
+    the engine runs (the modes, the one replay: datagen.replay, lockstep, shards, resume, report, merge).
+    A subclass sets the attributes and defines every method that raises NotImplementedError; the rest
+    have defaults. Positions in m, angles in rad, velocities in m/s; an observation is the env's
+    (obs_dim,) float32 vector, an action its (act_dim,) float32 vector."""
+
+    # ---- what the task is ----
     name: str  # "pusht": its key in known_tasks(), recorded in a run's settings
     title: str  # "PushT": how messages name it
     generator: str  # the command that makes a source set of this task ("gen_demos_pusht.py")
-    start_names: tuple[str, ...]
-    state_ranges: dict[str, tuple[float, float]]
-    action_ranges: dict[str, tuple[float, float]]
-    env_module: object
-    failures: dict[str, tuple[str, ...]]
+    env_module: object  # STATE_NAMES, ACTION_NAMES, ENV_STATE_NAMES, FPS, ROBOT_TYPE, TASK, OBS_DIM, ACT_DIM
+    start_names: tuple[str, ...]  # a start's numbers, in place()'s order (stored as aug.start)
+    state_ranges: dict[str, tuple[float, float]]  # {state name: (low, high)}: a source outside is refused
+    action_ranges: dict[str, tuple[float, float]]  # {action name: (low, high)}: the env's clip range
     max_steps: int  # control steps an episode may last: the env's limit
+    expert_class: type | None = None  # its scripted expert: expert_class(noise=std m/s, seed=int); optional
+    default_noise: float = 0.0  # the expert's action noise (std, m/s) in the task's demo sets
 
-    # ---- what every task must provide (each raises until the task defines it) ----
+    # ---- what replay reads (datagen.replay) ----
+    arms: dict[str, slice]  # {arm: the columns of its controlled point's (x, y) in an observation}
+    reach: dict[str, tuple]  # {arm: ((x low, x high), (y low, y high))}: where its point can go
+    subtasks: tuple[Subtask, ...]  # in order; the last one runs to the source's end
+    bridge_speed: float  # m/s: a bridge's top speed
+    bridge_tol: float  # m: arms this close to their first waypoints are not bridged
+    bridge_moves: tuple[float, float] | None = None  # (m, rad): a bridge that moves the object more hit it
+    hold_steps: int = 0  # steps the arms hold still after the plan, for a success that must be held
+
     def make_env(self, share=None):
-        """A new simulator of this task: reset(seed) and step(action) -> (obs (obs_dim,) float32,
-        reward, done, info["success"]). share: an env of this task whose compiled model (and, where the
-        env can, simulator memory) the new one may share; every env keeps its own state."""
+        """A new simulator of this task: step(action) -> (obs, reward, done, info["success"]). share: an env
+        of this task whose compiled model (and, where the env can, its MjData) the new one may share;
+        every env keeps its own state (lockstep's lanes)."""
+        raise NotImplementedError
+
+    def start_of(self, state) -> tuple:
+        """The start (start_names' values) an observation shows: place(env, start_of(obs)) puts the env
+        where obs was."""
         raise NotImplementedError
 
     def perturb(self, first_state, rng, how: Perturbation):
-        """A start near a source's first observation `first_state` ((obs_dim,) float32): a tuple of
-        floats in start_names' order and units (m, rad), drawn from `rng` alone with how.pos_sigma (m)
-        and how.yaw_sigma (rad); None when no valid draw was found (reason "no_valid_start")."""
+        """A start near a source's first observation: start_names' values drawn from `rng` alone with
+        how.pos_sigma (m) and how.yaw_sigma (rad); None when no valid draw was found ("no_valid_start")."""
         raise NotImplementedError
 
     def place(self, env, start):
-        """Put `env` at `start` (perturb's tuple) with fresh counters, fully (nothing of an earlier attempt
-        may survive); returns the first observation ((obs_dim,) float32)."""
+        """Put `env` at `start` with fresh counters, fully (nothing of an earlier attempt may survive);
+        returns the first observation."""
         raise NotImplementedError
 
     def expert(self):
-        """The noise-free expert that re-solves a placed start: reset() and act(obs) -> (act_dim,)
-        float32 action, in the env's action units (velocities, m/s, for our two robots)."""
-        raise NotImplementedError
-
-    def object_pose(self, state) -> np.ndarray:
-        """(x m, y m, yaw rad) of the object the task is about, read from an observation."""
-        raise NotImplementedError
-
-    def nearest(self, pool: dict, start) -> int:
-        """The episode of the source in `pool` ({episode: Source}) whose objects start nearest `start`'s
-        (MimicGen's nearest source selection); ties to the lowest episode."""
-        raise NotImplementedError
-
-    def segments(self, source: Source) -> list:
-        """The source demo cut into subtasks, each with its frames [start, stop) and the object frame
-        its motion is relative to (Segment, or the task's own subtask type)."""
-        raise NotImplementedError
-
-    def replay(self, env, start, source: Source, plans: dict | None = None) -> Outcome:
-        """The source's segments re-expressed for `start` and executed open-loop in `env` (placed here):
-        an Outcome whose episode holds the frames actually executed, reason None when the env reports
-        success, else one of failures["replay"]. plans: the caller's cache for segments (may be None)."""
-        raise NotImplementedError
+        """The noise-free expert that re-solves a placed start (mode "resolve"): reset() and act(obs) ->
+        action; None: the task has no expert, and only replays."""
+        return None if self.expert_class is None else self.expert_class(noise=0.0)
 
     def success(self, env) -> bool:
         """Whether `env` reports the task done (its latched success)."""
+        raise NotImplementedError
+
+    def object_pose(self, state) -> np.ndarray:
+        """(x, y, yaw) of the object the task is about, read from an observation."""
+        raise NotImplementedError
+
+    def frame_pose(self, frame: str, state) -> tuple[float, float, float]:
+        """(x, y, yaw) of the object frame named `frame` (a name in subtasks' frames) in an observation."""
+        raise NotImplementedError
+
+    def start_distance(self, a, b) -> float:
+        """How far apart the objects of two starts lie (nearest source selection; m, a yaw weighted)."""
+        raise NotImplementedError
+
+    def signals(self, env) -> dict[str, bool]:
+        """{signal: on} of the env now, for every name in subtasks' ends (MimicGen's subtask termination
+        signals); read after every step of a replay and of a source's re-simulation."""
+        return {}
+
+    def action_to_target(self, states, actions) -> dict:
+        """A source's frames (states (T, obs_dim), actions (T, act_dim)) as world-frame targets, per arm:
+        {arm: (waypoints (T, 2) m, velocities (T, 2) m/s, gripper commands (T,) or None)}. The engine
+        re-expresses waypoints and velocities in a new object frame; the gripper rides along."""
+        raise NotImplementedError
+
+    def target_to_action(self, obs, waypoints: dict, velocities: dict, grips: dict | None) -> np.ndarray:
+        """The action ((act_dim,) float32) that takes each arm from where `obs` shows it towards its
+        `waypoints[arm]` ((2,) m) moving at `velocities[arm]` ((2,) m/s), with `grips[arm]` its gripper
+        command: a velocity command for our two robots, a position target for a robot that takes one."""
         raise NotImplementedError
 
     # ---- what lockstep needs; each default runs the same bytes one attempt (or one env) at a time ----
@@ -303,39 +303,13 @@ class Task:
         bit env.step per env (what this default does)."""
         return step_each(envs, actions)
 
-    def replay_lanes(self, sources: dict, how: Perturbation) -> dict | None:
-        """Mode "replay" as lockstep lanes (datagen.lockstep: begin, decide, finish), bit-identical to
-        replay_mode with the attempt's own source; None: the engine replays one attempt at a time."""
-        return None
+    @property
+    def failures(self) -> dict[str, tuple[str, ...]]:
+        """{mode: every reason an attempt of that mode can return}; a task without an expert only replays."""
+        from datagen.replay import failures
 
-    # ---- the modes, the same for every task ----
-    def resolve(self, source: Source, rng, how: Perturbation, env, pool=None, plans=None) -> Outcome:
-        """1. perturb the source's first state, 2. re-solve with the expert, 3. keep only on success.
-        The expert solves the start itself: no source is replayed, so `pool` is not read."""
-        start = self.perturb(source.states[0], rng, how)
-        if start is None:
-            return Outcome("no_valid_start", source_episode=source.episode)
-        ep = rollout(env, self.expert(), self.place(env, start))
-        return ended(ep, None if ep["success"] else "expert_failed", start, source.episode)
-
-    def replay_mode(self, source: Source, rng, how: Perturbation, env, pool=None, plans=None) -> Outcome:
-        """1. perturb (the same draw as resolve), 2. replay the transformed source (the attempt's own, or
-        given `pool` ({episode: Source}) the pool's nearest to the new start), 3. keep on success.
-        plans: the caller's cache of replay plans (datagen.engine.Simulators.plans), None: none kept."""
-        start = self.perturb(source.states[0], rng, how)
-        if start is None:
-            return Outcome("no_valid_start", source_episode=source.episode)
-        chosen = pool[self.nearest(pool, start)] if pool else source
-        return self.replay(env, start, chosen, plans)
-
-    def run_mode(
-        self, mode: str, source: Source, rng, how: Perturbation, env, pool=None, plans=None
-    ) -> Outcome:
-        """The Outcome of one attempt of `mode` (its source_episode: the source it was made from). pool:
-        the sources --select nearest chooses from (None: the attempt's own); plans: the caller's cache
-        of replay plans (None: none kept)."""
-        run = {"resolve": self.resolve, "replay": self.replay_mode}[mode]
-        return run(source, rng, how, env, pool, plans)
+        resolve = {"resolve": ("expert_failed", "no_valid_start")} if self.expert() is not None else {}
+        return resolve | {"replay": failures(self)}
 
     @property
     def modes(self) -> tuple[str, ...]:
