@@ -173,7 +173,7 @@ class Aloha(Task):
     def start_distance(self, a, b) -> float:
         return object_distance(a, b)
 
-    def signals(self, env) -> dict[str, bool]:
+    def signals(self, obs, env) -> dict[str, bool]:  # the grasp rule lives in the physics: re-simulated
         right, left = env.holding
         return {"grasp": right, "handoff": left and not right}
 

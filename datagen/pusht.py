@@ -149,9 +149,10 @@ class PushT(Task):
     def start_distance(self, a, b) -> float:
         return pose_distance(a[:3], b[:3])
 
-    def signals(self, env) -> dict[str, bool]:
-        (px, py), (bx, by, yaw) = env.pusher_pos, env.block_pose
-        gap = pusht_env.t_signed_distance(px, py, bx, by, yaw)
+    resimulate = False  # contact shows in an observation: a source's recorded frames are read
+
+    def signals(self, obs, env) -> dict[str, bool]:
+        gap = pusht_env.t_signed_distance(obs[0], obs[1], obs[2], obs[3], math.atan2(obs[4], obs[5]))
         return {"contact": gap <= pusht_env.PUSHER_RADIUS + CONTACT_TOL}
 
     def action_to_target(self, states, actions) -> dict:

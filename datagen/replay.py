@@ -65,17 +65,21 @@ def failures(task: Task) -> tuple[str, ...]:
 
 def signals(task: Task, source: Source, env=None) -> np.ndarray:
     """(T+1, n) bool: the task's signals (the ends of its subtasks, in order) at each frame of `source`
-    and after its last action, re-simulated from its first frame through its recorded actions. Raises
-    ValueError when the re-simulation leaves the recorded frames by more than 1 mm (a set from another
-    env)."""
-    env = task.make_env() if env is None else env
+    and after its last action (the last row repeats the last frame's when read from the frames). Read
+    from the recorded frames where the task's signals need no physics (task.resimulate False); else
+    re-simulated from its first frame through its recorded actions, and a ValueError when that leaves
+    the recorded frames by more than 1 mm (a set from another env)."""
     names = [s.ends for s in task.subtasks if s.ends]
-    task.place(env, task.start_of(source.states[0]))
-    on = [[task.signals(env)[n] for n in names]]
+    if not task.resimulate:
+        on = [[task.signals(obs, None)[n] for n in names] for obs in source.states]
+        return np.array(on + on[-1:], bool).reshape(len(on) + 1, len(names))
+    env = task.make_env() if env is None else env
+    obs = task.place(env, task.start_of(source.states[0]))
+    on = [[task.signals(obs, env)[n] for n in names]]
     drift = 0.0
     for t, a in enumerate(source.actions):
         obs, *_ = env.step(a)
-        on.append([task.signals(env)[n] for n in names])
+        on.append([task.signals(obs, env)[n] for n in names])
         if t + 1 < len(source.states):
             drift = max(drift, float(np.max(np.abs(obs - source.states[t + 1]))))
     if drift > 1e-3:
@@ -165,11 +169,11 @@ class Replay:
             out[arm] = (pts, vel, None if grip is None else np.asarray(grip, np.float64))
         return out
 
-    def watch(self, env) -> None:
-        """Record which of the task's signals are on in `env` now."""
+    def watch(self, obs, env) -> None:
+        """Record which of the task's signals are on in the observation `obs` of `env`."""
         if not self.seen:
             return
-        for name, on in self.task.signals(env).items():
+        for name, on in self.task.signals(obs, env).items():
             if name in self.seen:
                 self.seen[name] |= bool(on)
 
@@ -199,7 +203,7 @@ class Replay:
                     wp = {a: here[a] + i / n * (first[a] - here[a]) for a in task.arms}
                     vel = {a: (first[a] - here[a]) * fps / n for a in task.arms}
                     obs = yield task.target_to_action(obs, wp, vel, None if grips is None else dict(grips))
-                    self.watch(env)
+                    self.watch(obs, env)
                 self.end_bridge(obs)
             for t in range(seg.stop - seg.start):
                 if grips is not None:
@@ -207,12 +211,12 @@ class Replay:
                 obs = yield task.target_to_action(
                     obs, {a: segs[a][0][t] for a in task.arms}, {a: segs[a][1][t] for a in task.arms}, grips
                 )
-                self.watch(env)
+                self.watch(obs, env)
         self.planned = True
         for _ in range(task.hold_steps):  # hold still so a success hold can complete
             here = {a: np.asarray(obs[task.arms[a]], np.float64) for a in task.arms}
             obs = yield task.target_to_action(obs, here, {a: np.zeros(2) for a in task.arms}, grips)
-            self.watch(env)
+            self.watch(obs, env)
 
     def end_bridge(self, obs) -> None:
         """Whether the bridge that started at self.bridging moved the object beyond task.bridge_moves."""
@@ -225,7 +229,7 @@ class Replay:
 
     def outcome(self, env, last_obs, episode: dict) -> Outcome:
         """The Outcome of the frames `episode` recorded (last_obs: the observation after its last step)."""
-        self.watch(env)
+        self.watch(last_obs, env)
         if self.bridging is not None:  # the episode ended during a bridge
             self.end_bridge(last_obs)
         success = bool(self.task.success(env))

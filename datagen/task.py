@@ -275,9 +275,13 @@ class Task:
         """How far apart the objects of two starts lie (nearest source selection; m, a yaw weighted)."""
         raise NotImplementedError
 
-    def signals(self, env) -> dict[str, bool]:
-        """{signal: on} of the env now, for every name in subtasks' ends (MimicGen's subtask termination
-        signals); read after every step of a replay and of a source's re-simulation."""
+    resimulate: bool = True  # signals() reads the env's physics: a source is re-simulated to read them
+
+    def signals(self, obs, env) -> dict[str, bool]:
+        """{signal: on} for every name in subtasks' ends (MimicGen's subtask termination signals), in the
+        observation `obs` of `env`, read after every step of a replay. A task whose signals the
+        observation alone shows sets resimulate = False (env is then None when a source is cut: its
+        recorded frames are read); otherwise a source is re-simulated to read them."""
         return {}
 
     def action_to_target(self, states, actions) -> dict:

@@ -10,9 +10,10 @@ import pytest
 import aloha_env
 import pusht_env
 from ch37.seeds import env_seed
+from datagen import ALOHA, PUSHT, Perturbation, engine
 from datagen import aloha as at
-from datagen import engine
 from datagen import pusht as pt
+from datagen import replay as rp
 from datagen import task as dt
 from datagen.task import rollout
 from scripted_expert import AlohaExpert, PushTExpert
@@ -84,8 +85,8 @@ def test_perturbation_stays_in_its_regions_and_is_a_pure_function(env):
 @pytest.mark.parametrize("i", range(4))
 def test_subtask_boundaries_sit_on_the_grasp_signals(env, i):
     src = aloha_source(env, i, placed=False)
-    steps = at.plan(env, src)
-    assert [s.name for s in steps] == ["reach_grasp", "handoff", "carry_place"]
+    steps = rp.cut(ALOHA, src)
+    assert [s.subtask.name for s in steps] == ["reach_grasp", "handoff", "carry_place"]
     assert steps[0].start == 0 and steps[-1].stop == len(src.actions)
     assert all(a.stop == b.start for a, b in zip(steps, steps[1:]))
     s = src.states
@@ -102,18 +103,19 @@ def test_subtask_boundaries_sit_on_the_grasp_signals(env, i):
 
 def test_split_refuses_a_source_without_a_handoff(env):
     src = aloha_source(env, 0)
-    steps = at.plan(env, src)
+    steps = rp.cut(ALOHA, src)
     cut = dt.Source(0, src.states[: steps[1].start + 2], src.actions[: steps[1].start + 2])
     with pytest.raises(ValueError, match="handoff"):
-        at.plan(env, cut)
+        rp.cut(ALOHA, cut)
 
 
 # ------------------------------------------------------------------------------- segment transforms
 def test_arm_segment_identity_returns_the_source_columns(env):
     src = aloha_source(env, 1)
-    for sub in at.plan(env, src):
-        for arm, frame in zip(at.ARMS, sub.frames):
-            pts, vel, grip = at.arm_segment(src, sub, arm, frame, src.states[sub.start])
+    plan = rp.cut(ALOHA, src)
+    run = rp.Replay(ALOHA, src, plan, at.start_of(src.states[0]))
+    for sub in plan:
+        for arm, (pts, vel, grip) in run.segment(sub, src.states[sub.start]).items():
             rows = slice(sub.start, sub.stop)
             assert np.array_equal(pts, src.states[rows, at.XY[arm]].astype(np.float64))
             assert np.array_equal(vel, src.actions[rows, at.XY[arm]].astype(np.float64))
@@ -122,10 +124,12 @@ def test_arm_segment_identity_returns_the_source_columns(env):
 
 def test_arm_segment_translates_with_its_frame_and_stays_rigid(env):
     src = aloha_source(env, 1)
-    place = at.plan(env, src)[2]  # carry_place: the left arm relative to the target
+    plan = rp.cut(ALOHA, src)
+    place = plan[2]  # carry_place: the right arm relative to the handoff, the left to the target
     now = src.states[place.start].copy()
     now[8:10] += (0.03, -0.05)  # the target moved; the cube did not
-    pts, vel, _ = at.arm_segment(src, place, "left", "target", now)
+    segs = rp.Replay(ALOHA, src, plan, at.start_of(src.states[0])).segment(place, now)
+    pts, vel, _ = segs["left"]
     old = src.states[place.start : place.stop, 3:5].astype(np.float64)
     np.testing.assert_allclose(pts - old, np.tile((0.03, -0.05), (len(old), 1)), atol=1e-7)
     np.testing.assert_allclose(vel, src.actions[place.start : place.stop, 3:5], atol=1e-12)
@@ -134,7 +138,7 @@ def test_arm_segment_translates_with_its_frame_and_stays_rigid(env):
         pts - now[8:10].astype(np.float64), old - src.states[place.start, 8:10], atol=1e-7
     )
     # the handoff frame moves with the target's y only; the cube frame not at all here
-    hand, _, _ = at.arm_segment(src, place, "right", "handoff", now)
+    hand, _, _ = segs["right"]
     np.testing.assert_allclose(
         hand - src.states[place.start : place.stop, 0:2], [[0.0, -0.05]] * len(old), atol=1e-7
     )
@@ -143,14 +147,17 @@ def test_arm_segment_translates_with_its_frame_and_stays_rigid(env):
 def test_pusht_segment_rotates_about_the_block_and_slides_onto_the_target():
     env = pusht_env.PushTEnv()
     src = pusht_source(env, 0)
-    approach, push = pt.split(src)
+    by_contact = pt.PushT(pt.BY_CONTACT)
+    plan = rp.cut(by_contact, src)
+    approach, push = plan
+    run = rp.Replay(by_contact, src, plan, by_contact.start_of(src.states[0]))
     first = src.states[0]
-    same, _ = pt.subtask_segment(src, approach, first)
+    same, _, _ = run.segment(approach, first)["pusher"]
     np.testing.assert_allclose(same, src.states[: approach.stop, :2], atol=1e-12)  # identity
     turned = first.copy()  # the block turned by +90 degrees about its own origin
     yaw = math.atan2(first[4], first[5]) + math.pi / 2
     turned[4], turned[5] = math.sin(yaw), math.cos(yaw)
-    pts, vel = pt.subtask_segment(src, approach, turned)
+    pts, vel, _ = run.segment(approach, turned)["pusher"]
     rel_old = src.states[: approach.stop, :2] - first[2:4]
     rel_new = pts - first[2:4]
     np.testing.assert_allclose(rel_new, rel_old @ dt.rotation(math.pi / 2).T, atol=1e-6)  # rotated
@@ -159,10 +166,12 @@ def test_pusht_segment_rotates_about_the_block_and_slides_onto_the_target():
     # the push relative to the block and the target starts on the moved block, ends on the source's end
     moved = src.states[push.start].copy()
     moved[2:4] += (0.04, -0.02)
-    pts, _ = pt.subtask_segment(src, push, moved)
+    pts, _, _ = run.segment(push, moved)["pusher"]
     np.testing.assert_allclose(pts[0], src.states[push.start, :2] + (0.04, -0.02), atol=1e-6)
     np.testing.assert_allclose(pts[-1], src.states[-1, :2], atol=1e-6)
-    blk, _ = pt.subtask_segment(src, push, moved, push_frame="block")
+    block_only = pt.PushT(pt.BY_CONTACT_BLOCK)
+    plan = rp.cut(block_only, src)
+    blk, _, _ = rp.Replay(block_only, src, plan, None).segment(plan[1], moved)["pusher"]
     np.testing.assert_allclose(blk - src.states[push.start :, :2], [[0.04, -0.02]] * len(blk), atol=1e-6)
 
 
@@ -171,7 +180,7 @@ def test_identity_replay_reproduces_the_source_frames(env):
     """A source replayed from its own start, with no perturbation, is its own frames, byte for byte:
     every frame pose equals its source pose, no bridge is needed, and the tracking term is exactly 0."""
     src = aloha_source(env, 2)
-    got = at.replay(env, at.start_of(src.states[0]), src)
+    got = rp.replay(ALOHA, env, at.start_of(src.states[0]), src)
     ep = got.episode
     assert got.reason is None and ep["success"]
     assert ep["observation.state"].tobytes() == src.states.tobytes()
@@ -182,7 +191,7 @@ def test_identity_replay_of_a_reset_source_is_its_frames_to_float32_rounding(env
     """A source rolled out from reset(seed) started from float64 values its float32 first frame
     rounds; replayed from that frame, it differs from its source by rounding alone."""
     src = aloha_source(env, 2, placed=False)
-    got = at.replay(env, at.start_of(src.states[0]), src)
+    got = rp.replay(ALOHA, env, at.start_of(src.states[0]), src)
     ep = got.episode
     assert got.reason is None and len(ep["action"]) == len(src.actions) == got.steps
     np.testing.assert_allclose(ep["observation.state"], src.states, atol=1e-6)
@@ -191,14 +200,15 @@ def test_identity_replay_of_a_reset_source_is_its_frames_to_float32_rounding(env
 
 def test_replay_keeps_what_re_executes_and_names_every_rejection(env):
     srcs = {i: aloha_source(env, i) for i in range(3)}
-    plans = {e: at.plan(env, s) for e, s in srcs.items()}
+    sims = engine.Simulators()  # the sources' cuts, made once
+    how = Perturbation(0, 0.08, 0.5)
     results = [
-        at.attempt(srcs[e], engine.attempt_rng(0, e, k), env, pos_sigma=0.08, mode="replay", plans=plans)
+        engine.attempt(ALOHA, srcs[e], k, how, mode="replay", env=env, sims=sims)
         for e in srcs
         for k in range(4)
     ]
     kept = [r for r in results if r.kept]
-    assert kept and all(r.reason in at.FAILURES["replay"] for r in results if not r.kept)
+    assert kept and all(r.reason in ALOHA.failures["replay"] for r in results if not r.kept)
     ep, start = kept[0].episode, kept[0].start
     obs = env.set_start(*start)  # the recorded actions from the recorded start give the same frames
     for s, a in zip(ep["observation.state"], ep["action"]):
@@ -215,19 +225,19 @@ def test_subtasks_carry_the_cube_where_one_cube_frame_cannot(env):
     start[2] += 0.06  # target x: still inside its spawn region for this source
     start[3] = -start[3] * 0.5
     assert aloha_env.TARGET_X_RANGE[0] <= start[2] <= aloha_env.TARGET_X_RANGE[1]
-    got = at.replay(env, start, src, at.whole(src))
+    got = rp.replay(at.Aloha(at.WHOLE), env, start, src)
     assert got.reason == "finished_off_target" and not got.episode["success"]
-    got = at.replay(env, start, src)
+    got = rp.replay(ALOHA, env, start, src)
     assert got.reason is None and got.episode["success"]
 
 
 def test_nearest_picks_the_source_with_the_nearest_objects(env):
     srcs = {i: aloha_source(env, i) for i in range(4)}
     for e, s in srcs.items():
-        assert at.nearest(srcs, at.start_of(s.states[0])) == e
+        assert rp.nearest(ALOHA, srcs, at.start_of(s.states[0])) == e
     near = np.array(at.start_of(srcs[2].states[0]))
     near[:4] += 0.004
-    assert at.nearest(srcs, tuple(near)) == 2
+    assert rp.nearest(ALOHA, srcs, tuple(near)) == 2
 
 
 # ------------------------------------------------------------------------------- PushT
@@ -242,13 +252,14 @@ def pusht_source(env, i):
 def test_pusht_split_and_identity_replay():
     env = pusht_env.PushTEnv()
     src = pusht_source(env, 0)
-    approach, push = pt.split(src)
+    by_contact = pt.PushT(pt.BY_CONTACT)
+    approach, push = rp.cut(by_contact, src)
     s = src.states
     assert approach.start == 0 and approach.stop == push.start and push.stop == len(s)
     d = [pusht_env.t_signed_distance(r[0], r[1], r[2], r[3], math.atan2(r[4], r[5])) for r in s]
     assert min(d[: push.start]) > pusht_env.PUSHER_RADIUS + pt.CONTACT_TOL >= d[push.start]
     start = tuple(float(v) for v in pt.block_pose(s[0])) + (float(s[0][0]), float(s[0][1]))
-    got = pt.replay_subtasks(env, start, src)
+    got = rp.replay(by_contact, env, start, src)
     ep = got.episode
     assert got.reason is None
     assert (
@@ -261,7 +272,7 @@ def test_pusht_nearest_weighs_yaw_by_the_success_tolerances():
     srcs = {i: pusht_source(env, i) for i in range(3)}
     for e, s in srcs.items():
         start = tuple(float(v) for v in pt.block_pose(s.states[0])) + (0.0, 0.0)
-        assert pt.nearest(srcs, start) == e
+        assert rp.nearest(PUSHT, srcs, start) == e
     a, b = (0.1, 0.0, 0.0), (0.1, 0.0, 0.2)  # 0.2 rad apart = one success tolerance = 0.03 m
     assert pt.pose_distance(a, b) == pytest.approx(pusht_env.SUCCESS_POS_TOL)
 
@@ -273,7 +284,7 @@ def test_replay_yield_tool_counts_every_attempt_of_every_cell(tmp_path):
     assert replay_yield.main(argv) == 0
     res = json.loads((tmp_path / "replay_yield.json").read_text())
     rows = {(r["task"], r["mode"], r["multiplier"]): r for r in res["rows"]}
-    want = {(t, m, 1.0) for t, modes in replay_yield.MODES.items() for m in modes}
+    want = {(t, m, 1.0) for t, modes in replay_yield.VARIANTS.items() for m in modes}
     assert set(rows) == want | {("aloha", m, 2.0) for m in replay_yield.SIGMA_MODES}
     for r in rows.values():
         assert r["attempts"] == 2 and r["kept"] + sum(r["failures"].values()) == 2

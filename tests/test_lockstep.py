@@ -114,7 +114,7 @@ def test_the_runner_is_task_agnostic_aloha_episodes_equal_rollout():
         envs=engine.Simulators().lanes(ALOHA, 5),
         begin=lambda seed, env: lockstep.Lane(seed, env.reset(seed)),
         decide=lambda lanes, envs, obs: (expert.act_batch(obs), None),
-        finish=lambda lane, env, episode: episode | {"success": bool(episode["next.success"][-1, 0])},
+        finish=lambda lane, env, episode, last: episode | {"success": bool(episode["next.success"][-1, 0])},
         max_frames=aloha_env.MAX_STEPS,
         obs_dim=aloha_env.OBS_DIM,
         act_dim=aloha_env.ACT_DIM,
@@ -126,31 +126,42 @@ def test_the_runner_is_task_agnostic_aloha_episodes_equal_rollout():
     assert_same_results(want, got)
 
 
-def test_aloha_resolve_in_lockstep_equals_one_at_a_time(tmp_path):
-    """ALOHA's re-solve through the engine's lockstep (the generic resolve lanes over the task's parts,
-    AlohaBatch.act_batch deciding) returns exactly datagen.engine.attempt's results."""
+@pytest.mark.parametrize("mode, select", [("resolve", "own"), ("replay", "own"), ("replay", "nearest")])
+def test_aloha_in_lockstep_equals_one_at_a_time(tmp_path, mode, select):
+    """ALOHA's re-solve (the generic resolve lanes, AlohaBatch.act_batch deciding) and the engine's one
+    replay (datagen.replay.lanes, subtask by subtask, from the attempt's own or the nearest source)
+    through lockstep return exactly datagen.engine.attempt's results."""
     out = tmp_path / "aloha3"
     assert gen_demos_aloha.main(["--episodes", "3", "--seed", "0", "--out", str(out), "--quiet"]) == 0
     srcs = engine.sources(load_arrays(out))
     how = Perturbation(0, 0.08, 0.5)
     jobs = [(e, k) for e in sorted(srcs) for k in range(10)]  # 30 attempts
-    one = [engine.attempt(ALOHA, srcs[e], k, how) for e, k in jobs]
-    together = lockstep.attempts_lockstep(ALOHA, srcs, jobs, how, lanes=8)
+    pool = srcs if select == "nearest" else None
+    one = [engine.attempt(ALOHA, srcs[e], k, how, mode=mode, pool=pool) for e, k in jobs]
+    together = lockstep.attempts_lockstep(ALOHA, srcs, jobs, how, mode=mode, select=select, lanes=8)
     assert sum(r.kept for r in one) >= 10
+    assert_same_results(one, together)
+
+
+def test_pusht_replay_from_the_nearest_source_in_lockstep_equals_one_at_a_time(sources):
+    how = Perturbation(2, 0.02, 0.2)
+    jobs = [(e, k) for e in sorted(sources) for k in range(25)]  # 100 attempts
+    one = [engine.attempt(PUSHT, sources[e], k, how, mode="replay", pool=sources) for e, k in jobs]
+    together = lockstep.attempts_lockstep(PUSHT, sources, jobs, how, mode="replay", select="nearest", lanes=6)
+    assert 0 < sum(r.kept for r in one) < len(jobs)
     assert_same_results(one, together)
 
 
 class PlainPushT(type(PUSHT)):
     """PushT with lockstep's hooks removed: the Task contract's defaults (no batch expert, no replay
-    lanes, each env stepped by its own step)."""
+    each env stepped by its own step)."""
 
     batch_expert = Task.batch_expert
     step_batch = Task.step_batch
-    replay_lanes = Task.replay_lanes
 
 
 class PerEnvPushT(type(PUSHT)):
-    """PushT's batch expert and replay lanes, its envs stepped one by one (the default step_batch)."""
+    """PushT's batch expert, its envs stepped one by one (the default step_batch)."""
 
     step_batch = Task.step_batch
 
@@ -165,7 +176,7 @@ def test_a_task_without_the_batch_hooks_gives_the_same_results(sources, mode, si
     assert sum(r.kept for r in want) >= 3
     for task in (PlainPushT(), PerEnvPushT()):
         assert_same_results(want, lockstep.attempts_lockstep(task, sources, jobs, how, mode=mode, lanes=9))
-    assert PlainPushT().batch_expert() is None and PlainPushT().replay_lanes(sources, how) is None
+    assert PlainPushT().batch_expert() is None
 
 
 def test_the_simulators_a_worker_keeps_are_passed_not_hidden():

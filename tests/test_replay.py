@@ -9,7 +9,8 @@ import pytest
 
 import pusht_env
 from ch37.seeds import env_seed
-from datagen import PUSHT, Outcome, Perturbation, Source, engine, pusht, rollout
+from datagen import PUSHT, Outcome, Perturbation, Source, engine, pusht, replay, rollout
+from datagen.task import rotation, transform_segment
 from scripted_expert import PushTExpert
 
 
@@ -17,22 +18,20 @@ def test_transform_identity_returns_the_path():
     rng = np.random.default_rng(0)
     pts, vel = rng.normal(size=(20, 2)), rng.normal(size=(20, 2))
     pose = (0.13, -0.07, 2.1)
-    moved, turned = pusht.transform_segment(pts, vel, pose, pose)
+    moved, turned = transform_segment(pts, vel, pose, pose)
     np.testing.assert_allclose(moved, pts, atol=1e-12)
     np.testing.assert_allclose(turned, vel, atol=1e-12)
 
 
 def test_transform_rotation_about_the_object():
     # object at the origin turned by +90 degrees: a point 1 m ahead of it goes to 1 m to its left
-    moved, turned = pusht.transform_segment(
-        [[1.0, 0.0], [0.0, 2.0]], [[0.5, 0.0]], (0, 0, 0), (0, 0, math.pi / 2)
-    )
+    moved, turned = transform_segment([[1.0, 0.0], [0.0, 2.0]], [[0.5, 0.0]], (0, 0, 0), (0, 0, math.pi / 2))
     np.testing.assert_allclose(moved, [[0.0, 1.0], [-2.0, 0.0]], atol=1e-12)
     np.testing.assert_allclose(turned, [[0.0, 0.5]], atol=1e-12)
 
 
 def test_transform_translation_moves_points_not_velocities():
-    moved, turned = pusht.transform_segment([[1.5, 2.0]], [[0.3, -0.4]], (1.0, 2.0, 0.0), (3.0, -1.0, 0.0))
+    moved, turned = transform_segment([[1.5, 2.0]], [[0.3, -0.4]], (1.0, 2.0, 0.0), (3.0, -1.0, 0.0))
     np.testing.assert_allclose(moved, [[3.5, -1.0]], atol=1e-12)
     np.testing.assert_allclose(turned, [[0.3, -0.4]], atol=1e-12)
 
@@ -42,9 +41,9 @@ def test_transform_keeps_the_path_rigid_relative_to_the_object():
     rng = np.random.default_rng(1)
     pts = rng.normal(size=(30, 2))
     src, new = (0.2, -0.1, 0.7), (-0.3, 0.25, -2.4)
-    moved, _ = pusht.transform_segment(pts, np.zeros_like(pts), src, new)
-    off_src = (pts - src[:2]) @ pusht.rotation(-src[2]).T
-    off_new = (moved - new[:2]) @ pusht.rotation(-new[2]).T
+    moved, _ = transform_segment(pts, np.zeros_like(pts), src, new)
+    off_src = (pts - src[:2]) @ rotation(-src[2]).T
+    off_new = (moved - new[:2]) @ rotation(-new[2]).T
     np.testing.assert_allclose(off_new, off_src, atol=1e-12)
     d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
     np.testing.assert_allclose(np.linalg.norm(moved[:, None] - moved[None], axis=-1), d, atol=1e-12)
@@ -66,10 +65,10 @@ def expert_source(env, i):
 
 def test_identity_replay_reproduces_the_source(env):
     source, start = expert_source(env, 0)
-    got = pusht.replay(env, start, source)
+    got = replay.replay(PUSHT, env, start, source)
     ep = got.episode
     assert got.kept and got.reason is None and ep["success"] and got.steps == len(source.actions)
-    assert len(ep["action"]) == len(source.actions)  # no approach: the pusher is on the first waypoint
+    assert len(ep["action"]) == len(source.actions)  # no bridge: the pusher is on the first waypoint
     np.testing.assert_allclose(ep["observation.state"], source.states, atol=1e-6)
     np.testing.assert_allclose(ep["action"], source.actions, atol=1e-6)
 
@@ -79,7 +78,7 @@ def test_a_moved_block_makes_the_replay_miss_and_names_why(env):
     would be; the filter rejects it and says it ran to its end off target."""
     source, start = expert_source(env, 0)
     shifted = (start[0] + 0.06, start[1], start[2], start[3] + 0.06, start[4])
-    got = pusht.replay(env, shifted, source)
+    got = replay.replay(PUSHT, env, shifted, source)
     assert not got.kept and not got.episode["success"]
     assert got.reason == "finished_off_target"
     assert math.hypot(*env.block_pose[:2]) > pusht_env.SUCCESS_POS_TOL
@@ -87,7 +86,7 @@ def test_a_moved_block_makes_the_replay_miss_and_names_why(env):
 
 def test_kept_replays_hold_the_actions_actually_executed(env):
     """Small perturbations keep some replays; re-executing a kept demo's recorded actions from its
-    recorded start reproduces its frames and its success (the approach included)."""
+    recorded start reproduces its frames and its success (the bridge included)."""
     source, _ = expert_source(env, 1)
     results = [
         engine.attempt(PUSHT, source, k, Perturbation(0, 0.004, 0.02), mode="replay", env=env)

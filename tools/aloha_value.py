@@ -6,12 +6,12 @@ initial weights (issue 29's study, second half):
     python -m tools.aloha_value --smoke --seeds 1     seconds; numbers not meaningful
 
     source     the seed's 12 expert demos (env_seed(seed, "demo", i), i < 12, noise-free AlohaExpert)
-    replayed   the 12 + 96 replayed: 8 kept per source demo by aloha_task's subtask replay of its own
+    replayed   the 12 + 96 replayed: 8 kept per source demo by the engine's subtask replay (datagen.replay) of its own
                source, attempts k = 0, 1, ... (engine.attempt_rng(seed, e, k)) until 8 pass
     resolved   the 12 + 96 re-solved: the same attempts, the expert solving each perturbed start
     fresh      108 expert demos (i < 108: the 12 sources and 96 more from fresh reset starts)
 
-Perturbation: the chapter's 0.08 m on cube, target and both end-effectors (aloha_task.perturbed_start).
+Perturbation: the chapter's 0.08 m on cube, target and both end-effectors (datagen.aloha.perturbed_start).
 Steps: the chapter's epochs (500) passes over the largest arm's frames at batch 128 (lr 1e-3 cosine,
 hidden 512). Each arm rolls out on the seed's 100 held-out starts (env_seed(seed, "eval", j)); the
 pooled rates carry Wilson 95% intervals, the paired differences their per-seed values.
@@ -33,8 +33,7 @@ from ch37.cli import pick_device
 from ch37.config import DEFAULTS, SMOKE, check
 from ch37.ownership import check_out_path, check_own_result, dump_json, round_floats, write_atomic
 from ch37.seeds import env_seed
-from datagen import aloha as aloha_task
-from datagen import engine
+from datagen import ALOHA, Perturbation, engine
 from datagen.task import Source, rollout
 from scripted_expert import AlohaExpert
 from tools.common import parser, provenance, rel
@@ -64,7 +63,8 @@ def expert_demos(env, seed: int, n: int) -> list[dict]:
 
 def grow(env, sources: dict, mode: str, seed: int, c: dict) -> tuple[list[dict], dict]:
     """The first per_demo kept attempts (k order) of each source demo in `mode`, and the counts."""
-    plans = {e: aloha_task.plan(env, s) for e, s in sources.items()} if mode == "replay" else None
+    sims = engine.Simulators()  # the sources' cut, made once
+    how = Perturbation(seed, c["aug_pos_sigma"], c["aug_yaw_sigma"])  # ALOHA reads no yaw
     kept, attempts, failures = [], 0, {}
     for e, src in sources.items():
         n = 0
@@ -72,8 +72,7 @@ def grow(env, sources: dict, mode: str, seed: int, c: dict) -> tuple[list[dict],
             if n == c["per_demo"]:
                 break
             attempts += 1
-            how = dict(pos_sigma=c["aug_pos_sigma"], mode=mode, plans=plans)
-            r = aloha_task.attempt(src, engine.attempt_rng(seed, e, k), env, **how)
+            r = engine.attempt(ALOHA, src, k, how, mode=mode, env=env, sims=sims)
             if r.kept:
                 kept.append(r.episode)
                 n += 1

@@ -8,15 +8,16 @@ For each seed, the chapter's 12 source demos of each robot (the demo sets' own s
 episode i of seed s from env seed env_seed(s, "demo", i)), and for each source demo `--attempts`
 attempts k = 0, 1, ...; attempt k of source episode e draws its start from
 engine.attempt_rng(seed, e, k), so every mode of a task meets the same starts (paired). The
-chapter's perturbation: PushT block and pusher xy 0.08 m, block yaw 0.5 rad (engine.perturbed_start);
-ALOHA cube, target and both end-effectors 0.08 m each (no yaw: the cube is a point), every point
-kept in its spawn region (aloha_task.perturbed_start). Modes:
+chapter's perturbation: PushT block and pusher xy 0.08 m, block yaw 0.5 rad; ALOHA cube, target and
+both end-effectors 0.08 m each (no yaw: the cube is a point), every point kept in its spawn region (the
+tasks' perturb). Every attempt is datagen.engine.attempt, the engine's one replay (datagen.replay) on
+the task as the mode describes it (VARIANTS). Modes:
 
     resolve                the task's noise-free expert solves the start
-    replay                 the attempt's own source, one segment relative to the object (PushT:
-                           engine.replay, the chapter's replay; ALOHA: aloha_task.whole)
-    subtasks               its own source, split into subtasks (pusht_task / aloha_task)
-    subtasks_nearest       the source nearest the new start (MimicGen's selection), split into subtasks
+    replay                 the attempt's own source, one segment relative to the object (PushT: the
+                           engine's replay, PUSHT; ALOHA: Aloha(WHOLE), both arms relative to the cube)
+    subtasks               its own source, cut into subtasks (PushT(BY_CONTACT); ALOHA)
+    subtasks_nearest       the source nearest the new start (MimicGen's selection), cut into subtasks
     subtasks_block_nearest PushT only: nearest, with the push relative to the block alone
 
 Exit codes: 0 ok, 2 bad input.
@@ -29,46 +30,48 @@ from pathlib import Path
 
 import numpy as np
 
-import aloha_env
-import pusht_env
 from ch37 import ROOT, errors
 from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
 from ch37.ownership import dump_json, round_floats, write_atomic
 from ch37.parallel import map_jobs
 from ch37.seeds import env_seed
-from datagen import aloha as aloha_task
-from datagen import engine
-from datagen import pusht as pusht_task
+from datagen import ALOHA, PUSHT, Perturbation, engine
+from datagen.aloha import WHOLE, Aloha
+from datagen.pusht import BY_CONTACT, BY_CONTACT_BLOCK, PushT
 from datagen.task import Source, rollout
-from gen_demos_aloha import ALOHA
-from gen_demos_pusht import PUSHT
 from tools.common import parser, provenance, rel
 
 POS_SIGMA, YAW_SIGMA = DEFAULTS["aug_pos_sigma"], DEFAULTS["aug_yaw_sigma"]  # m, rad
-MODES = {
-    "pusht": ("resolve", "replay", "subtasks", "subtasks_nearest", "subtasks_block_nearest"),
-    "aloha": ("resolve", "replay", "subtasks", "subtasks_nearest"),
-}
 SIGMA_MODES = ("replay", "subtasks", "subtasks_nearest")  # ALOHA modes of the perturbation sweep
 
-_WORK: dict = {}  # (task, seed) -> {"sources": {e: Source}, "plans": {e: [Subtask]}}, built before forking
-_ENVS: dict = {}  # one simulator per task per process
-
-
-def env_of(task: str):
-    if task not in _ENVS:
-        _ENVS[task] = pusht_env.PushTEnv() if task == "pusht" else aloha_env.AlohaCubeEnv()
-    return _ENVS[task]
+# mode -> (the task as that mode describes it, the source a replay transforms)
+VARIANTS = {
+    "pusht": {
+        "resolve": (PUSHT, "own"),
+        "replay": (PUSHT, "own"),
+        "subtasks": (PushT(BY_CONTACT), "own"),
+        "subtasks_nearest": (PushT(BY_CONTACT), "nearest"),
+        "subtasks_block_nearest": (PushT(BY_CONTACT_BLOCK), "nearest"),
+    },
+    "aloha": {
+        "resolve": (ALOHA, "own"),
+        "replay": (Aloha(WHOLE), "own"),
+        "subtasks": (ALOHA, "own"),
+        "subtasks_nearest": (ALOHA, "nearest"),
+    },
+}
+_WORK: dict = {}  # (task, seed) -> {e: Source}, built before forking
+_SIMS = engine.Simulators()  # each process's envs and cut sources (a forked worker fills its own)
 
 
 def sources(task: str, seed: int, n: int) -> dict:
     """The chapter's n source demos of `task` at `seed`, rolled out as the demo generators do."""
-    emb = PUSHT if task == "pusht" else ALOHA
-    env, out = env_of(task), {}
+    t = VARIANTS[task]["resolve"][0]
+    env, out = _SIMS.env(t), {}
     for i in range(n):
         s = env_seed(seed, "demo", i)
-        ep = rollout(env, emb.expert_class(noise=emb.default_noise, seed=s), env.reset(s))
+        ep = rollout(env, t.expert_class(noise=t.default_noise, seed=s), env.reset(s))
         out[i] = Source(i, ep["observation.state"], ep["action"])
     return out
 
@@ -77,28 +80,12 @@ def one(job) -> tuple[str, int]:
     """('kept', frames of the kept episode) or (the failure reason, 0) of one attempt:
     job = (task, mode, seed, episode, k, sigma multiplier)."""
     task, mode, seed, e, k, m = job
-    work, env = _WORK[(task, seed)], env_of(task)
-    src, pool, rng = work["sources"][e], work["sources"], engine.attempt_rng(seed, e, k)
-    if task == "aloha":
-        plans = work["plans"] if mode != "replay" else {x: aloha_task.whole(s) for x, s in pool.items()}
-        how = dict(pos_sigma=m * POS_SIGMA, mode="resolve" if mode == "resolve" else "replay", plans=plans)
-        r = aloha_task.attempt(src, rng, env, pool=pool if mode.endswith("nearest") else None, **how)
-        return ("kept", r.steps) if r.kept else (r.reason, 0)
-    start = pusht_task.perturbed_start(src.states[0], rng, m * POS_SIGMA, m * YAW_SIGMA)
-    if start is None:
-        return "no_valid_start", 0
-    if mode == "resolve":
-        ep = rollout(env, pusht_task.PUSHT.expert(), env.set_start(*start))
-        why = None if ep["success"] else "expert_failed"
-    elif mode == "replay":
-        got = pusht_task.replay(env, start, src)
-        ep, why = got.episode, got.reason
-    else:
-        chosen = pool[pusht_task.nearest(pool, start)] if mode.endswith("nearest") else src
-        frame = "block" if mode == "subtasks_block_nearest" else "block+target"
-        got = pusht_task.replay_subtasks(env, start, chosen, push_frame=frame)
-        ep, why = got.episode, got.reason
-    return (why, 0) if why else ("kept", len(ep["action"]))
+    pool = _WORK[(task, seed)]
+    t, select = VARIANTS[task][mode]
+    how = Perturbation(seed, m * POS_SIGMA, m * YAW_SIGMA)
+    run = "resolve" if mode == "resolve" else "replay"
+    r = engine.attempt(t, pool[e], k, how, mode=run, pool=pool if select == "nearest" else None, sims=_SIMS)
+    return ("kept", r.steps) if r.kept else (r.reason, 0)
 
 
 def cell(task: str, mode: str, seeds, n: int, attempts: int, m: float, workers: int) -> dict:
@@ -133,13 +120,11 @@ def main(argv: list[str]) -> int:
     if any(not (0 < m < 100) for m in a.aloha_sigma):
         raise DataError("--aloha_sigma multipliers must be in (0, 100)")
     seeds = list(range(a.seeds))
-    for task in MODES:
+    for task in VARIANTS:
         for s in seeds:
-            src = sources(task, s, a.sources)
-            plans = {e: aloha_task.plan(env_of(task), x) for e, x in src.items()} if task == "aloha" else {}
-            _WORK[(task, s)] = {"sources": src, "plans": plans}
+            _WORK[(task, s)] = sources(task, s, a.sources)
     rows = []
-    todo = [(task, mode, 1.0) for task, modes in MODES.items() for mode in modes]
+    todo = [(task, mode, 1.0) for task, modes in VARIANTS.items() for mode in modes]
     todo += [("aloha", mode, m) for m in sorted(a.aloha_sigma) if m != 1.0 for mode in SIGMA_MODES]
     for task, mode, m in todo:
         rows.append(r := cell(task, mode, seeds, a.sources, a.attempts, m, a.workers))
