@@ -6,8 +6,9 @@ initial weights (issue 29's study, second half):
     python -m tools.aloha_value --smoke --seeds 1     seconds; numbers not meaningful
 
     source     the seed's 12 expert demos (env_seed(seed, "demo", i), i < 12, noise-free AlohaExpert)
-    replayed   the 12 + 96 replayed: 8 kept per source demo by the engine's subtask replay (datagen.replay) of its own
-               source, attempts k = 0, 1, ... (engine.attempt_rng(seed, e, k)) until 8 pass
+    replayed   the 12 + 96 replayed: 8 kept per source demo by the engine's subtask replay
+               (datagen.replay) of its own source, attempts k = 0, 1, ... (engine.attempt_rng(seed, e, k))
+               until 8 pass
     resolved   the 12 + 96 re-solved: the same attempts, the expert solving each perturbed start
     fresh      108 expert demos (i < 108: the 12 sources and 96 more from fresh reset starts)
 
