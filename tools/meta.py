@@ -61,8 +61,14 @@ META_STATIC = {
                 "path": "mimicgen/utils/pose_utils.py",
                 "symbol": "transform_source_data_segment_using_object_pose",
                 "why": "how MimicGen moves a source end-effector segment into the new object's frame; "
-                "datagen.pusht.transform_segment is its planar (SE(2)) analog, used by --aug_mode replay; "
+                "datagen.task.transform_segment is its planar (SE(2)) analog, used by --aug_mode replay; "
                 "the chapter's default re-solves with its expert, because it owns one for any start",
+            },
+            {
+                "path": "mimicgen/datagen/data_generator.py",
+                "why": "the one generation loop for every task (parse a source into subtask segments by their "
+                "end signals, select a source, transform, interpolate into the segment, execute, keep on "
+                "success); datagen/replay.py is that loop here, and a task only describes (env_interfaces/)",
             },
             {
                 "path": "mimicgen/scripts/generate_dataset.py",
