@@ -66,9 +66,9 @@ META_STATIC = {
             },
             {
                 "path": "mimicgen/datagen/data_generator.py",
-                "why": "the one generation loop for every task (parse a source into subtask segments by their "
-                "end signals, select a source, transform, interpolate into the segment, execute, keep on "
-                "success); datagen/replay.py is that loop here, and a task only describes (env_interfaces/)",
+                "why": "the one generation loop for every task (parse a source into subtask segments by "
+                "their end signals, select a source, transform, interpolate into the segment, execute, keep "
+                "on success); datagen/replay.py is that loop here; a task only describes",
             },
             {
                 "path": "mimicgen/scripts/generate_dataset.py",
