@@ -1,4 +1,5 @@
-"""Scripted experts for the two chapter embodiments (PushT and the ALOHA cube handoff).
+"""Scripted experts for the two chapter embodiments (PushT and the ALOHA cube handoff) and for gym-pusht
+(LeRobot's own PushT).
 
 Each expert is a policy object with ``reset()`` and ``act(obs) -> float32 action``. Optional
 Gaussian action noise is drawn from a generator seeded by the caller, so a noisy demo is
@@ -203,11 +204,13 @@ class PushTExpert:
 #     and it ends the episode at once. A few px or a few degrees off fail, so the push slows near the goal.
 # The observation is LeRobot's "environment_state_agent_pos", flattened: agent x, y (px) then the block's 8
 # keypoints (16 floats, px). The block pose is recovered from the keypoints (block_pose_from_keypoints);
-# the goal pose is gym-pusht's, fixed. The policy is Markov in the observation.
+# the goal pose is gym-pusht's, fixed. The policy is Markov in the observation. Its steps are PushTExpert's
+# 1-3 (score the candidate pushes, push or get behind the best one, orbit when the T is in the way), in
+# pixels; its step 4 (back off and hold) is not needed, since success ends the episode.
 _GP_KEYPOINTS = np.array(  # the 8 keypoints in the block's frame (px), in gym-pusht's order
     [(-60, 0), (60, 0), (60, 30), (-60, 30), (-15, 30), (15, 30), (15, 120), (-15, 120)], dtype=np.float64
 )  # bar: x in [-60, 60], y in [0, 30]; stem: x in [-15, 15], y in [30, 120]
-_GP_COG = np.array([0.0, 45.0])  # px, block frame: gym-pusht's centre of gravity (midway between the bars')
+_GP_COG = np.array([0.0, 45.0])  # px, block frame: gym-pusht's centre of gravity (its 2 boxes' mean centre)
 _GP_GOAL = np.array([256.0, 256.0, math.pi / 4])  # gym-pusht's goal pose: x, y (px), angle (rad)
 _GP_R = 15.0  # px, pusher radius
 _GP_K = 1.0 / 3000.0  # 1/px^2: mass / moment of inertia of the block (m = 1, I = 3000 px^2)
@@ -220,7 +223,7 @@ _GP_TRAVEL_COST = 0.002  # score per px of pusher travel to reach a candidate
 _GP_V_PUSH = (20.0, 300.0)  # px/s, min and max pushing speed (fast far out, slow near the goal)
 _GP_PUSH_GAIN = 3.0  # 1/s: pushing speed per px of remaining (scaled) twist error
 _GP_V_MOVE = (100.0, 600.0)  # px/s, min and max repositioning speed
-_GP_V_ORBIT = 200.0  # px/s: orbiting speed (slower: the target is a straight line ahead, the T is round)
+_GP_V_ORBIT = 200.0  # px/s: orbiting speed (slower: a target far ahead on the tangent cuts the T's corners)
 _GP_MOVE_GAIN = 8.0  # 1/s: repositioning speed per px of distance to the pre-contact point
 
 
