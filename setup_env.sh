@@ -29,8 +29,9 @@ fi
 if [ ! -f "$stamp" ]; then
     echo "setting up .venv from requirements.lock (first run downloads lerobot and torch, a few GB, a few minutes)..."
     # exactly the lock: every package the set-up installs (pyproject.toml's dependencies + dev, ray and
-    # train extras: the tests run the data engine on a real local Ray and LeRobot's own trainer), pinned
-    # with its hashes; the chapter itself runs from this folder. uv when present (faster), pip otherwise.
+    # train extras: the tests run the data engine on a real local Ray, LeRobot's own trainer and its PushT,
+    # gym-pusht), pinned with its hashes; the chapter itself runs from this folder. uv when present
+    # (faster), pip otherwise.
     if command -v uv >/dev/null 2>&1; then
         uv pip sync -q --python .venv/bin/python requirements.lock
     else

@@ -7,8 +7,9 @@
 #
 # Needs uv (`pip install uv`, any venv). The lock covers pyproject.toml's dependencies plus its dev, ray
 # and train extras, for Python 3.12 on every platform (--universal: markers, hashes of every wheel), from
-# PyPI (the CUDA torch build on Linux). uv keeps the pins of the lock it overwrites unless told to move
-# them. A new lock changes what produced the published numbers: re-run them (README, "Reproducing").
+# PyPI (the CUDA torch build on Linux), less what tools/lock-excludes.txt names (opencv-python: one cv2).
+# uv keeps the pins of the lock it overwrites unless told to move them. A new lock changes what produced
+# the published numbers: re-run them (README, "Reproducing").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 UV=$(command -v uv || true)
@@ -18,5 +19,5 @@ if [ -z "$UV" ]; then
 fi
 "$UV" pip compile pyproject.toml --extra dev --extra ray --extra train \
     --python-version 3.12 --universal --generate-hashes \
-    --custom-compile-command "bash tools/lock.sh" \
+    --custom-compile-command "bash tools/lock.sh" --excludes tools/lock-excludes.txt \
     -o requirements.lock "$@"
