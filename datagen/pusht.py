@@ -68,7 +68,7 @@ YAW_WEIGHT = pusht_env.SUCCESS_POS_TOL / pusht_env.SUCCESS_YAW_TOL  # m per rad
 ONE_SEGMENT = (Subtask("push", ("block",)),)  # the engine's replay
 BY_CONTACT = (  # the study's: approach, then a push sliding from the block onto the target
     Subtask("approach", ("block",), ends="contact"),
-    Subtask("push", (("block", "target"),), bridge=False),  # it starts where the approach ended
+    Subtask("push", ("block",), bridge=False, onto=("target",)),  # it starts where the approach ended
 )
 BY_CONTACT_BLOCK = (BY_CONTACT[0], Subtask("push", ("block",), bridge=False))
 

@@ -14,7 +14,7 @@ An attempt is executed subtask by subtask. At each subtask's start, the object f
 current observation (open loop in between, as MimicGen reads the object pose once per subtask), and every
 arm's segment (the source's targets: task.action_to_target) is re-expressed from its frame's pose in the
 source (at the subtask's first frame) into the same frame's pose now (datagen.task.transform_segment; a
-frame given as (a, b) slides from frame a onto frame b over the subtask). A subtask with `bridge` is
+subtask's `onto` makes an arm's frame slide onto another over the subtask). A subtask with `bridge` is
 entered by linear interpolation from where the arms are to their first waypoints, all arms in step, at up
 to task.bridge_speed (none when every arm is within task.bridge_tol); each gripper keeps its last command.
 Then every step is task.target_to_action of each arm's waypoint, velocity and gripper command of that
@@ -151,14 +151,15 @@ class Replay:
         rows = slice(seg.start, seg.stop)
         targets = task.action_to_target(src.states[rows], src.actions[rows])
         first, out = src.states[seg.start], {}
-        for arm, frame in zip(task.arms, seg.subtask.frames):
+        onto = seg.subtask.onto or (None,) * len(task.arms)
+        for arm, frame, to in zip(task.arms, seg.subtask.frames, onto):
             pts, vel, grip = targets[arm]
-            if isinstance(frame, str):
+            if to is None:
                 was, now_ = task.frame_pose(frame, first), task.frame_pose(frame, now)
                 pts, vel = transform_segment(pts, vel, was, now_)
-            else:  # a frame sliding from frame[0] onto frame[1] over the subtask
-                a0, a1 = task.frame_pose(frame[0], first), task.frame_pose(frame[1], first)
-                b0, b1 = task.frame_pose(frame[0], now), task.frame_pose(frame[1], now)
+            else:  # a frame sliding from `frame` onto `to` over the subtask
+                a0, a1 = task.frame_pose(frame, first), task.frame_pose(to, first)
+                b0, b1 = task.frame_pose(frame, now), task.frame_pose(to, now)
                 k = max(len(pts) - 1, 1)
                 moved = []
                 for t in range(len(pts)):  # frame t in the pose a fraction t / k of the way

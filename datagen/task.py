@@ -194,15 +194,17 @@ def rollout(env, policy, obs, *, render: bool = False) -> dict:
 @dataclass(frozen=True)
 class Subtask:
     """One of a task's subtasks, as MimicGen's task config names them: its name, the object frame each arm's
-    motion is relative to (task.arms order; a name of task.frame_pose, or (a, b): a frame that slides
-    from a onto b over the subtask), the signal (task.signals) whose rise ends it (None: it runs to the
-    source's end), and whether it is entered by interpolation from where the arms are (bridge). Every
-    arm moves through every subtask in step (a coordination subtask is one whose frames all agree)."""
+    motion is relative to (task.arms order; names of task.frame_pose), the signal (task.signals) whose
+    rise ends it (None: it runs to the source's end), whether it is entered by interpolation from where
+    the arms are (bridge), and, per arm, a frame the arm's frame slides onto over the subtask (onto;
+    None: it stays put). Every arm moves through every subtask in step (a coordination subtask is one
+    whose frames all agree)."""
 
     name: str
-    frames: tuple
+    frames: tuple[str, ...]
     ends: str | None = None
     bridge: bool = True
+    onto: tuple[str | None, ...] | None = None
 
 
 class Task:
