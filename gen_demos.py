@@ -1,11 +1,16 @@
-"""The demo generators' command line, shared by gen_demos_pusht.py and gen_demos_aloha.py:
-main(embodiment, argv) parses and checks the flags (ch37.config), then datagen.demos.generate.
-Every problem a user can fix is one line and exit 2, Ctrl-C 130.
+"""The demo generators' command line, for any task of the engine with an expert:
+
+    python gen_demos.py --task gym_pusht --episodes 50 --seed 0 --out DIR [--noise N] [--video]
+
+main(task, argv) parses and checks the flags (ch37.config), then datagen.demos.generate;
+gen_demos_pusht.py and gen_demos_aloha.py are main(PUSHT) and main(ALOHA). --task picks a task of
+datagen.known_tasks() by name. Every problem a user can fix is one line and exit 2, Ctrl-C 130.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,7 +18,7 @@ from ch37 import config
 from ch37.config import FINITE, NON_NEGATIVE, POSITIVE, flag
 from ch37.errors import DataError, run_main
 from ch37.seeds import MAX_SEED, SEED_BLOCK
-from datagen import Task, check_gl, generate
+from datagen import Task, check_gl, generate, known_tasks
 from lerobot_v3 import IMAGE_SIZE
 
 
@@ -68,3 +73,24 @@ def _main(emb: Task, argv=None) -> int:
     wrote = f"wrote {s['episodes']} {emb.name} episodes, {s['frames']} frames to {a.out}"
     print(f"{wrote} (expert successes {s['successes']}/{s['episodes']})")
     return 0
+
+
+def by_task(argv=None) -> int:
+    """`python gen_demos.py --task NAME ...`: main with the engine's task of that name."""
+    return run_main(_by_task, argv)
+
+
+def _by_task(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    p = argparse.ArgumentParser(add_help=False)
+    p.add_argument("--task")
+    got, rest = p.parse_known_args(argv)
+    tasks = {name: t for name, t in known_tasks().items() if t.expert_class is not None}
+    if got.task not in tasks:
+        given = "no --task" if got.task is None else f"--task {got.task!r}"
+        raise DataError(f"{given}: pick one of {', '.join(tasks)} (the engine's tasks with an expert)")
+    return _main(tasks[got.task], rest)
+
+
+if __name__ == "__main__":
+    sys.exit(by_task())

@@ -11,7 +11,8 @@ code from what the run imported.
 In MimicGen's division of work, a task only describes (Task below: each attribute and method with its
 inputs, outputs and units):
 
-    its env              make_env, place (a start, fully), success, max_steps, the ranges of its states
+    its env              make_env (our envs, or a Gymnasium env through GymnasiumEnv), place (a
+                         start, fully), success, max_steps, the ranges of its states
                          and actions; start_of (the start an observation shows), perturb (a start near
                          a source's first observation), start_names (a start's numbers: aug.start)
     its robot            arms (each controlled point's columns in an observation), reach,
@@ -44,6 +45,7 @@ from ch37.parallel import step_each
 from lerobot_v3 import IMAGE_KEY, IMAGE_SIZE, write_set
 
 __all__ = [
+    "GymnasiumEnv",
     "Outcome",
     "Perturbation",
     "Source",
@@ -106,6 +108,27 @@ class Source:
     episode: int
     states: np.ndarray  # (T, obs_dim) observation.state; resolve reads only the first row
     actions: np.ndarray  # (T, act_dim) action; kept for modes that reuse the source path
+
+
+class GymnasiumEnv:
+    """A Gymnasium env (reset(seed=, options=) -> (obs, info); step -> (obs, reward, terminated,
+    truncated, info)) as the engine steps one: reset(seed, options) -> obs, step(action) -> (obs, reward,
+    done, info with "success"), success (latched). observe(obs) -> the task's observation vector
+    ((obs_dim,) float32); success_key: the info key that says the task is done ("is_success")."""
+
+    def __init__(self, env, observe, success_key: str = "is_success"):
+        self.env, self.observe, self.success_key = env, observe, success_key
+        self.success = False
+
+    def reset(self, seed=None, options=None) -> np.ndarray:
+        obs, _ = self.env.reset(seed=seed, options=options)
+        self.success = False
+        return self.observe(obs)
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.success |= bool(info[self.success_key])
+        return self.observe(obs), reward, bool(terminated or truncated), info | {"success": self.success}
 
 
 def rotation(yaw: float) -> np.ndarray:
