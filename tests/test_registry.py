@@ -30,13 +30,13 @@ def _edited(monkeypatch, target: Path) -> None:
 @pytest.mark.parametrize("name", ["pusht", "aloha"])
 def test_an_edit_to_a_task_module_its_env_or_its_expert_changes_the_digests(monkeypatch, name):
     task = known_tasks()[name]
-    expert = type(task.expert())
+    expert = task.expert_class
     module = sys.modules[type(task).__module__]
     digest_run = lambda: shards.engine_version(task)  # noqa: E731
-    digest_demos = lambda: demos.generator_version.__wrapped__(task.env_module, expert)  # noqa: E731
+    digest_demos = lambda: demos.generator_version.__wrapped__(task)  # noqa: E731
     before = digest_run(), digest_demos()
     for f, guards_demos in (
-        (module.__file__, False),  # the task module: resumed shards (a demo set is made without it)
+        (module.__file__, True),  # the task module: a demo set is made through it (its env, its expert)
         (task.env_module.__file__, True),
         (task.env_module.XML_PATH, True),
         (sys.modules[expert.__module__].__file__, True),
