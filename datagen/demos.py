@@ -72,6 +72,7 @@ def generate(
     feats = features(m.STATE_NAMES, m.ACTION_NAMES, video=video, env_state_names=m.ENV_STATE_NAMES)
     stamp = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=video)
     how = dict(repo_id=f"local/{emb.name}_demos", fps=m.FPS, robot_type=m.ROBOT_TYPE, task=m.TASK)
+    how["obs_names"] = emb.obs_names  # the frames' observations: the set's state (and env state) columns
     write_dataset(out, feats=feats, episodes=episodes_iter(), stamp=stamp, **how)
     return summary
 

@@ -285,4 +285,5 @@ def save(task: Task, root, kept: list[dict], *, repo_id: str, stamp: dict) -> No
             feats=feats,
             episodes=kept,
             stamp={"made_by": MADE_BY} | stamp,
+            obs_names=task.obs_names,  # the frames' observations: the set's state (and env state) columns
         )

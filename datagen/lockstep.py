@@ -32,7 +32,7 @@ and the runner keeps `lanes` envs busy, refilling a lane as soon as its attempt 
 frame into preallocated arrays (lanes x max_frames), and returns the results in job order.
 Mode "resolve" is built here for every task from its parts (perturb, place, batch_expert, step_batch,
 max_steps: the Task contract, datagen.task); mode "replay" is the engine's one replay as lanes
-(datagen.replay.lanes: each lane runs the same generator as one attempt does), for every task and both
+(replay_lanes: each lane runs datagen.replay's generator, as one attempt does), for every task and both
 --select. A task without a batch expert runs "resolve" one attempt at a time through
 datagen.engine.attempt, the same bytes.
 """
@@ -47,7 +47,16 @@ from ch37.parallel import step_envs
 from datagen import engine, replay
 from datagen.task import Outcome, Perturbation, Task
 
-__all__ = ["LANES", "Lane", "attempts_lockstep", "kept_or_not", "resolve_lanes", "run_lanes", "start_of_job"]
+__all__ = [
+    "LANES",
+    "Lane",
+    "attempts_lockstep",
+    "kept_or_not",
+    "replay_lanes",
+    "resolve_lanes",
+    "run_lanes",
+    "start_of_job",
+]
 
 LANES = 256  # attempts stepped together per worker (ALOHA's lane: an MjData, 0.44 MiB, ~1 ms to make)
 
@@ -170,6 +179,44 @@ def resolve_lanes(task: Task, sources: dict, how: Perturbation) -> dict:
     return {"begin": begin, "decide": decide, "finish": finish}
 
 
+def replay_lanes(task: Task, sources: dict, how: Perturbation, pool: dict | None, plans: dict) -> dict:
+    """The engine's one replay as lanes: each lane runs datagen.replay.Replay.steps, so a lane's frames
+    are datagen.replay.replay's, bit for bit (tests/test_lockstep.py). pool: the sources --select
+    nearest chooses from (None: the attempt's own); plans: the worker's cut sources."""
+
+    def begin(job, env):
+        start = start_of_job(task, sources, job, how)
+        if start is None:
+            return Outcome("no_valid_start", source_episode=job[0])
+        source = pool[replay.nearest(task, pool, start)] if pool else sources[job[0]]
+        try:
+            plan = replay.plan_of(task, source, plans)
+        except ValueError:
+            return Outcome("source_not_split", None, start, source.episode)
+        run = replay.Replay(task, source, plan, start)
+        obs = task.place(env, start)
+        gen = run.steps(env)
+        next(gen)
+        return Lane(job, obs, run=run, gen=gen)
+
+    def decide(lanes, envs, obs):
+        actions = np.zeros((len(lanes), task.env_module.ACT_DIM), np.float32)
+        stop = np.zeros(len(lanes), bool)
+        for j, lane in enumerate(lanes):
+            try:
+                actions[j] = lane.gen.send(obs[j])
+            except StopIteration:
+                stop[j] = True
+        return actions, stop
+
+    def finish(lane, env, episode, last_obs):
+        got = lane.run.outcome(env, last_obs, episode)
+        kept = engine.with_provenance(got.episode, got.source_episode, got.start) if got.kept else None
+        return Outcome(got.reason, kept, got.start, got.source_episode, got.steps)
+
+    return {"begin": begin, "decide": decide, "finish": finish}
+
+
 def attempts_lockstep(
     task: Task,
     sources: dict,
@@ -190,7 +237,7 @@ def attempts_lockstep(
     if mode == "resolve" and task.batch_expert() is not None:
         parts = resolve_lanes(task, sources, how)
     if mode == "replay":
-        parts = replay.lanes(task, sources, how, sources if select == "nearest" else None, sims.plans)
+        parts = replay_lanes(task, sources, how, sources if select == "nearest" else None, sims.plans)
     if parts is None:  # the task offers no lanes for this mode: the same results, one at a time
         return engine.run_attempts(task, sources, jobs, how, mode=mode, select=select, workers=1, sims=sims)
     m = task.env_module

@@ -30,7 +30,8 @@ REASONS that applies:
     source_not_split      the source cannot be cut into the task's subtasks (cut raises ValueError)
 
 One attempt is a generator (Replay.steps) that receives each observation and yields each action, so the
-same code runs one attempt at a time (replay) and as lockstep's lanes (lanes): the same bytes.
+same code runs one attempt at a time (replay) and as lockstep's lanes (datagen.lockstep.replay_lanes):
+the same bytes.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ import numpy as np
 
 from datagen.task import Outcome, Source, Subtask, Task, ended, recorded, transform_segment
 
-__all__ = ["Replay", "Segment", "cut", "failures", "lanes", "nearest", "plan_of", "replay", "signals"]
+__all__ = ["Replay", "Segment", "cut", "failures", "nearest", "plan_of", "replay", "signals"]
 
 
 @dataclass(frozen=True)
@@ -275,43 +276,3 @@ def replay(task: Task, env, start, source: Source, plans: dict | None = None) ->
         if done:
             break
     return run.outcome(env, obs, recorded(task.env_module, states, actions, succ, False))
-
-
-def lanes(task: Task, sources: dict, how, pool: dict | None, plans: dict) -> dict:
-    """The replay as datagen.lockstep lanes (begin, decide, finish): each lane runs Replay.steps, so a
-    lane's frames are replay()'s, bit for bit (tests/test_lockstep.py). pool: the sources --select
-    nearest chooses from (None: the attempt's own)."""
-    from datagen.engine import with_provenance
-    from datagen.lockstep import Lane, start_of_job
-
-    def begin(job, env):
-        start = start_of_job(task, sources, job, how)
-        if start is None:
-            return Outcome("no_valid_start", source_episode=job[0])
-        source = pool[nearest(task, pool, start)] if pool else sources[job[0]]
-        try:
-            plan = plan_of(task, source, plans)
-        except ValueError:
-            return Outcome("source_not_split", None, start, source.episode)
-        run = Replay(task, source, plan, start)
-        obs = task.place(env, start)
-        gen = run.steps(env)
-        next(gen)
-        return Lane(job, obs, run=run, gen=gen)
-
-    def decide(lanes_, envs, obs):
-        actions = np.zeros((len(lanes_), task.env_module.ACT_DIM), np.float32)
-        stop = np.zeros(len(lanes_), bool)
-        for j, lane in enumerate(lanes_):
-            try:
-                actions[j] = lane.gen.send(obs[j])
-            except StopIteration:
-                stop[j] = True
-        return actions, stop
-
-    def finish(lane, env, episode, last_obs):
-        got = lane.run.outcome(env, last_obs, episode)
-        kept = with_provenance(got.episode, got.source_episode, got.start) if got.kept else None
-        return Outcome(got.reason, kept, got.start, got.source_episode, got.steps)
-
-    return {"begin": begin, "decide": decide, "finish": finish}

@@ -241,7 +241,9 @@ class Task:
     name: str  # "pusht": its key in known_tasks(), recorded in a run's settings
     title: str  # "PushT": how messages name it
     generator: str  # the command that makes a source set of this task ("gen_demos_pusht.py")
-    env_module: object  # STATE_NAMES, ACTION_NAMES, ENV_STATE_NAMES, FPS, ROBOT_TYPE, TASK, OBS_DIM, ACT_DIM
+    # env_module: STATE_NAMES, ACTION_NAMES, ENV_STATE_NAMES, FPS, ROBOT_TYPE, TASK, OBS_DIM, ACT_DIM (and
+    # OBS_NAMES where the observation vector is more than observation.state: see obs_names)
+    env_module: object
     start_names: tuple[str, ...]  # a start's numbers, in place()'s order (stored as aug.start)
     state_ranges: dict[str, tuple[float, float]]  # {state name: (low, high)}: a source outside is refused
     action_ranges: dict[str, tuple[float, float]]  # {action name: (low, high)}: the env's clip range
@@ -331,6 +333,14 @@ class Task:
         """envs[i] stepped with actions[i]: (obs (N, obs_dim), success (N,) bool, done (N,) bool), bit for
         bit env.step per env (what this default does)."""
         return step_each(envs, actions)
+
+    @property
+    def obs_names(self) -> tuple[str, ...]:
+        """The names of the observation vector's entries: env_module.OBS_NAMES where the env's
+        observation holds more than a set's observation.state (its ENV_STATE_NAMES beside it, as
+        lerobot/pusht_keypoints records them), else its STATE_NAMES."""
+        m = self.env_module
+        return tuple(getattr(m, "OBS_NAMES", m.STATE_NAMES))
 
     @property
     def failures(self) -> dict[str, tuple[str, ...]]:

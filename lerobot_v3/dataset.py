@@ -139,14 +139,25 @@ def _fast_fingerprints():
 
 
 def write_set(
-    root: Path, *, repo_id: str, fps: int, robot_type: str, task: str, feats: dict, episodes, per_frame=False
+    root: Path,
+    *,
+    repo_id: str,
+    fps: int,
+    robot_type: str,
+    task: str,
+    feats: dict,
+    episodes,
+    per_frame=False,
+    obs_names=None,
 ) -> None:
     """Write `episodes` (an iterable of dicts of per-frame arrays keyed like `feats`) as a LeRobot v3
     set in the new folder `root` (it must not exist). Whole-or-absent publication, stamps and the
     folder's ownership are the caller's (datagen.write_dataset builds it beside its target).
 
     ENV_STATE_KEY, when `feats` has it and an episode does not, is taken from the episode's
-    observation.state columns of the same names (see features).
+    observation.state columns of the same names (see features). obs_names: the names of an episode's
+    observation.state columns when they are a task's whole observation (state and environment state,
+    datagen.task.Task.obs_names); the set's observation.state then holds feats' state names of them.
 
     A set of numeric features of shape (d,) (every set the chapter writes) is written in one pass
     from the arrays (_write_direct): the same files, columns, Arrow types and metadata LeRobot's
@@ -156,7 +167,7 @@ def write_set(
     encoding mp4 is LeRobot's job. per_frame: every set through LeRobot's path (a benchmark's baseline).
     """
     root = Path(root)
-    episodes = _with_env_state(episodes, feats)
+    episodes = _with_env_state(episodes, feats, obs_names)
     if not per_frame and all(f["dtype"] in _DIRECT_DTYPES and len(f["shape"]) == 1 for f in feats.values()):
         _write_direct(root, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes)
         return  # its stats.json is written sorted
@@ -182,16 +193,30 @@ def write_sorted_stats(stats: dict, root: Path) -> None:
 _DIRECT_DTYPES = {"bool", "float32", "float64", "int8", "int16", "int32", "int64", "uint8"}
 
 
-def _with_env_state(episodes, feats: dict):
-    """`episodes`, each with ENV_STATE_KEY filled from its observation.state columns when missing."""
-    if ENV_STATE_KEY not in feats:
-        yield from episodes
-        return
-    cols = columns(feats["observation.state"]["names"], feats[ENV_STATE_KEY]["names"])
+def _with_env_state(episodes, feats: dict, obs_names=None):
+    """`episodes`, each with ENV_STATE_KEY filled from its observation.state columns when missing, and,
+    given obs_names (those columns' names), its observation.state cut to feats' state names."""
+    state_names = feats["observation.state"]["names"]
+    obs_names = state_names if obs_names is None else list(obs_names)
+    keep = None if list(obs_names) == list(state_names) else columns(obs_names, state_names)
+    cols = columns(obs_names, feats[ENV_STATE_KEY]["names"]) if ENV_STATE_KEY in feats else None
     for ep in episodes:
-        if ENV_STATE_KEY not in ep:  # (T, 10) -> (T, len(cols))
-            ep = ep | {ENV_STATE_KEY: np.ascontiguousarray(ep["observation.state"][:, cols])}
+        obs = ep["observation.state"]
+        if cols is not None and ENV_STATE_KEY not in ep:  # (T, 10) -> (T, len(cols))
+            ep = ep | {ENV_STATE_KEY: np.ascontiguousarray(obs[:, cols])}
+        if keep is not None:
+            ep = ep | {"observation.state": np.ascontiguousarray(obs[:, keep])}
         yield ep
+
+
+def observation(arrays: dict, obs_names, state_names, env_state_names=()) -> np.ndarray:
+    """(N, len(obs_names)) float32: a set's observation.state and ENV_STATE_KEY columns (load_arrays'
+    arrays) put together in the order of a task's observation names (the inverse of write_set's cut)."""
+    if list(obs_names) == list(state_names):
+        return arrays["observation.state"]
+    names = list(state_names) + list(env_state_names)
+    both = np.concatenate([arrays["observation.state"], arrays[ENV_STATE_KEY]], axis=1)
+    return np.ascontiguousarray(both[:, columns(names, obs_names)], np.float32)
 
 
 def _write_lerobot(tmp: Path, *, repo_id, fps, robot_type, task, feats, episodes) -> None:

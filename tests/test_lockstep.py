@@ -129,7 +129,7 @@ def test_the_runner_is_task_agnostic_aloha_episodes_equal_rollout():
 @pytest.mark.parametrize("mode, select", [("resolve", "own"), ("replay", "own"), ("replay", "nearest")])
 def test_aloha_in_lockstep_equals_one_at_a_time(tmp_path, mode, select):
     """ALOHA's re-solve (the generic resolve lanes, AlohaBatch.act_batch deciding) and the engine's one
-    replay (datagen.replay.lanes, subtask by subtask, from the attempt's own or the nearest source)
+    replay (datagen.lockstep.replay_lanes, subtask by subtask, from the attempt's own or the nearest source)
     through lockstep return exactly datagen.engine.attempt's results."""
     out = tmp_path / "aloha3"
     assert gen_demos_aloha.main(["--episodes", "3", "--seed", "0", "--out", str(out), "--quiet"]) == 0
