@@ -1,5 +1,5 @@
 """A task registers itself when its module is imported, and the digests that guard resumed shards
-(datagen.shards.engine_version) and cached demo sets (datagen.demos.generator_version) are read from
+(datagen.run.engine_version) and cached demo sets (datagen.demos.generator_version) are read from
 the modules a task imports (ch37.code_files), so no list of files can forget a task's code."""
 
 import sys
@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 import datagen
-from datagen import ALOHA, PUSHT, demos, shards
+from datagen import ALOHA, PUSHT, demos, run
 from datagen.task import known_tasks, register
 
 
@@ -32,7 +32,7 @@ def test_an_edit_to_a_task_module_its_env_or_its_expert_changes_the_digests(monk
     task = known_tasks()[name]
     expert = type(task.expert())
     module = sys.modules[type(task).__module__]
-    digest_run = lambda: shards.engine_version(task)  # noqa: E731
+    digest_run = lambda: run.engine_version(task)  # noqa: E731
     digest_demos = lambda: demos.generator_version.__wrapped__(task.env_module, expert)  # noqa: E731
     before = digest_run(), digest_demos()
     for f, guards_demos in (
