@@ -2,8 +2,8 @@
 
     run(src, out, settings, workers=, ray=, quiet=) -> the generation report   (augment_demos.py)
 
-The run reads in one direction: this module says the order of its steps, and each step's module does
-one job (each of them writes into --out through ch37.ownership):
+The run reads in one direction: this module says the order of its steps, starts the workers and times
+them; each step lives in a module named for its job, and those alone call ch37.ownership:
 
     datagen.source_check   which task --src is, whether the engine can grow it, its identity
     datagen.plan           the settings as stamped, the attempts cut into shards, the memory they need

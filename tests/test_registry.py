@@ -47,3 +47,13 @@ def test_an_edit_to_a_task_module_its_env_or_its_expert_changes_the_digests(monk
             if guards_demos:
                 assert digest_demos() != before[1], f"an edit of {f} leaves the {name} demo digest as it was"
     assert (digest_run(), digest_demos()) == before
+
+
+@pytest.mark.parametrize("step", ["run", "source_check", "plan", "resume", "shards", "report"])
+def test_an_edit_to_any_step_of_a_run_changes_the_run_digest(monkeypatch, step):
+    """The run is cut by job into modules (datagen.run orders them); its digest is read from what
+    datagen.run imports, so each of them guards resumed shards without being listed."""
+    digest_run = lambda: run.engine_version(PUSHT)  # noqa: E731
+    before = digest_run()
+    _edited(monkeypatch, Path(sys.modules[f"datagen.{step}"].__file__))
+    assert digest_run() != before, f"an edit of datagen/{step}.py leaves the run digest as it was"
