@@ -1,19 +1,19 @@
 """What a run finds in its --out, and what it leaves there for a re-run to finish.
 
-    check_out_first(out, src)     before the source is read: a folder that is not ours, refused at once
-    taken(out, src, config)       the folder checked again and held under its lock while the run writes
-    completed(out, stamp)         the report of a run already complete (nothing to do), else None
-    begin(out, config)            the run's stamp, not yet complete: the folder is ours from here on
-    finished(out, config, shards) the whole shards of an earlier run of these settings, judged
-    complete(out, run_stamp, rep) its report written, the run stamped complete, its shards removed
+    check_out_first(out, src)        before the source is read: a folder not ours, refused at once
+    taken(out, src, config)          the folder checked again and held under its lock while the run writes
+    completed(out, stamp)            the report of a run already complete (nothing to do), else None
+    begin(out, config)               the run's stamp, not yet complete: the folder is ours from here on
+    finished(out, config, shards)    the whole shards of an earlier run of these settings, judged
+    complete(out, run_stamp, report) the report written, the run stamped complete, its shards removed
 
 A run's stamp (OUT/scale_data_stamp.json: made_by, kind "engine", its settings, complete) is what a
 re-run reads: the same command on the same --out finishes the run (only the missing shards are made)
 or, once complete, leaves it as it is; other settings are refused. A shard is kept only if its files
 have the sha256 its stamp records and the stamp's counts agree with them (stamp_problem). What a run
-writes is known: these names, each shard's files (its stamp), data/ and meta/ (listed in the run's
-stamp before they are renamed into OUT); a resume that finds anything else refuses, changing nothing
-(foreign).
+writes is known: RUN_NAMES in OUT, SHARD_NAMES in OUT/shards, each shard's files (its stamp), data/ and
+meta/ (listed in the run's stamp before they are renamed into OUT); a resume that finds anything else
+refuses, changing nothing (foreign).
 """
 
 from __future__ import annotations
