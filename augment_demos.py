@@ -13,8 +13,9 @@ block x, y, yaw, pusher x, y), with generation_report.json beside it.
 
 The same command gives the same bytes with any --workers, with --ray, and after a killed run is
 re-run (finished shards are kept, only the missing ones are made). The engine lives in datagen/:
-engine.py (one attempt), pusht.py and aloha.py (the tasks), shards.py (the run: shards, stats, report);
-the merge in lerobot_v3/merge.py, local processes or Ray in ch37.parallel.map_jobs.
+engine.py (one attempt), pusht.py and aloha.py (the tasks), run.py (the run, in the order of its steps:
+source_check.py, plan.py, resume.py, shards.py, report.py); the merge in lerobot_v3/merge.py, local
+processes or Ray in ch37.parallel.map_jobs.
 """
 
 from __future__ import annotations
@@ -70,7 +71,7 @@ def parse(argv=None):
 
 
 def settings(a) -> dict:
-    """The run's settings (datagen.shards.SETTINGS) from the flags: the engine's own names for them."""
+    """The run's settings (datagen.plan.SETTINGS) from the flags: the engine's own names for them."""
     return dict(
         mode=a.aug_mode,
         select=a.select,
@@ -84,18 +85,17 @@ def settings(a) -> dict:
 
 def main(argv=None) -> int:
     a = parse(argv)
-    from datagen import shards
+    from datagen.report import REPORT_NAME
+    from datagen.run import run
 
-    r = shards.run(
-        shards.task_of(a.src), a.src, a.out, settings(a), workers=a.workers, ray=a.ray, quiet=a.quiet
-    )
+    r = run(a.src, a.out, settings(a), workers=a.workers, ray=a.ray, quiet=a.quiet)
     made, reused = r.get("kept_this_run", r["kept"]), r["shards"]["reused"]
     rate = f" in {r['seconds']:.1f} s ({r['demos_per_s']:.1f} demos/s)"
     if reused:  # a resumed run: what it made now (and its rate) apart from what an earlier run made
         rate = f"; {made} made now{rate}, {r['kept'] - made} resumed from {reused} shards of an earlier run"
     print(
         f"augment_demos: {r['attempts']} attempts, {r['kept']} kept (yield {r['yield']:.3f}), "
-        f"{r['frames']} frames{rate} -> {a.out} (LeRobot v3; report {a.out / shards.REPORT_NAME})"
+        f"{r['frames']} frames{rate} -> {a.out} (LeRobot v3; report {a.out / REPORT_NAME})"
     )
     return 0
 

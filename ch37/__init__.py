@@ -92,7 +92,7 @@ def code_files(roots=None) -> dict[str, str]:
     the result cache's record of what a run imported (ch37.result_cache). roots (modules): those modules
     and every project module they import, transitively (_imported_by), so the same roots give the same
     files whatever else the process imported: a demo set's digest (datagen.demos.generator_version: the
-    task's env and expert) and a run's (datagen.shards.engine_version: the engine and the task module).
+    task's env and expert) and a run's (datagen.run.engine_version: the engine and the task module).
     Each module brings its file, the model file it names (XML_PATH) and the files it says it reads (READS).
     """
     if roots is None:

@@ -12,8 +12,13 @@ engine     one attempt in either mode, keep_first, grow, run_attempts, save: tas
 replay     the one replay for every task (MimicGen's generation loop): cut a source at its subtask
            signals, re-express each segment in the new object frames, bridge, execute, keep on success
 lockstep   a worker's attempts stepped together (resolve and replay), the same bytes
-shards     a run on disk: fixed shards on local processes or Ray (ch37.parallel.map_jobs), resume,
-           the generation report, the merge (lerobot_v3.merge_sets)
+run        a run on disk (augment_demos.py): run() says the order of its steps, each in its own module:
+  source_check   which task a source set is (task_of), whether the engine can grow it (read_source)
+  plan           the settings as stamped, the attempts cut into shards (plan), the memory that needs
+  resume         --out checked and held under its lock, the run's stamp, an earlier run's shards judged
+  shards         a shard made by a worker (local processes or Ray: ch37.parallel.map_jobs), saved, merged
+                 (lerobot_v3.merge_sets)
+  report         the generation report, summed from the shard stamps
 
 A task registers itself when its module is imported (datagen.task.register); known_tasks() imports every
 module of the package and returns them by name, so a new task is one module here, listed nowhere else.

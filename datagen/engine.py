@@ -6,7 +6,7 @@ start, re-solve or replay it, keep it if it succeeds.
 is a pure function of its arguments: attempt k of source episode e draws from its own generator,
 np.random.default_rng([env_seed(seed, "aug", e), k]), and the sim is fully reset at the perturbed
 start (task.place), so the result never depends on which process runs it, in what order, or with
-what else. scale_data.py's augment region and augment_demos.py (through datagen.shards) call the
+what else. scale_data.py's augment region and augment_demos.py (through datagen.run) call the
 same function. The modes are the engine's (resolve here, replay: datagen.replay), the parts they use
 the task's (datagen.task.Task); the kept episode
 carries its provenance on every frame: aug.source_episode and aug.start (the start it was made from).

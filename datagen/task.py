@@ -1,7 +1,7 @@
 """What a task gives the data engine: MimicGen's env interface, made small.
 
 The engine (datagen.engine: one attempt in either mode; datagen.replay: the one replay; datagen.lockstep;
-datagen.shards: the run, its shards, report and merge) knows no task. Everything about one task lives in
+datagen.run: a run, its shards, resume, report and merge) knows no task. Everything about one task lives in
 one module named for it (datagen/pusht.py, datagen/aloha.py), and only that module (and the engine's
 bit-identical fast copies, datagen/fast_*.py) imports its env and its expert. A task is an instance of a
 Task subclass that its module registers as it is imported (TASK = register(MyTask())): known_tasks()

@@ -732,8 +732,8 @@ def load_arrays(root: Path, keys=("observation.state", "action", "episode_index"
 
 
 # A user's set must suit the env it feeds, checked where it is read (datagen.demos.ensure_demos for
-# scale_data.py, datagen.shards.read_source for augment_demos.py): fps_problem before loading (LeRobot
-# may refuse a set whose timestamps do not fit its fps), frames_problem on the loaded arrays.
+# scale_data.py, datagen.source_check.read_source for augment_demos.py): fps_problem before loading
+# (LeRobot may refuse a set whose timestamps do not fit its fps), frames_problem on the loaded arrays.
 def fps_problem(root: Path, fps: int) -> str | None:
     """None if the set at `root` is recorded at `fps` Hz, the env's control rate, else why not. An
     action is a command held for 1/fps s: a 50 fps set stepped at 10 fps runs each command 5x too long."""

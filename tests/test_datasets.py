@@ -133,7 +133,7 @@ def test_bad_flags_one_line(tmp_path, capsys, argv, needle):
 def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
     """A user's set from before observation.environment_state (or from another writer) is read as
     before: the schema check, the lesson's read, the data engine's read and its growth."""
-    from datagen import PUSHT, Perturbation, engine, ensure_demos, shards
+    from datagen import PUSHT, Perturbation, engine, ensure_demos, source_check
 
     emb, m = gen_demos_pusht.PUSHT, gen_demos_pusht.PUSHT.env_module
     env = emb.make_env()
@@ -156,7 +156,7 @@ def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
     assert how == "your own set, used as given"
     d = lerobot_io.load_arrays(old)
     assert d["observation.state"].tobytes() == b"".join(ep["observation.state"].tobytes() for ep in eps)
-    src = shards.read_source(PUSHT, old)
+    src = source_check.read_source(PUSHT, old)
     got = engine.attempt(PUSHT, engine.sources(src)[0], 0, Perturbation(0, 0.0, 0.0))
     assert got.kept  # the unperturbed start re-solved
     kept = got.episode

@@ -20,14 +20,15 @@ import gen_demos_aloha
 import gen_demos_pusht
 import pusht_env
 from ch37.ownership import LOCK_NAME, MADE_BY, STAMP_NAME
-from datagen import ALOHA, PUSHT, Perturbation, engine, pusht, shards
+from datagen import ALOHA, PUSHT, Perturbation, engine, plan, pusht, shards
+from datagen.report import REPORT_NAME
 from lerobot_v3.dataset import load_arrays, open_dataset
 
 PER_DEMO, SHARD = 4, 2  # 3 sources x 4 = 12 attempts in 6 shards: enough to kill one run mid-way
 SETTINGS = ["--per_demo", str(PER_DEMO), "--shard_size", str(SHARD), "--quiet"]
 
 
-def tree(root, skip=(shards.REPORT_NAME,)):
+def tree(root, skip=(REPORT_NAME,)):
     """{relative path: bytes} of every file under root (the report holds timings, so it is left out)."""
     return {
         p.relative_to(root).as_posix(): p.read_bytes()
@@ -122,7 +123,7 @@ def test_run_writes_the_attempts_in_order_loadable_with_provenance(src, referenc
     assert not (reference / shards.SHARDS_DIR).exists()  # shards are removed once merged
     stamp = json.loads((reference / STAMP_NAME).read_text())
     assert stamp["made_by"] == MADE_BY and stamp["complete"] and stamp["config"]["source"]["episodes"] == 3
-    rep = json.loads((reference / shards.REPORT_NAME).read_text())
+    rep = json.loads((reference / REPORT_NAME).read_text())
     assert rep["attempts"] == 12 and rep["kept"] == len(want) == rep["dataset"]["episodes"]
     assert rep["kept"] + sum(rep["failures"].values()) == rep["attempts"]
     assert rep["frames"] == len(got["action"]) and rep["yield"] == round(rep["kept"] / 12, 4)
@@ -173,10 +174,10 @@ def test_shard_size_changes_no_byte(src, reference, tmp_path):
     not 6) give the same data/ and meta/ files, byte for byte, meta/episodes included."""
     out = tmp_path / "s7"
     augment("--src", src, "--out", out, "--workers", "1", "--per_demo", str(PER_DEMO), "--shard_size", "7")
-    assert json.loads((out / shards.REPORT_NAME).read_text())["shards"]["total"] == 2
+    assert json.loads((out / REPORT_NAME).read_text())["shards"]["total"] == 2
     got, want = (
-        tree(out, skip=(shards.REPORT_NAME, STAMP_NAME)),
-        tree(reference, skip=(shards.REPORT_NAME, STAMP_NAME)),
+        tree(out, skip=(REPORT_NAME, STAMP_NAME)),
+        tree(reference, skip=(REPORT_NAME, STAMP_NAME)),
     )
     assert got.keys() == want.keys() and any(k.startswith("meta/episodes/") for k in got)
     assert [k for k in got if got[k] != want[k]] == []
@@ -209,7 +210,7 @@ def test_local_ray_same_bytes(src, reference, tmp_path):
     """A real Ray started by the command on this machine (2 CPUs) and shut down at its end."""
     p = augment("--src", src, "--out", tmp_path / "ray", "--ray", "--workers", "2", *SETTINGS)
     assert tree(tmp_path / "ray") == tree(reference)
-    rep = json.loads((tmp_path / "ray" / shards.REPORT_NAME).read_text())
+    rep = json.loads((tmp_path / "ray" / REPORT_NAME).read_text())
     assert rep["executor"].startswith("ray local") and rep["versions"]["ray"]
     assert "Traceback" not in p.stderr
 
@@ -272,7 +273,7 @@ def test_killed_run_is_finished_by_the_same_command(src, reference, tmp_path):
         (out / shards.SHARDS_DIR / "shard-00004" / "junk.parquet").write_bytes(b"half a file")
     p = augment(*cmd[2:])
     assert tree(out) == tree(reference)
-    rep = json.loads((out / shards.REPORT_NAME).read_text())
+    rep = json.loads((out / REPORT_NAME).read_text())
     assert rep["shards"]["reused"] == len(done) and rep["shards"]["made_this_run"] == 6 - len(done)
     assert rep["attempts"] == 12  # the report covers the whole run, reused shards included
     # issue 31 #7: the summary says what this run made (its rate is over that) and what it resumed
@@ -425,14 +426,12 @@ def test_a_shard_size_that_leaves_thousands_of_files_says_so():
 
 def test_a_plan_beyond_memory_is_one_line():
     """Issue 22 item 10: the plan's memory (ATTEMPT_BYTES an attempt) is checked against what is free."""
-    assert shards.plan_memory_problem(3, 10, 1 << 30) is None
-    assert shards.plan_memory_problem(12, 10**6, None) is None  # unknown memory: not refused
-    why = shards.plan_memory_problem(
-        12, 10**6, 1 << 30, "--per_demo"
-    )  # 12e6 attempts x 200 B = 2.2 GB > 1 GB
+    assert plan.plan_memory_problem(3, 10, 1 << 30) is None
+    assert plan.plan_memory_problem(12, 10**6, None) is None  # unknown memory: not refused
+    why = plan.plan_memory_problem(12, 10**6, 1 << 30, "--per_demo")  # 12e6 attempts x 200 B = 2.2 GB > 1 GB
     assert "12,000,000 attempts need about 2.2 GB" in why and "lower --per_demo" in why
     # the flag named as the command spells it: augment_demos' --attempts_per_demo unless told otherwise
-    assert "lower --attempts_per_demo" in shards.plan_memory_problem(12, 10**6, 1 << 30)
+    assert "lower --attempts_per_demo" in plan.plan_memory_problem(12, 10**6, 1 << 30)
 
 
 @pytest.mark.parametrize("make_src,make_out,extra,needle", [b[1:] for b in BAD], ids=[b[0] for b in BAD])
@@ -510,7 +509,7 @@ def test_joining_a_ray_cluster_same_bytes(src, reference, tmp_path):
         head.terminate()  # `ray start --block` stops the processes it started
         head.wait(timeout=60)
     assert tree(tmp_path / "joined") == tree(reference)
-    rep = json.loads((tmp_path / "joined" / shards.REPORT_NAME).read_text())
+    rep = json.loads((tmp_path / "joined" / REPORT_NAME).read_text())
     assert rep["executor"] == f"ray 127.0.0.1:{port}"
 
 
@@ -566,7 +565,7 @@ def test_resume_remakes_damaged_shards_byte_identical(src, reference, tmp_path):
     lines = [x for x in p.stdout.splitlines() if "is damaged" in x]
     assert len(lines) == 2 and all("making it again" in x for x in lines), p.stdout
     assert tree(out) == tree(reference)  # every data/ and meta/ file, byte for byte
-    rep = json.loads((out / shards.REPORT_NAME).read_text())
+    rep = json.loads((out / REPORT_NAME).read_text())
     assert rep["shards"]["reused"] == len(done) - 2 and rep["attempts"] == 12
 
 
@@ -584,8 +583,8 @@ def test_a_stamp_whose_counts_disagree_with_its_files_is_a_damaged_shard(src, re
     lines = [x for x in p.stdout.splitlines() if "is damaged" in x]
     assert len(lines) == 1 and done[0][-5:] in lines[0] and "making it again" in lines[0], p.stdout
     assert tree(out) == tree(reference)
-    rep = json.loads((out / shards.REPORT_NAME).read_text())
-    assert rep["kept"] == json.loads((reference / shards.REPORT_NAME).read_text())["kept"]
+    rep = json.loads((out / REPORT_NAME).read_text())
+    assert rep["kept"] == json.loads((reference / REPORT_NAME).read_text())["kept"]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -642,7 +641,7 @@ def test_aloha_replay_nearest_same_bytes_for_workers_ray_and_resume(aloha_src, t
     chosen = [w.source_episode for w in want]
     assert all(int(w.episode["aug.source_episode"][0, 0]) == w.source_episode for w in want if w.kept)
     assert chosen != own  # nearest chose another source for some attempt (else this test shows nothing)
-    rep = json.loads((ref / shards.REPORT_NAME).read_text())
+    rep = json.loads((ref / REPORT_NAME).read_text())
     assert set(rep["failures"]) == set(ALOHA.failures["replay"]) and rep["settings"]["select"] == "nearest"
     assert rep["kept"] + sum(rep["failures"].values()) == rep["attempts"] == 6
     augment(*flags, "--out", tmp_path / "w2", "--workers", "2")
@@ -656,7 +655,7 @@ def test_aloha_replay_nearest_same_bytes_for_workers_ray_and_resume(aloha_src, t
     assert proc.returncode == -signal.SIGKILL and not (out / "meta").exists()
     augment(*cmd[2:])
     assert tree(out) == tree(ref)
-    assert json.loads((out / shards.REPORT_NAME).read_text())["shards"]["reused"] >= 1
+    assert json.loads((out / REPORT_NAME).read_text())["shards"]["reused"] >= 1
 
 
 def test_aloha_resolve_is_a_lerobot_set_of_the_handoff(aloha_src, tmp_path):
@@ -666,7 +665,7 @@ def test_aloha_resolve_is_a_lerobot_set_of_the_handoff(aloha_src, tmp_path):
     p = augment("--src", aloha_src, "--out", out, "--workers", "1", *ALOHA_SETTINGS)
     assert p.stdout.strip().splitlines()[-1].startswith("augment_demos: 6 attempts")
     ds = open_dataset(out)
-    rep = json.loads((out / shards.REPORT_NAME).read_text())
+    rep = json.loads((out / REPORT_NAME).read_text())
     assert ds.num_episodes == rep["kept"] > 0 and ds.meta.robot_type == ALOHA.env_module.ROBOT_TYPE
     assert ds.meta.features["aug.start"]["names"] == list(ALOHA.start_names)
     frame = ds[0]

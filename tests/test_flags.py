@@ -229,18 +229,18 @@ def test_a_shared_knob_has_one_name_default_and_bound_in_every_command():
 def test_per_demo_has_one_meaning():
     """augment_demos' attempts per source episode is --attempts_per_demo (old --per_demo) and reaches the
     engine as attempts_per_demo; only a run's stamps keep its first key, "per_demo", for the same bytes."""
-    from datagen import shards
+    from datagen import plan
 
     a = parse_with(augment_demos, ["--per_demo", "3", "--pos_sigma", "0.05", "--mode", "replay"])
     s = augment_demos.settings(a)
-    assert set(s) == set(shards.SETTINGS) and s["attempts_per_demo"] == 3 and s["pos_sigma"] == 0.05
-    stored = shards.stored(s)
+    assert set(s) == set(plan.SETTINGS) and s["attempts_per_demo"] == 3 and s["pos_sigma"] == 0.05
+    stored = plan.stored(s)
     assert (
         stored["per_demo"] == 3
         and "attempts_per_demo" not in stored
-        and set(stored) == set(shards.STORED_SETTINGS)
+        and set(stored) == set(plan.STORED_SETTINGS)
     )
-    assert shards.attempts_per_demo(stored) == 3 and s["mode"] == "replay"
+    assert plan.attempts_per_demo(stored) == 3 and s["mode"] == "replay"
     assert "per_demo" not in config.DEFAULTS  # the lesson's kept count is aug_per_demo
     assert config.CHAPTER.aug_per_demo == 8
 

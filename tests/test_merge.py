@@ -14,7 +14,7 @@ import torch
 
 import gen_demos_pusht
 from ch37.ownership import read_json
-from datagen import engine, shards
+from datagen import engine, plan, shards
 from lerobot_v3 import frame_stats, merge
 from lerobot_v3.dataset import load_arrays, open_dataset
 
@@ -29,11 +29,11 @@ def roots(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("merge")
     assert gen_demos_pusht.main(["--episodes", "3", "--seed", "0", "--out", str(tmp / "src"), "--quiet"]) == 0
     sources = engine.sources(load_arrays(tmp / "src"))
-    plan = shards.plan(sources, CONFIG["per_demo"], CONFIG["shard_size"])
-    for i, jobs in enumerate(plan):
+    cut = plan.plan(sources, CONFIG["per_demo"], CONFIG["shard_size"])
+    for i, jobs in enumerate(cut):
         result = shards.make_shard(i, jobs, {e: sources[e] for e in sorted({e for e, _ in jobs})}, CONFIG)
         shards.save_shard(tmp / "run", i, result)
-    return [shards.shard_dir(tmp / "run", i) for i in range(len(plan))]
+    return [shards.shard_dir(tmp / "run", i) for i in range(len(cut))]
 
 
 @pytest.fixture(scope="module")

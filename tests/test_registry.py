@@ -1,5 +1,5 @@
 """A task registers itself when its module is imported, and the digests that guard resumed shards
-(datagen.shards.engine_version) and cached demo sets (datagen.demos.generator_version) are read from
+(datagen.run.engine_version) and cached demo sets (datagen.demos.generator_version) are read from
 the modules a task imports (ch37.code_files), so no list of files can forget a task's code."""
 
 import sys
@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 import datagen
-from datagen import ALOHA, PUSHT, demos, shards
+from datagen import ALOHA, PUSHT, demos, run
 from datagen.task import known_tasks, register
 
 
@@ -32,7 +32,7 @@ def test_an_edit_to_a_task_module_its_env_or_its_expert_changes_the_digests(monk
     task = known_tasks()[name]
     expert = task.expert_class
     module = sys.modules[type(task).__module__]
-    digest_run = lambda: shards.engine_version(task)  # noqa: E731
+    digest_run = lambda: run.engine_version(task)  # noqa: E731
     digest_demos = lambda: demos.generator_version.__wrapped__(task)  # noqa: E731
     before = digest_run(), digest_demos()
     for f, guards_demos in (
@@ -47,3 +47,13 @@ def test_an_edit_to_a_task_module_its_env_or_its_expert_changes_the_digests(monk
             if guards_demos:
                 assert digest_demos() != before[1], f"an edit of {f} leaves the {name} demo digest as it was"
     assert (digest_run(), digest_demos()) == before
+
+
+@pytest.mark.parametrize("step", ["run", "source_check", "plan", "resume", "shards", "report"])
+def test_an_edit_to_any_step_of_a_run_changes_the_run_digest(monkeypatch, step):
+    """The run is cut by job into modules (datagen.run orders them); its digest is read from what
+    datagen.run imports, so each of them guards resumed shards without being listed."""
+    digest_run = lambda: run.engine_version(PUSHT)  # noqa: E731
+    before = digest_run()
+    _edited(monkeypatch, Path(sys.modules[f"datagen.{step}"].__file__))
+    assert digest_run() != before, f"an edit of datagen/{step}.py leaves the run digest as it was"

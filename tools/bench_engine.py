@@ -49,7 +49,7 @@ from ch37 import ROOT, errors
 from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
 from ch37.ownership import dump_json, is_ours, read_stamp, round_floats, write_atomic
-from datagen import Perturbation, engine, known_tasks, lockstep, shards
+from datagen import Perturbation, engine, known_tasks, lockstep, resume
 from lerobot_v3.dataset import load_arrays
 from tools.common import parser, provenance
 
@@ -132,11 +132,11 @@ def two_ray_nodes(workers: int):
 
 
 def remove_run(run_dir: Path) -> None:
-    """Remove an engine run this tool made (shards.foreign finds nothing else in it); refuse otherwise."""
+    """Remove an engine run this tool made (resume.foreign finds nothing else in it); refuse otherwise."""
     if not run_dir.exists():
         return
     stamp = read_stamp(run_dir)
-    if not is_ours(stamp) or stamp.get("kind") != "engine" or shards.foreign(run_dir, stamp):
+    if not is_ours(stamp) or stamp.get("kind") != "engine" or resume.foreign(run_dir, stamp):
         raise DataError(f"{run_dir} holds files this tool did not write; move it elsewhere")
     shutil.rmtree(run_dir)
 

@@ -1,0 +1,148 @@
+"""The source set a run grows, only read: which task it is (task_of), whether the engine can grow it
+(read_source: its schema, names, fps, files, frames and value ranges, each failure one line) and what
+it is, wherever it lives (source_identity: a digest of the frames read, in the run's stamp)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ch37.errors import DataError
+from ch37.ownership import read_json
+from ch37.seeds import SEED_BLOCK
+from datagen.task import Task, known_tasks
+from lerobot_v3.dataset import check_hf_cache, fps_problem, frames_problem, load_arrays, schema_problem
+
+# The episodes table's columns that say where each episode's frames are (LeRobot v3)
+EPISODE_COLUMNS = ("episode_index", "length", "dataset_from_index", "dataset_to_index")
+EPISODE_COLUMNS += ("data/chunk_index", "data/file_index")
+
+
+def state_range_problem(
+    task: Task, src: Path, states: np.ndarray, actions: np.ndarray | None = None
+) -> str | None:
+    """None if every state (N, obs_dim) and action (N, act_dim) lies in the task's documented ranges
+    (task.state_ranges, task.action_ranges; 1e-6 of slack: float32 rounding), else the first dimension
+    outside, how many frames and the first row. A value outside is no state or action of the task: its
+    attempts could only fail."""
+    for key, values, ranges in (
+        ("observation.state", states, task.state_ranges),
+        ("action", actions, task.action_ranges),
+    ):
+        for i, (name, (lo, hi)) in enumerate(ranges.items() if values is not None else ()):
+            bad = (values[:, i] < lo - 1e-6) | (values[:, i] > hi + 1e-6)
+            if bad.any():
+                row, what = int(np.argmax(bad)), key.split(".")[-1]
+                return (
+                    f"--src {src}: {key} {name} (index {i}) is {float(values[row, i]):g} in "
+                    f"{int(bad.sum())} frames, the first at row {row}; the {task.title} env's range for it "
+                    f"is [{lo:g}, {hi:g}]: this is not a {task.title} {what}"
+                )
+    return None
+
+
+def task_of(src: Path) -> Task:
+    """The task whose sets `src` is (of datagen.task.known_tasks()), read from its meta/info.json: the task
+    whose env's ROBOT_TYPE the set records, or, for a set without one, the one task whose state and action
+    widths it has. DataError (one line) for a set that fits no task. A folder without a readable
+    info.json is left to read_source's checks (as PushT's, the engine's first task), which name what is
+    wrong with it."""
+    try:
+        info = json.loads((Path(src) / "meta" / "info.json").read_text())
+        feats = info["features"]
+        shapes = tuple(list(feats[k]["shape"]) for k in ("observation.state", "action"))
+    except (OSError, ValueError, KeyError, TypeError):
+        return known_tasks()["pusht"]
+    robot = info.get("robot_type")
+    if robot:
+        fits = [t for t in known_tasks().values() if t.env_module.ROBOT_TYPE == robot]
+    else:
+        fits = [
+            t for t in known_tasks().values() if shapes == ([t.env_module.OBS_DIM], [t.env_module.ACT_DIM])
+        ]
+    if len(fits) == 1:
+        return fits[0]
+    known = "; ".join(
+        f"{t.title}: robot_type '{t.env_module.ROBOT_TYPE}', observation.state [{t.env_module.OBS_DIM}], "
+        f"action [{t.env_module.ACT_DIM}] (make one with {t.generator})"
+        for t in known_tasks().values()
+    )
+    raise DataError(
+        f"--src {src} fits no task of the engine (robot_type {robot!r}, observation.state {shapes[0]}, "
+        f"action {shapes[1]}); it grows {known}"
+    )
+
+
+def read_source(task: Task, src: Path) -> dict:
+    """The source set's columns (a set of `task`), or DataError with one line saying what is wrong with it."""
+    import datasets
+    import pyarrow.parquet as pq
+
+    m, title = task.env_module, task.title
+    if not src.is_dir():
+        raise DataError(f"--src {src} is not a folder; make a {title} set with {task.generator}")
+    problem = schema_problem(src, m.OBS_DIM, m.ACT_DIM)
+    if problem:
+        raise DataError(f"--src {problem} (a {title} set has state [{m.OBS_DIM}] and action [{m.ACT_DIM}])")
+    feats = read_json(src / "meta" / "info.json")["features"]
+    for key, want in (("observation.state", m.STATE_NAMES), ("action", m.ACTION_NAMES)):
+        names = feats[key].get("names")
+        if names is not None and list(names) != list(want):
+            raise DataError(f"--src {src}: {key} names {names} are not {title}'s {list(want)}")
+    problem = fps_problem(src, m.FPS)
+    if problem:
+        raise DataError(f"--src {problem}")
+    for f in sorted(src.glob("data/*/*.parquet")) + sorted(src.glob("meta/episodes/*/*.parquet")):
+        try:
+            schema = pq.read_schema(f)
+        except Exception as e:  # pyarrow's errors for a broken file vary by what is broken
+            raise DataError(
+                f"--src {src}: {f.relative_to(src)} is not a readable parquet file ({e})"
+            ) from None
+        missing = (
+            [c for c in EPISODE_COLUMNS if c not in schema.names]
+            if f.relative_to(src).parts[1] == "episodes"
+            else []
+        )
+        if missing:
+            raise DataError(
+                f"--src {src}: {f.relative_to(src)} lacks the columns {', '.join(missing)} (a LeRobot v3 "
+                "episodes table says where each episode's frames are); regenerate or repair the set"
+            )
+    datasets.logging.set_verbosity(datasets.logging.CRITICAL)  # a failure below is our one line, not a log
+    check_hf_cache()  # a cache we cannot write is named as the cause, not the set
+    try:
+        arrays = load_arrays(src, keys=("observation.state", "action", "episode_index"))
+    except Exception as e:  # pyarrow, datasets and lerobot each raise their own kinds for a broken set
+        first = (str(e).strip().splitlines() or [""])[0][:160]
+        raise DataError(
+            f"--src {src} could not be read as a LeRobot dataset ({type(e).__name__}: {first})"
+        ) from None
+    if len(arrays["action"]) == 0:
+        raise DataError(f"--src {src} holds no frames")
+    problem = frames_problem(src, arrays)
+    if problem:
+        raise DataError(f"--src {problem}")
+    problem = state_range_problem(task, src, arrays["observation.state"], arrays["action"])
+    if problem:
+        raise DataError(problem)
+    if arrays["episode_index"].max() >= SEED_BLOCK:
+        raise DataError(f"--src {src}: episode indices must be below {SEED_BLOCK:,} (the seed block)")
+    return arrays
+
+
+def source_identity(arrays: dict) -> dict:
+    """What a run was grown from, independent of where the set lives: a digest of the frames read."""
+    h = hashlib.sha256()
+    for key in ("episode_index", "observation.state", "action"):
+        a = np.ascontiguousarray(arrays[key])
+        h.update(f"{key}:{a.dtype.str}:{a.shape}".encode())
+        h.update(a.tobytes())
+    return {
+        "sha256": h.hexdigest(),
+        "episodes": int(len(np.unique(arrays["episode_index"]))),
+        "frames": int(len(arrays["action"])),
+    }
