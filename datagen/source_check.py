@@ -14,7 +14,15 @@ from ch37.errors import DataError
 from ch37.ownership import read_json
 from ch37.seeds import SEED_BLOCK
 from datagen.task import Task, known_tasks
-from lerobot_v3.dataset import check_hf_cache, fps_problem, frames_problem, load_arrays, schema_problem
+from lerobot_v3.dataset import (
+    ENV_STATE_KEY,
+    check_hf_cache,
+    fps_problem,
+    frames_problem,
+    load_arrays,
+    observation,
+    schema_problem,
+)
 
 # The episodes table's columns that say where each episode's frames are (LeRobot v3)
 EPISODE_COLUMNS = ("episode_index", "length", "dataset_from_index", "dataset_to_index")
@@ -44,6 +52,11 @@ def state_range_problem(
     return None
 
 
+def _widths(task: Task) -> tuple[list, list]:
+    """The shapes of a set's observation.state and action for `task`."""
+    return [len(task.env_module.STATE_NAMES)], [task.env_module.ACT_DIM]
+
+
 def task_of(src: Path) -> Task:
     """The task whose sets `src` is (of datagen.task.known_tasks()), read from its meta/info.json: the task
     whose env's ROBOT_TYPE the set records, or, for a set without one, the one task whose state and action
@@ -60,14 +73,12 @@ def task_of(src: Path) -> Task:
     if robot:
         fits = [t for t in known_tasks().values() if t.env_module.ROBOT_TYPE == robot]
     else:
-        fits = [
-            t for t in known_tasks().values() if shapes == ([t.env_module.OBS_DIM], [t.env_module.ACT_DIM])
-        ]
+        fits = [t for t in known_tasks().values() if shapes == _widths(t)]
     if len(fits) == 1:
         return fits[0]
     known = "; ".join(
-        f"{t.title}: robot_type '{t.env_module.ROBOT_TYPE}', observation.state [{t.env_module.OBS_DIM}], "
-        f"action [{t.env_module.ACT_DIM}] (make one with {t.generator})"
+        f"{t.title}: robot_type '{t.env_module.ROBOT_TYPE}', observation.state {_widths(t)[0]}, "
+        f"action {_widths(t)[1]} (make one with {t.generator})"
         for t in known_tasks().values()
     )
     raise DataError(
@@ -84,14 +95,19 @@ def read_source(task: Task, src: Path) -> dict:
     m, title = task.env_module, task.title
     if not src.is_dir():
         raise DataError(f"--src {src} is not a folder; make a {title} set with {task.generator}")
-    problem = schema_problem(src, m.OBS_DIM, m.ACT_DIM)
+    n_state = len(m.STATE_NAMES)
+    problem = schema_problem(src, n_state, m.ACT_DIM)
     if problem:
-        raise DataError(f"--src {problem} (a {title} set has state [{m.OBS_DIM}] and action [{m.ACT_DIM}])")
+        raise DataError(f"--src {problem} (a {title} set has state [{n_state}] and action [{m.ACT_DIM}])")
     feats = read_json(src / "meta" / "info.json")["features"]
     for key, want in (("observation.state", m.STATE_NAMES), ("action", m.ACTION_NAMES)):
         names = feats[key].get("names")
-        if names is not None and list(names) != list(want):
+        # names as a list are checked; the hub's {"motors": [...]} form names the set's own axes
+        if isinstance(names, list) and names != list(want):
             raise DataError(f"--src {src}: {key} names {names} are not {title}'s {list(want)}")
+    whole = task.obs_names != tuple(m.STATE_NAMES)  # the observation holds the environment state too
+    if whole and ENV_STATE_KEY not in feats:
+        raise DataError(f"--src {src} has no {ENV_STATE_KEY} (a {title} observation needs it)")
     problem = fps_problem(src, m.FPS)
     if problem:
         raise DataError(f"--src {problem}")
@@ -115,7 +131,8 @@ def read_source(task: Task, src: Path) -> dict:
     datasets.logging.set_verbosity(datasets.logging.CRITICAL)  # a failure below is our one line, not a log
     check_hf_cache()  # a cache we cannot write is named as the cause, not the set
     try:
-        arrays = load_arrays(src, keys=("observation.state", "action", "episode_index"))
+        keys = ("observation.state", "action", "episode_index") + ((ENV_STATE_KEY,) if whole else ())
+        arrays = load_arrays(src, keys=keys)
     except Exception as e:  # pyarrow, datasets and lerobot each raise their own kinds for a broken set
         first = (str(e).strip().splitlines() or [""])[0][:160]
         raise DataError(
@@ -123,6 +140,11 @@ def read_source(task: Task, src: Path) -> dict:
         ) from None
     if len(arrays["action"]) == 0:
         raise DataError(f"--src {src} holds no frames")
+    if whole:  # the observation vector the task's env gives: state and environment state together
+        env_names = tuple(m.ENV_STATE_NAMES)
+        if arrays[ENV_STATE_KEY].shape[1:] != (len(env_names),):
+            raise DataError(f"--src {src}: {ENV_STATE_KEY} is not [{len(env_names)}] wide")
+        arrays["observation.state"] = observation(arrays, task.obs_names, m.STATE_NAMES, env_names)
     problem = frames_problem(src, arrays)
     if problem:
         raise DataError(f"--src {problem}")
