@@ -44,7 +44,7 @@ import numpy as np
 
 from datagen.task import Outcome, Source, Subtask, Task, ended, recorded, transform_segment
 
-__all__ = ["Replay", "Segment", "cut", "failures", "nearest", "plan_of", "replay", "signals"]
+__all__ = ["Replay", "Segment", "cut", "nearest", "plan_of", "replay", "signals"]
 
 
 @dataclass(frozen=True)
@@ -54,14 +54,6 @@ class Segment:
     subtask: Subtask
     start: int
     stop: int
-
-
-def failures(task: Task) -> tuple[str, ...]:
-    """Every reason a replay of `task` can return, in the order they are checked."""
-    blocked = ("approach_blocked",) if task.bridge_moves is not None else ()
-    missed = tuple(f"{s.ends}_missed" for s in task.subtasks if s.ends)
-    tail = ("out_of_time", "finished_off_target", "source_not_split", "no_valid_start")
-    return ("path_out_of_reach",) + blocked + missed + tail
 
 
 def signals(task: Task, source: Source, env=None) -> np.ndarray:

@@ -344,11 +344,14 @@ class Task:
 
     @property
     def failures(self) -> dict[str, tuple[str, ...]]:
-        """{mode: every reason an attempt of that mode can return}; a task without an expert only replays."""
-        from datagen.replay import failures
-
-        resolve = {"resolve": ("expert_failed", "no_valid_start")} if self.expert() is not None else {}
-        return resolve | {"replay": failures(self)}
+        """{mode: every reason an attempt of that mode can return}; a task without an expert only replays.
+        Replay's, in the order datagen.replay checks them: a waypoint beyond reach, a bridge that moved the
+        object (for a task with bridge_moves), each subtask's end signal that never came on, and the rest."""
+        resolve = {"resolve": ("expert_failed", "no_valid_start")} if self.expert_class is not None else {}
+        blocked = ("approach_blocked",) if self.bridge_moves is not None else ()
+        missed = tuple(f"{s.ends}_missed" for s in self.subtasks if s.ends)
+        tail = ("out_of_time", "finished_off_target", "source_not_split", "no_valid_start")
+        return resolve | {"replay": ("path_out_of_reach",) + blocked + missed + tail}
 
     @property
     def modes(self) -> tuple[str, ...]:
