@@ -325,8 +325,8 @@ def main(argv: list[str]) -> int:
         raise DataError(str(e)) from None
     except (KeyError, TypeError, IndexError) as e:
         raise DataError(f"a sweep file or scale_lab.json is malformed ({type(e).__name__}: {e}); re-run it")
-    if (replay := replay_section(a.replay)) is not None:
-        meta["replay"] = replay
+    if (replay := replay_section(a.replay)) is not None:  # a file not there keeps its part from before
+        meta["replay"] = (old.get("replay") or {}) | replay
     meta["region_hashes"] = current
     meta["environment"] = environment(meta)
     write_meta(a.meta, meta)
