@@ -13,7 +13,9 @@ from datagen.task import known_tasks, register
 
 
 def test_every_task_module_registers_itself_and_no_list_names_them():
-    assert known_tasks() == {"aloha": ALOHA, "pusht": PUSHT}
+    from datagen.gym_pusht import GYM_PUSHT
+
+    assert known_tasks() == {"aloha": ALOHA, "gym_pusht": GYM_PUSHT, "pusht": PUSHT}
     assert not hasattr(datagen, "TASKS")
     assert register(PUSHT) is PUSHT  # registering again is harmless
 

@@ -1,0 +1,109 @@
+"""LeRobot's own PushT (gym-pusht) through the engine, as a task nobody here wrote (issue 40): demo sets in
+the schema of lerobot/pusht_keypoints, both modes of augment_demos.py, every kept episode re-executed
+open-loop in a fresh gym-pusht from its recorded start, and a set written by LeRobot's own writer."""
+
+import json
+
+import numpy as np
+import pytest
+from conftest import ROOT, run_script
+
+from datagen import known_tasks
+from lerobot_v3 import ENV_STATE_KEY, load_arrays
+
+TASK = known_tasks()["gym_pusht"]
+
+
+@pytest.fixture(scope="module")
+def source(tmp_path_factory):
+    out = tmp_path_factory.mktemp("gp") / "src"
+    r = run_script(
+        ROOT / "gen_demos.py", "--task", "gym_pusht", "--episodes", "3", "--seed", "0", "--out", out
+    )
+    assert "expert successes 3/3" in r.stdout, r.stdout + r.stderr
+    return out
+
+
+def test_the_demo_set_has_the_hub_schema(source):
+    info = json.loads((source / "meta" / "info.json").read_text())
+    shapes = {k: info["features"][k]["shape"] for k in ("observation.state", ENV_STATE_KEY, "action")}
+    assert shapes == {"observation.state": [2], ENV_STATE_KEY: [16], "action": [2]} and info["fps"] == 10
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    ds = LeRobotDataset("local/gp", root=source, video_backend="pyav")
+    assert ds.num_episodes == 3 and tuple(ds[0][ENV_STATE_KEY].shape) == (16,)
+
+
+def replays_exactly(kept_set) -> int:
+    """Re-execute every kept episode open-loop in a fresh gym-pusht from its aug.start: its recorded
+    agent positions and keypoints, and gym-pusht's own success at its end. Returns the episodes checked."""
+    keys = ("observation.state", ENV_STATE_KEY, "action", "episode_index", "aug.start")
+    d = load_arrays(kept_set, keys=keys)
+    episodes = np.unique(d["episode_index"])
+    for e in episodes:
+        rows = np.flatnonzero(d["episode_index"] == e)
+        env = TASK.make_env()
+        obs = TASK.place(env, tuple(float(v) for v in d["aug.start"][rows[0]]))
+        for r in rows:
+            assert np.array_equal(obs[:2], d["observation.state"][r]) and np.array_equal(
+                obs[2:], d[ENV_STATE_KEY][r]
+            )
+            obs, _, done, info = env.step(d["action"][r])
+        assert info["is_success"] and done
+    return len(episodes)
+
+
+@pytest.mark.parametrize("mode, sigmas", [("resolve", ("0.08", "0.5")), ("replay", ("0.01", "0.05"))])
+def test_augment_demos_grows_it_and_every_kept_episode_re_executes(source, tmp_path, mode, sigmas):
+    out = tmp_path / mode
+    args = ["--src", source, "--out", out, "--per_demo", "3", "--seed", "1", "--aug_mode", mode, "--quiet"]
+    args += ["--aug_pos_sigma", sigmas[0], "--aug_yaw_sigma", sigmas[1], "--workers", "1"]
+    r = run_script(ROOT / "augment_demos.py", *args)
+    assert r.returncode == 0, r.stderr
+    report = json.loads((out / "generation_report.json").read_text())
+    assert report["attempts"] == 9 and set(report["failures"]) <= set(TASK.failures[mode])
+    if report["kept"]:
+        assert replays_exactly(out) == report["kept"]
+    assert mode == "replay" or report["kept"] >= 8  # the expert re-solves nearly every start
+
+
+def test_a_set_written_by_lerobots_own_writer_in_the_hubs_form_goes_in_as_it_is(source, tmp_path):
+    """What a practitioner has: a set LeRobot wrote (LeRobotDataset.create, add_frame, save_episode),
+    names in the hub's {"motors": [...]} form, next.reward and next.done beside next.success, no
+    robot_type of ours. augment_demos.py reads the task from its widths and grows it."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    d = load_arrays(
+        source, keys=("observation.state", ENV_STATE_KEY, "action", "episode_index", "next.success")
+    )
+    feats = {
+        "observation.state": {"dtype": "float32", "shape": (2,), "names": {"motors": ["motor_0", "motor_1"]}},
+        ENV_STATE_KEY: {"dtype": "float32", "shape": (16,), "names": None},
+        "action": {"dtype": "float32", "shape": (2,), "names": {"motors": ["motor_0", "motor_1"]}},
+        "next.reward": {"dtype": "float32", "shape": (1,), "names": None},
+        "next.done": {"dtype": "bool", "shape": (1,), "names": None},
+        "next.success": {"dtype": "bool", "shape": (1,), "names": None},
+    }
+    theirs = tmp_path / "theirs"
+    ds = LeRobotDataset.create(
+        "someone/pusht_keypoints", fps=10, features=feats, root=theirs, use_videos=False
+    )
+    for e in np.unique(d["episode_index"]):
+        rows = np.flatnonzero(d["episode_index"] == e)
+        for i, r in enumerate(rows):
+            last = i == len(rows) - 1
+            frame = {
+                k: np.atleast_1d(d[k][r])
+                for k in ("observation.state", ENV_STATE_KEY, "action", "next.success")
+            }
+            frame |= {"next.reward": np.float32([float(last)]), "next.done": np.array([last])}
+            ds.add_frame(frame | {"task": "Push the T-shaped block onto the T-shaped target."})
+        ds.save_episode()
+    ds.finalize()
+    out = tmp_path / "grown"
+    args = ["--src", theirs, "--out", out, "--per_demo", "2", "--seed", "1", "--workers", "1", "--quiet"]
+    r = run_script(ROOT / "augment_demos.py", *args)
+    assert r.returncode == 0, r.stderr
+    report = json.loads((out / "generation_report.json").read_text())
+    assert report["attempts"] == 6 and report["kept"] >= 5
+    assert replays_exactly(out) == report["kept"]
