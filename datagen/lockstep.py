@@ -32,9 +32,10 @@ and the runner keeps `lanes` envs busy, refilling a lane as soon as its attempt 
 frame into preallocated arrays (lanes x max_frames), and returns the results in job order.
 Mode "resolve" is built here for every task from its parts (perturb, place, batch_expert, step_batch,
 max_steps: the Task contract, datagen.task); mode "replay" is the engine's one replay as lanes
-(replay_lanes: each lane runs datagen.replay's generator, as one attempt does), for every task and both
---select. A task without a batch expert runs "resolve" one attempt at a time through
-datagen.engine.attempt, the same bytes.
+(replay_lanes: each lane runs datagen.replay's generator, as one attempt does), for both --select, for
+a task that steps its envs as one batch (its own step_batch). A task without a batch expert runs
+"resolve", and one without a batch step "replay", one attempt at a time through datagen.engine.attempt,
+the same bytes.
 """
 
 from __future__ import annotations
@@ -236,9 +237,11 @@ def attempts_lockstep(
     parts = None
     if mode == "resolve" and task.batch_expert() is not None:
         parts = resolve_lanes(task, sources, how)
-    if mode == "replay":
+    # a replay decides lane by lane: lanes pay where the task steps its envs as one batch (PushT's
+    # step_many); stepped env by env (the default step_batch) they cost more than one at a time
+    if mode == "replay" and type(task).step_batch is not Task.step_batch:
         parts = replay_lanes(task, sources, how, sources if select == "nearest" else None, sims.plans)
-    if parts is None:  # the task offers no lanes for this mode: the same results, one at a time
+    if parts is None:  # no lanes for this task and mode: the same results, one at a time
         return engine.run_attempts(task, sources, jobs, how, mode=mode, select=select, workers=1, sims=sims)
     m = task.env_module
     return run_lanes(

@@ -138,7 +138,21 @@ def test_aloha_in_lockstep_equals_one_at_a_time(tmp_path, mode, select):
     jobs = [(e, k) for e in sorted(srcs) for k in range(10)]  # 30 attempts
     pool = srcs if select == "nearest" else None
     one = [engine.attempt(ALOHA, srcs[e], k, how, mode=mode, pool=pool) for e, k in jobs]
-    together = lockstep.attempts_lockstep(ALOHA, srcs, jobs, how, mode=mode, select=select, lanes=8)
+    if mode == "resolve":
+        together = lockstep.attempts_lockstep(ALOHA, srcs, jobs, how, lanes=8)
+    else:  # attempts_lockstep replays ALOHA one at a time (no batch step): its lanes, run directly
+        sims, m = engine.Simulators(), aloha_env
+        parts = lockstep.replay_lanes(ALOHA, srcs, how, pool, sims.plans)
+        together = lockstep.run_lanes(
+            jobs,
+            envs=sims.lanes(ALOHA, 8),
+            **parts,
+            max_frames=m.MAX_STEPS,
+            obs_dim=m.OBS_DIM,
+            act_dim=m.ACT_DIM,
+            lanes=8,
+            step=ALOHA.step_batch,
+        )
     assert sum(r.kept for r in one) >= 10
     assert_same_results(one, together)
 
