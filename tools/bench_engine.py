@@ -43,8 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-import gen_demos_aloha
-import gen_demos_pusht
+import gen_demos
 from ch37 import ROOT, errors
 from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
@@ -333,8 +332,7 @@ def main(argv: list[str]) -> int:
     task = known_tasks()[a.task]
     src = a.src or a.out / f"src_{task.name}_seed0_ep{SOURCE_EPISODES}"
     if a.src is None and not (src / "meta" / "info.json").exists():
-        generator = {"pusht": gen_demos_pusht, "aloha": gen_demos_aloha}[task.name]  # task.generator's main
-        if generator.main(["--episodes", str(SOURCE_EPISODES), "--out", str(src), "--quiet"]) != 0:
+        if gen_demos.main(task, ["--episodes", str(SOURCE_EPISODES), "--out", str(src), "--quiet"]) != 0:
             raise DataError(f"could not make the source set at {src}")
     costs = {}
     if a.cost_repeats:
