@@ -59,8 +59,8 @@ def _widths(task: Task) -> tuple[list, list]:
 
 def task_of(src: Path) -> Task:
     """The task whose sets `src` is (of datagen.task.known_tasks()), read from its meta/info.json: the task
-    whose env's ROBOT_TYPE the set records, or, for a set without one or with one no task records, the
-    one task whose state and action widths it has. DataError (one line) for a set that fits no task. A
+    whose env's ROBOT_TYPE the set records, or, for a set without one, the one task whose state and
+    action widths it has. DataError (one line) for a set that fits no task. A
     folder without a readable info.json is left to read_source's checks (as PushT's, the engine's first
     task), which name what is wrong with it."""
     try:
@@ -70,8 +70,9 @@ def task_of(src: Path) -> Task:
     except (OSError, ValueError, KeyError, TypeError):
         return known_tasks()["pusht"]
     robot = info.get("robot_type")
-    fits = [t for t in known_tasks().values() if robot and t.env_module.ROBOT_TYPE == robot]
-    if not fits:  # no robot_type, or one no task records (a set someone else wrote): by its widths
+    if robot:  # a set that names its robot is that robot's (an SO-100 set is no PushT set)
+        fits = [t for t in known_tasks().values() if t.env_module.ROBOT_TYPE == robot]
+    else:  # a set someone else wrote without a robot_type (LeRobot's writer's default): by its widths
         fits = [t for t in known_tasks().values() if shapes == _widths(t)]
     if len(fits) == 1:
         return fits[0]
