@@ -14,7 +14,7 @@ import sys
 
 from ch37 import ROOT
 from ch37.errors import DataError
-from ch37.process import forking, worker_setup
+from ch37.process import environment, forking, worker_setup
 
 _FORKED_WORK: tuple = ()  # (fn, jobs) in a pool worker, set by its initializer
 
@@ -260,15 +260,9 @@ def _start_ray(address: str | None, workers: int):
         if address is None:  # "local": always a new instance, never a cluster that happens to run here
             # its workers inherit this environment: the repository on their path (a runtime_env
             # would start a second pool of workers, seconds more on a small machine)
-            saved = os.environ.get("PYTHONPATH")
-            os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), saved]))
-            try:
+            path = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))
+            with environment(PYTHONPATH=path):
                 ray.init(address="local", num_cpus=workers, **common)
-            finally:
-                if saved is None:
-                    os.environ.pop("PYTHONPATH")
-                else:
-                    os.environ["PYTHONPATH"] = saved
         else:
             excludes = [".git", ".venv", "outputs", "*.ipynb", "tests"]
             with _stderr_silenced():

@@ -2,7 +2,8 @@
 project but its error type (ch37.errors.DataError): no ownership, no flags, no task.
 
 dataset      features, write_set (a set in one pass, or LeRobot's own path for video), load_arrays
-             and open_dataset (read back through LeRobotDataset), the schema/fps/frame checks
+             and open_dataset (read back through LeRobotDataset), the schema/fps/frame checks;
+             hub_offline: no LeRobot or Hugging Face call reaches the Hub
 chunks       ChunkRoller: the one rule that starts a new data or episodes file at the size limit
 frame_stats  FrameStats: exact stats.json over all frames of a merge (numpy's quantiles bit for bit)
 merge        merge_sets: several sets of one task into one, in one pass
@@ -19,6 +20,7 @@ from lerobot_v3.dataset import (
     features,
     fps_problem,
     frames_problem,
+    hub_offline,
     load_arrays,
     observation,
     open_dataset,
@@ -36,6 +38,7 @@ __all__ = [
     "features",
     "fps_problem",
     "frames_problem",
+    "hub_offline",
     "load_arrays",
     "merge_sets",
     "observation",

@@ -34,9 +34,40 @@ ENV_STATE_KEY = "observation.environment_state"
 PARQUET = dict(compression="snappy", use_dictionary=False)
 
 
+_OFFLINE_VARS = ("HF_HUB_OFFLINE", "HF_DATASETS_OFFLINE")
+
+
+def hub_offline() -> None:
+    """Offline by construction: every set the chapter reads it made itself, so no LeRobot or Hugging Face
+    call may reach for the Hub (a missing local file is an error here, never a download). Called before
+    the first LeRobot import of every path that reaches LeRobot (check_hf_cache, merge_sets, the tools'
+    policies). huggingface_hub reads HF_HUB_OFFLINE once, when its constants module is first imported,
+    and datasets copies it into datasets.config on its own first import, so the variables are set for
+    that import only and put back: the process is offline from then on, the environment is untouched.
+    If either was imported before (online), this is a DataError: offline or a clear stop, never a fetch."""
+    saved = {k: os.environ.get(k) for k in _OFFLINE_VARS}
+    os.environ.update(dict.fromkeys(_OFFLINE_VARS, "1"))
+    try:
+        import datasets
+        import huggingface_hub.constants
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k)
+            else:
+                os.environ[k] = v
+    if not (huggingface_hub.constants.HF_HUB_OFFLINE and datasets.config.HF_HUB_OFFLINE):
+        raise DataError(
+            "huggingface_hub was imported online before the chapter's first LeRobot call; "
+            "set HF_HUB_OFFLINE=1 and HF_DATASETS_OFFLINE=1 before importing it (the chapter never downloads)"
+        )
+
+
 def check_hf_cache() -> None:
     """DataError (one line) unless Hugging Face datasets can write its cache: every read of a set goes
-    through it, and without this check a cache problem reads as a damaged data set."""
+    through it, and without this check a cache problem reads as a damaged data set. Offline first
+    (hub_offline): this is the first LeRobot step of every read and write."""
+    hub_offline()
     import datasets
 
     _probe_cache(Path(datasets.config.HF_DATASETS_CACHE))
@@ -57,11 +88,11 @@ def _probe_cache(cache: Path) -> None:  # once per folder and process: every rea
 
 def _lerobot_dataset_class():
     """LeRobotDataset, with Hugging Face datasets' per-episode "Map" bars silenced (our own bar is enough)."""
+    check_hf_cache()  # offline before LeRobot is imported (hub_offline)
     import datasets
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     datasets.disable_progress_bars()
-    check_hf_cache()
     return LeRobotDataset
 
 
@@ -636,6 +667,7 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     No clock, no randomness: equal episodes give equal bytes. No episodes: info.json only, as
     LeRobot leaves it. file_mb: the file size limit in MB (LeRobot's default when None; tests).
     """
+    check_hf_cache()  # as on LeRobot's path: a cache problem is named here, not at the first read
     import pandas as pd
     import pyarrow as pa
     from lerobot.datasets.dataset_metadata import CODEBASE_VERSION
@@ -643,7 +675,6 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     from lerobot.datasets.io_utils import write_info, write_tasks
     from lerobot.utils.constants import DEFAULT_FEATURES
 
-    check_hf_cache()  # as on LeRobot's path: a cache problem is named here, not at the first read
     all_feats = {k: dict(f, shape=tuple(f["shape"])) for k, f in feats.items()} | DEFAULT_FEATURES
     info = create_empty_dataset_info(CODEBASE_VERSION, fps, all_feats, False, robot_type, None, file_mb)
     tmp.mkdir(parents=True)

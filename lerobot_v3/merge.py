@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from lerobot_v3.chunks import ChunkRoller, rows_within
-from lerobot_v3.dataset import PARQUET, close_quietly, naming
+from lerobot_v3.dataset import PARQUET, close_quietly, hub_offline, naming
 from lerobot_v3.frame_stats import FrameStats, write_frame_stats
 
 # Episode rows per row group of meta/episodes: a fixed count, so the row groups never depend on how
@@ -226,6 +226,7 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
 
     What LeRobotDataset reads is what LeRobot's aggregate_datasets + write_frame_stats give for the
     same sets (tests/test_merge.py); only the file layout differs, and it depends on the frames alone."""
+    hub_offline()  # before LeRobot's first import here
     import pandas as pd
     import pyarrow as pa
     from lerobot.datasets.io_utils import load_info, write_info

@@ -12,9 +12,12 @@ sys.path.insert(0, str(ROOT))
 # scale_data.py's result cache: one private folder per test session, never the user's outputs/
 os.environ.setdefault("CH37_CACHE_DIR", tempfile.mkdtemp(prefix="ch37-cache-"))
 # headless rendering in this process (tests/test_gym_envs.py): mujoco picks its GL backend when first
-# imported, which a test module's imports do before any of ours could choose (EGL, as datagen.demos does)
+# imported, which a test module's imports do before ours could choose (EGL, the demo generators' choice)
 if sys.platform.startswith("linux"):
     os.environ.setdefault("MUJOCO_GL", "egl")
+# tests that import lerobot themselves (test_lerobot, test_merge, test_writer) may do it before the chapter's
+# first LeRobot call (lerobot_v3.hub_offline, which would then refuse): offline for the whole session
+os.environ["HF_HUB_OFFLINE"] = os.environ["HF_DATASETS_OFFLINE"] = "1"
 
 
 def run_script(*args, cwd=ROOT, check=True, timeout=600):

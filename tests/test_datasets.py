@@ -163,3 +163,41 @@ def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
     engine.save(PUSHT, tmp_path / "grown", [kept], repo_id="local/grown", stamp={})
     grown = lerobot_io.load_arrays(tmp_path / "grown", keys=("observation.state", lerobot_io.ENV_STATE_KEY))
     assert grown[lerobot_io.ENV_STATE_KEY].tobytes() == grown["observation.state"][:, 2:].tobytes()
+
+
+def test_a_missing_local_file_is_an_error_never_a_download(tmp_path):
+    """Issue 39 #4: nothing sets HF_HUB_OFFLINE at import any more; lerobot_v3.hub_offline makes the
+    process offline at its first LeRobot call. In a process whose environment does not say offline, a
+    set missing its data file (LeRobot's cue to fetch it from the Hub) is our one line, its cause the Hub
+    refused offline, and the environment is left as it was; huggingface_hub imported online before that
+    first call is a clear stop, not a download."""
+    gen_demos_pusht.main(["--episodes", "1", "--out", str(tmp_path / "set"), "--quiet"])
+    for f in (tmp_path / "set" / "data").rglob("*.parquet"):
+        f.unlink()
+    code = (
+        "import os, sys\n"
+        "if sys.argv[1] == 'first': import huggingface_hub.constants\n"
+        "from ch37.errors import DataError\n"
+        "from lerobot_v3 import load_arrays\n"
+        "try:\n    load_arrays(sys.argv[2])\n"
+        "except DataError as e:\n    print(e)\n"
+        "print(os.environ.get('HF_HUB_OFFLINE'), os.environ.get('HF_DATASETS_OFFLINE'))\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("HF_HUB_OFFLINE", "HF_DATASETS_OFFLINE")}
+    env["HF_HOME"] = str(tmp_path / "hf")  # the user's cache untouched
+    for order in ("ours", "first"):
+        p = subprocess.run(
+            [sys.executable, "-c", code, order, str(tmp_path / "set")],
+            cwd=ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        out = p.stdout.strip().splitlines()
+        assert p.returncode == 0 and len(out) == 2 and out[1] == "None None", (p.stdout, p.stderr)
+        line = out[0]
+        if order == "ours":
+            assert "cannot be read as a LeRobot v3 dataset (OfflineModeIsEnabled" in line, line
+        else:
+            assert "huggingface_hub was imported online" in line, line
