@@ -16,8 +16,6 @@ from ch37 import ROOT
 from ch37.errors import DataError
 from ch37.process import environment, forking, worker_setup
 
-_FORKED_WORK: tuple = ()  # (fn, jobs) in a pool worker, set by its initializer
-
 
 def progress(iterable, *, total: int, desc: str, quiet: bool = False):
     """A tqdm bar on a terminal; silent when quiet or when stderr is not a TTY."""
@@ -27,35 +25,78 @@ def progress(iterable, *, total: int, desc: str, quiet: bool = False):
     return tqdm(iterable, total=total, desc=desc, unit="ep", leave=False, disable=quiet)
 
 
-def _pool_init(parent: int, fn, jobs) -> None:
-    global _FORKED_WORK
-    worker_setup(parent)
-    _FORKED_WORK = (fn, jobs)  # inherited through fork with the initializer's arguments, never pickled
-
-
-def _run_job(i: int):
-    fn, jobs = _FORKED_WORK
-    return fn(jobs[i])
-
-
 def _imap(fn, jobs: list, *, workers: int, ordered: bool = True, chunksize: int | None = None):
     """fn(job) for each job, yielded as they finish (in job order when `ordered`), on `workers` forked
     processes; in this process without fork or with one worker. The results never depend on `workers`:
-    every job carries its own seed. `fn` reaches the workers through fork, not pickling, so a function
-    defined in a script or a notebook works."""
+    every job carries its own seed. `fn` and `jobs` are each worker's arguments, inherited through fork,
+    never pickled, so a function defined in a script or a notebook works; a worker takes the next
+    `chunksize` job indices from a shared counter and sends back (index, result, exception)."""
     import multiprocessing as mp
+    from multiprocessing.connection import wait
 
     jobs = list(jobs)
     if workers <= 1 or len(jobs) <= 1 or "fork" not in mp.get_all_start_methods():
         yield from map(fn, jobs)
         return
-    with forking():
-        pool = mp.get_context("fork").Pool(
-            min(workers, len(jobs)), initializer=_pool_init, initargs=(os.getpid(), fn, jobs)
-        )
-    with pool:
-        get = pool.imap if ordered else pool.imap_unordered
-        yield from get(_run_job, range(len(jobs)), chunksize=chunksize or max(1, len(jobs) // (4 * workers)))
+    ctx = mp.get_context("fork")
+    size = chunksize or max(1, len(jobs) // (4 * workers))
+    next_index = ctx.Value("q", 0)
+    pipes = [ctx.Pipe(duplex=False) for _ in range(min(workers, len(jobs)))]  # (parent's end, worker's)
+    procs = [
+        ctx.Process(target=_job_worker, args=(os.getpid(), fn, jobs, size, next_index, end), daemon=True)
+        for _, end in pipes
+    ]
+    try:
+        with forking():
+            for proc in procs:
+                proc.start()
+        for _, end in pipes:
+            end.close()
+        open_ends, left = [conn for conn, _ in pipes], len(jobs)
+        held, want = {}, 0  # results that came before their turn (ordered), the next index to yield
+        while left:
+            if not open_ends:  # every worker gone with jobs unanswered: one was killed (out of memory?)
+                codes = ", ".join(str(p.exitcode) for p in procs if p.exitcode)
+                raise DataError(f"a worker process died (exit code {codes}); try fewer --workers")
+            for conn in wait(open_ends):
+                try:
+                    i, got, error = conn.recv()
+                except EOFError:  # its worker has ended
+                    open_ends.remove(conn)
+                    continue
+                if error is not None:
+                    raise error
+                left -= 1
+                if not ordered:
+                    yield got
+                    continue
+                held[i] = got
+                while want in held:
+                    yield held.pop(want)
+                    want += 1
+    finally:  # done, failed or abandoned: no worker outlives the map
+        for proc in procs:
+            if proc.is_alive():
+                proc.kill()
+            proc.join()
+        for conn, _ in pipes:
+            conn.close()
+
+
+def _job_worker(parent: int, fn, jobs: list, size: int, next_index, conn) -> None:
+    worker_setup(parent)
+    while True:
+        with next_index.get_lock():
+            start = next_index.value
+            next_index.value = start + size
+        if start >= len(jobs):
+            break
+        for i in range(start, min(start + size, len(jobs))):
+            try:
+                conn.send((i, fn(jobs[i]), None))  # pickled before anything is written
+            except Exception as e:  # the caller re-raises it
+                conn.send((i, None, e))
+    conn.close()
 
 
 def map_jobs(

@@ -215,6 +215,35 @@ def test_local_ray_same_bytes(src, reference, tmp_path):
     assert "Traceback" not in p.stderr
 
 
+def test_forked_map_passes_its_work_and_names_a_killed_worker():
+    """Issue 39 #4: the forked workers get fn and the jobs as their arguments (no module state), so a
+    closure works, in job order or as finished; an exception in a job is raised here; a worker killed
+    mid-job (out of memory) is one DataError, not a wait for an answer that never comes."""
+    from ch37.errors import DataError
+    from ch37.parallel import map_jobs
+
+    k = 3
+    want = [x * k for x in range(40)]
+    assert list(map_jobs(lambda x: x * k, range(40), workers=2)) == want
+    assert sorted(map_jobs(lambda x: x * k, range(40), workers=2, ordered=False)) == want
+
+    def fails(x):
+        if x == 7:
+            raise ValueError("job 7")
+        return x
+
+    with pytest.raises(ValueError, match="job 7"):
+        list(map_jobs(fails, range(20), workers=2))
+
+    def killed(x):
+        if x == 5:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return x
+
+    with pytest.raises(DataError, match=r"a worker process died \(exit code -9\)"):
+        list(map_jobs(killed, range(20), workers=2))
+
+
 RAY_CRASH = """
 import os, sys, time
 from ch37.parallel import map_jobs
