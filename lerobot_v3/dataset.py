@@ -19,6 +19,7 @@ import numpy as np
 
 from ch37.errors import DataError
 from lerobot_v3.chunks import ChunkRoller, rows_below, rows_within
+from lerobot_v3.hub import hub_offline
 
 # torchcodec needs system FFmpeg libraries and prints long tracebacks when they are missing;
 # pyav ships its own FFmpeg, so every dataset here is read and written through pyav.
@@ -32,35 +33,6 @@ ENV_STATE_KEY = "observation.environment_state"
 # Parquet settings of every file we write. LeRobot writes snappy with dictionary encoding; on this
 # chapter's float columns a dictionary never pays (measured: docs/engine.md, "Figures behind constants").
 PARQUET = dict(compression="snappy", use_dictionary=False)
-
-
-_OFFLINE_VARS = ("HF_HUB_OFFLINE", "HF_DATASETS_OFFLINE")
-
-
-def hub_offline() -> None:
-    """Offline by construction: every set the chapter reads it made itself, so no LeRobot or Hugging Face
-    call may reach for the Hub (a missing local file is an error here, never a download). Called before
-    the first LeRobot import of every path that reaches LeRobot (check_hf_cache, merge_sets, the tools'
-    policies). huggingface_hub reads HF_HUB_OFFLINE once, when its constants module is first imported,
-    and datasets copies it into datasets.config on its own first import, so the variables are set for
-    that import only and put back: the process is offline from then on, the environment is untouched.
-    If either was imported before (online), this is a DataError: offline or a clear stop, never a fetch."""
-    saved = {k: os.environ.get(k) for k in _OFFLINE_VARS}
-    os.environ.update(dict.fromkeys(_OFFLINE_VARS, "1"))
-    try:
-        import datasets
-        import huggingface_hub.constants
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k)
-            else:
-                os.environ[k] = v
-    if not (huggingface_hub.constants.HF_HUB_OFFLINE and datasets.config.HF_HUB_OFFLINE):
-        raise DataError(
-            "huggingface_hub was imported online before the chapter's first LeRobot call; "
-            "set HF_HUB_OFFLINE=1 and HF_DATASETS_OFFLINE=1 before importing it (the chapter never downloads)"
-        )
 
 
 def check_hf_cache() -> None:
@@ -103,6 +75,7 @@ def _embed_only_images():
     this block (our writes through LeRobot's per-frame path) it is skipped exactly then; any table with
     an image column goes through lerobot's own code. Put back on leaving: nothing else in the process
     sees the change."""
+    hub_offline()
     import datasets
     from lerobot.datasets import dataset_writer
 
@@ -159,6 +132,7 @@ def _fast_fingerprints():
     datasets fingerprints every new Dataset by dill-hashing all its rows (~10 ms per episode, a
     third of the write). Nothing reads that fingerprint, so while we write, new in-memory Datasets
     get a random one, which is what datasets itself falls back to when hashing fails."""
+    hub_offline()
     from datasets import arrow_dataset, fingerprint
 
     saved = arrow_dataset.generate_fingerprint
@@ -213,6 +187,7 @@ def write_set(
 def write_sorted_stats(stats: dict, root: Path) -> None:
     """LeRobot's write_stats with sorted keys: LeRobot orders them by string hash; sorted, equal sets
     are equal bytes."""
+    hub_offline()
     from lerobot.datasets.utils import serialize_dict
 
     text = json.dumps(serialize_dict(stats), indent=4, sort_keys=True, ensure_ascii=False)
@@ -282,6 +257,7 @@ def _quantiles(x: np.ndarray, counts: np.ndarray | None = None):
     counts (D,) >= 2: column d holds counts[d] values, its first rows (the rest is padding, never
     read), so episodes of different lengths share one call; None: every column holds T.
     """
+    hub_offline()
     from lerobot.datasets.compute_stats import DEFAULT_QUANTILES
 
     rows, dims = x.shape
@@ -360,6 +336,7 @@ def _episodes_stats(bufs: list[dict], feats: dict) -> list[dict]:
     """[_episode_stats(buf, feats) for buf in bufs], the same bits and dtypes: rows of _stats_columns
     (each quantile back in the feature's dtype where LeRobot returns a bin's edge), LeRobot's own
     get_feature_stats for an episode of one frame."""
+    hub_offline()
     from lerobot.datasets.compute_stats import get_feature_stats
 
     outs = [None] * len(bufs)
@@ -561,6 +538,7 @@ def _write_data_file(path: Path, schema, parts: dict) -> None:
 def _write_episodes_table(root: Path, table, limit: float, chunks_size: int) -> None:
     """meta/episodes in files of at most `limit` bytes (Arrow size, as LeRobot splits it): one file up
     to ~50,000 episodes of this chapter's width (~2 KB a row)."""
+    hub_offline()
     import pyarrow as pa
     from lerobot.datasets.utils import DEFAULT_EPISODES_PATH
 
@@ -584,6 +562,7 @@ def _stacked_batches(episodes, feats, all_feats, *, fps: int, task: str):
     to STATS_BATCH episodes at a time, in order. The stats: {feature: {stat: (E, D)}}, the arrays
     LeRobot's aggregate_stats stacks from the episodes' stats; rows: {episodes-table column: E values},
     each episode's stat as LeRobot's flatten_dict lists it (its .tolist())."""
+    hub_offline()
     from lerobot.datasets.feature_utils import validate_frame
 
     it, e, frames = iter(episodes), 0, 0

@@ -108,7 +108,8 @@ def samples(lengths, cfg) -> dict:
 
 def policy_and_processors(stats: dict, seed: int):
     """A fresh LeRobot DiffusionPolicy (CONFIG) with its pre/post processors normalizing by `stats`."""
-    from lerobot_v3.dataset import ENV_STATE_KEY, hub_offline
+    from lerobot_v3 import hub_offline
+    from lerobot_v3.dataset import ENV_STATE_KEY
 
     hub_offline()  # before LeRobot's policies import huggingface_hub
     import torch
