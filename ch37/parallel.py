@@ -316,20 +316,30 @@ def _start_ray(address: str | None, workers: int):
             "" if address is None else " (is it running? a cluster with token auth needs RAY_AUTH_MODE=token)"
         )
         raise DataError(f"could not {'start' if address is None else 'join'} Ray{hint}: {why}") from None
-    _quiet_raylet_messages()
     return ray
 
 
-def _quiet_raylet_messages() -> None:
-    """Keep Ray's cluster messages off our stdout. Whatever log_to_driver says, a Ray driver starts a
-    thread that prints every raylet error message to stdout (ray._private.worker.listen_error_messages
-    -> print_to_stdstream; a lost node is about 20 lines amid the run's own output). With log_to_driver
-    off that thread is the function's only caller, so it is replaced by one that drops the messages; a
-    failure they describe reaches the run as the failed task's exception (its one error line)."""
-    with contextlib.suppress(ImportError, AttributeError):
+@contextlib.contextmanager
+def _raylet_messages_dropped():
+    """Keep Ray's cluster messages off our stdout while a run uses Ray. Whatever log_to_driver says, a
+    Ray driver starts a thread that prints every raylet error message to stdout
+    (ray._private.worker.listen_error_messages -> print_to_stdstream; a lost node is about 20 lines amid
+    the run's own output). With log_to_driver off that thread is the function's only caller, so inside
+    this block it is replaced by one that drops the messages; a failure they describe reaches the run as
+    the failed task's exception (its one error line). Put back on leaving (after ray.shutdown, which
+    ends that thread): nothing else in the process sees the change."""
+    try:
         import ray._private.worker as ray_worker
 
-        ray_worker.print_to_stdstream = lambda data, ignore_prefix=False: None
+        saved = ray_worker.print_to_stdstream
+    except (ImportError, AttributeError):  # no Ray (_start_ray says so) or another Ray inside
+        yield
+        return
+    ray_worker.print_to_stdstream = lambda data, ignore_prefix=False: None
+    try:
+        yield
+    finally:
+        ray_worker.print_to_stdstream = saved
 
 
 def _apply(fn, *args):
@@ -343,17 +353,18 @@ def _run_ray(fn, tasks: list, *, address: str | None, workers: int, timing: dict
     import time
 
     t0 = time.perf_counter()
-    ray = _start_ray(address, workers)
-    if timing is not None:
-        timing["start_s"] = time.perf_counter() - t0
-    try:
-        remote = ray.remote(num_cpus=1, max_retries=0)(_apply)  # any picklable fn, a builtin too
-        window = max(2, 2 * int(ray.cluster_resources().get("CPU", workers)))
-        todo, pending = list(tasks), []
-        while todo or pending:
-            while todo and len(pending) < window:
-                pending.append(remote.remote(fn, *todo.pop(0)))
-            done, pending = ray.wait(pending, num_returns=1)
-            yield ray.get(done[0])
-    finally:
-        ray.shutdown()
+    with _raylet_messages_dropped():
+        ray = _start_ray(address, workers)
+        if timing is not None:
+            timing["start_s"] = time.perf_counter() - t0
+        try:
+            remote = ray.remote(num_cpus=1, max_retries=0)(_apply)  # any picklable fn, a builtin too
+            window = max(2, 2 * int(ray.cluster_resources().get("CPU", workers)))
+            todo, pending = list(tasks), []
+            while todo or pending:
+                while todo and len(pending) < window:
+                    pending.append(remote.remote(fn, *todo.pop(0)))
+                done, pending = ray.wait(pending, num_returns=1)
+                yield ray.get(done[0])
+        finally:
+            ray.shutdown()
