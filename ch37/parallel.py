@@ -76,6 +76,8 @@ def _imap(fn, jobs: list, *, workers: int, ordered: bool = True, chunksize: int 
                     want += 1
     finally:  # done, failed or abandoned: no worker outlives the map
         for proc in procs:
+            if proc.pid is None:  # never started: a stop signal (Terminated, Ctrl-C) came while forking
+                continue
             if proc.is_alive():
                 proc.kill()
             proc.join()

@@ -244,6 +244,30 @@ def test_forked_map_passes_its_work_and_names_a_killed_worker():
         list(map_jobs(killed, range(20), workers=2))
 
 
+def test_a_stop_signal_while_the_forked_map_starts_its_workers_is_raised_as_it_is(monkeypatch):
+    """Issue 39 #4, found by test_hardening's SIGTERM case: a stop signal whose Python handler runs while
+    the map starts its workers (Terminated, raised inside Process.start) reached the run as an
+    AssertionError from joining a worker never started (exit 1 and a traceback, not one line and 143).
+    It is raised as it is, and the worker started before it is gone."""
+    import multiprocessing.process
+
+    from ch37.errors import Terminated
+    from ch37.parallel import map_jobs
+
+    start, started = multiprocessing.process.BaseProcess.start, []
+
+    def start_then_stop(self):
+        if started:
+            raise Terminated()
+        start(self)
+        started.append(self)
+
+    monkeypatch.setattr(multiprocessing.process.BaseProcess, "start", start_then_stop)
+    with pytest.raises(Terminated):
+        list(map_jobs(abs, range(20), workers=3))
+    assert len(started) == 1 and not started[0].is_alive()
+
+
 RAY_CRASH = """
 import os, sys, time
 from ch37.parallel import map_jobs
