@@ -24,8 +24,10 @@ with their 4-tuple step) and adds what Gymnasium asks for:
   truncated at the simulator's step limit without success (PushT 300, ALOHA 400 control steps at 10 Hz).
   info is the simulator's ("success", "steps", ...).
 * ``render()`` in "rgb_array" mode: the simulator's top-down renderer, uint8 (render_size, render_size, 3).
-  It needs an OpenGL backend (EGL or OSMesa; on Linux MUJOCO_GL defaults to egl here); without one it
-  raises gymnasium.error.DependencyNotInstalled with one line saying what to install (and so does
+  It needs an OpenGL backend, which is yours to choose: MuJoCo reads MUJOCO_GL once, when it is first
+  imported, so set it in the environment before that (headless Linux: MUJOCO_GL=egl, or osmesa; importing
+  this module sets nothing); without one it raises gymnasium.error.DependencyNotInstalled with one line
+  saying what to install (and so does
   ``import gym_envs`` where MUJOCO_GL names a backend whose library cannot even be loaded, such as
   osmesa without libOSMesa: MuJoCo then fails as it is imported).
 
@@ -40,13 +42,8 @@ Actions: Box(-1, 1), the range both simulators clip to.
 from __future__ import annotations
 
 import os
-import sys
 from collections.abc import Mapping
 
-if sys.platform.startswith("linux"):  # headless rendering: EGL unless the user chose a GL backend
-    os.environ.setdefault("MUJOCO_GL", "egl")
-
-# the imports below come after MUJOCO_GL: mujoco reads it when it is first imported
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces

@@ -25,14 +25,10 @@ ownership.claim (or ownership.check_out_path), ownership.replace_own_dir and pro
 
 import hashlib
 import inspect
-import os
 import sys
 import warnings
 from pathlib import Path
 
-# Offline by construction: everything the chapter reads it made itself, so no LeRobot or Hugging Face
-# call may reach for the Hub (a missing local file must be an error here, never a download).
-os.environ["HF_HUB_OFFLINE"] = os.environ["HF_DATASETS_OFFLINE"] = "1"
 # In Jupyter without ipywidgets, tqdm.auto (which the datasets library imports) warns once and uses
 # the text progress bar instead of a widget: the notebook loses nothing, so the warning is noise.
 warnings.filterwarnings("ignore", message="IProgress not found")

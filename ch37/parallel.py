@@ -14,9 +14,7 @@ import sys
 
 from ch37 import ROOT
 from ch37.errors import DataError
-from ch37.process import forking, worker_setup
-
-_FORKED_WORK: tuple = ()  # (fn, jobs) in a pool worker, set by its initializer
+from ch37.process import environment, forking, worker_setup
 
 
 def progress(iterable, *, total: int, desc: str, quiet: bool = False):
@@ -27,35 +25,80 @@ def progress(iterable, *, total: int, desc: str, quiet: bool = False):
     return tqdm(iterable, total=total, desc=desc, unit="ep", leave=False, disable=quiet)
 
 
-def _pool_init(parent: int, fn, jobs) -> None:
-    global _FORKED_WORK
-    worker_setup(parent)
-    _FORKED_WORK = (fn, jobs)  # inherited through fork with the initializer's arguments, never pickled
-
-
-def _run_job(i: int):
-    fn, jobs = _FORKED_WORK
-    return fn(jobs[i])
-
-
 def _imap(fn, jobs: list, *, workers: int, ordered: bool = True, chunksize: int | None = None):
     """fn(job) for each job, yielded as they finish (in job order when `ordered`), on `workers` forked
     processes; in this process without fork or with one worker. The results never depend on `workers`:
-    every job carries its own seed. `fn` reaches the workers through fork, not pickling, so a function
-    defined in a script or a notebook works."""
+    every job carries its own seed. `fn` and `jobs` are each worker's arguments, inherited through fork,
+    never pickled, so a function defined in a script or a notebook works; a worker takes the next
+    `chunksize` job indices from a shared counter and sends back (index, result, exception)."""
     import multiprocessing as mp
+    from multiprocessing.connection import wait
 
     jobs = list(jobs)
     if workers <= 1 or len(jobs) <= 1 or "fork" not in mp.get_all_start_methods():
         yield from map(fn, jobs)
         return
-    with forking():
-        pool = mp.get_context("fork").Pool(
-            min(workers, len(jobs)), initializer=_pool_init, initargs=(os.getpid(), fn, jobs)
-        )
-    with pool:
-        get = pool.imap if ordered else pool.imap_unordered
-        yield from get(_run_job, range(len(jobs)), chunksize=chunksize or max(1, len(jobs) // (4 * workers)))
+    ctx = mp.get_context("fork")
+    size = chunksize or max(1, len(jobs) // (4 * workers))
+    next_index = ctx.Value("q", 0)
+    pipes = [ctx.Pipe(duplex=False) for _ in range(min(workers, len(jobs)))]  # (parent's end, worker's)
+    procs = [
+        ctx.Process(target=_job_worker, args=(os.getpid(), fn, jobs, size, next_index, end), daemon=True)
+        for _, end in pipes
+    ]
+    try:
+        with forking():
+            for proc in procs:
+                proc.start()
+        for _, end in pipes:
+            end.close()
+        open_ends, left = [conn for conn, _ in pipes], len(jobs)
+        held, want = {}, 0  # results that came before their turn (ordered), the next index to yield
+        while left:
+            if not open_ends:  # every worker gone with jobs unanswered: one was killed (out of memory?)
+                codes = ", ".join(str(p.exitcode) for p in procs if p.exitcode)
+                raise DataError(f"a worker process died (exit code {codes}); try fewer --workers")
+            for conn in wait(open_ends):
+                try:
+                    i, got, error = conn.recv()
+                except EOFError:  # its worker has ended
+                    open_ends.remove(conn)
+                    continue
+                if error is not None:
+                    raise error
+                left -= 1
+                if not ordered:
+                    yield got
+                    continue
+                held[i] = got
+                while want in held:
+                    yield held.pop(want)
+                    want += 1
+    finally:  # done, failed or abandoned: no worker outlives the map
+        for proc in procs:
+            if proc.pid is None:  # never started: a stop signal (Terminated, Ctrl-C) came while forking
+                continue
+            if proc.is_alive():
+                proc.kill()
+            proc.join()
+        for conn, _ in pipes:
+            conn.close()
+
+
+def _job_worker(parent: int, fn, jobs: list, size: int, next_index, conn) -> None:
+    worker_setup(parent)
+    while True:
+        with next_index.get_lock():
+            start = next_index.value
+            next_index.value = start + size
+        if start >= len(jobs):
+            break
+        for i in range(start, min(start + size, len(jobs))):
+            try:
+                conn.send((i, fn(jobs[i]), None))  # pickled before anything is written
+            except Exception as e:  # the caller re-raises it
+                conn.send((i, None, e))
+    conn.close()
 
 
 def map_jobs(
@@ -260,15 +303,9 @@ def _start_ray(address: str | None, workers: int):
         if address is None:  # "local": always a new instance, never a cluster that happens to run here
             # its workers inherit this environment: the repository on their path (a runtime_env
             # would start a second pool of workers, seconds more on a small machine)
-            saved = os.environ.get("PYTHONPATH")
-            os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), saved]))
-            try:
+            path = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))
+            with environment(PYTHONPATH=path):
                 ray.init(address="local", num_cpus=workers, **common)
-            finally:
-                if saved is None:
-                    os.environ.pop("PYTHONPATH")
-                else:
-                    os.environ["PYTHONPATH"] = saved
         else:
             excludes = [".git", ".venv", "outputs", "*.ipynb", "tests"]
             with _stderr_silenced():
@@ -281,20 +318,30 @@ def _start_ray(address: str | None, workers: int):
             "" if address is None else " (is it running? a cluster with token auth needs RAY_AUTH_MODE=token)"
         )
         raise DataError(f"could not {'start' if address is None else 'join'} Ray{hint}: {why}") from None
-    _quiet_raylet_messages()
     return ray
 
 
-def _quiet_raylet_messages() -> None:
-    """Keep Ray's cluster messages off our stdout. Whatever log_to_driver says, a Ray driver starts a
-    thread that prints every raylet error message to stdout (ray._private.worker.listen_error_messages
-    -> print_to_stdstream; a lost node is about 20 lines amid the run's own output). With log_to_driver
-    off that thread is the function's only caller, so it is replaced by one that drops the messages; a
-    failure they describe reaches the run as the failed task's exception (its one error line)."""
-    with contextlib.suppress(ImportError, AttributeError):
+@contextlib.contextmanager
+def _raylet_messages_dropped():
+    """Keep Ray's cluster messages off our stdout while a run uses Ray. Whatever log_to_driver says, a
+    Ray driver starts a thread that prints every raylet error message to stdout
+    (ray._private.worker.listen_error_messages -> print_to_stdstream; a lost node is about 20 lines amid
+    the run's own output). With log_to_driver off that thread is the function's only caller, so inside
+    this block it is replaced by one that drops the messages; a failure they describe reaches the run as
+    the failed task's exception (its one error line). Put back on leaving (after ray.shutdown, which
+    ends that thread): nothing else in the process sees the change."""
+    try:
         import ray._private.worker as ray_worker
 
-        ray_worker.print_to_stdstream = lambda data, ignore_prefix=False: None
+        saved = ray_worker.print_to_stdstream
+    except (ImportError, AttributeError):  # no Ray (_start_ray says so) or another Ray inside
+        yield
+        return
+    ray_worker.print_to_stdstream = lambda data, ignore_prefix=False: None
+    try:
+        yield
+    finally:
+        ray_worker.print_to_stdstream = saved
 
 
 def _apply(fn, *args):
@@ -308,17 +355,18 @@ def _run_ray(fn, tasks: list, *, address: str | None, workers: int, timing: dict
     import time
 
     t0 = time.perf_counter()
-    ray = _start_ray(address, workers)
-    if timing is not None:
-        timing["start_s"] = time.perf_counter() - t0
-    try:
-        remote = ray.remote(num_cpus=1, max_retries=0)(_apply)  # any picklable fn, a builtin too
-        window = max(2, 2 * int(ray.cluster_resources().get("CPU", workers)))
-        todo, pending = list(tasks), []
-        while todo or pending:
-            while todo and len(pending) < window:
-                pending.append(remote.remote(fn, *todo.pop(0)))
-            done, pending = ray.wait(pending, num_returns=1)
-            yield ray.get(done[0])
-    finally:
-        ray.shutdown()
+    with _raylet_messages_dropped():
+        ray = _start_ray(address, workers)
+        if timing is not None:
+            timing["start_s"] = time.perf_counter() - t0
+        try:
+            remote = ray.remote(num_cpus=1, max_retries=0)(_apply)  # any picklable fn, a builtin too
+            window = max(2, 2 * int(ray.cluster_resources().get("CPU", workers)))
+            todo, pending = list(tasks), []
+            while todo or pending:
+                while todo and len(pending) < window:
+                    pending.append(remote.remote(fn, *todo.pop(0)))
+                done, pending = ray.wait(pending, num_returns=1)
+                yield ray.get(done[0])
+        finally:
+            ray.shutdown()

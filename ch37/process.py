@@ -3,7 +3,8 @@
 Workers die with the run: each asks the kernel for SIGKILL when its parent dies (Linux prctl
 PR_SET_PDEATHSIG; elsewhere a thread watching the parent pid), and Ctrl-C is the parent's alone
 (workers ignore SIGINT; the parent stops them). forking() blocks the stop signals around a fork.
-max_workers and available_memory bound the flags that spend cores and memory. (The main process's
+max_workers and available_memory bound the flags that spend cores and memory; environment() scopes an
+environment variable to the call that needs it. (The main process's
 exit codes and its SIGTERM handler are ch37.errors'; a forked worker's copy of a run's lock is closed
 by ch37.ownership's at-fork hook.)
 """
@@ -32,6 +33,22 @@ def forking():
     finally:
         if can_mask:
             signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+@contextlib.contextmanager
+def environment(**values: str):
+    """These environment variables set for the block only, then put back as they were (unset where they
+    were unset): a setting a library reads from the environment, scoped to the call that needs it."""
+    saved = {k: os.environ.get(k) for k in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 def _die_with(parent: int) -> None:

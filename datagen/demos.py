@@ -18,6 +18,7 @@ from ch37 import code_digest
 from ch37.errors import DataError
 from ch37.ownership import MADE_BY, changed_files, holds_data, is_ours, read_stamp, replace_own_dir
 from ch37.parallel import progress
+from ch37.process import environment
 from ch37.seeds import env_seed
 from datagen.task import rollout, write_dataset
 from lerobot_v3 import (
@@ -27,10 +28,6 @@ from lerobot_v3 import (
     load_arrays,
     schema_problem,
 )
-
-if sys.platform.startswith("linux"):  # headless rendering: EGL unless the user chose a GL backend
-    os.environ.setdefault("MUJOCO_GL", "egl")
-os.environ.setdefault("SVT_LOG", "1")  # the AV1 encoder's banner: errors only
 
 
 # Any edit to the code that shapes a set's frames (this module, the task's module, its env and its expert,
@@ -73,7 +70,9 @@ def generate(
     stamp = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=video)
     how = dict(repo_id=f"local/{emb.name}_demos", fps=m.FPS, robot_type=m.ROBOT_TYPE, task=m.TASK)
     how["obs_names"] = emb.obs_names  # the frames' observations: the set's state (and env state) columns
-    write_dataset(out, feats=feats, episodes=episodes_iter(), stamp=stamp, **how)
+    # the AV1 encoder (video only) prints its banner unless SVT_LOG says errors only; a value of yours is kept
+    with environment(SVT_LOG=os.environ.get("SVT_LOG", "1")):
+        write_dataset(out, feats=feats, episodes=episodes_iter(), stamp=stamp, **how)
     return summary
 
 

@@ -23,6 +23,7 @@ from lerobot_v3.dataset import (
     observation,
     schema_problem,
 )
+from lerobot_v3.hub import hub_offline
 
 # The episodes table's columns that say where each episode's frames are (LeRobot v3)
 EPISODE_COLUMNS = ("episode_index", "length", "dataset_from_index", "dataset_to_index")
@@ -89,6 +90,7 @@ def task_of(src: Path) -> Task:
 
 def read_source(task: Task, src: Path) -> dict:
     """The source set's columns (a set of `task`), or DataError with one line saying what is wrong with it."""
+    hub_offline()
     import datasets
     import pyarrow.parquet as pq
 

@@ -3,6 +3,8 @@ project but its error type (ch37.errors.DataError): no ownership, no flags, no t
 
 dataset      features, write_set (a set in one pass, or LeRobot's own path for video), load_arrays
              and open_dataset (read back through LeRobotDataset), the schema/fps/frame checks
+hub          hub_offline: no LeRobot or Hugging Face call reaches the Hub (set when first needed, not at
+             import); OFFLINE_ENV: what a LeRobot program started as a subprocess is given
 chunks       ChunkRoller: the one rule that starts a new data or episodes file at the size limit
 frame_stats  FrameStats: exact stats.json over all frames of a merge (numpy's quantiles bit for bit)
 merge        merge_sets: several sets of one task into one, in one pass
@@ -25,17 +27,20 @@ from lerobot_v3.dataset import (
     schema_problem,
     write_set,
 )
+from lerobot_v3.hub import OFFLINE_ENV, hub_offline
 from lerobot_v3.merge import merge_sets
 
 __all__ = [
     "ENV_STATE_KEY",
     "IMAGE_KEY",
     "IMAGE_SIZE",
+    "OFFLINE_ENV",
     "check_hf_cache",
     "columns",
     "features",
     "fps_problem",
     "frames_problem",
+    "hub_offline",
     "load_arrays",
     "merge_sets",
     "observation",

@@ -9,6 +9,8 @@ both place their rows here; each turns its byte limit into rows as LeRobot does 
 
 from __future__ import annotations
 
+from lerobot_v3.hub import hub_offline
+
 __all__ = ["ChunkRoller", "rows_below", "rows_within"]
 
 
@@ -34,6 +36,7 @@ class ChunkRoller:
     def place(self, rows: int) -> tuple[int, int]:
         """Where the next block of `rows` rows goes, starting a new file if it would not fit."""
         if self.placed and self.placed + rows > self.limit_rows:
+            hub_offline()
             from lerobot.datasets.utils import update_chunk_file_indices
 
             self.chunk, self.file = update_chunk_file_indices(self.chunk, self.file, self.chunks_size)

@@ -19,6 +19,7 @@ import numpy as np
 
 from ch37.errors import DataError
 from lerobot_v3.chunks import ChunkRoller, rows_below, rows_within
+from lerobot_v3.hub import hub_offline
 
 # torchcodec needs system FFmpeg libraries and prints long tracebacks when they are missing;
 # pyav ships its own FFmpeg, so every dataset here is read and written through pyav.
@@ -36,7 +37,9 @@ PARQUET = dict(compression="snappy", use_dictionary=False)
 
 def check_hf_cache() -> None:
     """DataError (one line) unless Hugging Face datasets can write its cache: every read of a set goes
-    through it, and without this check a cache problem reads as a damaged data set."""
+    through it, and without this check a cache problem reads as a damaged data set. Offline first
+    (hub_offline): this is the first LeRobot step of every read and write."""
+    hub_offline()
     import datasets
 
     _probe_cache(Path(datasets.config.HF_DATASETS_CACHE))
@@ -57,11 +60,11 @@ def _probe_cache(cache: Path) -> None:  # once per folder and process: every rea
 
 def _lerobot_dataset_class():
     """LeRobotDataset, with Hugging Face datasets' per-episode "Map" bars silenced (our own bar is enough)."""
+    check_hf_cache()  # offline before LeRobot is imported (hub_offline)
     import datasets
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     datasets.disable_progress_bars()
-    check_hf_cache()
     return LeRobotDataset
 
 
@@ -72,6 +75,7 @@ def _embed_only_images():
     this block (our writes through LeRobot's per-frame path) it is skipped exactly then; any table with
     an image column goes through lerobot's own code. Put back on leaving: nothing else in the process
     sees the change."""
+    hub_offline()
     import datasets
     from lerobot.datasets import dataset_writer
 
@@ -128,6 +132,7 @@ def _fast_fingerprints():
     datasets fingerprints every new Dataset by dill-hashing all its rows (~10 ms per episode, a
     third of the write). Nothing reads that fingerprint, so while we write, new in-memory Datasets
     get a random one, which is what datasets itself falls back to when hashing fails."""
+    hub_offline()
     from datasets import arrow_dataset, fingerprint
 
     saved = arrow_dataset.generate_fingerprint
@@ -182,6 +187,7 @@ def write_set(
 def write_sorted_stats(stats: dict, root: Path) -> None:
     """LeRobot's write_stats with sorted keys: LeRobot orders them by string hash; sorted, equal sets
     are equal bytes."""
+    hub_offline()
     from lerobot.datasets.utils import serialize_dict
 
     text = json.dumps(serialize_dict(stats), indent=4, sort_keys=True, ensure_ascii=False)
@@ -251,6 +257,7 @@ def _quantiles(x: np.ndarray, counts: np.ndarray | None = None):
     counts (D,) >= 2: column d holds counts[d] values, its first rows (the rest is padding, never
     read), so episodes of different lengths share one call; None: every column holds T.
     """
+    hub_offline()
     from lerobot.datasets.compute_stats import DEFAULT_QUANTILES
 
     rows, dims = x.shape
@@ -329,6 +336,7 @@ def _episodes_stats(bufs: list[dict], feats: dict) -> list[dict]:
     """[_episode_stats(buf, feats) for buf in bufs], the same bits and dtypes: rows of _stats_columns
     (each quantile back in the feature's dtype where LeRobot returns a bin's edge), LeRobot's own
     get_feature_stats for an episode of one frame."""
+    hub_offline()
     from lerobot.datasets.compute_stats import get_feature_stats
 
     outs = [None] * len(bufs)
@@ -530,6 +538,7 @@ def _write_data_file(path: Path, schema, parts: dict) -> None:
 def _write_episodes_table(root: Path, table, limit: float, chunks_size: int) -> None:
     """meta/episodes in files of at most `limit` bytes (Arrow size, as LeRobot splits it): one file up
     to ~50,000 episodes of this chapter's width (~2 KB a row)."""
+    hub_offline()
     import pyarrow as pa
     from lerobot.datasets.utils import DEFAULT_EPISODES_PATH
 
@@ -553,6 +562,7 @@ def _stacked_batches(episodes, feats, all_feats, *, fps: int, task: str):
     to STATS_BATCH episodes at a time, in order. The stats: {feature: {stat: (E, D)}}, the arrays
     LeRobot's aggregate_stats stacks from the episodes' stats; rows: {episodes-table column: E values},
     each episode's stat as LeRobot's flatten_dict lists it (its .tolist())."""
+    hub_offline()
     from lerobot.datasets.feature_utils import validate_frame
 
     it, e, frames = iter(episodes), 0, 0
@@ -636,6 +646,7 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     No clock, no randomness: equal episodes give equal bytes. No episodes: info.json only, as
     LeRobot leaves it. file_mb: the file size limit in MB (LeRobot's default when None; tests).
     """
+    check_hf_cache()  # as on LeRobot's path: a cache problem is named here, not at the first read
     import pandas as pd
     import pyarrow as pa
     from lerobot.datasets.dataset_metadata import CODEBASE_VERSION
@@ -643,7 +654,6 @@ def _write_direct(tmp: Path, *, fps, robot_type, task, feats, episodes, file_mb:
     from lerobot.datasets.io_utils import write_info, write_tasks
     from lerobot.utils.constants import DEFAULT_FEATURES
 
-    check_hf_cache()  # as on LeRobot's path: a cache problem is named here, not at the first read
     all_feats = {k: dict(f, shape=tuple(f["shape"])) for k, f in feats.items()} | DEFAULT_FEATURES
     info = create_empty_dataset_info(CODEBASE_VERSION, fps, all_feats, False, robot_type, None, file_mb)
     tmp.mkdir(parents=True)

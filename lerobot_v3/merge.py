@@ -20,6 +20,7 @@ import numpy as np
 from lerobot_v3.chunks import ChunkRoller, rows_within
 from lerobot_v3.dataset import PARQUET, close_quietly, naming
 from lerobot_v3.frame_stats import FrameStats, write_frame_stats
+from lerobot_v3.hub import hub_offline
 
 # Episode rows per row group of meta/episodes: a fixed count, so the row groups never depend on how
 # the episodes were cut into shards (LeRobot's own writer buffers a few episodes per group).
@@ -226,6 +227,7 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
 
     What LeRobotDataset reads is what LeRobot's aggregate_datasets + write_frame_stats give for the
     same sets (tests/test_merge.py); only the file layout differs, and it depends on the frames alone."""
+    hub_offline()  # before LeRobot's first import here
     import pandas as pd
     import pyarrow as pa
     from lerobot.datasets.io_utils import load_info, write_info
@@ -299,6 +301,7 @@ def merge_sets(roots: list[Path], dest: Path, *, max_bytes: int | None = None, c
 def _stats_template(roots: list[Path]) -> dict:
     """The stats.json entries write_frame_stats fills: the first set's keys and stat names; a key that
     is no data feature (none in the engine's sets) gets LeRobot's aggregate of every set's stats."""
+    hub_offline()
     from lerobot.datasets.io_utils import load_info
 
     first = json.loads((roots[0] / "meta" / "stats.json").read_text())

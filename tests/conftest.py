@@ -12,14 +12,22 @@ sys.path.insert(0, str(ROOT))
 # scale_data.py's result cache: one private folder per test session, never the user's outputs/
 os.environ.setdefault("CH37_CACHE_DIR", tempfile.mkdtemp(prefix="ch37-cache-"))
 # headless rendering in this process (tests/test_gym_envs.py): mujoco picks its GL backend when first
-# imported, which a test module's imports do before any of ours could choose (EGL, as datagen.demos does)
+# imported, which a test module's imports do before ours could choose (EGL, the demo generators' choice)
 if sys.platform.startswith("linux"):
     os.environ.setdefault("MUJOCO_GL", "egl")
+# Nothing may download: the Hugging Face switches (lerobot_v3.OFFLINE_ENV; the chapter's own code never
+# sets them, lerobot_v3.hub_offline makes its process offline). Tests that import lerobot themselves
+# (test_lerobot, test_merge, test_writer) may do it before the chapter's first LeRobot call (which would
+# then refuse): offline for the whole session, and given explicitly to every script run_script starts
+# (lerobot-train is LeRobot's program, not ours: only its environment keeps it off the Hub).
+OFFLINE_ENV = {"HF_HUB_OFFLINE": "1", "HF_DATASETS_OFFLINE": "1"}
+os.environ.update(OFFLINE_ENV)
 
 
 def run_script(*args, cwd=ROOT, check=True, timeout=600):
-    """Run a project script with this interpreter; returns the CompletedProcess (text)."""
-    env = dict(os.environ, PYTHONHASHSEED="0")
+    """Run a project script (or LeRobot's lerobot-train) with this interpreter, offline (OFFLINE_ENV);
+    returns the CompletedProcess (text)."""
+    env = dict(os.environ, **OFFLINE_ENV, PYTHONHASHSEED="0")
     p = subprocess.run(
         [sys.executable, *map(str, args)], cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env
     )

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import OFFLINE_ENV
 
 import gen_demos_aloha
 import gen_demos_pusht
@@ -163,3 +164,72 @@ def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
     engine.save(PUSHT, tmp_path / "grown", [kept], repo_id="local/grown", stamp={})
     grown = lerobot_io.load_arrays(tmp_path / "grown", keys=("observation.state", lerobot_io.ENV_STATE_KEY))
     assert grown[lerobot_io.ENV_STATE_KEY].tobytes() == grown["observation.state"][:, 2:].tobytes()
+
+
+def test_a_missing_local_file_is_an_error_never_a_download(tmp_path):
+    """Issue 39 #4: nothing sets HF_HUB_OFFLINE at import any more; lerobot_v3.hub_offline makes the
+    process offline at its first LeRobot call. In a process whose environment does not say offline, a
+    set missing its data file (LeRobot's cue to fetch it from the Hub) is our one line, its cause the Hub
+    refused offline, and the environment is left as it was; huggingface_hub imported online before that
+    first call is a clear stop, not a download."""
+    gen_demos_pusht.main(["--episodes", "1", "--out", str(tmp_path / "set"), "--quiet"])
+    for f in (tmp_path / "set" / "data").rglob("*.parquet"):
+        f.unlink()
+    code = (
+        "import os, sys\n"
+        "if sys.argv[1] == 'first': import huggingface_hub.constants\n"
+        "from ch37.errors import DataError\n"
+        "from lerobot_v3 import load_arrays\n"
+        "try:\n    load_arrays(sys.argv[2])\n"
+        "except DataError as e:\n    print(e)\n"
+        "print(os.environ.get('HF_HUB_OFFLINE'), os.environ.get('HF_DATASETS_OFFLINE'))\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("HF_HUB_OFFLINE", "HF_DATASETS_OFFLINE")}
+    env["HF_HOME"] = str(tmp_path / "hf")  # the user's cache untouched
+    for order in ("ours", "first"):
+        p = subprocess.run(
+            [sys.executable, "-c", code, order, str(tmp_path / "set")],
+            cwd=ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        out = p.stdout.strip().splitlines()
+        assert p.returncode == 0 and len(out) == 2 and out[1] == "None None", (p.stdout, p.stderr)
+        line = out[0]
+        if order == "ours":
+            assert "cannot be read as a LeRobot v3 dataset (OfflineModeIsEnabled" in line, line
+        else:
+            assert "huggingface_hub was imported online" in line, line
+
+
+def test_the_commands_are_offline_where_the_environment_does_not_say_so(tmp_path):
+    """Issue 39 #4: the test session is offline (conftest), which hid a command whose first LeRobot,
+    datasets or huggingface_hub import came before lerobot_v3.hub_offline (augment_demos.py stopped at
+    'imported online'). Here, in an environment without the switches: a set generated, grown on two forked
+    workers in shards of one attempt (the writer, the stats, the merge), and read back, each process
+    offline, the environment handed to no one changed."""
+    import lerobot_v3
+
+    assert OFFLINE_ENV == lerobot_v3.OFFLINE_ENV  # the switches the tests' subprocesses get are the chapter's
+    env = {k: v for k, v in os.environ.items() if k not in OFFLINE_ENV}
+    env["HF_HOME"] = str(tmp_path / "hf")  # the user's cache untouched
+    src, grown = tmp_path / "src", tmp_path / "grown"
+    read = (
+        "import os, sys\nfrom lerobot_v3 import load_arrays\nn = len(load_arrays(sys.argv[1])['action'])\n"
+        "import huggingface_hub.constants as c, datasets.config as d\n"
+        "print(n, c.HF_HUB_OFFLINE, d.HF_HUB_OFFLINE, os.environ.get('HF_HUB_OFFLINE'))\n"
+    )
+    for argv in (
+        ["gen_demos_pusht.py", "--episodes", "2", "--out", src, "--quiet"],
+        ["augment_demos.py", "--src", src, "--per_demo", "2", "--shard_size", "1", "--workers", "2"]
+        + ["--out", grown, "--quiet"],
+        ["-c", read, grown],
+    ):
+        p = subprocess.run(
+            [sys.executable, *map(str, argv)], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300
+        )
+        assert p.returncode == 0 and "imported online" not in p.stderr, (argv[0], p.stdout, p.stderr)
+    frames, hub, datasets_offline, variable = p.stdout.split()
+    assert int(frames) > 0 and (hub, datasets_offline, variable) == ("True", "True", "None"), p.stdout

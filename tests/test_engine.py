@@ -215,6 +215,59 @@ def test_local_ray_same_bytes(src, reference, tmp_path):
     assert "Traceback" not in p.stderr
 
 
+def test_forked_map_passes_its_work_and_names_a_killed_worker():
+    """Issue 39 #4: the forked workers get fn and the jobs as their arguments (no module state), so a
+    closure works, in job order or as finished; an exception in a job is raised here; a worker killed
+    mid-job (out of memory) is one DataError, not a wait for an answer that never comes."""
+    from ch37.errors import DataError
+    from ch37.parallel import map_jobs
+
+    k = 3
+    want = [x * k for x in range(40)]
+    assert list(map_jobs(lambda x: x * k, range(40), workers=2)) == want
+    assert sorted(map_jobs(lambda x: x * k, range(40), workers=2, ordered=False)) == want
+
+    def fails(x):
+        if x == 7:
+            raise ValueError("job 7")
+        return x
+
+    with pytest.raises(ValueError, match="job 7"):
+        list(map_jobs(fails, range(20), workers=2))
+
+    def killed(x):
+        if x == 5:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return x
+
+    with pytest.raises(DataError, match=r"a worker process died \(exit code -9\)"):
+        list(map_jobs(killed, range(20), workers=2))
+
+
+def test_a_stop_signal_while_the_forked_map_starts_its_workers_is_raised_as_it_is(monkeypatch):
+    """Issue 39 #4, found by test_hardening's SIGTERM case: a stop signal whose Python handler runs while
+    the map starts its workers (Terminated, raised inside Process.start) reached the run as an
+    AssertionError from joining a worker never started (exit 1 and a traceback, not one line and 143).
+    It is raised as it is, and the worker started before it is gone."""
+    import multiprocessing.process
+
+    from ch37.errors import Terminated
+    from ch37.parallel import map_jobs
+
+    start, started = multiprocessing.process.BaseProcess.start, []
+
+    def start_then_stop(self):
+        if started:
+            raise Terminated()
+        start(self)
+        started.append(self)
+
+    monkeypatch.setattr(multiprocessing.process.BaseProcess, "start", start_then_stop)
+    with pytest.raises(Terminated):
+        list(map_jobs(abs, range(20), workers=3))
+    assert len(started) == 1 and not started[0].is_alive()
+
+
 RAY_CRASH = """
 import os, sys, time
 from ch37.parallel import map_jobs

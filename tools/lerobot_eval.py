@@ -37,6 +37,9 @@ def load_policy(path: Path, device: str):
     """(policy, preprocessor, postprocessor) from a `pretrained_model` folder, moved to `device`."""
     if not (path / "config.json").is_file():
         raise DataError(f"--policy {path} is not a LeRobot pretrained_model folder (no config.json)")
+    from lerobot_v3 import hub_offline
+
+    hub_offline()  # a file missing from the folder is an error, never a download from the Hub
     try:
         from lerobot.configs.policies import PreTrainedConfig
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors

@@ -108,6 +108,10 @@ def samples(lengths, cfg) -> dict:
 
 def policy_and_processors(stats: dict, seed: int):
     """A fresh LeRobot DiffusionPolicy (CONFIG) with its pre/post processors normalizing by `stats`."""
+    from lerobot_v3 import hub_offline
+    from lerobot_v3.dataset import ENV_STATE_KEY
+
+    hub_offline()  # before LeRobot's policies import huggingface_hub
     import torch
     from lerobot.configs.types import FeatureType, PolicyFeature
     from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
@@ -115,7 +119,6 @@ def policy_and_processors(stats: dict, seed: int):
     from lerobot.policies.factory import make_pre_post_processors
 
     import pusht_env
-    from lerobot_v3.dataset import ENV_STATE_KEY
 
     cfg = DiffusionConfig(
         input_features={

@@ -25,6 +25,7 @@ Exit codes: 0 ok, 2 bad input.
 
 from __future__ import annotations
 
+import functools
 import time
 from pathlib import Path
 
@@ -61,14 +62,12 @@ VARIANTS = {
         "subtasks_nearest": (ALOHA, "nearest"),
     },
 }
-_WORK: dict = {}  # (task, seed) -> {e: Source}, built before forking
-_SIMS = engine.Simulators()  # each process's envs and cut sources (a forked worker fills its own)
 
 
-def sources(task: str, seed: int, n: int) -> dict:
+def sources(sims: engine.Simulators, task: str, seed: int, n: int) -> dict:
     """The chapter's n source demos of `task` at `seed`, rolled out as the demo generators do."""
     t = VARIANTS[task]["resolve"][0]
-    env, out = _SIMS.env(t), {}
+    env, out = sims.env(t), {}
     for i in range(n):
         s = env_seed(seed, "demo", i)
         ep = rollout(env, t.expert_class(noise=t.default_noise, seed=s), env.reset(s))
@@ -76,25 +75,29 @@ def sources(task: str, seed: int, n: int) -> dict:
     return out
 
 
-def one(job) -> tuple[str, int]:
+def one(work: dict, sims: engine.Simulators, job) -> tuple[str, int]:
     """('kept', frames of the kept episode) or (the failure reason, 0) of one attempt:
-    job = (task, mode, seed, episode, k, sigma multiplier)."""
+    job = (task, mode, seed, episode, k, sigma multiplier); work: (task, seed) -> {e: Source}, built
+    before forking; sims: the envs and cut sources the attempts reuse (a forked worker fills its own)."""
     task, mode, seed, e, k, m = job
-    pool = _WORK[(task, seed)]
+    pool = work[(task, seed)]
     t, select = VARIANTS[task][mode]
     how = Perturbation(seed, m * POS_SIGMA, m * YAW_SIGMA)
     run = "resolve" if mode == "resolve" else "replay"
-    r = engine.attempt(t, pool[e], k, how, mode=run, pool=pool if select == "nearest" else None, sims=_SIMS)
+    r = engine.attempt(t, pool[e], k, how, mode=run, pool=pool if select == "nearest" else None, sims=sims)
     return ("kept", r.steps) if r.kept else (r.reason, 0)
 
 
-def cell(task: str, mode: str, seeds, n: int, attempts: int, m: float, workers: int) -> dict:
-    """Yield of one (task, mode, sigma multiplier) over seeds x n sources x attempts, with its reasons."""
+def cell(
+    work: dict, sims, task: str, mode: str, seeds, n: int, attempts: int, m: float, workers: int
+) -> dict:
+    """Yield of one (task, mode, sigma multiplier) over seeds x n sources x attempts, with its reasons.
+    work and sims: one's, handed to the workers with it (map_jobs forks them; nothing is pickled)."""
     from bc_recipe import wilson
 
     t = time.perf_counter()
     jobs = [(task, mode, s, e, k, m) for s in seeds for e in range(n) for k in range(attempts)]
-    got, frames = zip(*list(map_jobs(one, jobs, workers=workers)))
+    got, frames = zip(*list(map_jobs(functools.partial(one, work, sims), jobs, workers=workers)))
     kept = got.count("kept")
     per_seed = {s: got[i * n * attempts : (i + 1) * n * attempts].count("kept") for i, s in enumerate(seeds)}
     row = {"task": task, "mode": mode, "multiplier": m, "pos_sigma": m * POS_SIGMA}
@@ -119,15 +122,15 @@ def main(argv: list[str]) -> int:
     check(a, positive=["seeds", "sources", "attempts", "workers"])
     if any(not (0 < m < 100) for m in a.aloha_sigma):
         raise DataError("--aloha_sigma multipliers must be in (0, 100)")
-    seeds = list(range(a.seeds))
+    seeds, work, sims = list(range(a.seeds)), {}, engine.Simulators()  # this run's, passed to cell
     for task in VARIANTS:
         for s in seeds:
-            _WORK[(task, s)] = sources(task, s, a.sources)
+            work[(task, s)] = sources(sims, task, s, a.sources)
     rows = []
     todo = [(task, mode, 1.0) for task, modes in VARIANTS.items() for mode in modes]
     todo += [("aloha", mode, m) for m in sorted(a.aloha_sigma) if m != 1.0 for mode in SIGMA_MODES]
     for task, mode, m in todo:
-        rows.append(r := cell(task, mode, seeds, a.sources, a.attempts, m, a.workers))
+        rows.append(r := cell(work, sims, task, mode, seeds, a.sources, a.attempts, m, a.workers))
         got = (
             f"{r['kept']}/{r['attempts']} = {r['yield']:.3f} {r['failures']} frames {r['kept_frames_median']}"
         )
