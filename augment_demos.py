@@ -1,12 +1,14 @@
-"""Grow a PushT or ALOHA demo set: perturbed starts of every source demo, re-solved or replayed, kept on
-success.
+"""Grow a demo set of any task the engine knows (PushT, ALOHA, LeRobot's gym-pusht): perturbed starts of
+every source demo, re-solved or replayed, kept on success.
 
     python augment_demos.py --src my_pusht --attempts_per_demo 100 --out big [--workers N | --ray [ADDRESS]]
 
 --src is any LeRobot v3 set of a task the engine knows (datagen.known_tasks()), the task read from the set's
 robot_type (or its widths): PushT (observation.state float32[10], action float32[2], laid out as in
-pusht_env.py; gen_demos_pusht.py) or the ALOHA handoff (float32[10], float32[6], aloha_env.py;
-gen_demos_aloha.py), one made by those commands or your own. It is only read. --out becomes a
+pusht_env.py; gen_demos_pusht.py), the ALOHA handoff (float32[10], float32[6], aloha_env.py;
+gen_demos_aloha.py) or LeRobot's gym-pusht (observation.state float32[2] and
+observation.environment_state float32[16] as lerobot/pusht_keypoints records them, action float32[2];
+gen_demos.py --task gym_pusht), one made by those commands or your own. It is only read. --out becomes a
 LeRobot v3 set of the kept demos, every frame carrying its provenance (aug.source_episode: the source
 episode it was made from, the one replayed; aug.start: the task's start it was solved from, for PushT
 block x, y, yaw, pusher x, y), with generation_report.json beside it.
@@ -32,8 +34,8 @@ SHARD_SIZE = 300  # attempts per shard: ~1 MB of parquet, 1-2 s of one core (Pus
 
 @dataclass(frozen=True)
 class Args(config.Perturbation, config.Mode, config.Ray):
-    """Grow a PushT or ALOHA demo set: perturbed starts of every source demo, re-solved or replayed, kept
-    on success."""
+    """Grow a demo set of any task the engine knows (PushT, ALOHA, LeRobot's gym-pusht): perturbed starts
+    of every source demo, re-solved or replayed, kept on success."""
 
     src: Path = flag(
         None, "source LeRobot v3 set of a task the engine knows (never modified)", type=Path, required=True
