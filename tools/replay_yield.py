@@ -19,6 +19,10 @@ the task as the mode describes it (VARIANTS). Modes:
     subtasks               its own source, cut into subtasks (PushT(BY_CONTACT); ALOHA)
     subtasks_nearest       the source nearest the new start (MimicGen's selection), cut into subtasks
     subtasks_block_nearest PushT only: nearest, with the push relative to the block alone
+    replay_nearest         gym-pusht only (LeRobot's PushT, --tasks gym_pusht): the one-segment replay
+                           from the source nearest the new start
+
+--tasks picks the tasks (default: pusht, aloha and gym_pusht).
 
 Exit codes: 0 ok, 2 bad input.
 """
@@ -39,6 +43,7 @@ from ch37.parallel import map_jobs
 from ch37.seeds import env_seed
 from datagen import ALOHA, PUSHT, Perturbation, engine
 from datagen.aloha import WHOLE, Aloha
+from datagen.gym_pusht import GYM_PUSHT
 from datagen.pusht import BY_CONTACT, BY_CONTACT_BLOCK, PushT
 from datagen.task import Source, rollout
 from tools.common import parser, provenance, rel
@@ -60,6 +65,11 @@ VARIANTS = {
         "replay": (Aloha(WHOLE), "own"),
         "subtasks": (ALOHA, "own"),
         "subtasks_nearest": (ALOHA, "nearest"),
+    },
+    "gym_pusht": {  # LeRobot's own PushT (issue 40): one segment relative to the block, as the engine's
+        "resolve": (GYM_PUSHT, "own"),
+        "replay": (GYM_PUSHT, "own"),
+        "replay_nearest": (GYM_PUSHT, "nearest"),
     },
 }
 
@@ -101,7 +111,7 @@ def cell(
     kept = got.count("kept")
     per_seed = {s: got[i * n * attempts : (i + 1) * n * attempts].count("kept") for i, s in enumerate(seeds)}
     row = {"task": task, "mode": mode, "multiplier": m, "pos_sigma": m * POS_SIGMA}
-    row |= {"yaw_sigma": m * YAW_SIGMA if task == "pusht" else None, "attempts": len(got), "kept": kept}
+    row |= {"yaw_sigma": None if task == "aloha" else m * YAW_SIGMA, "attempts": len(got), "kept": kept}
     row |= {"yield": kept / len(got), "ci95": wilson(kept / len(got), len(got)), "kept_per_seed": per_seed}
     row["failures"] = {why: got.count(why) for why in sorted(set(got) - {"kept"})}
     row["kept_frames_median"] = float(np.median([f for f in frames if f])) if kept else None
@@ -116,6 +126,7 @@ def main(argv: list[str]) -> int:
     p.add_argument(
         "--aloha_sigma", type=float, nargs="*", default=[], help="ALOHA sweep: multipliers of 0.08 m"
     )
+    p.add_argument("--tasks", nargs="+", choices=list(VARIANTS), default=list(VARIANTS), help="the tasks")
     p.add_argument("--workers", type=int, default=1, help="processes for the attempts")
     p.add_argument("--out", type=Path, default=ROOT / "outputs/replay_yield", help="output folder")
     a = p.parse_args(argv)
@@ -123,20 +134,22 @@ def main(argv: list[str]) -> int:
     if any(not (0 < m < 100) for m in a.aloha_sigma):
         raise DataError("--aloha_sigma multipliers must be in (0, 100)")
     seeds, work, sims = list(range(a.seeds)), {}, engine.Simulators()  # this run's, passed to cell
-    for task in VARIANTS:
+    for task in a.tasks:
         for s in seeds:
             work[(task, s)] = sources(sims, task, s, a.sources)
     rows = []
-    todo = [(task, mode, 1.0) for task, modes in VARIANTS.items() for mode in modes]
-    todo += [("aloha", mode, m) for m in sorted(a.aloha_sigma) if m != 1.0 for mode in SIGMA_MODES]
+    todo = [(task, mode, 1.0) for task in a.tasks for mode in VARIANTS[task]]
+    if "aloha" in a.tasks:
+        todo += [("aloha", mode, m) for m in sorted(a.aloha_sigma) if m != 1.0 for mode in SIGMA_MODES]
     for task, mode, m in todo:
         rows.append(r := cell(work, sims, task, mode, seeds, a.sources, a.attempts, m, a.workers))
         got = (
             f"{r['kept']}/{r['attempts']} = {r['yield']:.3f} {r['failures']} frames {r['kept_frames_median']}"
         )
-        print(f"{task:5s} x{m:<4g} {mode:22s} {got}", flush=True)
+        print(f"{task:9s} x{m:<4g} {mode:22s} {got}", flush=True)
     cmd = f"python -m tools.replay_yield --seeds {a.seeds} --sources {a.sources} --attempts {a.attempts}"
     cmd += " --aloha_sigma " + " ".join(f"{m:g}" for m in a.aloha_sigma) if a.aloha_sigma else ""
+    cmd += " --tasks " + " ".join(a.tasks) if a.tasks != list(VARIANTS) else ""
     res = {"kind": "replay_yield", "command": cmd, "seeds": seeds, "rows": rows} | provenance(a.script)
     a.out.mkdir(parents=True, exist_ok=True)
     f = write_atomic(a.out / "replay_yield.json", dump_json(round_floats(res, 4)))
