@@ -53,7 +53,8 @@ def replays_exactly(kept_set) -> int:
     return len(episodes)
 
 
-@pytest.mark.parametrize("mode, sigmas", [("resolve", ("0.08", "0.5")), ("replay", ("0.01", "0.05"))])
+# replay at 1 mm and 0.005 rad: open-loop pushes in pymunk keep about half there, none at the chapter's
+@pytest.mark.parametrize("mode, sigmas", [("resolve", ("0.08", "0.5")), ("replay", ("0.001", "0.005"))])
 def test_augment_demos_grows_it_and_every_kept_episode_re_executes(source, tmp_path, mode, sigmas):
     out = tmp_path / mode
     args = ["--src", source, "--out", out, "--per_demo", "3", "--seed", "1", "--aug_mode", mode, "--quiet"]
@@ -62,9 +63,8 @@ def test_augment_demos_grows_it_and_every_kept_episode_re_executes(source, tmp_p
     assert r.returncode == 0, r.stderr
     report = json.loads((out / "generation_report.json").read_text())
     assert report["attempts"] == 9 and set(report["failures"]) <= set(TASK.failures[mode])
-    if report["kept"]:
-        assert replays_exactly(out) == report["kept"]
-    assert mode == "replay" or report["kept"] >= 8  # the expert re-solves nearly every start
+    assert report["kept"] >= (8 if mode == "resolve" else 1)  # the expert re-solves nearly every start
+    assert replays_exactly(out) == report["kept"]
 
 
 def test_a_set_written_by_lerobots_own_writer_in_the_hubs_form_goes_in_as_it_is(source, tmp_path):
