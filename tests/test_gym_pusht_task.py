@@ -53,7 +53,7 @@ def replays_exactly(kept_set) -> int:
     return len(episodes)
 
 
-# replay at 1 mm and 0.005 rad: open-loop pushes in pymunk keep about half there, none at the chapter's
+# replay at 1 mm and 0.005 rad: open-loop pushes in pymunk keep some there, none at the chapter's
 @pytest.mark.parametrize("mode, sigmas", [("resolve", ("0.08", "0.5")), ("replay", ("0.001", "0.005"))])
 def test_augment_demos_grows_it_and_every_kept_episode_re_executes(source, tmp_path, mode, sigmas):
     out = tmp_path / mode
