@@ -19,6 +19,7 @@ import importlib.metadata
 import importlib.util
 import platform
 import re
+import site
 from pathlib import Path
 
 from ch37 import ROOT, errors
@@ -79,8 +80,11 @@ def locked_here(path: Path = LOCK) -> dict[str, str]:
 
 
 def installed() -> dict[str, str]:
-    """{canonical name: version} of every distribution this interpreter sees."""
-    return {canonicalize_name(d.metadata["Name"]): d.version for d in importlib.metadata.distributions()}
+    """{canonical name: version} of every distribution installed in this interpreter's site-packages
+    (where pip installs). A folder an import adds to sys.path is no installation: setuptools puts its
+    vendored packages there (packaging, importlib-metadata, ...), and pygame imports it."""
+    found = importlib.metadata.distributions(path=site.getsitepackages())
+    return {canonicalize_name(d.metadata["Name"]): d.version for d in found}
 
 
 def drift(path: Path = LOCK, have: dict[str, str] | None = None) -> list[str]:
