@@ -4,6 +4,26 @@
 # and a stamped .venv missing a locked package (python -m tools.lock --missing) is installed again.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")"
+# A .venv this set-up cannot use as it is (a file, a dangling link, a venv of another Python) is the user's:
+# one line saying what to do, exit 2, nothing in it touched (venv would fail on it, or pip after the download).
+venv_problem() {
+    if [ -L .venv ] && [ ! -e .venv ]; then
+        echo "error: .venv is a link to $(readlink .venv), which does not exist; remove the link (rm .venv) or point it at a Python 3.12 venv, and run again"
+    elif [ -e .venv ] && [ ! -d .venv ]; then
+        echo "error: .venv is a file, not a folder; move it aside (mv .venv .venv.bak) and run again"
+    elif [ -f .venv/pyvenv.cfg ]; then
+        local made
+        made=$(sed -n 's/^version\(_info\)\? *= *\([0-9]*\.[0-9]*\).*/\2/p' .venv/pyvenv.cfg | head -n 1)
+        if [ -n "$made" ] && [ "$made" != 3.12 ]; then
+            echo "error: .venv was made with Python $made; requirements.lock is for Python 3.12; move it aside (mv .venv .venv-$made) and run again"
+        fi
+    fi
+}
+problem=$(venv_problem)
+if [ -n "$problem" ]; then
+    echo "$problem" >&2
+    exit 2
+fi
 if ! .venv/bin/python -c 'import pip' >/dev/null 2>&1; then
     PY=""
     for cand in python3.12 "$HOME/.pyenv/versions/3.12.1/bin/python" python3; do

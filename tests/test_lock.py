@@ -1,6 +1,7 @@
 """requirements.lock (tools/lock.py): .venv is exactly the lock, the lock covers pyproject.toml, and
 meta.yaml records the lock its numbers ran on."""
 
+import os
 import tomllib
 from pathlib import Path
 
@@ -137,3 +138,46 @@ def test_the_set_up_recovers_from_a_stopped_set_up_by_itself(tmp_path):
     lines = p.stdout.strip().splitlines()
     assert p.returncode == 1 and "Traceback" not in p.stdout + p.stderr, p.stdout + p.stderr
     assert "drift: packaging: installed nothing" in p.stdout and "rm -r .venv" in lines[-1], p.stdout
+
+
+@pytest.mark.parametrize("kind", ["file", "dangling link", "python 3.11 venv"])
+def test_the_set_up_refuses_a_venv_it_cannot_use_and_leaves_it_as_it_is(tmp_path, kind):
+    """Issue 48 #8: a .venv made with Python 3.11 was kept and the 3.12 lock installed into it (the download
+    happened, then pip failed); a .venv that is a file ended in venv's own "Unable to create directory", a
+    dangling link in "[Errno 17] File exists", both exit 1. Each is the user's: one `error:` line saying what
+    to do, exit 2, the file, link or venv untouched."""
+    import shutil
+    import subprocess
+    import sys
+
+    for name in ("setup_env.sh", "tools", "ch37"):
+        (shutil.copytree if name != "setup_env.sh" else shutil.copy)(ROOT / name, tmp_path / name)
+    shutil.copy(ROOT / "requirements.lock", tmp_path / "requirements.lock")
+    venv = tmp_path / ".venv"
+    if kind == "file":
+        venv.write_text("my notes\n")
+    elif kind == "dangling link":
+        venv.symlink_to(tmp_path / "gone")
+    else:  # a real 3.11 where the machine has one (this image does), else a venv whose config says 3.11
+        py311 = shutil.which("python3.11")
+        if py311 and subprocess.run([py311, "-m", "venv", "--without-pip", venv]).returncode == 0:
+            pass
+        else:
+            subprocess.run([sys.executable, "-m", "venv", "--without-pip", venv], check=True)
+            cfg = venv / "pyvenv.cfg"
+            cfg.write_text(cfg.read_text().replace("version = 3.12", "version = 3.11"))
+
+    def state():
+        if venv.is_symlink():
+            return ("link", os.readlink(venv))
+        if venv.is_file():
+            return ("file", venv.read_bytes())
+        return sorted((str(p), p.is_symlink() or p.read_bytes()) for p in venv.rglob("*") if not p.is_dir())
+
+    before = state()
+    base = Path(sys._base_executable).parent
+    env = {"PATH": f"{base}:/usr/bin:/bin", "HOME": str(tmp_path), "PIP_NO_INDEX": "1"}
+    code, out = _set_up(tmp_path, env)
+    lines = out.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("error: .venv "), out
+    assert "run again" in lines[0] and state() == before
