@@ -109,9 +109,12 @@ class GymPushT(Task):
     def make_env(self, share=None):
         import gymnasium
 
-        with warnings.catch_warnings():  # pygame's pkg_resources notice, at gym-pusht's import
-            warnings.simplefilter("ignore")
-            import gym_pusht  # noqa: F401  (registers gym_pusht/PushT-v0)
+        # pygame's "pkg_resources is deprecated" notice: gym-pusht's env module imports pygame (its own
+        # filter there misses the notice's category), and gymnasium.make would import that module outside
+        # this block, so it is imported here
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", "pkg_resources is deprecated")
+            import gym_pusht.envs  # noqa: F401  (registers gym_pusht/PushT-v0; the env module, pygame)
 
         # the checker warns when a keypoint of a block at the table's edge leaves [0, 512]: gym-pusht's own
         env = gymnasium.make(

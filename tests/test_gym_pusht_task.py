@@ -107,3 +107,12 @@ def test_a_set_written_by_lerobots_own_writer_in_the_hubs_form_goes_in_as_it_is(
     report = json.loads((out / "generation_report.json").read_text())
     assert report["attempts"] == 6 and report["kept"] >= 5
     assert replays_exactly(out) == report["kept"]
+
+
+def test_making_the_env_prints_no_pygame_notice():
+    """Issue 48 #11: gymnasium.make imports gym-pusht's env module, and with it pygame, whose
+    "pkg_resources is deprecated" notice was printed on every run (once per worker): the env module is
+    imported inside the import that silences it. A fresh process: this one may have imported pygame."""
+    code = "from datagen.gym_pusht import GYM_PUSHT\nGYM_PUSHT.make_env().reset(0)\nprint('made')"
+    r = run_script("-c", code)
+    assert r.stdout.strip() == "made" and r.stderr.strip() == "", r.stderr
