@@ -14,11 +14,16 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+if __name__ == "__main__":
+    from ch37.process import headless_gl
+
+    headless_gl()  # --video renders headless: before the imports below load mujoco
+
 from ch37 import config
 from ch37.config import FINITE, NON_NEGATIVE, POSITIVE, flag
 from ch37.errors import DataError, run_main
 from ch37.seeds import MAX_SEED, SEED_BLOCK
-from datagen import Task, check_gl, generate, known_tasks
+from datagen import Task, generate, known_tasks, video_problem
 from lerobot_v3 import IMAGE_SIZE
 
 
@@ -67,7 +72,7 @@ def _main(emb: Task, argv=None) -> int:
     )
     if holds_data(a.out):
         raise DataError(f"{a.out} already holds data; pick another --out (nothing was touched)")
-    if problem := check_out_path(a.out, "--out") or (check_gl() if a.video else None):
+    if problem := check_out_path(a.out, "--out") or (video_problem(emb) if a.video else None):
         raise DataError(problem)
     s = generate(emb, a.out, episodes=a.episodes, seed=a.seed, noise=a.noise, video=a.video, quiet=a.quiet)
     wrote = f"wrote {s['episodes']} {emb.name} episodes, {s['frames']} frames to {a.out}"

@@ -20,6 +20,8 @@ ours. The only engine module that imports gym_pusht (at the first env made, not 
     subtasks   one: the whole push relative to the block, entered by a bridge from where the agent is
     actions    position targets (px): a replayed step commands the segment's re-expressed target
     success    gym-pusht's own info["is_success"] (coverage of the goal above 0.95; it ends the episode)
+    video      (--video) gym-pusht's own render(): the table drawn IMAGE_SIZE square (pygame, no OpenGL),
+               with a cross at the last target
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ import warnings
 import numpy as np
 
 from datagen.task import GymnasiumEnv, Perturbation, Subtask, Task, register
+from lerobot_v3 import IMAGE_SIZE
 from scripted_expert import GymPushTExpert, block_pose_from_keypoints
 
 __all__ = ["GYM_PUSHT", "GymPushT", "START_NAMES", "pose_to_start", "start_to_pose"]
@@ -117,8 +120,15 @@ class GymPushT(Task):
             import gym_pusht.envs  # noqa: F401  (registers gym_pusht/PushT-v0; the env module, pygame)
 
         # the checker warns when a keypoint of a block at the table's edge leaves [0, 512]: gym-pusht's own
+        # frames (--video): gym-pusht's own drawing (pygame, no OpenGL), IMAGE_SIZE square, made at render()
+        # alone; its cross marks the last target
+        size = dict(visualization_width=IMAGE_SIZE, visualization_height=IMAGE_SIZE)
         env = gymnasium.make(
-            "gym_pusht/PushT-v0", obs_type="environment_state_agent_pos", disable_env_checker=True
+            "gym_pusht/PushT-v0",
+            obs_type="environment_state_agent_pos",
+            disable_env_checker=True,
+            render_mode="rgb_array",
+            **size,
         )
         return GymnasiumEnv(env, _observe)
 

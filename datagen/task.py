@@ -113,8 +113,9 @@ class Source:
 class GymnasiumEnv:
     """A Gymnasium env (reset(seed=, options=) -> (obs, info); step -> (obs, reward, terminated,
     truncated, info)) as the engine steps one: reset(seed, options) -> obs, step(action) -> (obs, reward,
-    done, info with "success"), success (latched). observe(obs) -> the task's observation vector
-    ((obs_dim,) float32); success_key: the info key that says the task is done ("is_success")."""
+    done, info with "success"), success (latched), render(size) (--video's frames). observe(obs) -> the
+    task's observation vector ((obs_dim,) float32); success_key: the info key that says the task is done
+    ("is_success")."""
 
     def __init__(self, env, observe, success_key: str = "is_success"):
         self.env, self.observe, self.success_key = env, observe, success_key
@@ -129,6 +130,16 @@ class GymnasiumEnv:
         obs, reward, terminated, truncated, info = self.env.step(action)
         self.success |= bool(info[self.success_key])
         return self.observe(obs), reward, bool(terminated or truncated), info | {"success": self.success}
+
+    def render(self, size: int) -> np.ndarray:
+        """The env's own frame, (size, size, 3) uint8: Gymnasium's render() of an env its task made with
+        render_mode "rgb_array", drawing at that size. ValueError for an env that draws no such frame."""
+        if self.env.render_mode != "rgb_array":
+            raise ValueError(f"its env was made with render_mode={self.env.render_mode!r}, not 'rgb_array'")
+        frame = np.asarray(self.env.render())
+        if frame.shape != (size, size, 3):
+            raise ValueError(f"its env draws frames of shape {frame.shape}, not {(size, size, 3)}")
+        return frame.astype(np.uint8, copy=False)
 
 
 def rotation(yaw: float) -> np.ndarray:

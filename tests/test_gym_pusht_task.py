@@ -116,3 +116,20 @@ def test_making_the_env_prints_no_pygame_notice():
     code = "from datagen.gym_pusht import GYM_PUSHT\nGYM_PUSHT.make_env().reset(0)\nprint('made')"
     r = run_script("-c", code)
     assert r.stdout.strip() == "made" and r.stderr.strip() == "", r.stderr
+
+
+def test_gen_demos_records_a_gym_pusht_video(tmp_path):
+    """Issue 48 #5: `gen_demos.py --task gym_pusht --video` stopped in its first rollout with
+    AttributeError: 'GymnasiumEnv' object has no attribute 'render'. gym-pusht draws its frames itself
+    (pygame, no OpenGL): the set holds its video, IMAGE_SIZE square, one frame per frame."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from lerobot_v3 import IMAGE_KEY, IMAGE_SIZE
+
+    out = tmp_path / "set"
+    r = run_script(ROOT / "gen_demos.py", "--task", "gym_pusht", "--episodes", "1", "--video", "--out", out)
+    assert "expert successes 1/1" in r.stdout and r.stderr.strip() == "", r.stderr
+    ds = LeRobotDataset("local/gp", root=out, video_backend="pyav")
+    first, last = ds[0][IMAGE_KEY], ds[len(ds) - 1][IMAGE_KEY]
+    assert tuple(first.shape) == (3, IMAGE_SIZE, IMAGE_SIZE) and float(first.std()) > 0.05
+    assert not np.allclose(first.numpy(), last.numpy())  # the block moved
