@@ -102,6 +102,7 @@ class GymPushT(Task):
     action_ranges = dict.fromkeys(Spec.ACTION_NAMES, (0.0, 512.0))  # px: gym-pusht's action space
     max_steps = 300  # gym-pusht's registered limit
     expert_class = GymPushTExpert
+    noise_unit = "px"  # the expert's noise is on its position targets
     arms = {"agent": slice(0, 2)}
     reach = {"agent": ((0.0, 512.0), (0.0, 512.0))}  # px: a target outside the action space is none
     subtasks = (Subtask("push", ("block",)),)

@@ -259,8 +259,9 @@ class Task:
     state_ranges: dict[str, tuple[float, float]]  # {state name: (low, high)}: a source outside is refused
     action_ranges: dict[str, tuple[float, float]]  # {action name: (low, high)}: the env's clip range
     max_steps: int  # control steps an episode may last: the env's limit
-    expert_class: type | None = None  # its scripted expert: expert_class(noise=std m/s, seed=int); optional
-    default_noise: float = 0.0  # the expert's action noise (std, m/s) in the task's demo sets
+    expert_class: type | None = None  # its scripted expert: expert_class(noise=std, seed=int); optional
+    default_noise: float = 0.0  # the expert's action noise (std, in noise_unit) in the task's demo sets
+    noise_unit: str = "m/s"  # the unit of the expert's noise: its actions' (gen_demos.py --noise)
 
     # ---- what replay reads (datagen.replay) ----
     arms: dict[str, slice]  # {arm: the columns of its controlled point's (x, y) in an observation}
