@@ -22,6 +22,8 @@ run        a run on disk (augment_demos.py): run() says the order of its steps, 
 
 A task registers itself when its module is imported (datagen.task.register); known_tasks() imports every
 module of the package and returns them by name, so a new task is one module here, listed nowhere else.
+A module that fails to import (half written, or a copy still naming its original's task) is one warning
+line naming it, its tasks unavailable and the others known.
 """
 
 from datagen.aloha import ALOHA

@@ -32,9 +32,12 @@ success: datagen.replay), lockstep, shards, resume, report and merge.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import math
 import pkgutil
+import sys
+import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -374,19 +377,48 @@ class Task:
 _REGISTERED: dict[str, Task] = {}
 
 
+def _file_of(module: str) -> str:
+    """How a message names a module of this package: datagen/pusht.py."""
+    f = Path(sys.modules[module].__file__)
+    return f"{f.parent.name}/{f.name}"
+
+
 def register(task: Task) -> Task:
     """Make `task` known to the engine under task.name; a task module calls it as it is imported
     (PUSHT = register(PushT())), as MimicGen's env interfaces register through their metaclass."""
     old = _REGISTERED.setdefault(task.name, task)
     if old is not task and type(old) is not type(task):
-        raise ValueError(f"two tasks named {task.name!r}: {type(old).__name__} and {type(task).__name__}")
+        first, second = (_file_of(type(t).__module__) for t in (old, task))
+        raise ValueError(
+            f"{second} names its task {task.name!r}, as {first} does; give one of them another name"
+        )
     return old
+
+
+@functools.cache  # once per process (a forked worker inherits it): a module that failed is not re-run
+def _import_modules() -> dict[str, str]:
+    """Import every module of this package, so that each task module registers its task; {file: why} for
+    each that fails to import, and one warning line for each on stderr. A module that raises as it is
+    imported (one half written, or a copy of another task's module that still bears its name) makes its
+    own tasks unavailable, not the others."""
+    failed = {}
+    for m in pkgutil.iter_modules([str(Path(__file__).parent)]):
+        name = f"{__package__}.{m.name}"
+        try:
+            importlib.import_module(name)
+        except Exception as e:  # whatever a module raises, the others' tasks stay known
+            file = str(Path(__file__).parent / f"{m.name}.py")
+            lines = [f.lineno for f in traceback.extract_tb(e.__traceback__) if f.filename == file]
+            line = getattr(e, "lineno", None) if isinstance(e, SyntaxError) else lines[-1] if lines else None
+            where = f"{__package__}/{m.name}.py" + (f" (line {line})" if line else "")
+            failed[where] = f"{type(e).__name__}: {' '.join(str(e).split())}"
+            print(f"warning: {where} was not loaded, its tasks unavailable: {failed[where]}", file=sys.stderr)
+    return failed
 
 
 def known_tasks() -> dict[str, Task]:
     """{name: task} of every task the engine knows, by name. Every module of this package is imported
     first, so a task module found here registers itself: a new task is one module in datagen/, listed
-    nowhere else."""
-    for m in pkgutil.iter_modules([str(Path(__file__).parent)]):
-        importlib.import_module(f"{__package__}.{m.name}")
+    nowhere else. A module that fails to import is one warning line, its tasks left out."""
+    _import_modules()
     return dict(sorted(_REGISTERED.items()))
