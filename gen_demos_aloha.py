@@ -6,13 +6,12 @@ observation.state float32[10] and action float32[6] (two planar velocities in m/
 commands), fps 10; names and units in aloha_env.py. Callable from Python as main(argv).
 """
 
-import os
 import sys
 
-if __name__ == "__main__" and sys.platform.startswith("linux"):
-    # --video renders headless: EGL unless you chose a GL backend. Set by the program that renders, before
-    # its imports load mujoco (which reads MUJOCO_GL once, when first imported); never by an import of ours.
-    os.environ.setdefault("MUJOCO_GL", "egl")
+if __name__ == "__main__":
+    from ch37.process import headless_gl
+
+    headless_gl()  # --video renders headless: before the imports below load mujoco
 
 import gen_demos
 from datagen import ALOHA  # the task: its env, its expert, its name (the engine reads the same)

@@ -70,10 +70,13 @@ def _group_of(cls, f: dataclasses.Field) -> type:
     return next(c for c in reversed(cls.__mro__) if f.name in getattr(c, "__annotations__", {}))
 
 
-def parser_of(cls, prog: str | None = None, description: str | None = None) -> argparse.ArgumentParser:
+def parser_of(
+    cls, prog: str | None = None, description: str | None = None, helps: dict | None = None
+) -> argparse.ArgumentParser:
     """The parser of command dataclass `cls`: its own flags first, then one argument group per class it
     takes flags from (in its bases' order, the class docstring's first line the group's title), every
-    flag's default in --help."""
+    flag's default in --help. `helps` {name: help} replace fields' help known only at run time (a
+    task's units)."""
     p = parser(description or (cls.__doc__ or "").strip(), prog=prog)
     by_owner = {}
     for f in fields(cls):
@@ -82,7 +85,7 @@ def parser_of(cls, prog: str | None = None, description: str | None = None) -> a
         group = p if owner is cls else p.add_argument_group((owner.__doc__ or owner.__name__).strip())
         for f in by_owner[owner]:
             m, default = f.metadata, _default(f)
-            kw = dict(m["kw"], default=default, help=m["help"])
+            kw = dict(m["kw"], default=default, help=(helps or {}).get(f.name, m["help"]))
             if isinstance(default, bool) and "action" not in kw:
                 kw["action"] = argparse.BooleanOptionalAction if default else "store_true"
             elif "type" not in kw and "action" not in kw and default is not None:
@@ -145,12 +148,20 @@ def check_fields(args, cls, argv=None) -> None:
 
 
 def parse(
-    cls, argv=None, *, prog=None, description=None, smoke: dict | None = None, defaults: dict | None = None
+    cls,
+    argv=None,
+    *,
+    prog=None,
+    description=None,
+    smoke: dict | None = None,
+    defaults: dict | None = None,
+    helps: dict | None = None,
 ) -> argparse.Namespace:
     """Parse and check the flags of command dataclass `cls`; a problem is a DataError (one line, exit 2).
-    `defaults` replace fields' defaults known only at run time (the embodiment's noise); with `smoke`
-    and --smoke given, smoke's values are the defaults (flags given explicitly win)."""
-    p = parser_of(cls, prog, description)
+    `defaults` replace fields' defaults and `helps` their help, known only at run time (the task's noise
+    and its unit); with `smoke` and --smoke given, smoke's values are the defaults (flags given
+    explicitly win)."""
+    p = parser_of(cls, prog, description, helps)
     p.set_defaults(**(defaults or {}))
     args = p.parse_args(argv)
     if smoke and getattr(args, "smoke", False):

@@ -4,9 +4,9 @@ Workers die with the run: each asks the kernel for SIGKILL when its parent dies 
 PR_SET_PDEATHSIG; elsewhere a thread watching the parent pid), and Ctrl-C is the parent's alone
 (workers ignore SIGINT; the parent stops them). forking() blocks the stop signals around a fork.
 max_workers and available_memory bound the flags that spend cores and memory; environment() scopes an
-environment variable to the call that needs it. (The main process's
-exit codes and its SIGTERM handler are ch37.errors'; a forked worker's copy of a run's lock is closed
-by ch37.ownership's at-fork hook.)
+environment variable to the call that needs it; headless_gl() picks a rendering program's GL backend.
+(The main process's exit codes and its SIGTERM handler are ch37.errors'; a forked worker's copy of a
+run's lock is closed by ch37.ownership's at-fork hook.)
 """
 
 from __future__ import annotations
@@ -49,6 +49,15 @@ def environment(**values: str):
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
+
+
+def headless_gl() -> None:
+    """MuJoCo's EGL backend for a program that renders (the demo generators' --video), unless you chose one
+    (MUJOCO_GL): on Linux a machine may have no display for GLFW, MuJoCo's default. MuJoCo reads MUJOCO_GL
+    once, when first imported, so the program calls this under `if __name__ == "__main__"` before its
+    imports load mujoco; never an import of ours (a library's user chooses their own backend)."""
+    if sys.platform.startswith("linux"):
+        os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 def _die_with(parent: int) -> None:

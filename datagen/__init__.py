@@ -5,7 +5,7 @@ task       Task (what a task describes, in MimicGen's division: its env, starts 
            conversion, an optional expert), Subtask, Outcome (what one attempt came to), Perturbation,
            Source, rollout, write_dataset (a stamped set)
 demos      expert demo sets of a task: generate, ensure_demos (the chapter's private demo cache),
-           check_given (a set you name, checked and never modified)
+           check_given (a set you name, checked and never modified), video_problem (whether --video can)
 pusht      PUSHT: PushT described as a task (the only module here that imports pusht_env and its expert)
 aloha      ALOHA: the ALOHA cube handoff described as a task (the only module here that imports aloha_env)
 engine     one attempt in either mode, keep_first, grow, run_attempts, save: task-agnostic
@@ -22,10 +22,12 @@ run        a run on disk (augment_demos.py): run() says the order of its steps, 
 
 A task registers itself when its module is imported (datagen.task.register); known_tasks() imports every
 module of the package and returns them by name, so a new task is one module here, listed nowhere else.
+A module that fails to import (half written, or a copy still naming its original's task) is one warning
+line naming it, its tasks unavailable and the others known.
 """
 
 from datagen.aloha import ALOHA
-from datagen.demos import check_given, check_gl, ensure_demos, generate
+from datagen.demos import check_given, check_gl, ensure_demos, generate, video_problem
 from datagen.engine import (
     ATTEMPTS_PER_KEPT,
     KEPT_KEYS,
@@ -78,5 +80,6 @@ __all__ = [
     "run_attempts",
     "save",
     "sources",
+    "video_problem",
     "write_dataset",
 ]

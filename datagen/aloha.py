@@ -132,6 +132,7 @@ class Aloha(Task):
     start_names = START_NAMES
     state_ranges, action_ranges = STATE_RANGES, ACTION_RANGES
     expert_class = AlohaExpert
+    noise_unit = "m/s, grip commands alike (-1..1)"  # one std on all six action numbers
     max_steps = aloha_env.MAX_STEPS
     arms = XY
     reach = REACH

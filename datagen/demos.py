@@ -22,6 +22,7 @@ from ch37.process import environment
 from ch37.seeds import env_seed
 from datagen.task import rollout, write_dataset
 from lerobot_v3 import (
+    IMAGE_SIZE,
     features,
     fps_problem,
     frames_problem,
@@ -103,6 +104,21 @@ def check_gl() -> str | None:
         return (
             f"no OpenGL backend for headless rendering ({type(e).__name__}); set MUJOCO_GL=egl or osmesa "
             "with its library installed, or use --no-video"
+        )
+
+
+def video_problem(task) -> str | None:
+    """None if `task`'s env draws the frames --video records (rollout(render=True)) here, else one line
+    saying why: asked before anything is made, of a fresh env of the task, for every task alike."""
+    env = task.make_env()
+    try:
+        env.reset(0)
+        env.render(IMAGE_SIZE)
+        return None
+    except Exception as e:  # MuJoCo without a GL context raises its own kinds; an env may draw nothing at all
+        return (
+            check_gl()
+            or f"--video: {task.title} draws no frames here ({type(e).__name__}: {e}); use --no-video"
         )
 
 

@@ -20,6 +20,8 @@ ours. The only engine module that imports gym_pusht (at the first env made, not 
     subtasks   one: the whole push relative to the block, entered by a bridge from where the agent is
     actions    position targets (px): a replayed step commands the segment's re-expressed target
     success    gym-pusht's own info["is_success"] (coverage of the goal above 0.95; it ends the episode)
+    video      (--video) gym-pusht's own render(): the table drawn IMAGE_SIZE square (pygame, no OpenGL),
+               with a cross at the last target
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ import warnings
 import numpy as np
 
 from datagen.task import GymnasiumEnv, Perturbation, Subtask, Task, register
+from lerobot_v3 import IMAGE_SIZE
 from scripted_expert import GymPushTExpert, block_pose_from_keypoints
 
 __all__ = ["GYM_PUSHT", "GymPushT", "START_NAMES", "pose_to_start", "start_to_pose"]
@@ -99,6 +102,7 @@ class GymPushT(Task):
     action_ranges = dict.fromkeys(Spec.ACTION_NAMES, (0.0, 512.0))  # px: gym-pusht's action space
     max_steps = 300  # gym-pusht's registered limit
     expert_class = GymPushTExpert
+    noise_unit = "px"  # the expert's noise is on its position targets
     arms = {"agent": slice(0, 2)}
     reach = {"agent": ((0.0, 512.0), (0.0, 512.0))}  # px: a target outside the action space is none
     subtasks = (Subtask("push", ("block",)),)
@@ -109,13 +113,23 @@ class GymPushT(Task):
     def make_env(self, share=None):
         import gymnasium
 
-        with warnings.catch_warnings():  # pygame's pkg_resources notice, at gym-pusht's import
-            warnings.simplefilter("ignore")
-            import gym_pusht  # noqa: F401  (registers gym_pusht/PushT-v0)
+        # pygame's "pkg_resources is deprecated" notice: gym-pusht's env module imports pygame (its own
+        # filter there misses the notice's category), and gymnasium.make would import that module outside
+        # this block, so it is imported here
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", "pkg_resources is deprecated")
+            import gym_pusht.envs  # noqa: F401  (registers gym_pusht/PushT-v0; the env module, pygame)
 
         # the checker warns when a keypoint of a block at the table's edge leaves [0, 512]: gym-pusht's own
+        # frames (--video): gym-pusht's own drawing (pygame, no OpenGL), IMAGE_SIZE square, made at render()
+        # alone; its cross marks the last target
+        size = dict(visualization_width=IMAGE_SIZE, visualization_height=IMAGE_SIZE)
         env = gymnasium.make(
-            "gym_pusht/PushT-v0", obs_type="environment_state_agent_pos", disable_env_checker=True
+            "gym_pusht/PushT-v0",
+            obs_type="environment_state_agent_pos",
+            disable_env_checker=True,
+            render_mode="rgb_array",
+            **size,
         )
         return GymnasiumEnv(env, _observe)
 

@@ -32,9 +32,12 @@ success: datagen.replay), lockstep, shards, resume, report and merge.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import math
 import pkgutil
+import sys
+import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -113,8 +116,9 @@ class Source:
 class GymnasiumEnv:
     """A Gymnasium env (reset(seed=, options=) -> (obs, info); step -> (obs, reward, terminated,
     truncated, info)) as the engine steps one: reset(seed, options) -> obs, step(action) -> (obs, reward,
-    done, info with "success"), success (latched). observe(obs) -> the task's observation vector
-    ((obs_dim,) float32); success_key: the info key that says the task is done ("is_success")."""
+    done, info with "success"), success (latched), render(size) (--video's frames). observe(obs) -> the
+    task's observation vector ((obs_dim,) float32); success_key: the info key that says the task is done
+    ("is_success")."""
 
     def __init__(self, env, observe, success_key: str = "is_success"):
         self.env, self.observe, self.success_key = env, observe, success_key
@@ -129,6 +133,16 @@ class GymnasiumEnv:
         obs, reward, terminated, truncated, info = self.env.step(action)
         self.success |= bool(info[self.success_key])
         return self.observe(obs), reward, bool(terminated or truncated), info | {"success": self.success}
+
+    def render(self, size: int) -> np.ndarray:
+        """The env's own frame, (size, size, 3) uint8: Gymnasium's render() of an env its task made with
+        render_mode "rgb_array", drawing at that size. ValueError for an env that draws no such frame."""
+        if self.env.render_mode != "rgb_array":
+            raise ValueError(f"its env was made with render_mode={self.env.render_mode!r}, not 'rgb_array'")
+        frame = np.asarray(self.env.render())
+        if frame.shape != (size, size, 3):
+            raise ValueError(f"its env draws frames of shape {frame.shape}, not {(size, size, 3)}")
+        return frame.astype(np.uint8, copy=False)
 
 
 def rotation(yaw: float) -> np.ndarray:
@@ -248,8 +262,9 @@ class Task:
     state_ranges: dict[str, tuple[float, float]]  # {state name: (low, high)}: a source outside is refused
     action_ranges: dict[str, tuple[float, float]]  # {action name: (low, high)}: the env's clip range
     max_steps: int  # control steps an episode may last: the env's limit
-    expert_class: type | None = None  # its scripted expert: expert_class(noise=std m/s, seed=int); optional
-    default_noise: float = 0.0  # the expert's action noise (std, m/s) in the task's demo sets
+    expert_class: type | None = None  # its scripted expert: expert_class(noise=std, seed=int); optional
+    default_noise: float = 0.0  # the expert's action noise (std, in noise_unit) in the task's demo sets
+    noise_unit: str = "m/s"  # the unit of the expert's noise: its actions' (gen_demos.py --noise)
 
     # ---- what replay reads (datagen.replay) ----
     arms: dict[str, slice]  # {arm: the columns of its controlled point's (x, y) in an observation}
@@ -362,19 +377,48 @@ class Task:
 _REGISTERED: dict[str, Task] = {}
 
 
+def _file_of(module: str) -> str:
+    """How a message names a module of this package: datagen/pusht.py."""
+    f = Path(sys.modules[module].__file__)
+    return f"{f.parent.name}/{f.name}"
+
+
 def register(task: Task) -> Task:
     """Make `task` known to the engine under task.name; a task module calls it as it is imported
     (PUSHT = register(PushT())), as MimicGen's env interfaces register through their metaclass."""
     old = _REGISTERED.setdefault(task.name, task)
     if old is not task and type(old) is not type(task):
-        raise ValueError(f"two tasks named {task.name!r}: {type(old).__name__} and {type(task).__name__}")
+        first, second = (_file_of(type(t).__module__) for t in (old, task))
+        raise ValueError(
+            f"{second} names its task {task.name!r}, as {first} does; give one of them another name"
+        )
     return old
+
+
+@functools.cache  # once per process (a forked worker inherits it): a module that failed is not re-run
+def _import_modules() -> dict[str, str]:
+    """Import every module of this package, so that each task module registers its task; {file: why} for
+    each that fails to import, and one warning line for each on stderr. A module that raises as it is
+    imported (one half written, or a copy of another task's module that still bears its name) makes its
+    own tasks unavailable, not the others."""
+    failed = {}
+    for m in pkgutil.iter_modules([str(Path(__file__).parent)]):
+        name = f"{__package__}.{m.name}"
+        try:
+            importlib.import_module(name)
+        except Exception as e:  # whatever a module raises, the others' tasks stay known
+            file = str(Path(__file__).parent / f"{m.name}.py")
+            lines = [f.lineno for f in traceback.extract_tb(e.__traceback__) if f.filename == file]
+            line = getattr(e, "lineno", None) if isinstance(e, SyntaxError) else lines[-1] if lines else None
+            where = f"{__package__}/{m.name}.py" + (f" (line {line})" if line else "")
+            failed[where] = f"{type(e).__name__}: {' '.join(str(e).split())}"
+            print(f"warning: {where} was not loaded, its tasks unavailable: {failed[where]}", file=sys.stderr)
+    return failed
 
 
 def known_tasks() -> dict[str, Task]:
     """{name: task} of every task the engine knows, by name. Every module of this package is imported
     first, so a task module found here registers itself: a new task is one module in datagen/, listed
-    nowhere else."""
-    for m in pkgutil.iter_modules([str(Path(__file__).parent)]):
-        importlib.import_module(f"{__package__}.{m.name}")
+    nowhere else. A module that fails to import is one warning line, its tasks left out."""
+    _import_modules()
     return dict(sorted(_REGISTERED.items()))

@@ -233,3 +233,54 @@ def test_the_commands_are_offline_where_the_environment_does_not_say_so(tmp_path
         assert p.returncode == 0 and "imported online" not in p.stderr, (argv[0], p.stdout, p.stderr)
     frames, hub, datasets_offline, variable = p.stdout.split()
     assert int(frames) > 0 and (hub, datasets_offline, variable) == ("True", "True", "None"), p.stdout
+
+
+def _no_gl_chosen() -> dict:
+    """This process's environment less every GL choice: a user's shell on a machine with no display."""
+    return {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM", "DISPLAY")}
+
+
+def test_gen_demos_task_pusht_records_its_video_as_gen_demos_pusht_does(tmp_path):
+    """Issue 48 #5: `gen_demos.py --task pusht --video` chose no GL backend (gen_demos_pusht.py picks EGL
+    unless you chose one), so MuJoCo tried GLFW with no display: GLFW warnings, then refused. Skipped
+    where this machine has no EGL (gen_demos_pusht.py could not render either)."""
+    from datagen import check_gl
+
+    if check_gl() is not None:  # conftest chose EGL for this process, as the generators do
+        pytest.skip("no EGL here")
+    out = tmp_path / "set"
+    argv = ["gen_demos.py", "--task", "pusht", "--episodes", "1", "--video", "--quiet", "--out", str(out)]
+    p = subprocess.run(
+        [sys.executable, *argv], cwd=ROOT, env=_no_gl_chosen(), capture_output=True, text=True, timeout=300
+    )
+    assert p.returncode == 0 and p.stderr.strip() == "", p.stderr
+    info = json.loads((out / "meta" / "info.json").read_text())
+    assert info["features"][lerobot_io.IMAGE_KEY]["dtype"] == "video"
+    assert list(out.glob("videos/*/*/*.mp4")), sorted(out.rglob("*"))
+
+
+class _NoFrames(gen_demos_pusht.PUSHT.__class__):
+    """PushT whose env cannot draw: a Gymnasium env made without a render mode (its render() is None)."""
+
+    name, title = "pusht_unrendered", "PushT without frames"
+
+    def make_env(self, share=None):
+        import gymnasium
+
+        import gym_envs  # registers ch37/PushT-v0
+        from datagen.task import GymnasiumEnv
+
+        return GymnasiumEnv(gymnasium.make(gym_envs.PUSHT_ID), lambda obs: obs, success_key="success")
+
+
+def test_video_of_a_task_that_cannot_render_is_refused_before_any_work(tmp_path, capsys):
+    """Issue 48 #5: --video for a task whose env records no frames is one line and exit 2 before
+    anything is made (it was an AttributeError deep in the first rollout)."""
+    import gen_demos
+
+    out = tmp_path / "set"
+    assert gen_demos.main(_NoFrames(), ["--episodes", "1", "--video", "--quiet", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and "--video" in err[0], err
+    assert "--no-video" in err[0] and "PushT without frames" in err[0], err
+    assert not out.exists() and not list(tmp_path.iterdir())

@@ -293,3 +293,31 @@ def test_the_copies_kept_for_an_instant_help_match_their_sources():
     assert all(t.modes == config.MODES for t in datagen.known_tasks().values())
     assert augment_demos.Args.__dataclass_fields__["select"].metadata["kw"]["choices"] == engine.SELECTS
     assert (cli.PUSHT_MAX_STEPS, cli.ALOHA_MAX_STEPS) == (pusht_env.MAX_STEPS, aloha_env.MAX_STEPS)
+
+
+def _flag_help(text: str, name: str) -> str:
+    """The help of flag --NAME in a --help text, on one line."""
+    lines = text.splitlines()
+    start = next(i for i, s in enumerate(lines) if s.lstrip().startswith(f"--{name}"))
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].lstrip().startswith("-")), len(lines))
+    return " ".join(" ".join(lines[start:end]).split())
+
+
+def test_gen_demos_help_needs_no_task_lists_the_tasks_and_their_units():
+    """Issue 48 #6: `gen_demos.py --help` answered "error: no --task ..."; --task was in no usage text,
+    and --noise said m/s where gym-pusht's noise is in px. Help works without a task and lists the tasks,
+    and every unit is the task's own."""
+    from datagen import known_tasks
+
+    tasks = {n: t for n, t in known_tasks().items() if t.expert_class is not None}
+    r = run_script(ROOT / "gen_demos.py", "--help", check=False)
+    assert r.returncode == 0 and r.stderr == "" and "--task" in r.stdout.split("\n\n")[0], r.stdout + r.stderr
+    task_help = _flag_help(r.stdout, "task")
+    assert all(name in task_help for name in tasks), task_help
+    noise = _flag_help(r.stdout, "noise")
+    assert "gym_pusht px" in noise and "pusht m/s" in noise, noise
+    r = run_script(ROOT / "gen_demos.py", "--task", "gym_pusht", "--help")
+    assert "--task" in r.stdout.split("\n\n")[0] and "m/s" not in _flag_help(r.stdout, "noise"), r.stdout
+    assert "px" in _flag_help(r.stdout, "noise") and "outputs/demos/gym_pusht" in r.stdout
+    r = run_script(ROOT / "gen_demos_pusht.py", "--help")
+    assert "--task" not in r.stdout and "m/s" in _flag_help(r.stdout, "noise"), r.stdout

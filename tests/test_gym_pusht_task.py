@@ -107,3 +107,29 @@ def test_a_set_written_by_lerobots_own_writer_in_the_hubs_form_goes_in_as_it_is(
     report = json.loads((out / "generation_report.json").read_text())
     assert report["attempts"] == 6 and report["kept"] >= 5
     assert replays_exactly(out) == report["kept"]
+
+
+def test_making_the_env_prints_no_pygame_notice():
+    """Issue 48 #11: gymnasium.make imports gym-pusht's env module, and with it pygame, whose
+    "pkg_resources is deprecated" notice was printed on every run (once per worker): the env module is
+    imported inside the import that silences it. A fresh process: this one may have imported pygame."""
+    code = "from datagen.gym_pusht import GYM_PUSHT\nGYM_PUSHT.make_env().reset(0)\nprint('made')"
+    r = run_script("-c", code)
+    assert r.stdout.strip() == "made" and r.stderr.strip() == "", r.stderr
+
+
+def test_gen_demos_records_a_gym_pusht_video(tmp_path):
+    """Issue 48 #5: `gen_demos.py --task gym_pusht --video` stopped in its first rollout with
+    AttributeError: 'GymnasiumEnv' object has no attribute 'render'. gym-pusht draws its frames itself
+    (pygame, no OpenGL): the set holds its video, IMAGE_SIZE square, one frame per frame."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from lerobot_v3 import IMAGE_KEY, IMAGE_SIZE
+
+    out = tmp_path / "set"
+    r = run_script(ROOT / "gen_demos.py", "--task", "gym_pusht", "--episodes", "1", "--video", "--out", out)
+    assert "expert successes 1/1" in r.stdout and r.stderr.strip() == "", r.stderr
+    ds = LeRobotDataset("local/gp", root=out, video_backend="pyav")
+    first, last = ds[0][IMAGE_KEY], ds[len(ds) - 1][IMAGE_KEY]
+    assert tuple(first.shape) == (3, IMAGE_SIZE, IMAGE_SIZE) and float(first.std()) > 0.05
+    assert not np.allclose(first.numpy(), last.numpy())  # the block moved

@@ -59,3 +59,53 @@ def test_an_edit_to_any_step_of_a_run_changes_the_run_digest(monkeypatch, step):
     before = digest_run()
     _edited(monkeypatch, Path(sys.modules[f"datagen.{step}"].__file__))
     assert digest_run() != before, f"an edit of datagen/{step}.py leaves the run digest as it was"
+
+
+def _copy_with(tmp_path: Path, name: str, text: str) -> Path:
+    """A copy of the project's code with one more module datagen/NAME (the repository is never written)."""
+    import shutil
+
+    root = Path(__file__).resolve().parent.parent
+    skip = shutil.ignore_patterns(".git", ".venv", "outputs", "__pycache__", ".*_cache", "tests", "docs")
+    copy = tmp_path / "project"
+    shutil.copytree(root, copy, ignore=skip)
+    (copy / "datagen" / name).write_text(text)
+    return copy
+
+
+def _run(copy: Path, *argv):
+    from conftest import run_script
+
+    return run_script(*argv, cwd=copy, check=False, timeout=300)
+
+
+def test_a_copied_task_module_is_one_warning_naming_both_modules_and_every_command_works(tmp_path):
+    """Issue 48 #7: copying datagen/pusht.py to datagen/my_task.py (a newcomer's first step of adding a
+    task) stopped every engine command with "ValueError: two tasks named 'pusht': PushT and PushT",
+    naming no file. Now one warning line names both modules; the commands go on with the tasks known."""
+    copy = _copy_with(tmp_path, "my_task.py", (Path(datagen.__file__).parent / "pusht.py").read_text())
+    r = _run(copy, "gen_demos.py", "--task", "pusht", "--episodes", "1", "--quiet", "--out", tmp_path / "s")
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 0 and len(err) == 1 and err[0].startswith("warning: "), r.stderr
+    assert "datagen/my_task.py" in err[0] and "datagen/pusht.py" in err[0] and "'pusht'" in err[0], err
+    args = ["--src", tmp_path / "s", "--out", tmp_path / "grown", "--per_demo", "1", "--workers", "1"]
+    r = _run(copy, "augment_demos.py", *args, "--quiet")
+    assert r.returncode == 0 and r.stderr.strip().splitlines() == err, r.stderr
+
+
+def test_a_task_module_that_fails_to_import_makes_only_its_own_task_unavailable(tmp_path):
+    """Issue 48 #7: a task module that raised on import stopped augment_demos.py and gen_demos.py for every
+    task, PushT sets included, with its traceback. Now it is one warning line naming it and why; every
+    other task works, and asking for its task is one error line."""
+    copy = _copy_with(tmp_path, "half_done.py", "import numpy\n\nraise RuntimeError('not finished yet')\n")
+    r = _run(copy, "gen_demos.py", "--task", "pusht", "--episodes", "1", "--quiet", "--out", tmp_path / "s")
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 0 and len(err) == 1 and err[0].startswith("warning: "), r.stderr
+    assert "datagen/half_done.py" in err[0] and "RuntimeError: not finished yet" in err[0], err
+    args = ["--src", tmp_path / "s", "--out", tmp_path / "grown", "--per_demo", "1", "--workers", "1"]
+    r = _run(copy, "augment_demos.py", *args, "--quiet")
+    assert r.returncode == 0 and r.stderr.strip().splitlines() == err, r.stderr
+    r = _run(copy, "gen_demos.py", "--task", "half_done", "--out", tmp_path / "x")
+    assert r.returncode == 2 and r.stderr.strip().splitlines()[:-1] == err, r.stderr
+    assert r.stderr.strip().splitlines()[-1].startswith("error: --task 'half_done'"), r.stderr
+    assert not (tmp_path / "x").exists() and "Traceback" not in r.stderr
