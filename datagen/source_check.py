@@ -1,6 +1,7 @@
 """The source set a run grows, only read: which task it is (task_of), whether the engine can grow it
-(read_source: its schema, names, fps, files, frames and value ranges, each failure one line) and what
-it is, wherever it lives (source_identity: a digest of the frames read, in the run's stamp)."""
+(read_source: its schema, names, fps, files, frames, value ranges and the task's own check of its states,
+Task.state_problem; each failure one line) and what it is, wherever it lives (source_identity: a digest of
+the frames read, in the run's stamp)."""
 
 from __future__ import annotations
 
@@ -153,6 +154,15 @@ def read_source(task: Task, src: Path) -> dict:
     problem = state_range_problem(task, src, arrays["observation.state"], arrays["action"])
     if problem:
         raise DataError(problem)
+    found = task.state_problem(arrays["observation.state"])
+    if found:  # named by episode and frame, as a user finds it in the set
+        row, what = found
+        ep = arrays["episode_index"]
+        frame = int(np.count_nonzero(ep[:row] == ep[row]))
+        raise DataError(
+            f"--src {src}: episode {int(ep[row])}, frame {frame} (row {row}): {what}; this is not a "
+            f"{task.title} state, and nothing is grown from it"
+        )
     if arrays["episode_index"].max() >= SEED_BLOCK:
         raise DataError(f"--src {src}: episode indices must be below {SEED_BLOCK:,} (the seed block)")
     return arrays
