@@ -1101,3 +1101,59 @@ def test_unprivileged_cases_are_one_line(as_nobody, case, needle):
     err = p.stderr.strip().splitlines()
     assert p.returncode == 2 and len(err) == 1 and needle in err[0], p.stderr
     assert "Traceback" not in p.stdout + p.stderr and snapshot([work / "src"]) == before
+
+
+# ---------------------------------------------------------------------------------------------
+# Issue 48: a malformed meta/info.json (#4), --out inside --src (#9), the tools' result files (#12)
+# ---------------------------------------------------------------------------------------------
+def _info_edited(edit, command="augment"):
+    """A user's copy of the PushT set whose meta/info.json is edit(info), given to augment_demos.py as
+    --src (or to scale_data.py as --pusht_data)."""
+
+    def make(tmp, ref):
+        mine = user_set(ref, tmp)
+        info = json.loads((mine / "meta" / "info.json").read_text())
+        (mine / "meta" / "info.json").write_text(json.dumps(edit(info), indent=4))
+        if command == "augment":
+            return ["augment_demos.py", "--src", mine, "--out", tmp / "o", "--per_demo", "1"], [mine], None
+        return [*SD, "--no-cache", "--out", tmp / "o", "--pusht_data", mine], [mine], None
+
+    return make
+
+
+ISSUE48_CASES = [
+    # 4: one line naming what is malformed, not a traceback (nor PushT's widths blamed)
+    (
+        "info-feature-entry-a-list",
+        _info_edited(lambda i: i | {"features": i["features"] | {"observation.state": [5]}}),
+        2,
+        "meta/info.json's feature 'observation.state' is a list, not an object",
+    ),
+    (
+        "info-features-a-list",
+        _info_edited(lambda i: i | {"features": list(i["features"])}),
+        2,
+        "meta/info.json's features is a list, not an object",
+    ),
+    ("info-a-list", _info_edited(lambda i: [i]), 2, "meta/info.json holds a list, not an object"),
+    ("info-fps-a-string", _info_edited(lambda i: i | {"fps": "10"}), 2, "fps is '10' (a string)"),
+    (
+        "info-a-list-scale-data",
+        _info_edited(lambda i: [i], "scale_data"),
+        2,
+        "meta/info.json holds a list, not an object",
+    ),
+    (
+        "info-fps-a-string-scale-data",
+        _info_edited(lambda i: i | {"fps": "10"}, "scale_data"),
+        2,
+        "fps is '10' (a string)",
+    ),
+]
+
+
+@pytest.mark.parametrize(
+    "make, code, needle", [c[1:] for c in ISSUE48_CASES], ids=[c[0] for c in ISSUE48_CASES]
+)
+def test_issue48_bad_input_is_one_line_and_nothing_is_touched(ref, tmp_path, make, code, needle):
+    test_bad_input_is_one_line_and_nothing_is_touched(ref, tmp_path, make, code, needle)
