@@ -306,7 +306,8 @@ def check_own_result(path: Path, kind: str, flag: str = "--out") -> None:
 
 def check_out_path(path: Path, flag: str = "--out") -> str | None:
     """None if `path` can hold this program's output, else one line saying why not. Creates nothing:
-    it writes and removes a probe file in `path`, or in its nearest existing parent folder."""
+    it writes and removes a probe file in `path`, or in its nearest existing parent folder; so a caller
+    checks first that `path` is not inside a folder it only reads (claim's inputs, the engine's --src)."""
     path = Path(path)
     if str(path) == "":
         return f"{flag} must not be empty"
@@ -471,14 +472,14 @@ def claim(
     replaces  folders the run will rebuild: each must hold only files this program wrote
     """
     out = Path(out)
-    if problem := check_out_path(out):
-        raise DataError(problem)
-    for flag, given in (inputs or {}).items():
+    for flag, given in (inputs or {}).items():  # before check_out_path's probe file, which would land there
         if given is not None and out.resolve().is_relative_to(Path(given).resolve()):
             raise DataError(
                 f"--out {out} is inside {flag} {given}: results would be written into your dataset; "
                 "pass another --out"
             )
+    if problem := check_out_path(out):
+        raise DataError(problem)
     stamp = read_stamp(out)
     if (out / "meta" / "info.json").exists() or (is_ours(stamp) and stamp.get("kind") != "results"):
         raise DataError(f"--out {out} is a dataset folder; results would mix into it: pass another --out")

@@ -1157,3 +1157,24 @@ ISSUE48_CASES = [
 )
 def test_issue48_bad_input_is_one_line_and_nothing_is_touched(ref, tmp_path, make, code, needle):
     test_bad_input_is_one_line_and_nothing_is_touched(ref, tmp_path, make, code, needle)
+
+
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["augment_demos.py", "--per_demo", "1", "--src"], "overlaps --src"),
+        ([*SD, "--no-cache", "--pusht_data"], "is inside --pusht_data"),
+    ],
+    ids=["augment_demos", "scale_data"],
+)
+def test_out_inside_the_source_is_refused_before_anything_is_written_there(ref, tmp_path, argv, needle):
+    """Issue 48 #9: --out inside the source is refused before any write: the probe that --out can be
+    written never lands in the source (its folder's mtime unchanged, nothing left by a kill there)."""
+    src = user_set(ref, tmp_path, "src")
+    before, mtime = snapshot([src]), src.stat().st_mtime_ns
+    time.sleep(0.05)  # a write after this moves the folder's mtime past the one read
+    p = run(*argv, src, "--out", src / "sub")
+    err = [line for line in p.stderr.splitlines() if line.strip()]
+    assert p.returncode == 2 and len(err) == 1 and needle in err[0], p.stderr
+    assert src.stat().st_mtime_ns == mtime and snapshot([src]) == before
+    assert not (src / "sub").exists()
