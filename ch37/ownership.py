@@ -294,14 +294,20 @@ def sweep_leftovers(folder: Path, name: str | None = None) -> list[str]:
     return removed
 
 
-def check_own_result(path: Path, kind: str, flag: str = "--out") -> None:
+def check_own_result(path: Path, kind: str, flag: str = "--out", beside=()) -> None:
     """DataError unless `path` is absent or a JSON result of this tool (its "kind" is `kind`): a tool's
-    re-run may replace its own result file, never a file of the user's."""
+    re-run may replace its own result file, never a file of the user's. `beside`: files the tool writes
+    after that result (a figure of it), which hold no mark of their own: replaced only beside a result
+    of this tool, never where there is none."""
     path = Path(path)
     if path.exists() or path.is_symlink():
         data = read_json(path) if path.is_file() and not path.is_symlink() else None
         if not isinstance(data, dict) or data.get("kind") != kind:
             raise DataError(f"{path} exists and was not written by this tool; pass another {flag}")
+        return
+    for other in map(Path, beside):
+        if other.exists() or other.is_symlink():
+            raise DataError(f"{other} exists and was not written by this tool; pass another {flag}")
 
 
 def check_out_path(path: Path, flag: str = "--out") -> str | None:

@@ -1121,6 +1121,17 @@ def _info_edited(edit, command="augment"):
     return make
 
 
+def _tool_over_users_result(name, command):
+    """A tool (`command`: "-m tools.X flags", bench_engine's --src the reference set) whose --out holds
+    the user's own file `name`."""
+    return lambda tmp, ref: (
+        [*command.split(), *(["--src", ref["pusht"]] if "bench_engine" in command else [])]
+        + ["--out", _user_result(tmp, name)],
+        [tmp / "u" / name],
+        None,
+    )
+
+
 ISSUE48_CASES = [
     # 4: one line naming what is malformed, not a traceback (nor PushT's widths blamed)
     (
@@ -1148,6 +1159,54 @@ ISSUE48_CASES = [
         _info_edited(lambda i: i | {"fps": "10"}, "scale_data"),
         2,
         "fps is '10' (a string)",
+    ),
+    # 12: a tool's re-run may replace its own result, never the user's file of that name
+    (
+        "replay-yield-out-holds-users-json",
+        _tool_over_users_result(
+            "replay_yield.json", "-m tools.replay_yield --tasks pusht --seeds 1 --sources 1 --attempts 1"
+        ),
+        2,
+        "replay_yield.json exists and was not written by this tool; pass another --out",
+    ),
+    (
+        "replay-compare-out-holds-users-json",
+        _tool_over_users_result("replay_compare.json", "-m tools.replay --smoke --seeds 1"),
+        2,
+        "replay_compare.json exists and was not written by this tool; pass another --out",
+    ),
+    (
+        "replay-sigma-out-holds-users-json",
+        _tool_over_users_result(
+            "replay_sigma.json", "-m tools.replay --smoke --sigma 1 --attempts 1 --sigma_seeds 1"
+        ),
+        2,
+        "replay_sigma.json exists and was not written by this tool; pass another --out",
+    ),
+    (
+        "replay-sigma-out-holds-users-png",
+        _tool_over_users_result(
+            "replay_sigma.png", "-m tools.replay --smoke --sigma 1 --attempts 1 --sigma_seeds 1"
+        ),
+        2,
+        "replay_sigma.png exists and was not written by this tool; pass another --out",
+    ),
+    (
+        "bench-engine-costs-out-holds-users-json",
+        _tool_over_users_result(
+            "bench_engine_costs.json",
+            "-m tools.bench_engine --costs_only --cost_repeats 1 --cost_attempts_per_demo 1",
+        ),
+        2,
+        "bench_engine_costs.json exists and was not written by this tool; pass another --out",
+    ),
+    (
+        "bench-engine-out-holds-users-json",
+        _tool_over_users_result(
+            "bench_engine.json", "-m tools.bench_engine --cost_repeats 0 --sizes 1 --executors local"
+        ),
+        2,
+        "bench_engine.json exists and was not written by this tool; pass another --out",
     ),
 ]
 
@@ -1178,3 +1237,16 @@ def test_out_inside_the_source_is_refused_before_anything_is_written_there(ref, 
     assert p.returncode == 2 and len(err) == 1 and needle in err[0], p.stderr
     assert src.stat().st_mtime_ns == mtime and snapshot([src]) == before
     assert not (src / "sub").exists()
+
+
+def test_a_tools_figure_is_replaced_only_beside_its_own_result(tmp_path):
+    """Issue 48 #12: a figure (tools.replay's replay_sigma.png) has no mark of its own: it may be replaced
+    beside a result of the tool, never where the user's file of that name stands alone."""
+    from ch37.errors import DataError
+
+    png = tmp_path / "replay_sigma.png"
+    png.write_bytes(b"\x89PNG mine")
+    with pytest.raises(DataError, match="replay_sigma.png exists and was not written by this tool"):
+        ownership.check_own_result(tmp_path / "replay_sigma.json", "replay_sigma", beside=[png])
+    (tmp_path / "replay_sigma.json").write_text(json.dumps({"kind": "replay_sigma"}))
+    ownership.check_own_result(tmp_path / "replay_sigma.json", "replay_sigma", beside=[png])
