@@ -56,8 +56,9 @@ def _imap(fn, jobs: list, *, workers: int, ordered: bool = True, chunksize: int 
         held, want = {}, 0  # results that came before their turn (ordered), the next index to yield
         while left:
             if not open_ends:  # every worker gone with jobs unanswered: one was killed (out of memory?)
-                codes = ", ".join(str(p.exitcode) for p in procs if p.exitcode)
-                raise DataError(f"a worker process died (exit code {codes}); try fewer --workers")
+                raise DataError(
+                    f"a worker process died (exit code {_exit_codes(procs)}); try fewer --workers"
+                )
             for conn in wait(open_ends):
                 try:
                     i, got, error = conn.recv()
@@ -83,6 +84,21 @@ def _imap(fn, jobs: list, *, workers: int, ordered: bool = True, chunksize: int 
             proc.join()
         for conn, _ in pipes:
             conn.close()
+
+
+def _exit_codes(procs, wait_s: float = 10.0) -> str:
+    """The exit codes of the workers that did not end cleanly, once they are reaped. A dying process
+    closes its pipe before the kernel makes it reapable, so its end of the pipe can come first (often on
+    a loaded machine) and its exitcode still read None: each is waited for, `wait_s` in all. A worker
+    still running after that is named as such; with every worker ended cleanly (a job called exit(0)),
+    their codes."""
+    import time
+
+    deadline = time.monotonic() + wait_s
+    for proc in procs:
+        proc.join(max(0.0, deadline - time.monotonic()))
+    codes = [p.exitcode for p in procs if p.exitcode != 0] or [p.exitcode for p in procs]
+    return ", ".join("none yet: still running" if c is None else str(c) for c in codes)
 
 
 def _job_worker(parent: int, fn, jobs: list, size: int, next_index, conn) -> None:

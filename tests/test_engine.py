@@ -724,3 +724,23 @@ def test_aloha_resolve_is_a_lerobot_set_of_the_handoff(aloha_src, tmp_path):
     frame = ds[0]
     assert tuple(frame["action"].shape) == (6,) and tuple(frame["aug.start"].shape) == (8,)
     assert set(rep["failures"]) == set(ALOHA.failures["resolve"])
+
+
+def test_a_killed_worker_is_named_with_its_exit_code_even_when_its_pipe_ends_first():
+    """Issue 48 #3: a killed worker's pipe ends before the process is reaped (its files are closed
+    first as it dies; on a loaded machine the gap is long enough to see), and the map read its exit
+    code in that gap: "a worker process died (exit code ); ...". Here the gap is made wide on purpose:
+    the job closes its pipe, waits, then kills its own process. The map waits for the dead worker (a
+    bounded wait) and names its code."""
+    from ch37.errors import DataError
+    from ch37.parallel import map_jobs
+
+    def dies_after_its_pipe(x):
+        if x == 5:
+            os.closerange(3, os.sysconf("SC_OPEN_MAX"))  # its end of the pipe: the parent sees it end
+            time.sleep(1)
+            os.kill(os.getpid(), signal.SIGKILL)
+        return x
+
+    with pytest.raises(DataError, match=r"a worker process died \(exit code -9\); try fewer --workers"):
+        list(map_jobs(dies_after_its_pipe, range(20), workers=2))
