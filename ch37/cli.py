@@ -271,17 +271,47 @@ def reference_words(ref: dict | None, seed: int, effect: float) -> str:
 # The kernel path the published numbers ran on: an x86-64 CPU, MKL held to this branch (MKL_CBWR, set by
 # scale_data.py's setup region before torch loads). docs/reproducibility.md says why and what it costs.
 PUBLISHED_MKL_CBWR = "COMPATIBLE"
+# MKL's branch codes (mkl_cbwr.h) as MKL_CBWR spells them; 1 (MKL_CBWR_BRANCH_OFF) is MKL_CBWR unset
+MKL_BRANCHES = {1: "", 2: "AUTO", 3: "COMPATIBLE", 4: "SSE2", 6: "SSSE3", 7: "SSE4_1", 8: "SSE4_2", 9: "AVX"}
+MKL_BRANCHES |= {10: "AVX2", 11: "AVX512_MIC", 12: "AVX512", 13: "AVX512_MIC_E1", 14: "AVX512_E1"}
+
+
+def mkl_branch() -> str:
+    """The MKL branch this process runs, as MKL_CBWR spells it ("" for MKL's own). MKL reads MKL_CBWR
+    once, at its first use, and keeps that branch for the process: a value set later (a notebook's
+    %env between two Run-alls) changes nothing, so MKL itself is asked (fixing its branch now, from
+    MKL_CBWR as set, if it has not run yet). It falls back on its automatic choice for a branch this
+    CPU lacks (AVX2 on AMD: AUTO). Without MKL (not x86-64, a torch built without it): MKL_CBWR as set."""
+    import ctypes
+
+    import torch
+
+    try:  # torch's CPU library carries MKL and exports MKL's own service call
+        get = ctypes.CDLL(str(Path(torch.__file__).parent / "lib" / "libtorch_cpu.so")).mkl_serv_cbwr_get
+    except (OSError, AttributeError):
+        return os.environ.get("MKL_CBWR", "")
+    get.restype, get.argtypes = ctypes.c_int, [ctypes.c_int]
+    got = get(-1)  # MKL_CBWR_ALL: the branch, and the STRICT bit (0x10000)
+    name = MKL_BRANCHES.get(got & 0xFFFF, f"branch {got & 0xFFFF}")
+    return f"{name},STRICT" if got & 0x10000 else name
 
 
 def other_draw(device: str) -> str | None:
     """Why this run cannot reproduce the published numbers bit for bit (a CUDA or MPS device, a CPU that
-    is not x86-64, another MKL branch), or None when it runs on the published kernel path."""
+    is not x86-64, another MKL branch in force: mkl_branch), or None when it runs on the published
+    kernel path."""
     if device != "cpu":
         return f"device {device}"
     if platform.machine().lower() not in ("x86_64", "amd64"):
         return f"a {platform.machine() or 'non-x86'} CPU (MKL runs on x86-64 only)"
-    if os.environ.get("MKL_CBWR") != PUBLISHED_MKL_CBWR:
-        return f"MKL_CBWR={os.environ.get('MKL_CBWR', '')} (published: {PUBLISHED_MKL_CBWR})"
+    branch, asked = mkl_branch(), os.environ.get("MKL_CBWR", "")
+    if branch == asked != PUBLISHED_MKL_CBWR:
+        return f"MKL_CBWR={asked} (published: {PUBLISHED_MKL_CBWR})"
+    if branch != PUBLISHED_MKL_CBWR:
+        return (
+            f"MKL's {branch or 'own'} branch, taken at its first use in this process (MKL_CBWR={asked} now;"
+            f" published: {PUBLISHED_MKL_CBWR})"
+        )
     return None
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import secrets
 import sys
 
 from ch37 import ROOT
@@ -56,8 +57,9 @@ def _imap(fn, jobs: list, *, workers: int, ordered: bool = True, chunksize: int 
         held, want = {}, 0  # results that came before their turn (ordered), the next index to yield
         while left:
             if not open_ends:  # every worker gone with jobs unanswered: one was killed (out of memory?)
-                codes = ", ".join(str(p.exitcode) for p in procs if p.exitcode)
-                raise DataError(f"a worker process died (exit code {codes}); try fewer --workers")
+                raise DataError(
+                    f"a worker process died (exit code {_exit_codes(procs)}); try fewer --workers"
+                )
             for conn in wait(open_ends):
                 try:
                     i, got, error = conn.recv()
@@ -83,6 +85,21 @@ def _imap(fn, jobs: list, *, workers: int, ordered: bool = True, chunksize: int 
             proc.join()
         for conn, _ in pipes:
             conn.close()
+
+
+def _exit_codes(procs, wait_s: float = 10.0) -> str:
+    """The exit codes of the workers that did not end cleanly, once they are reaped. A dying process
+    closes its pipe before the kernel makes it reapable, so its end of the pipe can come first (often on
+    a loaded machine) and its exitcode still read None: each is waited for, `wait_s` in all. A worker
+    still running after that is named as such; with every worker ended cleanly (a job called exit(0)),
+    their codes."""
+    import time
+
+    deadline = time.monotonic() + wait_s
+    for proc in procs:
+        proc.join(max(0.0, deadline - time.monotonic()))
+    codes = [p.exitcode for p in procs if p.exitcode != 0] or [p.exitcode for p in procs]
+    return ", ".join("none yet: still running" if c is None else str(c) for c in codes)
 
 
 def _job_worker(parent: int, fn, jobs: list, size: int, next_index, conn) -> None:
@@ -302,9 +319,14 @@ def _start_ray(address: str | None, workers: int):
     try:
         if address is None:  # "local": always a new instance, never a cluster that happens to run here
             # its workers inherit this environment: the repository on their path (a runtime_env
-            # would start a second pool of workers, seconds more on a small machine)
+            # would start a second pool of workers, seconds more on a small machine), and the cluster's
+            # own token, made for this run and held in the environment of its processes alone (readable
+            # by their user only), whatever RAY_AUTH_MODE says: anyone holding it can join and run code
+            # as this user, and Ray's own place, ~/.ray/auth_token, it writes readable by every user
             path = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))
-            with environment(PYTHONPATH=path):
+            token = secrets.token_hex(32)
+            with environment(PYTHONPATH=path, RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=token):
+                _ray_auth_reread()
                 ray.init(address="local", num_cpus=workers, **common)
         else:
             excludes = [".git", ".venv", "outputs", "*.ipynb", "tests"]
@@ -312,13 +334,38 @@ def _start_ray(address: str | None, workers: int):
                 ray.init(
                     address=address, runtime_env={"working_dir": str(ROOT), "excludes": excludes}, **common
                 )
-    except (ConnectionError, RuntimeError, ValueError) as e:
+    except (ConnectionError, RuntimeError, ValueError, ray.exceptions.RayError) as e:  # a wrong token too
         why = (str(e).strip().splitlines() or [type(e).__name__])[0]
         hint = (
-            "" if address is None else " (is it running? a cluster with token auth needs RAY_AUTH_MODE=token)"
+            ""
+            if address is None
+            else " (is it running? a cluster with token auth needs RAY_AUTH_MODE=token and its token:"
+            " ~/.ray/auth_token, RAY_AUTH_TOKEN_PATH or RAY_AUTH_TOKEN)"
         )
         raise DataError(f"could not {'start' if address is None else 'join'} Ray{hint}: {why}") from None
     return ray
+
+
+def _ray_auth_reread() -> None:
+    """Make this process's Ray read RAY_AUTH_MODE and its token from the environment again. It reads
+    them once and keeps them, so a second private cluster in one process (a notebook's second run)
+    would be shown the first one's token, and a cluster joined after ours would be shown ours."""
+    try:
+        from ray._raylet import AuthenticationTokenLoader, Config
+    except ImportError:  # a Ray without token authentication: nothing kept
+        return
+    Config.initialize("")  # what Ray's own ray.init does when it turns token authentication on
+    AuthenticationTokenLoader.instance().reset_cache()
+
+
+@contextlib.contextmanager
+def _ray_auth_put_back():
+    """On leaving (Ray shut down, or its start failed), this process's Ray forgets our cluster's token
+    and mode and reads the environment's again (_ray_auth_reread)."""
+    try:
+        yield
+    finally:
+        _ray_auth_reread()
 
 
 @contextlib.contextmanager
@@ -355,7 +402,7 @@ def _run_ray(fn, tasks: list, *, address: str | None, workers: int, timing: dict
     import time
 
     t0 = time.perf_counter()
-    with _raylet_messages_dropped():
+    with _raylet_messages_dropped(), _ray_auth_put_back():
         ray = _start_ray(address, workers)
         if timing is not None:
             timing["start_s"] = time.perf_counter() - t0

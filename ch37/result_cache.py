@@ -23,6 +23,7 @@ from importlib.metadata import version
 from pathlib import Path
 
 from ch37 import ROOT, code_files
+from ch37.cli import mkl_branch
 from ch37.config import NOT_IN_KEY, RESULT_FILES
 from ch37.errors import DataError
 from ch37.ownership import (
@@ -65,8 +66,9 @@ def result_key(config: dict) -> str:
     )
     h.update(f"cache format {CACHE_FORMAT}".encode())
     # MKL's kernel branch decides the trained weights' bits (docs/reproducibility.md): a run on another
-    # branch is another result, never this one replayed
-    h.update(f"MKL_CBWR={os.environ.get('MKL_CBWR', '')}".encode())
+    # branch is another result, never this one replayed. The branch MKL runs, not MKL_CBWR as set now:
+    # MKL reads it once per process (a notebook's %env between two Run-alls changes nothing)
+    h.update(f"MKL branch={mkl_branch()}".encode())
     for pkg in ("torch", "lerobot", "mujoco", "numpy"):
         h.update(f"{pkg}=={version(pkg)}".encode())
     for key in ("pusht_data", "aloha_data"):  # a user's own set: its bytes are part of the input

@@ -5,6 +5,7 @@ import hashlib
 import json
 import math
 import os
+import secrets
 import shutil
 import signal
 import subprocess
@@ -533,7 +534,9 @@ def test_joining_a_ray_cluster_same_bytes(src, reference, tmp_path):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    env = dict(os.environ, RAY_AUTH_MODE="token")  # Ray 2.60 clusters authenticate with a token
+    # Ray 2.60 clusters authenticate with a token: this one's own, given to the head and to the run
+    # alike (no ~/.ray/auth_token: a fresh machine has none, and the engine's own clusters write none)
+    env = dict(os.environ, RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=secrets.token_hex(32))
     ray_bin = Path(sys.executable).with_name("ray")
     head = subprocess.Popen(
         [str(ray_bin), "start", "--head", "--block", "--port", str(port), "--num-cpus", "2"],
@@ -724,3 +727,95 @@ def test_aloha_resolve_is_a_lerobot_set_of_the_handoff(aloha_src, tmp_path):
     frame = ds[0]
     assert tuple(frame["action"].shape) == (6,) and tuple(frame["aug.start"].shape) == (8,)
     assert set(rep["failures"]) == set(ALOHA.failures["resolve"])
+
+
+def test_a_killed_worker_is_named_with_its_exit_code_even_when_its_pipe_ends_first():
+    """Issue 48 #3: a killed worker's pipe ends before the process is reaped (its files are closed
+    first as it dies; on a loaded machine the gap is long enough to see), and the map read its exit
+    code in that gap: "a worker process died (exit code ); ...". Here the gap is made wide on purpose:
+    the job closes its pipe, waits, then kills its own process. The map waits for the dead worker (a
+    bounded wait) and names its code."""
+    from ch37.errors import DataError
+    from ch37.parallel import map_jobs
+
+    def dies_after_its_pipe(x):
+        if x == 5:
+            os.closerange(3, os.sysconf("SC_OPEN_MAX"))  # its end of the pipe: the parent sees it end
+            time.sleep(1)
+            os.kill(os.getpid(), signal.SIGKILL)
+        return x
+
+    with pytest.raises(DataError, match=r"a worker process died \(exit code -9\); try fewer --workers"):
+        list(map_jobs(dies_after_its_pipe, range(20), workers=2))
+
+
+RAY_TOKEN_PROBE = r"""
+import json, os, subprocess
+from ch37.parallel import map_jobs
+
+LOOK = 'id -u; grep -rlsF -D skip -f - -- "$H" "$T" /proc/[0-9]*/cmdline /proc/[0-9]*/environ'
+
+
+def probe(_):
+    # in a worker of the run's own cluster, while it runs: the token it was started with (Ray's places:
+    # the environment, else ~/.ray/auth_token), then every file where an unprivileged user finds it
+    token = os.environ.get("RAY_AUTH_TOKEN")
+    if token is None:
+        with open(os.path.join(os.environ["HOME"], ".ray", "auth_token")) as f:
+            token = f.read().strip()
+    nobody = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", "sh", "-c", LOOK]
+    env = {"PATH": "/usr/bin:/bin", "H": os.environ["HOME"], "T": os.environ["RAY_TMPDIR"]}
+    p = subprocess.run(nobody, input=token, capture_output=True, text=True, env=env)  # on stdin: no trace
+    return len(token), p.stdout.split()  # the user's id, then the files
+
+
+for mode in (None, "token"):  # Ray's default, then RAY_AUTH_MODE=token; two runs in one process
+    if mode:
+        os.environ["RAY_AUTH_MODE"] = mode
+    print(json.dumps([*map_jobs(probe, [0], workers=1, ray="local"), "RAY_AUTH_TOKEN" in os.environ]))
+"""
+
+
+def test_the_private_ray_clusters_token_is_the_runs_alone():
+    """Issue 48 #2: the private cluster of --ray left its token in ~/.ray/auth_token, mode 0644 in a
+    0755 folder (with RAY_AUTH_MODE=token too): any user of the machine could read it and join the
+    cluster, which runs code as the run's user. As an unprivileged user, during each of two runs in one
+    process (a notebook's second run), the token is in no file it can read (the run's home, Ray's
+    session folders, every process's command line and environment), nothing is left in the home, and
+    nothing of the cluster runs after."""
+    if os.geteuid() != 0 or shutil.which("setpriv") is None:
+        pytest.skip("needs root and setpriv to look as an unprivileged user")
+    import tempfile
+
+    home, tmp = Path(tempfile.mkdtemp(prefix="ch37-home-")), Path(tempfile.mkdtemp(prefix="ch37-ray-"))
+    try:
+        for d in (home, tmp):
+            d.chmod(0o755)  # a home and a temp folder others may enter, as on many machines
+        env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
+        env.update(HOME=str(home), RAY_TMPDIR=str(tmp))
+        p = subprocess.run(
+            [sys.executable, "-c", RAY_TOKEN_PROBE],
+            cwd=ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert p.returncode == 0, p.stderr
+        # each run: a token, looked for as uid 65534 and found nowhere; not left in the run's environment
+        assert [json.loads(line) for line in p.stdout.splitlines()] == [[[64, ["65534"]], False]] * 2
+        assert not list(home.iterdir())
+        deadline = time.monotonic() + 30
+        while left := [c for c in Path("/proc").glob("[0-9]*/cmdline") if str(tmp).encode() in _read(c)]:
+            assert time.monotonic() < deadline, f"still running: {left}"
+            time.sleep(0.5)
+    finally:
+        shutil.rmtree(home, ignore_errors=True)
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _read(path: Path) -> bytes:
+    try:
+        return path.read_bytes()
+    except OSError:  # the process ended meanwhile
+        return b""

@@ -2,12 +2,16 @@
 
 import hashlib
 import json
+import os
+import platform
 import re
 import shutil
+import subprocess
+import sys
 
 import numpy as np
 import pytest
-from conftest import run_script
+from conftest import ROOT, run_script
 
 from ch37 import ownership
 from ch37.seeds import env_seed
@@ -267,10 +271,8 @@ def test_result_cache_reuses_only_the_same_configuration(tmp_path, monkeypatch):
     ).read_bytes()
 
 
-def test_result_key_changes_with_every_input(monkeypatch):
+def test_result_key_changes_with_every_input():
     from ch37 import result_cache
-
-    monkeypatch.setenv("MKL_CBWR", "COMPATIBLE")
 
     base = {
         "seed": 0,
@@ -287,8 +289,7 @@ def test_result_key_changes_with_every_input(monkeypatch):
     )  # where and how fast: same result
     for field, value in (("seed", 1), ("epochs", 499), ("smoke", True), ("device", "cuda"), ("lr", 0.01)):
         assert result_cache.result_key(dict(base, **{field: value})) != k, field
-    monkeypatch.setenv("MKL_CBWR", "AVX2")  # another MKL kernel branch: other bits, another result
-    assert result_cache.result_key(base) != k
+    # another MKL kernel branch (other bits, another result): the test of issue 48 #10 below
 
 
 def test_a_cached_result_goes_stale_when_any_imported_file_changes(tmp_path, monkeypatch):
@@ -376,3 +377,48 @@ def test_lockstep_envs_raise_a_worker_error():
         envs.reset()
         with pytest.raises(ValueError, match="non-finite action"):
             envs.step([0, 1], np.array([[0.0, 0.0], [np.nan, 0.0]]))
+
+
+MKL_KEYS = r"""
+import json, os, sys
+import torch
+from ch37 import cli, result_cache
+
+base = {"seed": 0, "epochs": 500, "smoke": False, "device": "cpu"}
+torch.ones(8, 8) @ torch.ones(8, 8)  # MKL's first use: it reads MKL_CBWR now, once for the process
+got = [[result_cache.result_key(base), cli.other_draw("cpu")]]
+for value in sys.argv[1:]:  # a notebook's %env MKL_CBWR=... between two Run-alls
+    os.environ["MKL_CBWR"] = value
+    got.append([result_cache.result_key(base), cli.other_draw("cpu")])
+print(json.dumps(got))
+"""
+
+
+@pytest.mark.skipif(
+    platform.machine().lower() not in ("x86_64", "amd64"), reason="MKL's kernel path exists on x86-64 only"
+)
+def test_the_cache_and_the_banner_name_the_mkl_branch_in_force():
+    """Issue 48 #10: MKL reads MKL_CBWR once per process, at its first use. A notebook that changed
+    %env MKL_CBWR between two Run-alls stored a result computed on the first branch under the second's
+    cache key (served later to a run really on that branch), and the banner named the second. Both
+    now follow the branch MKL runs: after a change, the key and the banner's line are the first
+    branch's, the same as a fresh process on it gives."""
+
+    def keys(first, *later):
+        env = {k: v for k, v in os.environ.items() if k != "MKL_CBWR"}
+        p = subprocess.run(
+            [sys.executable, "-c", MKL_KEYS, *later],
+            cwd=ROOT,
+            env=dict(env, MKL_CBWR=first),
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert p.returncode == 0, p.stderr
+        return json.loads(p.stdout)
+
+    (compatible,), (avx2,) = keys("COMPATIBLE"), keys("AVX2")
+    assert compatible[0] != avx2[0] and compatible[1] is None and avx2[1]  # another branch, another draw
+    assert keys("COMPATIBLE", "AVX2") == [compatible, compatible]  # MKL still runs COMPATIBLE
+    first, changed = keys("AVX2", "COMPATIBLE")
+    assert first == avx2 and changed[0] == avx2[0] and changed[1]  # still AVX2's (AUTO's on AMD)

@@ -33,6 +33,7 @@ import hashlib
 import json
 import math
 import os
+import secrets
 import shutil
 import socket
 import subprocess
@@ -120,9 +121,10 @@ def run_sampled(cmd: list[str], env: dict | None = None) -> dict:
 @contextlib.contextmanager
 def two_ray_nodes(workers: int):
     """A Ray cluster of two nodes on this machine, as an operator starts one: its address, then stopped.
-    `ray start` enables token authentication, so the run that joins needs RAY_AUTH_MODE=token."""
+    `ray start` enables token authentication, so the nodes and the run that joins get RAY_AUTH_MODE=token
+    and this cluster's own token (none is in ~/.ray/auth_token on a fresh machine)."""
     ray = [str(Path(sys.executable).with_name("ray"))]
-    env = os.environ | {"RAY_AUTH_MODE": "token"}
+    env = os.environ | {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32)}
     with socket.socket() as s:  # a free port for the head's GCS
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
