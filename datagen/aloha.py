@@ -181,7 +181,7 @@ class Aloha(Task):
     def action_to_target(self, states, actions) -> dict:
         return {arm: (states[:, XY[arm]], actions[:, XY[arm]], actions[:, GRIP[arm]]) for arm in XY}
 
-    def target_to_action(self, obs, waypoints, velocities, grips) -> np.ndarray:
+    def target_to_action(self, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
         a = np.zeros(aloha_env.ACT_DIM)
         for arm in XY:
             here = np.asarray(obs[XY[arm]], np.float64)

@@ -166,7 +166,7 @@ class GymPushT(Task):
     def action_to_target(self, states, actions) -> dict:
         return {"agent": (actions[:, :2], np.zeros((len(actions), 2)), None)}
 
-    def target_to_action(self, obs, waypoints, velocities, grips) -> np.ndarray:
+    def target_to_action(self, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
         return np.clip(waypoints["agent"], 0.0, 512.0).astype(np.float32)
 
 

@@ -158,7 +158,7 @@ class PushT(Task):
     def action_to_target(self, states, actions) -> dict:
         return {"pusher": (states[:, :2], actions[:, :2], None)}
 
-    def target_to_action(self, obs, waypoints, velocities, grips) -> np.ndarray:
+    def target_to_action(self, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
         here = np.asarray(obs[:2], np.float64)
         a = velocities["pusher"] + TRACK_GAIN * (waypoints["pusher"] - here)
         return np.clip(a, -_LIMIT, _LIMIT).astype(np.float32)

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import functools
 import importlib
-import math
 import pkgutil
 import sys
 import traceback
@@ -59,8 +58,6 @@ __all__ = [
     "recorded",
     "register",
     "rollout",
-    "rotation",
-    "transform_segment",
     "write_dataset",
 ]
 
@@ -145,29 +142,6 @@ class GymnasiumEnv:
         return frame.astype(np.uint8, copy=False)
 
 
-def rotation(yaw: float) -> np.ndarray:
-    """The 2x2 rotation by `yaw` (rad)."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([[c, -s], [s, c]])
-
-
-def transform_segment(points, vectors, src_pose, new_pose):
-    """Re-express a path that was made relative to an object at `src_pose` for the object at `new_pose`.
-
-    points (T, 2) world positions (m) and vectors (T, 2) world velocities (m/s); poses (x, y, yaw).
-    A point is first written in the source object's frame, q = R(-yaw0) (p - xy0), then put back in the
-    world from the new pose, p' = R(yaw1) q + xy1; a velocity only rotates, v' = R(yaw1 - yaw0) v.
-    The planar SE(2) analog of MimicGen's transform_source_data_segment_using_object_pose.
-    Returns (points' (T, 2), vectors' (T, 2)); an identical pose returns the inputs (to float rounding).
-    """
-    x0, y0, yaw0 = (float(v) for v in src_pose)
-    x1, y1, yaw1 = (float(v) for v in new_pose)
-    in_object = (np.asarray(points, np.float64) - (x0, y0)) @ rotation(-yaw0).T  # (T, 2) object frame
-    moved = in_object @ rotation(yaw1).T + (x1, y1)
-    turned = np.asarray(vectors, np.float64) @ rotation(yaw1 - yaw0).T
-    return moved, turned
-
-
 def write_dataset(
     out: Path,
     *,
@@ -248,8 +222,9 @@ class Task:
     """The contract between the engine and a task, in MimicGen's division of work: the task describes,
     the engine runs (the modes, the one replay: datagen.replay, lockstep, shards, resume, report, merge).
     A subclass sets the attributes and defines every method that raises NotImplementedError; the rest
-    have defaults. Positions in m, angles in rad, velocities in m/s; an observation is the env's
-    (obs_dim,) float32 vector, an action its (act_dim,) float32 vector."""
+    have defaults. Units are the task's own (PushT's and ALOHA's metres, gym-pusht's pixels; angles in
+    rad, times in s), each attribute saying which; an observation is the env's (obs_dim,) float32
+    vector, an action its (act_dim,) float32 vector."""
 
     # ---- what the task is ----
     name: str  # "pusht": its key in known_tasks(), recorded in a run's settings
@@ -267,12 +242,16 @@ class Task:
     noise_unit: str = "m/s"  # the unit of the expert's noise: its actions' (gen_demos.py --noise)
 
     # ---- what replay reads (datagen.replay) ----
-    arms: dict[str, slice]  # {arm: the columns of its controlled point's (x, y) in an observation}
-    reach: dict[str, tuple]  # {arm: ((x low, x high), (y low, y high))}: where its point can go
+    # Poses live in SE(3) (datagen.poses): a frame is a (4, 4) pose, an arm's target a position (3,), an
+    # orientation (3, 3) and its gripper command. A planar task (a robot on a table) gives its frames as
+    # (x, y, yaw) triples and its targets as (x, y) points without orientation: the special case.
+    arms: dict[str, slice]  # {arm: the columns of its controlled point's position in an observation}
+    reach: dict[str, tuple]  # {arm: ((low, high) per axis of its point)}: a box its point can reach
     subtasks: tuple[Subtask, ...]  # in order; the last one runs to the source's end
-    bridge_speed: float  # m/s: a bridge's top speed
-    bridge_tol: float  # m: arms this close to their first waypoints are not bridged
-    bridge_moves: tuple[float, float] | None = None  # (m, rad): a bridge that moves the object more hit it
+    bridge_speed: float  # length unit / s: a bridge's top speed
+    bridge_tol: float  # length unit: arms this close to their first waypoints are not bridged
+    bridge_moves: tuple[float, float] | None = None  # (length, rad): a bridge moving the object more hit it
+    bridge_turn_speed: float | None = None  # rad/s: a bridge's top turning speed (None: turns don't count)
     hold_steps: int = 0  # steps the arms hold still after the plan, for a success that must be held
 
     def make_env(self, share=None):
@@ -326,16 +305,36 @@ class Task:
         recorded frames are read); otherwise a source is re-simulated to read them."""
         return {}
 
+    def arm_pose(self, arm: str, obs, env) -> tuple[np.ndarray, np.ndarray | None]:
+        """Where `arm` is in the observation `obs` of `env`: (position (d,), orientation (3, 3) or None).
+        By default its `arms` columns of obs, no orientation (a planar point); an arm whose orientation
+        the observation does not show reads it from env (a bridge starts from it)."""
+        return np.asarray(obs[self.arms[arm]], np.float64), None
+
+    def in_reach(self, arm: str, points) -> np.ndarray:
+        """(T,) bool: which of `points` ((T, d) positions) `arm` can reach; by default its `reach` box."""
+        pts = np.asarray(points)
+        inside = np.ones(len(pts), bool)
+        for axis, (lo, hi) in enumerate(self.reach[arm]):
+            inside &= (pts[:, axis] >= lo) & (pts[:, axis] <= hi)
+        return inside
+
     def action_to_target(self, states, actions) -> dict:
         """A source's frames (states (T, obs_dim), actions (T, act_dim)) as world-frame targets, per arm:
-        {arm: (waypoints (T, 2) m, velocities (T, 2) m/s, gripper commands (T,) or None)}. The engine
-        re-expresses waypoints and velocities in a new object frame; the gripper rides along."""
+        {arm: (waypoints (T, d), velocities (T, d) or None, gripper commands (T,) or None[, orientations
+        (T, 3, 3)])}: planar, d = 2 and no orientation; in SE(3), d = 3 and the orientations of the arm's
+        frame (a position-controlled arm gives velocities None). The engine re-expresses waypoints,
+        velocities and orientations in a new object frame; the gripper rides along."""
         raise NotImplementedError
 
-    def target_to_action(self, obs, waypoints: dict, velocities: dict, grips: dict | None) -> np.ndarray:
+    def target_to_action(
+        self, obs, waypoints: dict, velocities: dict, grips: dict | None, orientations: dict | None = None
+    ) -> np.ndarray:
         """The action ((act_dim,) float32) that takes each arm from where `obs` shows it towards its
-        `waypoints[arm]` ((2,) m) moving at `velocities[arm]` ((2,) m/s), with `grips[arm]` its gripper
-        command: a velocity command for our two robots, a position target for a robot that takes one."""
+        `waypoints[arm]` ((d,)) moving at `velocities[arm]` ((d,) or None), turned to `orientations[arm]`
+        ((3, 3); None for a planar task), with `grips[arm]` its gripper command: a velocity command for
+        our two robots, a position target for a robot that takes one, torques through the robot's own
+        controller for one driven by torques (datagen/pusher.py)."""
         raise NotImplementedError
 
     # ---- what lockstep needs; each default runs the same bytes one attempt (or one env) at a time ----
