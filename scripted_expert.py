@@ -243,6 +243,21 @@ def block_pose_from_keypoints(kp16) -> tuple[float, float, float]:
     return float(x), float(y), angle
 
 
+def keypoint_residual(kp16) -> np.ndarray:
+    """How far (px) each row of 16 keypoint coordinates (N, 16) is from a rigid placement of the T: the
+    largest distance of a keypoint from where block_pose_from_keypoints' fit puts it. The fit takes any
+    16 numbers; this says whether they were a T (a scaled, collapsed or mirrored one is tens of px off).
+    Vectorised apart from block_pose_from_keypoints, whose exact bytes the expert's actions depend on."""
+    w = np.asarray(kp16, dtype=np.float64).reshape(-1, 8, 2)
+    lc = _GP_KEYPOINTS - _GP_KEYPOINTS.mean(axis=0)
+    wc = w - w.mean(axis=1, keepdims=True)
+    cross = np.sum(lc[:, 0] * wc[..., 1] - lc[:, 1] * wc[..., 0], axis=1)
+    angle = np.arctan2(cross, np.sum(lc * wc, axis=(1, 2)))
+    c, s = np.cos(angle), np.sin(angle)
+    rot = np.stack([np.stack([c, -s], axis=-1), np.stack([s, c], axis=-1)], axis=-2)  # (N, 2, 2)
+    return np.linalg.norm(wc - lc @ rot.transpose(0, 2, 1), axis=2).max(axis=1)
+
+
 def _gp_sdf(q: np.ndarray) -> np.ndarray:
     """Distance (px) from block-frame points q (..., 2) to the T (negative inside): the union of two boxes."""
     q = np.asarray(q, dtype=np.float64)

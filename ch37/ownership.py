@@ -294,19 +294,26 @@ def sweep_leftovers(folder: Path, name: str | None = None) -> list[str]:
     return removed
 
 
-def check_own_result(path: Path, kind: str, flag: str = "--out") -> None:
+def check_own_result(path: Path, kind: str, flag: str = "--out", beside=()) -> None:
     """DataError unless `path` is absent or a JSON result of this tool (its "kind" is `kind`): a tool's
-    re-run may replace its own result file, never a file of the user's."""
+    re-run may replace its own result file, never a file of the user's. `beside`: files the tool writes
+    after that result (a figure of it), which hold no mark of their own: replaced only beside a result
+    of this tool, never where there is none."""
     path = Path(path)
     if path.exists() or path.is_symlink():
         data = read_json(path) if path.is_file() and not path.is_symlink() else None
         if not isinstance(data, dict) or data.get("kind") != kind:
             raise DataError(f"{path} exists and was not written by this tool; pass another {flag}")
+        return
+    for other in map(Path, beside):
+        if other.exists() or other.is_symlink():
+            raise DataError(f"{other} exists and was not written by this tool; pass another {flag}")
 
 
 def check_out_path(path: Path, flag: str = "--out") -> str | None:
     """None if `path` can hold this program's output, else one line saying why not. Creates nothing:
-    it writes and removes a probe file in `path`, or in its nearest existing parent folder."""
+    it writes and removes a probe file in `path`, or in its nearest existing parent folder; so a caller
+    checks first that `path` is not inside a folder it only reads (claim's inputs, the engine's --src)."""
     path = Path(path)
     if str(path) == "":
         return f"{flag} must not be empty"
@@ -471,14 +478,14 @@ def claim(
     replaces  folders the run will rebuild: each must hold only files this program wrote
     """
     out = Path(out)
-    if problem := check_out_path(out):
-        raise DataError(problem)
-    for flag, given in (inputs or {}).items():
+    for flag, given in (inputs or {}).items():  # before check_out_path's probe file, which would land there
         if given is not None and out.resolve().is_relative_to(Path(given).resolve()):
             raise DataError(
                 f"--out {out} is inside {flag} {given}: results would be written into your dataset; "
                 "pass another --out"
             )
+    if problem := check_out_path(out):
+        raise DataError(problem)
     stamp = read_stamp(out)
     if (out / "meta" / "info.json").exists() or (is_ours(stamp) and stamp.get("kind") != "results"):
         raise DataError(f"--out {out} is a dataset folder; results would mix into it: pass another --out")

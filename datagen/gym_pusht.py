@@ -6,7 +6,8 @@ ours. The only engine module that imports gym_pusht (at the first env made, not 
                datagen.task.GymnasiumEnv; its observation vector: agent_pos (2,) then
                environment_state (16,) (the block's 8 keypoints), px, float32
     columns    what lerobot/pusht_keypoints records: observation.state = the agent's (x, y),
-               observation.environment_state = the 16 keypoint numbers, action = a target (x, y)
+               observation.environment_state = the 16 keypoint numbers, action = a target (x, y); a
+               source frame whose keypoints are no rigid placement of the T (KEYPOINT_TOL) is refused
     start      what reset(options={"reset_to_state": ...}) takes: agent x, y, block x, y, angle
                (START_NAMES). gym-pusht sets the block's position, then turns it about its centre of
                gravity (COG), so the block lands at start_to_pose(start), not at the numbers passed
@@ -32,10 +33,18 @@ import warnings
 import numpy as np
 
 from datagen.task import GymnasiumEnv, Perturbation, Subtask, Task, register
-from lerobot_v3 import IMAGE_SIZE
-from scripted_expert import GymPushTExpert, block_pose_from_keypoints
+from lerobot_v3 import ENV_STATE_KEY, IMAGE_SIZE
+from scripted_expert import GymPushTExpert, block_pose_from_keypoints, keypoint_residual
 
-__all__ = ["GYM_PUSHT", "GymPushT", "START_NAMES", "pose_to_start", "start_to_pose"]
+__all__ = [
+    "GYM_PUSHT",
+    "KEYPOINT_TOL",
+    "GymPushT",
+    "START_NAMES",
+    "keypoint_residual",
+    "pose_to_start",
+    "start_to_pose",
+]
 
 PX_PER_M = 1000.0  # gym-pusht's T is the chapter's T at 1 px = 1 mm: --aug_pos_sigma (m) x this = px
 TRIES = 100  # perturbation draws per attempt before "no_valid_start"
@@ -47,6 +56,11 @@ AGENT_R = 15.0  # px: the agent's radius
 CLEAR = 5.0  # px: the agent's edge at least this far from the T at a start
 GOAL = (256.0, 256.0, math.pi / 4)  # gym-pusht's goal pose (px, px, rad)
 BOXES = ((-60.0, 60.0, 0.0, 30.0), (-15.0, 15.0, 30.0, 120.0))  # the T's bar and stem (block frame, px)
+# px: how far a source frame's keypoints may be from a rigid placement of the T (keypoint_residual).
+# Measured on 8,000 gym-pusht frames (random starts and pushes): its own float32 keypoints, as the hub's
+# sets store them, are at most 3.6e-5 px off; rounded to whole px, 0.86 px. A T scaled by 1.05 is 3.8 px
+# off; scaled x2 or collapsed onto a point, 76 px; mirrored (x -> 512 - x), 120 px.
+KEYPOINT_TOL = 2.0
 
 
 class Spec:
@@ -152,6 +166,17 @@ class GymPushT(Task):
 
     def success(self, env) -> bool:
         return bool(env.success)
+
+    def state_problem(self, states):
+        off = keypoint_residual(np.asarray(states)[:, 2:18])
+        bad = off > KEYPOINT_TOL
+        if not bad.any():
+            return None
+        row = int(np.argmax(bad))
+        return row, (
+            f"its 8 keypoints ({ENV_STATE_KEY}) are not a rigid placement of the T: {off[row]:.3g} px off "
+            f"the best fit, more than the {KEYPOINT_TOL:g} px allowed ({int(bad.sum())} of {len(off)} frames)"
+        )
 
     def object_pose(self, state) -> np.ndarray:
         return np.array(block_pose_from_keypoints(np.asarray(state[2:18], np.float64)))

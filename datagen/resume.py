@@ -57,18 +57,25 @@ RUN_NAMES = {STAMP_NAME, LOCK_NAME, REPORT_NAME, SHARDS_DIR, "data", "meta", MER
 def check_out_first(out: Path, src: Path) -> None:
     """Before the source is read: DataError (one line) unless `out` is a path this program can write and
     either new or a run of this command (check_out)."""
+    check_apart(out, src)  # before check_out_path's probe file, which would land inside --src
     problem = check_out_path(out)  # a path the file system or pyarrow cannot take, before anything
     if problem:
         raise DataError(problem)
     check_out(out, src)
 
 
-def check_out(out: Path, src: Path, config: dict | None = None) -> dict | None:
-    """None for a new run; the run's stamp for a run of this command (with `config`, when given);
-    DataError for anything else: --out overlapping --src, data this program did not make, other settings."""
+def check_apart(out: Path, src: Path) -> None:
+    """DataError unless `out` and `src` are apart (neither is or holds the other): the source is never
+    written, not even a probe file."""
     o, s = out.resolve(), src.resolve()
     if o == s or s in o.parents or o in s.parents:
         raise DataError(f"--out {out} overlaps --src {src}; the source is never written: pick another --out")
+
+
+def check_out(out: Path, src: Path, config: dict | None = None) -> dict | None:
+    """None for a new run; the run's stamp for a run of this command (with `config`, when given);
+    DataError for anything else: --out overlapping --src, data this program did not make, other settings."""
+    check_apart(out, src)
     stamp = check_ours(out, "engine")
     if stamp is None or config is None or stamp.get("config") == config:
         return stamp

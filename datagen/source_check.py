@@ -1,11 +1,11 @@
 """The source set a run grows, only read: which task it is (task_of), whether the engine can grow it
-(read_source: its schema, names, fps, files, frames and value ranges, each failure one line) and what
-it is, wherever it lives (source_identity: a digest of the frames read, in the run's stamp)."""
+(read_source: its schema, names, fps, files, frames, value ranges and the task's own check of its states,
+Task.state_problem; each failure one line) and what it is, wherever it lives (source_identity: a digest of
+the frames read, in the run's stamp)."""
 
 from __future__ import annotations
 
 import hashlib
-import json
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +19,7 @@ from lerobot_v3.dataset import (
     check_hf_cache,
     fps_problem,
     frames_problem,
+    info_problem,
     load_arrays,
     observation,
     schema_problem,
@@ -63,13 +64,15 @@ def task_of(src: Path) -> Task:
     whose env's ROBOT_TYPE the set records, or, for a set without one, the one task whose state and
     action widths it has. DataError (one line) for a set that fits no task. A
     folder without a readable info.json is left to read_source's checks (as PushT's, the engine's first
-    task), which name what is wrong with it."""
-    try:
-        info = json.loads((Path(src) / "meta" / "info.json").read_text())
-        feats = info["features"]
-        shapes = tuple(list(feats[k]["shape"]) for k in ("observation.state", "action"))
-    except (OSError, ValueError, KeyError, TypeError):
+    task), which name what is wrong with it; one readable but not of LeRobot's form (a list where an
+    object belongs) is named here, before any task's widths are blamed."""
+    info = read_json(Path(src) / "meta" / "info.json")
+    if info is None:
         return known_tasks()["pusht"]
+    if problem := info_problem(src):
+        raise DataError(f"--src {problem}")
+    feats = info["features"]  # an object of objects (info_problem)
+    shapes = tuple(feats.get(k, {}).get("shape") for k in ("observation.state", "action"))
     robot = info.get("robot_type")
     if robot:  # a set that names its robot is that robot's (an SO-100 set is no PushT set)
         fits = [t for t in known_tasks().values() if t.env_module.ROBOT_TYPE == robot]
@@ -153,6 +156,15 @@ def read_source(task: Task, src: Path) -> dict:
     problem = state_range_problem(task, src, arrays["observation.state"], arrays["action"])
     if problem:
         raise DataError(problem)
+    found = task.state_problem(arrays["observation.state"])
+    if found:  # named by episode and frame, as a user finds it in the set
+        row, what = found
+        ep = arrays["episode_index"]
+        frame = int(np.count_nonzero(ep[:row] == ep[row]))
+        raise DataError(
+            f"--src {src}: episode {int(ep[row])}, frame {frame} (row {row}): {what}; this is not a "
+            f"{task.title} state, and nothing is grown from it"
+        )
     if arrays["episode_index"].max() >= SEED_BLOCK:
         raise DataError(f"--src {src}: episode indices must be below {SEED_BLOCK:,} (the seed block)")
     return arrays

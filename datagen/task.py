@@ -284,6 +284,13 @@ class Task:
         """Whether `env` reports the task done (its latched success)."""
         raise NotImplementedError
 
+    def state_problem(self, states) -> tuple[int, str] | None:
+        """None if every observation of a source (N, obs_dim) is one the task's env can be in, else (the
+        first row that is not, what is wrong with it). state_ranges checks each number alone; a task whose
+        observation holds numbers that belong together checks them here (gym-pusht: its 8 keypoints must
+        be a rigid placement of the T), so that nothing is grown from a state no env was ever in."""
+        return None
+
     def object_pose(self, state) -> np.ndarray:
         """(x, y, yaw) of the object the task is about, read from an observation."""
         raise NotImplementedError

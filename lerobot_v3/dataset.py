@@ -751,6 +751,11 @@ def fps_problem(root: Path, fps: int) -> str | None:
         got = json.loads((Path(root) / "meta" / "info.json").read_text()).get("fps")
     except (OSError, ValueError, AttributeError):
         got = None
+    if isinstance(got, str | bool) or (got is not None and not isinstance(got, int | float)):
+        # "10" is no rate: said as it is, not as "recorded at 10 fps, but the env steps at 10 fps"
+        return (
+            f"{root}: meta/info.json's fps is {got!r} (a {json_kind(got)}), not a number of frames per second"
+        )
     if got != fps:
         return f"{root} is recorded at {got} fps, but the env steps at {fps} fps; resample it to {fps} fps"
     return None
@@ -768,15 +773,46 @@ def frames_problem(root: Path, arrays: dict) -> str | None:
     return None
 
 
+def json_kind(value) -> str:
+    """What JSON calls the type of `value` (a parsed JSON value), for messages about a file's form."""
+    kinds = {dict: "object", list: "list", str: "string", bool: "boolean", type(None): "null"}
+    return kinds.get(type(value), "number")
+
+
+def info_problem(root: Path) -> str | None:
+    """None if `root`'s meta/info.json has the form LeRobot v3 writes (an object whose features is an
+    object of objects), else one line saying what it is instead: a hand-edited or foreign file is named,
+    not tripped over."""
+    try:
+        info = json.loads((Path(root) / "meta" / "info.json").read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return f"{root} is not a LeRobot v3 dataset (no readable meta/info.json)"
+    if not isinstance(info, dict):
+        return (
+            f"{root}: meta/info.json holds a {json_kind(info)}, not an object; it is no LeRobot v3 info.json"
+        )
+    if "features" not in info:
+        return f"{root} is not a LeRobot v3 dataset (its meta/info.json has no features)"
+    feats = info["features"]
+    if not isinstance(feats, dict):
+        return f"{root}: meta/info.json's features is a {json_kind(feats)}, not an object of feature entries"
+    for key, entry in feats.items():
+        if not isinstance(entry, dict):
+            return (
+                f"{root}: meta/info.json's feature {key!r} is a {json_kind(entry)}, not an object with its "
+                "dtype and shape"
+            )
+    return None
+
+
 def schema_problem(root: Path, state_dim: int, action_dim: int) -> str | None:
     """None if `root` is a LeRobot dataset with the expected state/action widths, else why not."""
-    info_path = Path(root) / "meta" / "info.json"
-    try:
-        feats = json.loads(info_path.read_text())["features"]
-    except (OSError, json.JSONDecodeError, KeyError):
-        return f"{root} is not a LeRobot v3 dataset (no readable meta/info.json)"
+    problem = info_problem(root)
+    if problem:
+        return problem
+    feats = json.loads((Path(root) / "meta" / "info.json").read_text())["features"]
     for key, want in (("observation.state", state_dim), ("action", action_dim)):
         got = feats.get(key, {}).get("shape")
-        if got is None or list(got) != [want]:
+        if not isinstance(got, list) or got != [want]:
             return f"{root}: feature {key!r} has shape {got}, expected [{want}]"
     return None

@@ -133,3 +133,53 @@ def test_gen_demos_records_a_gym_pusht_video(tmp_path):
     first, last = ds[0][IMAGE_KEY], ds[len(ds) - 1][IMAGE_KEY]
     assert tuple(first.shape) == (3, IMAGE_SIZE, IMAGE_SIZE) and float(first.std()) > 0.05
     assert not np.allclose(first.numpy(), last.numpy())  # the block moved
+
+
+def _one_frame_moved(src, dst, move, episode=1, frame=4):
+    """A copy of `src` whose keypoints at `frame` of `episode` are move(keypoints (8, 2)), all else kept."""
+    import shutil
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    shutil.copytree(src, dst)
+    f = sorted((dst / "data").rglob("*.parquet"))[0]
+    t = pq.read_table(f)
+    row = np.flatnonzero(t["episode_index"].to_numpy() == episode)[frame]
+    values = t[ENV_STATE_KEY].to_pylist()
+    values[row] = [float(v) for v in move(np.asarray(values[row], np.float64).reshape(8, 2)).ravel()]
+    i = t.schema.get_field_index(ENV_STATE_KEY)
+    field = t.schema.field(ENV_STATE_KEY)
+    pq.write_table(t.set_column(i, field, pa.array(values, field.type)), f)
+    return dst
+
+
+@pytest.mark.parametrize(
+    "move",
+    [
+        lambda kp: 2 * kp - kp.mean(axis=0),  # scaled x2 about its centre
+        lambda kp: np.repeat(kp.mean(axis=0, keepdims=True), 8, axis=0),  # collapsed onto one point
+        lambda kp: kp * (-1, 1) + (512, 0),  # mirrored, x -> 512 - x
+    ],
+    ids=["scaled", "collapsed", "mirrored"],
+)
+def test_keypoints_that_are_no_rigid_t_are_refused_naming_the_episode_and_frame(source, tmp_path, move):
+    """Issue 48 #1: a frame whose 8 keypoints are no placement of the T (within the range check) is no
+    gym-pusht state: refused in one line naming its episode and frame, nothing grown from it."""
+    bad = _one_frame_moved(source, tmp_path / "bad", move)
+    args = ["--src", bad, "--out", tmp_path / "o", "--per_demo", "1", "--workers", "1", "--quiet"]
+    r = run_script(ROOT / "augment_demos.py", *args, check=False)
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "Traceback" not in r.stderr, r.stdout + r.stderr
+    assert "episode 1, frame 4" in err[0] and "not a rigid placement of the T" in err[0], err[0]
+    assert not (tmp_path / "o").exists()
+
+
+def test_gym_pusht_s_own_keypoints_fit_the_t_well_inside_the_tolerance(source):
+    """The tolerance is far above what gym-pusht's own float32 keypoints are off (their fit residual) and
+    far below what the cases above are off."""
+    from datagen.gym_pusht import KEYPOINT_TOL, keypoint_residual
+
+    d = load_arrays(source, keys=(ENV_STATE_KEY,))
+    assert keypoint_residual(d[ENV_STATE_KEY]).max() < KEYPOINT_TOL / 100
+    assert TASK.state_problem(np.hstack([np.zeros((len(d[ENV_STATE_KEY]), 2)), d[ENV_STATE_KEY]])) is None

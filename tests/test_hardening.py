@@ -1101,3 +1101,152 @@ def test_unprivileged_cases_are_one_line(as_nobody, case, needle):
     err = p.stderr.strip().splitlines()
     assert p.returncode == 2 and len(err) == 1 and needle in err[0], p.stderr
     assert "Traceback" not in p.stdout + p.stderr and snapshot([work / "src"]) == before
+
+
+# ---------------------------------------------------------------------------------------------
+# Issue 48: a malformed meta/info.json (#4), --out inside --src (#9), the tools' result files (#12)
+# ---------------------------------------------------------------------------------------------
+def _info_edited(edit, command="augment"):
+    """A user's copy of the PushT set whose meta/info.json is edit(info), given to augment_demos.py as
+    --src (or to scale_data.py as --pusht_data)."""
+
+    def make(tmp, ref):
+        mine = user_set(ref, tmp)
+        info = json.loads((mine / "meta" / "info.json").read_text())
+        (mine / "meta" / "info.json").write_text(json.dumps(edit(info), indent=4))
+        if command == "augment":
+            return ["augment_demos.py", "--src", mine, "--out", tmp / "o", "--per_demo", "1"], [mine], None
+        return [*SD, "--no-cache", "--out", tmp / "o", "--pusht_data", mine], [mine], None
+
+    return make
+
+
+def _tool_over_users_result(name, command):
+    """A tool (`command`: "-m tools.X flags", bench_engine's --src the reference set) whose --out holds
+    the user's own file `name`."""
+    return lambda tmp, ref: (
+        [*command.split(), *(["--src", ref["pusht"]] if "bench_engine" in command else [])]
+        + ["--out", _user_result(tmp, name)],
+        [tmp / "u" / name],
+        None,
+    )
+
+
+ISSUE48_CASES = [
+    # 4: one line naming what is malformed, not a traceback (nor PushT's widths blamed)
+    (
+        "info-feature-entry-a-list",
+        _info_edited(lambda i: i | {"features": i["features"] | {"observation.state": [5]}}),
+        2,
+        "meta/info.json's feature 'observation.state' is a list, not an object",
+    ),
+    (
+        "info-features-a-list",
+        _info_edited(lambda i: i | {"features": list(i["features"])}),
+        2,
+        "meta/info.json's features is a list, not an object",
+    ),
+    ("info-a-list", _info_edited(lambda i: [i]), 2, "meta/info.json holds a list, not an object"),
+    ("info-fps-a-string", _info_edited(lambda i: i | {"fps": "10"}), 2, "fps is '10' (a string)"),
+    (
+        "info-a-list-scale-data",
+        _info_edited(lambda i: [i], "scale_data"),
+        2,
+        "meta/info.json holds a list, not an object",
+    ),
+    (
+        "info-fps-a-string-scale-data",
+        _info_edited(lambda i: i | {"fps": "10"}, "scale_data"),
+        2,
+        "fps is '10' (a string)",
+    ),
+    # 12: a tool's re-run may replace its own result, never the user's file of that name
+    (
+        "replay-yield-out-holds-users-json",
+        _tool_over_users_result(
+            "replay_yield.json", "-m tools.replay_yield --tasks pusht --seeds 1 --sources 1 --attempts 1"
+        ),
+        2,
+        "replay_yield.json exists and was not written by this tool; pass another --out",
+    ),
+    (
+        "replay-compare-out-holds-users-json",
+        _tool_over_users_result("replay_compare.json", "-m tools.replay --smoke --seeds 1"),
+        2,
+        "replay_compare.json exists and was not written by this tool; pass another --out",
+    ),
+    (
+        "replay-sigma-out-holds-users-json",
+        _tool_over_users_result(
+            "replay_sigma.json", "-m tools.replay --smoke --sigma 1 --attempts 1 --sigma_seeds 1"
+        ),
+        2,
+        "replay_sigma.json exists and was not written by this tool; pass another --out",
+    ),
+    (
+        "replay-sigma-out-holds-users-png",
+        _tool_over_users_result(
+            "replay_sigma.png", "-m tools.replay --smoke --sigma 1 --attempts 1 --sigma_seeds 1"
+        ),
+        2,
+        "replay_sigma.png exists and was not written by this tool; pass another --out",
+    ),
+    (
+        "bench-engine-costs-out-holds-users-json",
+        _tool_over_users_result(
+            "bench_engine_costs.json",
+            "-m tools.bench_engine --costs_only --cost_repeats 1 --cost_attempts_per_demo 1",
+        ),
+        2,
+        "bench_engine_costs.json exists and was not written by this tool; pass another --out",
+    ),
+    (
+        "bench-engine-out-holds-users-json",
+        _tool_over_users_result(
+            "bench_engine.json", "-m tools.bench_engine --cost_repeats 0 --sizes 1 --executors local"
+        ),
+        2,
+        "bench_engine.json exists and was not written by this tool; pass another --out",
+    ),
+]
+
+
+@pytest.mark.parametrize(
+    "make, code, needle", [c[1:] for c in ISSUE48_CASES], ids=[c[0] for c in ISSUE48_CASES]
+)
+def test_issue48_bad_input_is_one_line_and_nothing_is_touched(ref, tmp_path, make, code, needle):
+    test_bad_input_is_one_line_and_nothing_is_touched(ref, tmp_path, make, code, needle)
+
+
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["augment_demos.py", "--per_demo", "1", "--src"], "overlaps --src"),
+        ([*SD, "--no-cache", "--pusht_data"], "is inside --pusht_data"),
+    ],
+    ids=["augment_demos", "scale_data"],
+)
+def test_out_inside_the_source_is_refused_before_anything_is_written_there(ref, tmp_path, argv, needle):
+    """Issue 48 #9: --out inside the source is refused before any write: the probe that --out can be
+    written never lands in the source (its folder's mtime unchanged, nothing left by a kill there)."""
+    src = user_set(ref, tmp_path, "src")
+    before, mtime = snapshot([src]), src.stat().st_mtime_ns
+    time.sleep(0.05)  # a write after this moves the folder's mtime past the one read
+    p = run(*argv, src, "--out", src / "sub")
+    err = [line for line in p.stderr.splitlines() if line.strip()]
+    assert p.returncode == 2 and len(err) == 1 and needle in err[0], p.stderr
+    assert src.stat().st_mtime_ns == mtime and snapshot([src]) == before
+    assert not (src / "sub").exists()
+
+
+def test_a_tools_figure_is_replaced_only_beside_its_own_result(tmp_path):
+    """Issue 48 #12: a figure (tools.replay's replay_sigma.png) has no mark of its own: it may be replaced
+    beside a result of the tool, never where the user's file of that name stands alone."""
+    from ch37.errors import DataError
+
+    png = tmp_path / "replay_sigma.png"
+    png.write_bytes(b"\x89PNG mine")
+    with pytest.raises(DataError, match="replay_sigma.png exists and was not written by this tool"):
+        ownership.check_own_result(tmp_path / "replay_sigma.json", "replay_sigma", beside=[png])
+    (tmp_path / "replay_sigma.json").write_text(json.dumps({"kind": "replay_sigma"}))
+    ownership.check_own_result(tmp_path / "replay_sigma.json", "replay_sigma", beside=[png])

@@ -47,7 +47,15 @@ import gen_demos
 from ch37 import ROOT, errors
 from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
-from ch37.ownership import dump_json, is_ours, read_stamp, round_floats, write_atomic
+from ch37.ownership import (
+    check_out_path,
+    check_own_result,
+    dump_json,
+    is_ours,
+    read_stamp,
+    round_floats,
+    write_atomic,
+)
 from datagen import Perturbation, engine, known_tasks, lockstep, resume
 from lerobot_v3.dataset import load_arrays
 from tools.common import parser, provenance
@@ -64,6 +72,7 @@ TABLE = {  # printed column: row key
     "phys s": "physics_s",
     "x phys": "gen_over_physics",
 }
+KIND, COSTS = "bench_engine", "bench_engine_costs"  # each JSON's "kind" and name: a re-run replaces its own
 EXECUTORS = ("local", "ray", "ray2")  # ray2: two Ray nodes on this machine, joined by address
 
 
@@ -329,6 +338,10 @@ def main(argv: list[str]) -> int:
         raise DataError(f"--checkout {a.checkout} has no augment_demos.py")
     if min(a.sizes) < 1:
         raise DataError("--sizes must be positive")
+    if problem := check_out_path(a.out):  # before the source set and the runs are made under it
+        raise DataError(problem)
+    result_kind = COSTS if a.costs_only else KIND  # an earlier run's may be replaced, a user's file never
+    check_own_result(a.out / f"{result_kind}.json", result_kind)
     task = known_tasks()[a.task]
     src = a.src or a.out / f"src_{task.name}_seed0_ep{SOURCE_EPISODES}"
     if a.src is None and not (src / "meta" / "info.json").exists():
@@ -347,8 +360,8 @@ def main(argv: list[str]) -> int:
             f"one at a time {c['one_at_a_time_over_physics']:.2f}x"
         )
     if a.costs_only:
-        result = {"per_demo_costs": costs, "provenance": provenance(a.script)}
-        path = write_atomic(a.out / "bench_engine_costs.json", dump_json(round_floats(result, 4)))
+        result = {"kind": COSTS, "per_demo_costs": costs, "provenance": provenance(a.script)}
+        path = write_atomic(a.out / f"{COSTS}.json", dump_json(round_floats(result, 4)))
         print(f"wrote {path}")
         return 0
     rows = []
@@ -376,6 +389,7 @@ def main(argv: list[str]) -> int:
     print("assumptions: " + "; ".join(est["assumptions"]))
     same = {str(n): len({r["sha256"] for r in rows if r["demos_requested"] == n}) == 1 for n in a.sizes}
     result = {
+        "kind": KIND,
         "task": task.name,
         "per_demo_costs": costs,
         "runs": rows,
@@ -383,7 +397,7 @@ def main(argv: list[str]) -> int:
         "checkout": str(a.checkout.resolve()),
     }
     result |= {"provenance": provenance(a.script), "identical_across_executors": same}
-    path = write_atomic(a.out / "bench_engine.json", dump_json(round_floats(result, 4)))
+    path = write_atomic(a.out / f"{KIND}.json", dump_json(round_floats(result, 4)))
     print(f"wrote {path}")
     return 0
 

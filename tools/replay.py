@@ -34,7 +34,7 @@ import datagen
 from ch37 import ROOT, errors
 from ch37.config import DEFAULTS, SMOKE, check
 from ch37.errors import DataError
-from ch37.ownership import dump_json, round_floats, write_atomic
+from ch37.ownership import check_out_path, check_own_result, dump_json, round_floats, write_atomic
 from ch37.seeds import env_seed
 from ch37.viz import save_png
 from datagen import ensure_demos
@@ -48,6 +48,7 @@ MODES = ("resolve", "replay")
 ARMS = ("source", "replay", "resolve_matched", "resolve_all")
 DIFFS = (("replay", "source"), ("resolve_matched", "source"), ("resolve_matched", "replay"))
 DIFFS += (("resolve_all", "source"),)
+COMPARE, SIGMA = "replay_compare", "replay_sigma"  # each JSON's "kind" and name: a re-run replaces its own
 KEYS = ("source_episodes", "per_demo", "tries", "epochs", "hidden_dim", "batch_size", "eval_episodes")
 
 
@@ -213,8 +214,8 @@ def compare(a, c: dict, out: Path, prov: dict) -> None:
         rep, took = r["modes"]["replay"], f"({r['seconds']} s)"
         print(f"seed {s}: replay {rep['kept']}/{rep['attempts']} kept, {rates} {took}", flush=True)
     cmd = f"python -m tools.replay --seeds {a.seeds}" + (" --smoke" if a.smoke else "")
-    res = {"kind": "replay_compare", "command": cmd, "rows": rows, **summarize(rows, c["eval_episodes"])}
-    f = write_atomic(out / "replay_compare.json", dump_json(round_floats(res | prov, 4)))
+    res = {"kind": COMPARE, "command": cmd, "rows": rows, **summarize(rows, c["eval_episodes"])}
+    f = write_atomic(out / f"{COMPARE}.json", dump_json(round_floats(res | prov, 4)))
     print(f"wrote {rel(f)}")
 
 
@@ -229,10 +230,10 @@ def sigma(a, c: dict, out: Path, prov: dict) -> None:
             print(f"sigma x{m:g} {mode:8s} {got}", flush=True)
     mults = " ".join(f"{m:g}" for m in a.sigma)
     cmd = f"python -m tools.replay --sigma {mults} --attempts {a.attempts} --sigma_seeds {a.sigma_seeds}"
-    res = {"kind": "replay_sigma", "command": cmd + (" --smoke" if a.smoke else ""), "seeds": seeds}
+    res = {"kind": SIGMA, "command": cmd + (" --smoke" if a.smoke else ""), "seeds": seeds}
     res |= {"attempts_per_source": a.attempts, "rows": rows, **prov}
-    f = write_atomic(out / "replay_sigma.json", dump_json(round_floats(res, 4)))
-    print(f"wrote {rel(f)} and {rel(sigma_plot(out / 'replay_sigma.png', res))}")
+    f = write_atomic(out / f"{SIGMA}.json", dump_json(round_floats(res, 4)))
+    print(f"wrote {rel(f)} and {rel(sigma_plot(out / f'{SIGMA}.png', res))}")
 
 
 def main(argv: list[str]) -> int:
@@ -252,6 +253,12 @@ def main(argv: list[str]) -> int:
         raise DataError("--sigma multipliers must be in (0, 100)")
     c = config(a.smoke)
     out = a.out or ROOT / ("outputs/replay-smoke" if a.smoke else "outputs/replay")
+    if problem := check_out_path(out):  # every input checked before the demos are made
+        raise DataError(problem)
+    if a.seeds:  # an earlier run's results may be replaced, a user's files never
+        check_own_result(out / f"{COMPARE}.json", COMPARE)
+    if a.sigma:
+        check_own_result(out / f"{SIGMA}.json", SIGMA, beside=[out / f"{SIGMA}.png"])
     out.mkdir(parents=True, exist_ok=True)
     prov = {"smoke": a.smoke, "config": c, **SIGMAS} | provenance(a.script)
     if a.seeds:

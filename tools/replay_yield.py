@@ -38,7 +38,7 @@ import numpy as np
 from ch37 import ROOT, errors
 from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
-from ch37.ownership import dump_json, round_floats, write_atomic
+from ch37.ownership import check_out_path, check_own_result, dump_json, round_floats, write_atomic
 from ch37.parallel import map_jobs
 from ch37.seeds import env_seed
 from datagen import ALOHA, PUSHT, Perturbation, engine
@@ -49,6 +49,7 @@ from datagen.task import Source, rollout
 from tools.common import parser, provenance, rel
 
 POS_SIGMA, YAW_SIGMA = DEFAULTS["aug_pos_sigma"], DEFAULTS["aug_yaw_sigma"]  # m, rad
+KIND = "replay_yield"  # the JSON's "kind" and name: a re-run replaces its own result, never a user's file
 SIGMA_MODES = ("replay", "subtasks", "subtasks_nearest")  # ALOHA modes of the perturbation sweep
 
 # mode -> (the task as that mode describes it, the source a replay transforms)
@@ -133,6 +134,9 @@ def main(argv: list[str]) -> int:
     check(a, positive=["seeds", "sources", "attempts", "workers"])
     if any(not (0 < m < 100) for m in a.aloha_sigma):
         raise DataError("--aloha_sigma multipliers must be in (0, 100)")
+    if problem := check_out_path(a.out):  # before the work: an earlier run's result may be replaced,
+        raise DataError(problem)  # a user's file never
+    check_own_result(a.out / f"{KIND}.json", KIND)
     seeds, work, sims = list(range(a.seeds)), {}, engine.Simulators()  # this run's, passed to cell
     for task in a.tasks:
         for s in seeds:
@@ -150,9 +154,9 @@ def main(argv: list[str]) -> int:
     cmd = f"python -m tools.replay_yield --seeds {a.seeds} --sources {a.sources} --attempts {a.attempts}"
     cmd += " --aloha_sigma " + " ".join(f"{m:g}" for m in a.aloha_sigma) if a.aloha_sigma else ""
     cmd += " --tasks " + " ".join(a.tasks) if a.tasks != list(VARIANTS) else ""
-    res = {"kind": "replay_yield", "command": cmd, "seeds": seeds, "rows": rows} | provenance(a.script)
+    res = {"kind": KIND, "command": cmd, "seeds": seeds, "rows": rows} | provenance(a.script)
     a.out.mkdir(parents=True, exist_ok=True)
-    f = write_atomic(a.out / "replay_yield.json", dump_json(round_floats(res, 4)))
+    f = write_atomic(a.out / f"{KIND}.json", dump_json(round_floats(res, 4)))
     print(f"wrote {rel(f)}")
     return 0
 
