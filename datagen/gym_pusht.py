@@ -161,12 +161,6 @@ class GymPushT(Task):
                 return pose_to_start(at, new)
         return None
 
-    def place(self, env, start):
-        return env.reset(options={"reset_to_state": list(start)})
-
-    def success(self, env) -> bool:
-        return bool(env.success)
-
     def state_problem(self, states):
         off = keypoint_residual(np.asarray(states)[:, 2:18])
         bad = off > KEYPOINT_TOL

@@ -127,17 +127,11 @@ class PushT(Task):
     def perturb(self, first_state, rng, how: Perturbation):
         return perturbed_start(first_state, rng, how.pos_sigma, how.yaw_sigma)
 
-    def place(self, env, start):
-        return env.set_start(*start)
-
     def batch_expert(self):
         return PushTBatch().act_batch
 
     def step_batch(self, envs, actions):
         return step_many(envs, actions)
-
-    def success(self, env) -> bool:
-        return bool(env.success)
 
     def object_pose(self, state) -> np.ndarray:
         return block_pose(state)

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from datagen.poses import interpolate, slerp, transform_segment
+from datagen.poses import interpolate, is_planar, slerp, transform_segment
 from datagen.task import Outcome, Source, Subtask, Task, ended, recorded
 
 __all__ = ["Replay", "Segment", "cut", "nearest", "plan_of", "replay", "signals"]
@@ -204,7 +204,8 @@ class Replay:
                 poses = {a: task.arm_pose(a, obs, env) for a in task.arms}
                 here = {a: p for a, (p, _) in poses.items()}
                 first = {a: segs[a][0][0] for a in task.arms}
-                n = self.bridge_steps(here, first, {a: r for a, (_, r) in poses.items()}, at(segs, 3, 0))
+                facing = {a: r for a, (_, r) in poses.items()}
+                n = self.bridge_steps(here, first, facing, at(segs, 3, 0), self.bridge_speed(segs))
                 self.bridging = task.object_pose(obs)
                 for i in range(n):  # linear interpolation (orientation: slerp), all arms in step
                     wp = {a: here[a] + i / n * (first[a] - here[a]) for a in task.arms}
@@ -228,19 +229,28 @@ class Replay:
             obs = yield task.target_to_action(obs, here, still, grips, turns)
             self.watch(obs, env)
 
-    def bridge_steps(self, here: dict, first: dict, facing: dict, turns: dict | None) -> int:
+    def bridge_steps(self, here: dict, first: dict, facing: dict, turns: dict | None, speed: float) -> int:
         """Steps of the bridge from the arms at `here` (positions, orientations `facing`) to their first
-        waypoints `first` (orientations `turns`): the farthest arm at task.bridge_speed, or the most
+        waypoints `first` (orientations `turns`): the farthest arm at `speed`, or the most
         turned at task.bridge_turn_speed where the task sets one; 0 when every arm is within bridge_tol."""
         task = self.task
         fps = task.env_module.FPS
         gaps = [first[a] - here[a] for a in task.arms]  # a planar gap's length as np.hypot gives it
         dist = max(float(np.hypot(*g)) if len(g) == 2 else float(np.linalg.norm(g)) for g in gaps)
-        n = math.ceil(dist / (task.bridge_speed / fps) - 1e-9) if dist > task.bridge_tol else 0
+        n = math.ceil(dist / (speed / fps) - 1e-9) if dist > task.bridge_tol else 0
         if turns is not None and task.bridge_turn_speed is not None:
             angle = max(_angle(facing[a], turns[a]) for a in task.arms if facing[a] is not None)
             n = max(n, math.ceil(angle / (task.bridge_turn_speed / fps) - 1e-9))
         return n
+
+    def bridge_speed(self, segs: dict) -> float:
+        """task.bridge_speed, or where the task sets none, the source's own top speed over `segs` (each
+        arm's waypoints, frame to frame): a bridge then moves no faster than the demo did."""
+        if self.task.bridge_speed is not None:
+            return self.task.bridge_speed
+        steps = [np.linalg.norm(np.diff(pts, axis=0), axis=1) for pts, *_ in segs.values() if len(pts) > 1]
+        top = max((float(s.max()) for s in steps if len(s)), default=0.0) * self.task.env_module.FPS
+        return top if top > 0 else math.inf
 
     @staticmethod
     def turned(facing, toward, s: float) -> np.ndarray:
@@ -251,9 +261,14 @@ class Replay:
         """Whether the bridge that started at self.bridging moved the object beyond task.bridge_moves."""
         tol = self.task.bridge_moves
         if self.bridging is not None and tol is not None:
-            shift = self.task.object_pose(obs) - self.bridging
-            turned = abs(math.remainder(shift[2], math.tau))
-            self.blocked |= math.hypot(shift[0], shift[1]) > tol[0] or turned > tol[1]
+            now, was = self.task.object_pose(obs), self.bridging
+            if is_planar(was):
+                shift = now - was
+                moved, turned = math.hypot(shift[0], shift[1]), abs(math.remainder(shift[2], math.tau))
+            else:
+                moved = float(np.linalg.norm(now[:3, 3] - was[:3, 3]))
+                turned = _angle(was[:3, :3], now[:3, :3])
+            self.blocked |= moved > tol[0] or turned > tol[1]
         self.bridging = None
 
     def outcome(self, env, last_obs, episode: dict) -> Outcome:
