@@ -26,6 +26,7 @@ __all__ = [
     "is_planar",
     "planar_pose",
     "quat_of",
+    "rigid_inverse",
     "rotation",
     "rotation_of",
     "slerp",
@@ -56,6 +57,15 @@ def _matrix(pose) -> np.ndarray:
     return planar_pose(*(float(v) for v in pose)) if is_planar(pose) else np.asarray(pose, np.float64)
 
 
+def rigid_inverse(pose) -> np.ndarray:
+    """The inverse of a (4, 4) pose, [R^T, -R^T p]: exact where a general inverse rounds (an unmoved
+    frame gives the identity, so a replay at zero perturbation commands the source's own targets)."""
+    rot, pos = np.asarray(pose, np.float64)[:3, :3], np.asarray(pose, np.float64)[:3, 3]
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = rot.T, -(rot.T @ pos)
+    return out
+
+
 def transform_segment(points, vectors, src_pose, new_pose, rotations=None):
     """Re-express a path that was made relative to an object at `src_pose` for the object at `new_pose`.
 
@@ -76,7 +86,7 @@ def transform_segment(points, vectors, src_pose, new_pose, rotations=None):
         turned = np.asarray(vectors, np.float64) @ rotation(yaw1 - yaw0).T
         return moved, turned
     src, new = _matrix(src_pose), _matrix(new_pose)
-    rel = new @ np.linalg.inv(src)  # (4, 4): the world moved with the object
+    rel = new @ rigid_inverse(src)  # (4, 4): the world moved with the object
     turn = rel[:3, :3]
     moved = np.asarray(points, np.float64).reshape(-1, 3) @ turn.T + rel[:3, 3]
     turned = None if vectors is None else np.asarray(vectors, np.float64).reshape(-1, 3) @ turn.T

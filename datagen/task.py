@@ -121,7 +121,8 @@ class GymnasiumEnv:
 
     observe(obs) -> the task's observation vector ((obs_dim,) float32). What the task is done means:
     success_key, the info key that says so ("is_success"), or for an env that reports none, success(obs,
-    info) -> bool, a predicate of the task's observation vector and the step's info. How a start is set:
+    info) -> bool, a predicate of the task's observation vector and the step's info, which also ends the
+    episode (an env that knows no success does not stop at it). How a start is set:
     set_start(env, start) -> the env's own observation, for an env whose reset cannot take one (Gymnasium's
     MuJoCo envs: env.unwrapped.set_state); by default reset(options={"reset_to_state": start})."""
 
@@ -147,7 +148,10 @@ class GymnasiumEnv:
         obs, reward, terminated, truncated, info = self.env.step(action)
         seen = self.observe(obs)
         self.success |= bool(info[self.success_key] if self.done_when is None else self.done_when(seen, info))
-        return seen, reward, bool(terminated or truncated), info | {"success": self.success}
+        # an env that reports no success does not end at it either: the predicate's success ends the
+        # episode, as gym-pusht's own does
+        done = terminated or truncated or (self.done_when is not None and self.success)
+        return seen, reward, bool(done), info | {"success": self.success}
 
     def render(self, size: int) -> np.ndarray:
         """The env's own frame, (size, size, 3) uint8: Gymnasium's render() of an env its task made with
