@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -142,6 +142,10 @@ class Replay:
         self.seen = dict.fromkeys((s.ends for s in task.subtasks if s.ends), False)  # signals ever on
         self.planned = False  # the plan ran to its end with the episode still going
         self.bridging = None  # the object pose a bridge under way started from
+        self.current = None  # the subtask under way
+        self.beyond = self.bumped = (
+            None  # the first waypoint found beyond reach, the bridge that hit the object
+        )
 
     def segment(self, seg: Segment, now) -> dict:
         """{arm: (waypoints (T, d), velocities (T, d) or None, gripper commands (T,) or None, orientations
@@ -195,9 +199,18 @@ class Replay:
             return None if segs[next(iter(segs))][i] is None else {a: segs[a][i][t] for a in task.arms}
 
         for seg in self.plan:
+            self.current = seg.subtask.name
             segs = self.segment(seg, obs)
             for arm, (pts, *_) in segs.items():
-                self.out_of_reach |= not task.in_reach(arm, pts).all()
+                inside = task.in_reach(arm, pts)
+                if not inside.all() and not self.out_of_reach:
+                    i = int(np.argmin(inside))
+                    at_ = ", ".join(f"{v:.4g}" for v in pts[i])
+                    self.beyond = (
+                        f"subtask {self.current!r}: waypoint {i} of {len(pts)} for arm {arm} ({at_}) "
+                        "is beyond its reach"
+                    )
+                self.out_of_reach |= not inside.all()
             if grips is None and at(segs, 2, 0) is not None:
                 grips = {a: float(g) for a, g in at(segs, 2, 0).items()}
             if seg.subtask.bridge:
@@ -268,6 +281,11 @@ class Replay:
             else:
                 moved = float(np.linalg.norm(now[:3, 3] - was[:3, 3]))
                 turned = _angle(was[:3, :3], now[:3, :3])
+            if (moved > tol[0] or turned > tol[1]) and not self.blocked:
+                self.bumped = (
+                    f"subtask {self.current!r}: its bridge moved the object {moved:.4g} and turned it "
+                    f"{turned:.3g} rad"
+                )
             self.blocked |= moved > tol[0] or turned > tol[1]
         self.bridging = None
 
@@ -278,19 +296,22 @@ class Replay:
             self.end_bridge(last_obs)
         success = bool(self.task.success(env))
         missed = [name for name, on in self.seen.items() if not on]
+        where = f"subtask {self.current!r}"  # the subtask under way when it failed
         if success:
-            why = None
+            why, detail = None, None
         elif self.out_of_reach:
-            why = "path_out_of_reach"
+            why, detail = "path_out_of_reach", self.beyond
         elif self.blocked:
-            why = "approach_blocked"
+            why, detail = "approach_blocked", self.bumped
         elif missed:
-            why = f"{missed[0]}_missed"
+            ending = next(s.name for s in self.task.subtasks if s.ends == missed[0])
+            why, detail = f"{missed[0]}_missed", f"subtask {ending!r}: its end signal never came on"
         elif not self.planned:
-            why = "out_of_time"
+            why, detail = "out_of_time", f"{where}: the episode's {self.task.max_steps} steps ran out"
         else:
-            why = "finished_off_target"
-        return ended(episode | {"success": success}, why, self.start, self.source.episode)
+            why, detail = "finished_off_target", f"{where}: its last waypoint reached without success"
+        got = ended(episode | {"success": success}, why, self.start, self.source.episode)
+        return replace(got, detail=detail)
 
 
 def replay(task: Task, env, start, source: Source, plans: dict | None = None) -> Outcome:

@@ -86,6 +86,8 @@ class Outcome:
     start           the perturbed start (task.start_names), None when no valid draw was found
     source_episode  the source demo the attempt was made from (the one replayed, under --select nearest)
     steps           control steps simulated (frames recorded), 0 when nothing was simulated
+    detail          where a replay failed, in words: the subtask and the waypoint (datagen.check shows
+                    it; a run's report counts reasons only)
     """
 
     reason: str | None
@@ -93,6 +95,7 @@ class Outcome:
     start: tuple | None = None
     source_episode: int | None = None
     steps: int = 0
+    detail: str | None = None
 
     @property
     def kept(self) -> bool:

@@ -320,3 +320,39 @@ def test_first_per_source_takes_each_source_demos_first_episodes():
     assert np.unique(ep[engine.first_per_source(ep, src, {3: 3, 7: 1})]).tolist() == [0, 1, 2, 3]
     assert not engine.first_per_source(ep, src, 0).any()
     assert engine.first_per_source(ep, src, {7: 9}).tolist() == np.isin(ep, [2, 4, 5]).tolist()
+
+
+def test_the_check_command_tells_a_newcomer_what_is_wrong_before_a_long_run():
+    """Issue 46 #4: python -m datagen.check TASK runs the start round-trip, the episode limit, the expert,
+    the ranges and the zero-perturbation replay, one line each. Each check can fail: a start_of that
+    drops the block's yaw, a max_steps that is not the env's, a reach that excludes the path (the line
+    names the subtask and the waypoint)."""
+    from conftest import ROOT, run_script
+
+    from datagen.check import checks
+    from datagen.gym_pusht import GymPushT
+    from datagen.pusht import PushT
+
+    r = run_script("-m", "datagen.check", "aloha", "--episodes", "2", cwd=ROOT, check=False)
+    lines = r.stdout.strip().splitlines()
+    assert r.returncode == 0 and len(lines) == 7 and all(" ok: " in x for x in lines[1:]), r.stdout + r.stderr
+    assert run_script("-m", "datagen.check", "nope", cwd=ROOT, check=False).returncode == 2
+
+    class NoYaw(PushT):
+        def start_of(self, state):
+            return super().start_of(state)[:2] + (0.0,) + super().start_of(state)[3:]
+
+    class Shorter(GymPushT):
+        max_steps = 100
+
+    class Fenced(NoYaw):  # started at the wrong yaw, its replays fail; a reach that excludes their paths
+        reach = {"pusher": ((-0.05, 0.05), (-0.05, 0.05))}
+
+    found = {c: {n: p for n, p, _ in checks(c(), 2, 0, 1e-3)} for c in (NoYaw, Shorter, Fenced)}
+    assert "off in block_cos_yaw" in found[NoYaw]["start round-trip"]
+    assert found[Shorter]["episode limit"] == "max_steps 100 but the env stops at 300"
+    out = found[Fenced]["replay"]
+    assert out.startswith(
+        "2 of 2 not reproduced; the first: rollout 0: path_out_of_reach (subtask 'push': "
+    ), out
+    assert "waypoint 0 of" in out and "beyond its reach" in out
