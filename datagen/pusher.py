@@ -38,7 +38,7 @@ from datagen.poses import quat_of, rotation_of
 from datagen.pusher_expert import PoseControl, PusherExpert, hand_rotation, held
 from datagen.task import GymnasiumEnv, Perturbation, Subtask, Task, register
 
-__all__ = ["PUSHER", "Pusher", "START_NAMES", "Spec"]
+__all__ = ["PUSHER", "Pusher", "START_NAMES", "SUBTASKS", "Spec", "WHOLE"]
 
 MAX_STEPS = 200  # control steps (10 s at 20 Hz): Pusher-v5's registered 100 cut off 16% of the expert's
 # held-out pushes (its slowest took 123 steps, 190 under 1 N.m of torque noise)
@@ -79,6 +79,11 @@ class Spec:
 
 
 HAND, OBJECT, GOAL = slice(14, 17), slice(17, 20), slice(20, 23)  # observation columns
+SUBTASKS = (  # the engine's: the approach relative to the object, then the push sliding onto the goal
+    Subtask("approach", ("object",), ends="held"),
+    Subtask("push", ("object",), bridge=False, onto=("goal",)),
+)
+WHOLE = (Subtask("push", ("object",)),)  # MimicGen's move without subtasks, for contrast (tools.replay_yield)
 
 
 def _pose(position) -> np.ndarray:
@@ -104,15 +109,14 @@ class Pusher(Task):
     noise_unit = "m (on the hand's target position)"
     default_noise = 0.005
     arms = {"hand": HAND}
-    subtasks = (
-        Subtask("approach", ("object",), ends="held"),
-        Subtask("push", ("object",), bridge=False, onto=("goal",)),
-    )
     # m: the robot's controller approaches any target itself (its error clipped to 0.15 m a step), so the
     # engine's bridge would only replace that approach with another: zero-perturbation replays of 40
     # sources reproduced 34 with bridges beyond 1 cm, 40 without (docs/replay.md)
     bridge_tol = math.inf
     resimulate = False  # "held" shows in an observation
+
+    def __init__(self, subtasks: tuple[Subtask, ...] = SUBTASKS):
+        self.subtasks = subtasks
 
     expert_class = PusherExpert
 
