@@ -127,7 +127,7 @@ class PoseControl:
     Gymnasium.)"""
 
     def __init__(self, env):
-        self.env, self.unwrapped, self.render_mode = env, env.unwrapped, env.render_mode
+        self.env, self.unwrapped, self.render_mode, self.spec = env, env.unwrapped, env.render_mode, env.spec
         self.scratch = mujoco.MjData(env.unwrapped.model)
         self.obs = None
 
