@@ -152,14 +152,8 @@ class Aloha(Task):
     def perturb(self, first_state, rng, how: Perturbation):
         return perturbed_start(first_state, rng, how.pos_sigma)
 
-    def place(self, env, start):
-        return env.set_start(*start)
-
     def batch_expert(self):
         return AlohaBatch().act_batch
-
-    def success(self, env) -> bool:
-        return bool(env.success)
 
     def object_pose(self, state) -> np.ndarray:
         return np.array([float(state[6]), float(state[7]), 0.0])  # the cube (x, y m); it never turns
@@ -181,7 +175,7 @@ class Aloha(Task):
     def action_to_target(self, states, actions) -> dict:
         return {arm: (states[:, XY[arm]], actions[:, XY[arm]], actions[:, GRIP[arm]]) for arm in XY}
 
-    def target_to_action(self, obs, waypoints, velocities, grips) -> np.ndarray:
+    def target_to_action(self, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
         a = np.zeros(aloha_env.ACT_DIM)
         for arm in XY:
             here = np.asarray(obs[XY[arm]], np.float64)

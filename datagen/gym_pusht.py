@@ -15,9 +15,9 @@ ours. The only engine module that imports gym_pusht (at the first env made, not 
                angle yaw_sigma rad, around a source's first frame; the block stays on the table
                (BLOCK_BOX), the agent inside its spawn box and clear of the T; up to TRIES draws.
                A start is rounded to float32 so that aug.start re-runs it exactly
-    expert     scripted_expert.GymPushTExpert (position targets through gym-pusht's PD)
-    frames     block (its pose recovered from the keypoints: scripted_expert.block_pose_from_keypoints,
-               so a set that records only keypoints works), goal (fixed)
+    expert     datagen.gym_pusht_expert.GymPushTExpert (position targets through gym-pusht's PD)
+    frames     block (its pose recovered from the keypoints: gym_pusht_expert.block_pose_from_keypoints, so
+               a set that records only keypoints works), goal (fixed)
     subtasks   one: the whole push relative to the block, entered by a bridge from where the agent is
     actions    position targets (px): a replayed step commands the segment's re-expressed target
     success    gym-pusht's own info["is_success"] (coverage of the goal above 0.95; it ends the episode)
@@ -32,9 +32,9 @@ import warnings
 
 import numpy as np
 
+from datagen.gym_pusht_expert import GymPushTExpert, block_pose_from_keypoints, keypoint_residual
 from datagen.task import GymnasiumEnv, Perturbation, Subtask, Task, register
 from lerobot_v3 import ENV_STATE_KEY, IMAGE_SIZE
-from scripted_expert import GymPushTExpert, block_pose_from_keypoints, keypoint_residual
 
 __all__ = [
     "GYM_PUSHT",
@@ -161,12 +161,6 @@ class GymPushT(Task):
                 return pose_to_start(at, new)
         return None
 
-    def place(self, env, start):
-        return env.reset(options={"reset_to_state": list(start)})
-
-    def success(self, env) -> bool:
-        return bool(env.success)
-
     def state_problem(self, states):
         off = keypoint_residual(np.asarray(states)[:, 2:18])
         bad = off > KEYPOINT_TOL
@@ -191,7 +185,7 @@ class GymPushT(Task):
     def action_to_target(self, states, actions) -> dict:
         return {"agent": (actions[:, :2], np.zeros((len(actions), 2)), None)}
 
-    def target_to_action(self, obs, waypoints, velocities, grips) -> np.ndarray:
+    def target_to_action(self, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
         return np.clip(waypoints["agent"], 0.0, 512.0).astype(np.float32)
 
 

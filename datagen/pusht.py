@@ -127,17 +127,11 @@ class PushT(Task):
     def perturb(self, first_state, rng, how: Perturbation):
         return perturbed_start(first_state, rng, how.pos_sigma, how.yaw_sigma)
 
-    def place(self, env, start):
-        return env.set_start(*start)
-
     def batch_expert(self):
         return PushTBatch().act_batch
 
     def step_batch(self, envs, actions):
         return step_many(envs, actions)
-
-    def success(self, env) -> bool:
-        return bool(env.success)
 
     def object_pose(self, state) -> np.ndarray:
         return block_pose(state)
@@ -158,7 +152,7 @@ class PushT(Task):
     def action_to_target(self, states, actions) -> dict:
         return {"pusher": (states[:, :2], actions[:, :2], None)}
 
-    def target_to_action(self, obs, waypoints, velocities, grips) -> np.ndarray:
+    def target_to_action(self, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
         here = np.asarray(obs[:2], np.float64)
         a = velocities["pusher"] + TRACK_GAIN * (waypoints["pusher"] - here)
         return np.clip(a, -_LIMIT, _LIMIT).astype(np.float32)

@@ -13,7 +13,7 @@ prepare_src_dataset annotates a source through its env. The last subtask runs to
 An attempt is executed subtask by subtask. At each subtask's start, the object frames are read from the
 current observation (open loop in between, as MimicGen reads the object pose once per subtask), and every
 arm's segment (the source's targets: task.action_to_target) is re-expressed from its frame's pose in the
-source (at the subtask's first frame) into the same frame's pose now (datagen.task.transform_segment; a
+source (at the subtask's first frame) into the same frame's pose now (datagen.poses.transform_segment; a
 subtask's `onto` makes an arm's frame slide onto another over the subtask). A subtask with `bridge` is
 entered by linear interpolation from where the arms are to their first waypoints, all arms in step, at up
 to task.bridge_speed (none when every arm is within task.bridge_tol); each gripper keeps its last command.
@@ -38,11 +38,12 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from datagen.task import Outcome, Source, Subtask, Task, ended, recorded, transform_segment
+from datagen.poses import interpolate, is_planar, slerp, transform_segment
+from datagen.task import Outcome, Source, Subtask, Task, ended, recorded
 
 __all__ = ["Replay", "Segment", "cut", "nearest", "plan_of", "replay", "signals"]
 
@@ -119,10 +120,15 @@ def nearest(task: Task, pool: dict, start) -> int:
     return min(pool, key=lambda e: (task.start_distance(task.start_of(pool[e].states[0]), start), e))
 
 
-def _interp(a, b, s: float) -> tuple[float, float, float]:
-    """The planar pose a fraction s (0..1) of the way from a to b (x, y linear; yaw the short way)."""
-    dyaw = math.remainder(float(b[2]) - float(a[2]), math.tau)
-    return (a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1]), float(a[2]) + s * dyaw)
+def _moved(points, vectors, rotations, was, now):
+    """transform_segment's (points, vectors, rotations) for both of its shapes (planar: no rotations)."""
+    got = transform_segment(points, vectors, was, now, rotations)
+    return got if len(got) == 3 else (*got, None)
+
+
+def _angle(r0, r1) -> float:
+    """The angle (rad) of the rotation that takes orientation r0 (3, 3) to r1."""
+    return math.acos(min(1.0, max(-1.0, (float(np.trace(np.asarray(r0).T @ r1)) - 1) / 2)))
 
 
 class Replay:
@@ -136,31 +142,40 @@ class Replay:
         self.seen = dict.fromkeys((s.ends for s in task.subtasks if s.ends), False)  # signals ever on
         self.planned = False  # the plan ran to its end with the episode still going
         self.bridging = None  # the object pose a bridge under way started from
+        self.current = None  # the subtask under way
+        self.beyond = self.bumped = (
+            None  # the first waypoint found beyond reach, the bridge that hit the object
+        )
 
     def segment(self, seg: Segment, now) -> dict:
-        """{arm: (waypoints (T, 2) m, velocities (T, 2) m/s, gripper commands (T,) or None)} of `seg`,
-        re-expressed for the frames in the observation `now`."""
+        """{arm: (waypoints (T, d), velocities (T, d) or None, gripper commands (T,) or None, orientations
+        (T, 3, 3) or None)} of `seg`, re-expressed for the frames in the observation `now`."""
         task, src = self.task, self.source
         rows = slice(seg.start, seg.stop)
         targets = task.action_to_target(src.states[rows], src.actions[rows])
         first, out = src.states[seg.start], {}
         onto = seg.subtask.onto or (None,) * len(task.arms)
         for arm, frame, to in zip(task.arms, seg.subtask.frames, onto):
-            pts, vel, grip = targets[arm]
+            pts, vel, grip, *turns = targets[arm]
+            rots = turns[0] if turns else None
             if to is None:
                 was, now_ = task.frame_pose(frame, first), task.frame_pose(frame, now)
-                pts, vel = transform_segment(pts, vel, was, now_)
+                pts, vel, rots = _moved(pts, vel, rots, was, now_)
             else:  # a frame sliding from `frame` onto `to` over the subtask
                 a0, a1 = task.frame_pose(frame, first), task.frame_pose(to, first)
                 b0, b1 = task.frame_pose(frame, now), task.frame_pose(to, now)
                 k = max(len(pts) - 1, 1)
                 moved = []
                 for t in range(len(pts)):  # frame t in the pose a fraction t / k of the way
-                    was, now_ = _interp(a0, a1, t / k), _interp(b0, b1, t / k)
-                    moved.append(transform_segment(pts[t : t + 1], vel[t : t + 1], was, now_))
-                pts = np.concatenate([m[0] for m in moved]).reshape(-1, 2)
-                vel = np.concatenate([m[1] for m in moved]).reshape(-1, 2)
-            out[arm] = (pts, vel, None if grip is None else np.asarray(grip, np.float64))
+                    was, now_ = interpolate(a0, a1, t / k), interpolate(b0, b1, t / k)
+                    part = (None if x is None else x[t : t + 1] for x in (pts, vel, rots))
+                    moved.append(_moved(*part, was, now_))
+                d = np.shape(pts)[1]
+                pts, vel, rots = (
+                    None if m[0] is None else np.concatenate(m).reshape(-1, *shape)
+                    for m, shape in zip(zip(*moved), ((d,), (d,), (3, 3)))
+                )
+            out[arm] = (pts, vel, None if grip is None else np.asarray(grip, np.float64), rots)
         return out
 
     def watch(self, obs, env) -> None:
@@ -178,47 +193,100 @@ class Replay:
         task = self.task
         fps = task.env_module.FPS
         obs = yield
-        grips = None
+        grips, turns = None, None  # what each gripper and each arm's orientation was last told
+
+        def at(segs, i: int, t: int) -> dict | None:  # column i of every arm's segment at frame t
+            return None if segs[next(iter(segs))][i] is None else {a: segs[a][i][t] for a in task.arms}
+
         for seg in self.plan:
+            self.current = seg.subtask.name
             segs = self.segment(seg, obs)
-            for arm, (pts, _, grip) in segs.items():
-                (xlo, xhi), (ylo, yhi) = task.reach[arm]
-                inside = (pts[:, 0] >= xlo) & (pts[:, 0] <= xhi) & (pts[:, 1] >= ylo) & (pts[:, 1] <= yhi)
+            for arm, (pts, *_) in segs.items():
+                inside = task.in_reach(arm, pts)
+                if not inside.all() and not self.out_of_reach:
+                    i = int(np.argmin(inside))
+                    at_ = ", ".join(f"{v:.4g}" for v in pts[i])
+                    self.beyond = (
+                        f"subtask {self.current!r}: waypoint {i} of {len(pts)} for arm {arm} ({at_}) "
+                        "is beyond its reach"
+                    )
                 self.out_of_reach |= not inside.all()
-            if grips is None and next(iter(segs.values()))[2] is not None:
-                grips = {a: float(segs[a][2][0]) for a in task.arms}  # what each gripper was last told
+            if grips is None and at(segs, 2, 0) is not None:
+                grips = {a: float(g) for a, g in at(segs, 2, 0).items()}
             if seg.subtask.bridge:
-                here = {a: np.asarray(obs[task.arms[a]], np.float64) for a in task.arms}
+                poses = {a: task.arm_pose(a, obs, env) for a in task.arms}
+                here = {a: p for a, (p, _) in poses.items()}
                 first = {a: segs[a][0][0] for a in task.arms}
-                dist = max(float(np.hypot(*(first[a] - here[a]))) for a in task.arms)
-                n = math.ceil(dist / (task.bridge_speed / fps) - 1e-9) if dist > task.bridge_tol else 0
+                facing = {a: r for a, (_, r) in poses.items()}
+                n = self.bridge_steps(here, first, facing, at(segs, 3, 0), self.bridge_speed(segs))
                 self.bridging = task.object_pose(obs)
-                for i in range(n):  # linear interpolation, all arms in step
+                for i in range(n):  # linear interpolation (orientation: slerp), all arms in step
                     wp = {a: here[a] + i / n * (first[a] - here[a]) for a in task.arms}
                     vel = {a: (first[a] - here[a]) * fps / n for a in task.arms}
-                    obs = yield task.target_to_action(obs, wp, vel, None if grips is None else dict(grips))
+                    if at(segs, 3, 0) is not None:
+                        turns = {a: self.turned(poses[a][1], segs[a][3][0], i / n) for a in task.arms}
+                    g = None if grips is None else dict(grips)
+                    obs = yield task.target_to_action(obs, wp, vel, g, turns)
                     self.watch(obs, env)
                 self.end_bridge(obs)
             for t in range(seg.stop - seg.start):
                 if grips is not None:
                     grips = {a: float(segs[a][2][t]) for a in task.arms}
-                obs = yield task.target_to_action(
-                    obs, {a: segs[a][0][t] for a in task.arms}, {a: segs[a][1][t] for a in task.arms}, grips
-                )
+                turns = at(segs, 3, t) or turns
+                obs = yield task.target_to_action(obs, at(segs, 0, t), at(segs, 1, t), grips, turns)
                 self.watch(obs, env)
         self.planned = True
         for _ in range(task.hold_steps):  # hold still so a success hold can complete
-            here = {a: np.asarray(obs[task.arms[a]], np.float64) for a in task.arms}
-            obs = yield task.target_to_action(obs, here, {a: np.zeros(2) for a in task.arms}, grips)
+            here = {a: task.arm_pose(a, obs, env)[0] for a in task.arms}
+            still = {a: np.zeros(len(here[a])) for a in task.arms}
+            obs = yield task.target_to_action(obs, here, still, grips, turns)
             self.watch(obs, env)
+
+    def bridge_steps(self, here: dict, first: dict, facing: dict, turns: dict | None, speed: float) -> int:
+        """Steps of the bridge from the arms at `here` (positions, orientations `facing`) to their first
+        waypoints `first` (orientations `turns`): the farthest arm at `speed`, or the most
+        turned at task.bridge_turn_speed where the task sets one; 0 when every arm is within bridge_tol."""
+        task = self.task
+        fps = task.env_module.FPS
+        gaps = [first[a] - here[a] for a in task.arms]  # a planar gap's length as np.hypot gives it
+        dist = max(float(np.hypot(*g)) if len(g) == 2 else float(np.linalg.norm(g)) for g in gaps)
+        n = math.ceil(dist / (speed / fps) - 1e-9) if dist > task.bridge_tol else 0
+        if turns is not None and task.bridge_turn_speed is not None:
+            angle = max(_angle(facing[a], turns[a]) for a in task.arms if facing[a] is not None)
+            n = max(n, math.ceil(angle / (task.bridge_turn_speed / fps) - 1e-9))
+        return n
+
+    def bridge_speed(self, segs: dict) -> float:
+        """task.bridge_speed, or where the task sets none, the source's own top speed over `segs` (each
+        arm's waypoints, frame to frame): a bridge then moves no faster than the demo did."""
+        if self.task.bridge_speed is not None:
+            return self.task.bridge_speed
+        steps = [np.linalg.norm(np.diff(pts, axis=0), axis=1) for pts, *_ in segs.values() if len(pts) > 1]
+        top = max((float(s.max()) for s in steps if len(s)), default=0.0) * self.task.env_module.FPS
+        return top if top > 0 else math.inf
+
+    @staticmethod
+    def turned(facing, toward, s: float) -> np.ndarray:
+        """The orientation a fraction s of a bridge's way from `facing` (None: not known, so `toward`)."""
+        return toward if facing is None else slerp(facing, toward, s)
 
     def end_bridge(self, obs) -> None:
         """Whether the bridge that started at self.bridging moved the object beyond task.bridge_moves."""
         tol = self.task.bridge_moves
         if self.bridging is not None and tol is not None:
-            shift = self.task.object_pose(obs) - self.bridging
-            turned = abs(math.remainder(shift[2], math.tau))
-            self.blocked |= math.hypot(shift[0], shift[1]) > tol[0] or turned > tol[1]
+            now, was = self.task.object_pose(obs), self.bridging
+            if is_planar(was):
+                shift = now - was
+                moved, turned = math.hypot(shift[0], shift[1]), abs(math.remainder(shift[2], math.tau))
+            else:
+                moved = float(np.linalg.norm(now[:3, 3] - was[:3, 3]))
+                turned = _angle(was[:3, :3], now[:3, :3])
+            if (moved > tol[0] or turned > tol[1]) and not self.blocked:
+                self.bumped = (
+                    f"subtask {self.current!r}: its bridge moved the object {moved:.4g} and turned it "
+                    f"{turned:.3g} rad"
+                )
+            self.blocked |= moved > tol[0] or turned > tol[1]
         self.bridging = None
 
     def outcome(self, env, last_obs, episode: dict) -> Outcome:
@@ -228,19 +296,22 @@ class Replay:
             self.end_bridge(last_obs)
         success = bool(self.task.success(env))
         missed = [name for name, on in self.seen.items() if not on]
+        where = f"subtask {self.current!r}"  # the subtask under way when it failed
         if success:
-            why = None
+            why, detail = None, None
         elif self.out_of_reach:
-            why = "path_out_of_reach"
+            why, detail = "path_out_of_reach", self.beyond
         elif self.blocked:
-            why = "approach_blocked"
+            why, detail = "approach_blocked", self.bumped
         elif missed:
-            why = f"{missed[0]}_missed"
+            ending = next(s.name for s in self.task.subtasks if s.ends == missed[0])
+            why, detail = f"{missed[0]}_missed", f"subtask {ending!r}: its end signal never came on"
         elif not self.planned:
-            why = "out_of_time"
+            why, detail = "out_of_time", f"{where}: the episode's {self.task.max_steps} steps ran out"
         else:
-            why = "finished_off_target"
-        return ended(episode | {"success": success}, why, self.start, self.source.episode)
+            why, detail = "finished_off_target", f"{where}: its last waypoint reached without success"
+        got = ended(episode | {"success": success}, why, self.start, self.source.episode)
+        return replace(got, detail=detail)
 
 
 def replay(task: Task, env, start, source: Source, plans: dict | None = None) -> Outcome:

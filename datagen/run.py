@@ -42,7 +42,7 @@ from datagen import engine, resume
 from datagen.plan import attempts_per_demo, plan, plan_memory_problem, stored, versions
 from datagen.report import REPORT_NAME, describe, report_of
 from datagen.shards import SHARDS_DIR, collect, make_shard, many_files_note, merge
-from datagen.source_check import read_source, source_identity, task_of
+from datagen.source_check import read_source, source_identity, successful_only, task_of
 from datagen.task import Task, known_tasks
 
 
@@ -62,7 +62,9 @@ def run(src: Path, out: Path, settings: dict, *, workers: int, ray: str | None =
     task = task_of(src)
     t0 = time.perf_counter()
     resume.check_out_first(out, src)  # before reading the source: a folder not ours is refused at once
-    arrays = read_source(task, src)
+    arrays, note = successful_only(read_source(task, src), src)
+    if note:
+        print(note, flush=True)
     n_sources = len(np.unique(arrays["episode_index"]))
     problem = plan_memory_problem(n_sources, settings["attempts_per_demo"], available_memory())
     if problem:

@@ -137,6 +137,7 @@ def read_source(task: Task, src: Path) -> dict:
     check_hf_cache()  # a cache we cannot write is named as the cause, not the set
     try:
         keys = ("observation.state", "action", "episode_index") + ((ENV_STATE_KEY,) if whole else ())
+        keys += (SUCCESS_KEY,) if SUCCESS_KEY in feats else ()
         arrays = load_arrays(src, keys=keys)
     except Exception as e:  # pyarrow, datasets and lerobot each raise their own kinds for a broken set
         first = (str(e).strip().splitlines() or [""])[0][:160]
@@ -168,6 +169,33 @@ def read_source(task: Task, src: Path) -> dict:
     if arrays["episode_index"].max() >= SEED_BLOCK:
         raise DataError(f"--src {src}: episode indices must be below {SEED_BLOCK:,} (the seed block)")
     return arrays
+
+
+SUCCESS_KEY = "next.success"  # what our sets (and the hub's) record after each frame's action
+
+
+def successful_only(arrays: dict, src: Path) -> tuple[dict, str | None]:
+    """The source's columns without its episodes that end unsolved (their last next.success False), and
+    a line naming them (None when none is dropped or the set records no success). A failed demo shows no
+    way to the goal: replaying it can only fail, and a demo grown from it would carry it as provenance.
+    DataError when no episode is left."""
+    if SUCCESS_KEY not in arrays:
+        return arrays, None
+    ep = arrays["episode_index"]
+    done = np.asarray(arrays.pop(SUCCESS_KEY)).reshape(len(ep), -1)[:, 0]
+    last = np.r_[ep[1:] != ep[:-1], True]  # each episode's last frame
+    failed = ep[last][~done[last]]
+    if not len(failed):
+        return arrays, None
+    if len(failed) == len(np.unique(ep)):
+        raise DataError(f"--src {src}: none of its {len(failed)} episodes ends in success (next.success)")
+    keep = ~np.isin(ep, failed)
+    shown = ", ".join(map(str, failed[:10].tolist())) + (", ..." if len(failed) > 10 else "")
+    note = (
+        f"note: {len(failed)} of {len(np.unique(ep))} source episodes end unsolved (next.success) and are "
+        f"skipped: episode {shown}; a failed demo shows no way to the goal"
+    )
+    return {k: v[keep] for k, v in arrays.items()}, note
 
 
 def source_identity(arrays: dict) -> dict:

@@ -32,6 +32,7 @@ success: datagen.replay), lockstep, shards, resume, report and merge.
 
 from __future__ import annotations
 
+import abc
 import functools
 import importlib
 import math
@@ -57,10 +58,9 @@ __all__ = [
     "ended",
     "known_tasks",
     "recorded",
+    "contract_problem",
     "register",
     "rollout",
-    "rotation",
-    "transform_segment",
     "write_dataset",
 ]
 
@@ -86,6 +86,8 @@ class Outcome:
     start           the perturbed start (task.start_names), None when no valid draw was found
     source_episode  the source demo the attempt was made from (the one replayed, under --select nearest)
     steps           control steps simulated (frames recorded), 0 when nothing was simulated
+    detail          where a replay failed, in words: the subtask and the waypoint (datagen.check shows
+                    it; a run's report counts reasons only)
     """
 
     reason: str | None
@@ -93,6 +95,7 @@ class Outcome:
     start: tuple | None = None
     source_episode: int | None = None
     steps: int = 0
+    detail: str | None = None
 
     @property
     def kept(self) -> bool:
@@ -115,13 +118,20 @@ class Source:
 
 class GymnasiumEnv:
     """A Gymnasium env (reset(seed=, options=) -> (obs, info); step -> (obs, reward, terminated,
-    truncated, info)) as the engine steps one: reset(seed, options) -> obs, step(action) -> (obs, reward,
-    done, info with "success"), success (latched), render(size) (--video's frames). observe(obs) -> the
-    task's observation vector ((obs_dim,) float32); success_key: the info key that says the task is done
-    ("is_success")."""
+    truncated, info)) as the engine steps one: reset(seed, options) -> obs, set_start(*start) -> obs (the
+    task's place), step(action) -> (obs, reward, done, info with "success"), success (latched),
+    render(size) (--video's frames).
 
-    def __init__(self, env, observe, success_key: str = "is_success"):
+    observe(obs) -> the task's observation vector ((obs_dim,) float32). What the task is done means:
+    success_key, the info key that says so ("is_success"), or for an env that reports none, success(obs,
+    info) -> bool, a predicate of the task's observation vector and the step's info, which also ends the
+    episode (an env that knows no success does not stop at it). How a start is set:
+    set_start(env, start) -> the env's own observation, for an env whose reset cannot take one (Gymnasium's
+    MuJoCo envs: env.unwrapped.set_state); by default reset(options={"reset_to_state": start})."""
+
+    def __init__(self, env, observe, success_key: str = "is_success", *, success=None, set_start=None):
         self.env, self.observe, self.success_key = env, observe, success_key
+        self.done_when, self.setter = success, set_start
         self.success = False
 
     def reset(self, seed=None, options=None) -> np.ndarray:
@@ -129,10 +139,22 @@ class GymnasiumEnv:
         self.success = False
         return self.observe(obs)
 
+    def set_start(self, *start) -> np.ndarray:
+        """The env put at `start` (fully, its counters fresh): its first observation vector."""
+        if self.setter is None:
+            return self.reset(options={"reset_to_state": list(start)})
+        self.env.reset(seed=0)  # fresh counters (time limit, latched state); the setter then sets every state
+        self.success = False
+        return self.observe(self.setter(self.env, start))
+
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
-        self.success |= bool(info[self.success_key])
-        return self.observe(obs), reward, bool(terminated or truncated), info | {"success": self.success}
+        seen = self.observe(obs)
+        self.success |= bool(info[self.success_key] if self.done_when is None else self.done_when(seen, info))
+        # an env that reports no success does not end at it either: the predicate's success ends the
+        # episode, as gym-pusht's own does
+        done = terminated or truncated or (self.done_when is not None and self.success)
+        return seen, reward, bool(done), info | {"success": self.success}
 
     def render(self, size: int) -> np.ndarray:
         """The env's own frame, (size, size, 3) uint8: Gymnasium's render() of an env its task made with
@@ -143,29 +165,6 @@ class GymnasiumEnv:
         if frame.shape != (size, size, 3):
             raise ValueError(f"its env draws frames of shape {frame.shape}, not {(size, size, 3)}")
         return frame.astype(np.uint8, copy=False)
-
-
-def rotation(yaw: float) -> np.ndarray:
-    """The 2x2 rotation by `yaw` (rad)."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([[c, -s], [s, c]])
-
-
-def transform_segment(points, vectors, src_pose, new_pose):
-    """Re-express a path that was made relative to an object at `src_pose` for the object at `new_pose`.
-
-    points (T, 2) world positions (m) and vectors (T, 2) world velocities (m/s); poses (x, y, yaw).
-    A point is first written in the source object's frame, q = R(-yaw0) (p - xy0), then put back in the
-    world from the new pose, p' = R(yaw1) q + xy1; a velocity only rotates, v' = R(yaw1 - yaw0) v.
-    The planar SE(2) analog of MimicGen's transform_source_data_segment_using_object_pose.
-    Returns (points' (T, 2), vectors' (T, 2)); an identical pose returns the inputs (to float rounding).
-    """
-    x0, y0, yaw0 = (float(v) for v in src_pose)
-    x1, y1, yaw1 = (float(v) for v in new_pose)
-    in_object = (np.asarray(points, np.float64) - (x0, y0)) @ rotation(-yaw0).T  # (T, 2) object frame
-    moved = in_object @ rotation(yaw1).T + (x1, y1)
-    turned = np.asarray(vectors, np.float64) @ rotation(yaw1 - yaw0).T
-    return moved, turned
 
 
 def write_dataset(
@@ -244,57 +243,82 @@ class Subtask:
     onto: tuple[str | None, ...] | None = None
 
 
-class Task:
+class Task(abc.ABC):
     """The contract between the engine and a task, in MimicGen's division of work: the task describes,
     the engine runs (the modes, the one replay: datagen.replay, lockstep, shards, resume, report, merge).
-    A subclass sets the attributes and defines every method that raises NotImplementedError; the rest
-    have defaults. Positions in m, angles in rad, velocities in m/s; an observation is the env's
-    (obs_dim,) float32 vector, an action its (act_dim,) float32 vector."""
+
+    Required (REQUIRED_ATTRIBUTES and the abstract methods: ten names, checked when the task registers):
+    name, env_module, start_names, arms; make_env, start_of, perturb, object_pose, action_to_target,
+    target_to_action. Everything else has a default. Units are the task's own (PushT's and ALOHA's
+    metres, gym-pusht's pixels; angles in rad, times in s), each attribute saying which; an observation
+    is the env's (obs_dim,) float32 vector, an action its (act_dim,) float32 vector."""
+
+    REQUIRED_ATTRIBUTES = ("name", "env_module", "start_names", "arms")
 
     # ---- what the task is ----
     name: str  # "pusht": its key in known_tasks(), recorded in a run's settings
-    title: str  # "PushT": how messages name it
-    generator: str  # the command that makes a source set of this task ("gen_demos_pusht.py")
     # env_module: STATE_NAMES, ACTION_NAMES, ENV_STATE_NAMES, FPS, ROBOT_TYPE, TASK, OBS_DIM, ACT_DIM (and
-    # OBS_NAMES where the observation vector is more than observation.state: see obs_names)
+    # OBS_NAMES where the observation vector is more than observation.state: see obs_names; MAX_STEPS, the
+    # env's episode limit, where max_steps is not set): a module or a class holding them (gym_pusht.Spec)
     env_module: object
     start_names: tuple[str, ...]  # a start's numbers, in place()'s order (stored as aug.start)
-    state_ranges: dict[str, tuple[float, float]]  # {state name: (low, high)}: a source outside is refused
-    action_ranges: dict[str, tuple[float, float]]  # {action name: (low, high)}: the env's clip range
-    max_steps: int  # control steps an episode may last: the env's limit
+    state_ranges: dict[str, tuple[float, float]] = {}  # {state name: (low, high)}: a source outside: refused
+    action_ranges: dict[str, tuple[float, float]] = {}  # {action name: (low, high)}: the clip range
     expert_class: type | None = None  # its scripted expert: expert_class(noise=std, seed=int); optional
     default_noise: float = 0.0  # the expert's action noise (std, in noise_unit) in the task's demo sets
     noise_unit: str = "m/s"  # the unit of the expert's noise: its actions' (gen_demos.py --noise)
 
+    @property
+    def title(self) -> str:
+        """How messages name the task ("PushT"); by default its name."""
+        return self.name
+
+    @property
+    def generator(self) -> str:
+        """The command that makes a source set of this task; by default gen_demos.py's."""
+        return f"gen_demos.py --task {self.name}"
+
+    @property
+    def max_steps(self) -> int:
+        """Control steps an episode may last: the env's limit (env_module.MAX_STEPS by default)."""
+        return int(self.env_module.MAX_STEPS)
+
     # ---- what replay reads (datagen.replay) ----
-    arms: dict[str, slice]  # {arm: the columns of its controlled point's (x, y) in an observation}
-    reach: dict[str, tuple]  # {arm: ((x low, x high), (y low, y high))}: where its point can go
-    subtasks: tuple[Subtask, ...]  # in order; the last one runs to the source's end
-    bridge_speed: float  # m/s: a bridge's top speed
-    bridge_tol: float  # m: arms this close to their first waypoints are not bridged
-    bridge_moves: tuple[float, float] | None = None  # (m, rad): a bridge that moves the object more hit it
+    # Poses live in SE(3) (datagen.poses): a frame is a (4, 4) pose, an arm's target a position (3,), an
+    # orientation (3, 3) and its gripper command. A planar task (a robot on a table) gives its frames as
+    # (x, y, yaw) triples and its targets as (x, y) points without orientation: the special case.
+    arms: dict[str, slice]  # {arm: the columns of its controlled point's position in an observation}
+    reach: dict[str, tuple] = {}  # {arm: ((low, high) per axis of its point)}: a box it can reach (none: all)
+    # in order, the last one running to the source's end; by default one, every arm relative to the object
+    subtasks: tuple[Subtask, ...] = (Subtask("whole", ("object",)),)
+    bridge_speed: float | None = None  # length unit / s: a bridge's top speed (None: the source's own)
+    bridge_tol: float = 0.0  # length unit: arms this close to their first waypoints are not bridged
+    bridge_moves: tuple[float, float] | None = None  # (length, rad): a bridge moving the object more hit it
+    bridge_turn_speed: float | None = None  # rad/s: a bridge's top turning speed (None: turns don't count)
     hold_steps: int = 0  # steps the arms hold still after the plan, for a success that must be held
 
+    @abc.abstractmethod
     def make_env(self, share=None):
-        """A new simulator of this task: step(action) -> (obs, reward, done, info["success"]). share: an env
-        of this task whose compiled model (and, where the env can, its MjData) the new one may share;
-        every env keeps its own state (lockstep's lanes)."""
-        raise NotImplementedError
+        """A new simulator of this task: step(action) -> (obs, reward, done, info["success"]) and
+        set_start(*start) -> obs (see place); GymnasiumEnv makes one of a Gymnasium env. share: an env of
+        this task whose compiled model (and, where the env can, its MjData) the new one may share; every
+        env keeps its own state (lockstep's lanes)."""
 
+    @abc.abstractmethod
     def start_of(self, state) -> tuple:
         """The start (start_names' values) an observation shows: place(env, start_of(obs)) puts the env
         where obs was."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def perturb(self, first_state, rng, how: Perturbation):
         """A start near a source's first observation: start_names' values drawn from `rng` alone with
-        how.pos_sigma (m) and how.yaw_sigma (rad); None when no valid draw was found ("no_valid_start")."""
-        raise NotImplementedError
+        how.pos_sigma and how.yaw_sigma (the task's length unit, rad); None when no valid draw was found
+        ("no_valid_start")."""
 
     def place(self, env, start):
         """Put `env` at `start` with fresh counters, fully (nothing of an earlier attempt may survive);
-        returns the first observation."""
-        raise NotImplementedError
+        returns the first observation. By default the env's own set_start(*start)."""
+        return env.set_start(*start)
 
     def expert(self):
         """The noise-free expert that re-solves a placed start (mode "resolve"): reset() and act(obs) ->
@@ -302,8 +326,8 @@ class Task:
         return None if self.expert_class is None else self.expert_class(noise=0.0)
 
     def success(self, env) -> bool:
-        """Whether `env` reports the task done (its latched success)."""
-        raise NotImplementedError
+        """Whether `env` reports the task done: by default its latched `success`."""
+        return bool(env.success)
 
     def state_problem(self, states) -> tuple[int, str] | None:
         """None if every observation of a source (N, obs_dim) is one the task's env can be in, else (the
@@ -312,17 +336,20 @@ class Task:
         be a rigid placement of the T), so that nothing is grown from a state no env was ever in."""
         return None
 
-    def object_pose(self, state) -> np.ndarray:
-        """(x, y, yaw) of the object the task is about, read from an observation."""
-        raise NotImplementedError
+    @abc.abstractmethod
+    def object_pose(self, state):
+        """The pose of the object the task is about, read from an observation: (x, y, yaw) for a planar
+        task, a (4, 4) matrix in SE(3) (datagen.poses)."""
 
-    def frame_pose(self, frame: str, state) -> tuple[float, float, float]:
-        """(x, y, yaw) of the object frame named `frame` (a name in subtasks' frames) in an observation."""
-        raise NotImplementedError
+    def frame_pose(self, frame: str, state):
+        """The pose of the object frame named `frame` (a name in subtasks' frames) in an observation, as
+        object_pose gives one; by default every frame is the object's."""
+        return self.object_pose(state)
 
     def start_distance(self, a, b) -> float:
-        """How far apart the objects of two starts lie (nearest source selection; m, a yaw weighted)."""
-        raise NotImplementedError
+        """How far apart two starts lie (nearest source selection); by default the Euclidean distance of
+        their numbers."""
+        return math.dist(a, b)
 
     resimulate: bool = True  # signals() reads the env's physics: a source is re-simulated to read them
 
@@ -333,17 +360,37 @@ class Task:
         recorded frames are read); otherwise a source is re-simulated to read them."""
         return {}
 
+    def arm_pose(self, arm: str, obs, env) -> tuple[np.ndarray, np.ndarray | None]:
+        """Where `arm` is in the observation `obs` of `env`: (position (d,), orientation (3, 3) or None).
+        By default its `arms` columns of obs, no orientation (a planar point); an arm whose orientation
+        the observation does not show reads it from env (a bridge starts from it)."""
+        return np.asarray(obs[self.arms[arm]], np.float64), None
+
+    def in_reach(self, arm: str, points) -> np.ndarray:
+        """(T,) bool: which of `points` ((T, d) positions) `arm` can reach; by default its `reach` box."""
+        pts = np.asarray(points)
+        inside = np.ones(len(pts), bool)
+        for axis, (lo, hi) in enumerate(self.reach.get(arm, ())):
+            inside &= (pts[:, axis] >= lo) & (pts[:, axis] <= hi)
+        return inside
+
+    @abc.abstractmethod
     def action_to_target(self, states, actions) -> dict:
         """A source's frames (states (T, obs_dim), actions (T, act_dim)) as world-frame targets, per arm:
-        {arm: (waypoints (T, 2) m, velocities (T, 2) m/s, gripper commands (T,) or None)}. The engine
-        re-expresses waypoints and velocities in a new object frame; the gripper rides along."""
-        raise NotImplementedError
+        {arm: (waypoints (T, d), velocities (T, d) or None, gripper commands (T,) or None[, orientations
+        (T, 3, 3)])}: planar, d = 2 and no orientation; in SE(3), d = 3 and the orientations of the arm's
+        frame (a position-controlled arm gives velocities None). The engine re-expresses waypoints,
+        velocities and orientations in a new object frame; the gripper rides along."""
 
-    def target_to_action(self, obs, waypoints: dict, velocities: dict, grips: dict | None) -> np.ndarray:
+    @abc.abstractmethod
+    def target_to_action(
+        self, obs, waypoints: dict, velocities: dict, grips: dict | None, orientations: dict | None = None
+    ) -> np.ndarray:
         """The action ((act_dim,) float32) that takes each arm from where `obs` shows it towards its
-        `waypoints[arm]` ((2,) m) moving at `velocities[arm]` ((2,) m/s), with `grips[arm]` its gripper
-        command: a velocity command for our two robots, a position target for a robot that takes one."""
-        raise NotImplementedError
+        `waypoints[arm]` ((d,)) moving at `velocities[arm]` ((d,) or None), turned to `orientations[arm]`
+        ((3, 3); None for a planar task), with `grips[arm]` its gripper command: a velocity command for
+        our two robots, a position target for a robot that takes one, torques through the robot's own
+        controller for one driven by torques (datagen/pusher.py)."""
 
     # ---- what lockstep needs; each default runs the same bytes one attempt (or one env) at a time ----
     def batch_expert(self):
@@ -390,9 +437,29 @@ def _file_of(module: str) -> str:
     return f"{f.parent.name}/{f.name}"
 
 
+def contract_problem(task: Task) -> str | None:
+    """None if `task` holds the contract's required attributes and its subtasks fit its arms, else what
+    is missing or wrong, in words."""
+    missing = [a for a in Task.REQUIRED_ATTRIBUTES if not hasattr(task, a)]
+    if missing:
+        plural = "s" * (len(missing) > 1)
+        return f"misses the required attribute{plural} {', '.join(missing)} (datagen.task.Task)"
+    for sub in task.subtasks:
+        if len(sub.frames) != len(task.arms):
+            return (
+                f"has subtask {sub.name!r} with {len(sub.frames)} frame(s) for {len(task.arms)} arm(s) "
+                f"({', '.join(task.arms)}): give each arm its frame"
+            )
+    return None
+
+
 def register(task: Task) -> Task:
     """Make `task` known to the engine under task.name; a task module calls it as it is imported
-    (PUSHT = register(PushT())), as MimicGen's env interfaces register through their metaclass."""
+    (PUSHT = register(PushT())), as MimicGen's env interfaces register through their metaclass. A task
+    that misses a required member (Task.REQUIRED_ATTRIBUTES; an abstract method already stops its
+    class from being made) or whose subtasks do not name one frame per arm is refused in one line."""
+    if problem := contract_problem(task):
+        raise TypeError(f"{_file_of(type(task).__module__)}: {type(task).__name__} {problem}")
     old = _REGISTERED.setdefault(task.name, task)
     if old is not task and type(old) is not type(task):
         first, second = (_file_of(type(t).__module__) for t in (old, task))

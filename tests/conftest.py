@@ -47,14 +47,18 @@ def with_nan(root: Path, key: str = "action", row: int = 3) -> Path:
 
 
 def with_value(root: Path, key: str, row: int, col: int, value: float) -> Path:
-    """Set `key`[row][col] of the set's first data parquet to `value`, schema and metadata kept."""
+    """Set `key`[row][col] (a scalar column: `key`[row]) of the set's first data parquet to `value`, schema
+    and metadata kept."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     f = sorted((root / "data").rglob("*.parquet"))[0]
     t = pq.read_table(f)
     values = t[key].to_pylist()
-    values[row][col] = value
+    if isinstance(values[row], list):
+        values[row][col] = value
+    else:
+        values[row] = value
     i = t.schema.get_field_index(key)
     pq.write_table(t.set_column(i, t.schema.field(key), pa.array(values, t.schema.field(key).type)), f)
     return root

@@ -819,3 +819,25 @@ def _read(path: Path) -> bytes:
         return path.read_bytes()
     except OSError:  # the process ended meanwhile
         return b""
+
+
+def test_source_episodes_that_end_unsolved_are_skipped_in_one_line(src, tmp_path):
+    """Issue 46: a source set holding failed episodes (an expert at 13 of 18) was grown from without a
+    word, every failed demo a source. An episode whose last next.success is False is skipped, one line
+    naming it; nothing is grown from it. A set in which no episode succeeds is refused in one line."""
+    bad = shutil.copytree(src, tmp_path / "bad")
+    ep = load_arrays(bad, keys=("episode_index",))["episode_index"]
+    with_value(bad, "next.success", int(np.flatnonzero(ep == 1)[-1]), 0, False)
+    p = augment("--src", bad, "--out", tmp_path / "o", "--workers", "1", *SETTINGS)
+    note = "note: 1 of 3 source episodes end unsolved (next.success) and are skipped: episode 1;"
+    assert note in p.stdout, p.stdout
+    grown = load_arrays(tmp_path / "o", keys=("aug.source_episode",))["aug.source_episode"]
+    assert set(np.unique(grown)) <= {0, 2} and len(grown)
+    for e in (0, 2):
+        with_value(bad, "next.success", int(np.flatnonzero(ep == e)[-1]), 0, False)
+    p = augment("--src", bad, "--out", tmp_path / "o2", "--workers", "1", *SETTINGS, check=False)
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(err) == 1 and "none of its 3 episodes ends in success" in err[0], (
+        p.stderr
+    )
+    assert not (tmp_path / "o2").exists()

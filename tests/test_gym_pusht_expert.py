@@ -1,5 +1,5 @@
-"""GymPushTExpert on gym-pusht, LeRobot's own PushT (scripted_expert.py): the block pose it reads back from
-the keypoints is gym-pusht's, and it solves seeded starts by gym-pusht's own success criterion.
+"""GymPushTExpert on gym-pusht, LeRobot's own PushT (datagen/gym_pusht_expert.py): the block pose it reads
+back from the keypoints is gym-pusht's, and it solves seeded starts by gym-pusht's own success criterion.
 The full count: python -m tools.gym_pusht_expert --episodes 50 --seed 0."""
 
 import ast
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from scripted_expert import GymPushTExpert, block_pose_from_keypoints
+from datagen.gym_pusht_expert import GymPushTExpert, block_pose_from_keypoints
 
 
 @pytest.fixture(scope="module")
@@ -102,8 +102,9 @@ def test_actions_are_position_targets_and_noise_is_seeded(env):
 
 
 def test_the_expert_reads_the_observation_alone():
-    """scripted_expert.py is pure numpy on the observation: it imports no gym-pusht, pymunk or gymnasium."""
-    tree = ast.parse((ROOT / "scripted_expert.py").read_text())
+    """datagen/gym_pusht_expert.py is pure numpy on the observation: it imports no gym-pusht, pymunk or
+    gymnasium."""
+    tree = ast.parse((ROOT / "datagen" / "gym_pusht_expert.py").read_text())
     names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     names |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
     assert not {m.split(".")[0] for m in names} & {"gym_pusht", "pymunk", "gymnasium", "pygame"}

@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import run_script
 
 import datagen
 from datagen import ALOHA, PUSHT, demos, run
@@ -13,9 +14,17 @@ from datagen.task import known_tasks, register
 
 
 def test_every_task_module_registers_itself_and_no_list_names_them():
+    """Our tasks are known by their names, each from its own module of datagen/; a user's task module
+    registered beside them is allowed (test_the_suite_passes_with_a_users_task_registered)."""
     from datagen.gym_pusht import GYM_PUSHT
 
-    assert known_tasks() == {"aloha": ALOHA, "gym_pusht": GYM_PUSHT, "pusht": PUSHT}
+    known = known_tasks()
+    assert {n: known[n] for n in ("aloha", "gym_pusht", "pusht")} == {
+        "aloha": ALOHA,
+        "gym_pusht": GYM_PUSHT,
+        "pusht": PUSHT,
+    }
+    assert all(type(t).__module__.startswith("datagen.") and t.name == n for n, t in known.items())
     assert not hasattr(datagen, "TASKS")
     assert register(PUSHT) is PUSHT  # registering again is harmless
 
@@ -74,8 +83,6 @@ def _copy_with(tmp_path: Path, name: str, text: str) -> Path:
 
 
 def _run(copy: Path, *argv):
-    from conftest import run_script
-
     return run_script(*argv, cwd=copy, check=False, timeout=300)
 
 
@@ -109,3 +116,72 @@ def test_a_task_module_that_fails_to_import_makes_only_its_own_task_unavailable(
     assert r.returncode == 2 and r.stderr.strip().splitlines()[:-1] == err, r.stderr
     assert r.stderr.strip().splitlines()[-1].startswith("error: --task 'half_done'"), r.stderr
     assert not (tmp_path / "x").exists() and "Traceback" not in r.stderr
+
+
+def test_the_contract_is_small_and_a_task_that_breaks_it_is_refused_in_one_line():
+    """Issue 46: Task is an abstract base whose required part fits in a head (at most ten members; MimicGen's
+    has six methods); a class missing a required method cannot be made, one missing a required attribute
+    or giving a subtask no frame for one of its arms is refused at registration, each in one line that
+    names what is missing."""
+    from datagen.pusht import PushT
+    from datagen.task import Subtask, Task
+
+    required = set(Task.__abstractmethods__) | set(Task.REQUIRED_ATTRIBUTES)
+    assert len(required) <= 10, sorted(required)
+
+    class NoAction(PushT):
+        target_to_action = Task.target_to_action  # the abstract one: not written yet
+
+    with pytest.raises(TypeError, match="abstract method 'target_to_action'"):
+        NoAction()
+
+    # a task written from scratch that never says its name: PushT's methods, its other attributes
+    parts = {m: getattr(PushT, m) for m in Task.__abstractmethods__}
+    parts |= {a: getattr(PushT, a) for a in Task.REQUIRED_ATTRIBUTES if a != "name"} | {
+        "__module__": __name__
+    }
+    with pytest.raises(TypeError) as e:
+        register(type("NoName", (Task,), parts)())
+    assert len(str(e.value).splitlines()) == 1 and "misses the required attribute name" in str(e.value)
+    assert "test_registry.py: NoName" in str(e.value), str(e.value)
+
+    two_arms = PushT(subtasks=(Subtask("push", ("block", "block")),))
+    with pytest.raises(
+        TypeError, match="subtask 'push' with 2 frame.s. for 1 arm.s. .pusher.: give each arm"
+    ):
+        register(two_arms)
+    assert known_tasks()["pusht"] is PUSHT
+
+
+USER_TASK = """\"\"\"A user's task: PushT with a tighter reach, beside ours (no list names it).\"\"\"
+
+from datagen.pusht import PushT
+from datagen.task import register
+
+
+class MyPushT(PushT):
+    name = "my_pusht"
+    title = "my PushT"
+    reach = {"pusher": ((-0.3, 0.3), (-0.3, 0.3))}
+
+
+MY_PUSHT = register(MyPushT())
+"""
+
+
+def test_the_suite_passes_with_a_users_task_registered(tmp_path):
+    """Issue 46: adding a task made the registry test fail (it asserted known_tasks() was exactly ours).
+    With a user's task module in datagen/, the tests that read the registry pass in a copy of the
+    project, and the user's task is known to the commands."""
+    import shutil
+
+    copy = _copy_with(tmp_path, "my_pusht.py", USER_TASK)
+    shutil.copytree(Path(__file__).resolve().parent, copy / "tests")
+    r = _run(copy, "gen_demos.py", "--help")
+    assert r.returncode == 0 and "my_pusht" in r.stdout, r.stdout + r.stderr
+    tests = ["tests/test_registry.py", "tests/test_flags.py", "tests/test_hidden_state.py"]
+    skip = "not copied_task_module and not fails_to_import and not users_task"
+    r = run_script(
+        "-m", "pytest", "-q", "-p", "no:cacheprovider", *tests, "-k", skip, cwd=copy, check=False, timeout=600
+    )
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-2000:]

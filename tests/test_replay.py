@@ -10,7 +10,7 @@ import pytest
 import pusht_env
 from ch37.seeds import env_seed
 from datagen import PUSHT, Outcome, Perturbation, Source, engine, pusht, replay, rollout
-from datagen.task import rotation, transform_segment
+from datagen.poses import interpolate, planar_pose, quat_of, rotation, rotation_of, transform_segment
 from scripted_expert import PushTExpert
 
 
@@ -47,6 +47,71 @@ def test_transform_keeps_the_path_rigid_relative_to_the_object():
     np.testing.assert_allclose(off_new, off_src, atol=1e-12)
     d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
     np.testing.assert_allclose(np.linalg.norm(moved[:, None] - moved[None], axis=-1), d, atol=1e-12)
+
+
+def _random_pose(rng) -> np.ndarray:
+    """A (4, 4) pose with a uniformly drawn orientation (a random unit quaternion) and position."""
+    out = np.eye(4)
+    out[:3, :3] = rotation_of(rng.normal(size=4))
+    out[:3, 3] = rng.normal(size=3)
+    return out
+
+
+def test_se3_transform_is_the_planar_one_for_planar_frames():
+    """Issue 46: a planar task is SE(3)'s special case. Frames given as (x, y, yaw) take the SE(2) path
+    (their bytes); the same frames as (4, 4) poses and points at z = 0 take the SE(3) path: the two agree."""
+    rng = np.random.default_rng(2)
+    pts, vel = rng.normal(size=(25, 2)), rng.normal(size=(25, 2))
+    src, new = (0.2, -0.1, 0.7), (-0.3, 0.25, -2.4)
+    flat_pts, flat_vel = transform_segment(pts, vel, src, new)
+    lift = np.c_[pts, np.zeros(25)], np.c_[vel, np.zeros(25)]
+    moved, turned, turns = transform_segment(*lift, planar_pose(*src), planar_pose(*new), np.eye(3)[None])
+    np.testing.assert_allclose(moved, np.c_[flat_pts, np.zeros(25)], atol=1e-12)
+    np.testing.assert_allclose(turned, np.c_[flat_vel, np.zeros(25)], atol=1e-12)
+    np.testing.assert_allclose(turns[0], planar_pose(0, 0, new[2] - src[2])[:3, :3], atol=1e-12)
+
+
+def test_se3_transform_keeps_position_and_orientation_rigid_relative_to_the_object():
+    """A pose of the arm written in the object's frame is the same before and after the object moves:
+    inv(src) T = inv(new) T' for every waypoint T (position and orientation), and velocities turn."""
+    rng = np.random.default_rng(3)
+    src, new = _random_pose(rng), _random_pose(rng)
+    pts, vel = rng.normal(size=(10, 3)), rng.normal(size=(10, 3))
+    rots = np.stack([rotation_of(q) for q in rng.normal(size=(10, 4))])
+    moved, turned, turns = transform_segment(pts, vel, src, new, rots)
+    for t in range(10):
+        before, after = np.eye(4), np.eye(4)
+        before[:3, :3], before[:3, 3] = rots[t], pts[t]
+        after[:3, :3], after[:3, 3] = turns[t], moved[t]
+        np.testing.assert_allclose(np.linalg.inv(new) @ after, np.linalg.inv(src) @ before, atol=1e-10)
+    np.testing.assert_allclose(
+        turned @ np.linalg.inv(new[:3, :3]).T, vel @ np.linalg.inv(src[:3, :3]).T, atol=1e-10
+    )
+    same = transform_segment(pts, None, src, src, rots)
+    np.testing.assert_allclose(same[0], pts, atol=1e-12)
+    assert same[1] is None and np.allclose(same[2], rots, atol=1e-12)
+
+
+def test_interpolate_moves_linearly_and_turns_by_slerp():
+    """A bridge's pose: position linear, orientation along the shorter arc at a constant rate; the ends
+    are the poses themselves; quat_of and rotation_of are each other's inverse."""
+    rng = np.random.default_rng(4)
+    a, b = _random_pose(rng), _random_pose(rng)
+    np.testing.assert_allclose(interpolate(a, b, 0.0), a, atol=1e-12)
+    np.testing.assert_allclose(interpolate(a, b, 1.0), b, atol=1e-12)
+    whole = np.arccos((np.trace(a[:3, :3].T @ b[:3, :3]) - 1) / 2)
+    for s in (0.25, 0.5, 0.8):
+        mid = interpolate(a, b, s)
+        np.testing.assert_allclose(mid[:3, 3], a[:3, 3] + s * (b[:3, 3] - a[:3, 3]), atol=1e-12)
+        part = np.arccos(np.clip((np.trace(a[:3, :3].T @ mid[:3, :3]) - 1) / 2, -1, 1))
+        assert part == pytest.approx(s * whole, abs=1e-9)
+        np.testing.assert_allclose(mid[:3, :3] @ mid[:3, :3].T, np.eye(3), atol=1e-12)
+    for q in rng.normal(size=(20, 4)):
+        r = rotation_of(q)
+        np.testing.assert_allclose(rotation_of(quat_of(r)), r, atol=1e-12)
+    assert interpolate((0, 0, 3.0), (1, 2, -3.0), 0.5) == pytest.approx(
+        (0.5, 1.0, 3.0 + 0.5 * (math.tau - 6))
+    )
 
 
 @pytest.fixture(scope="module")
@@ -255,3 +320,39 @@ def test_first_per_source_takes_each_source_demos_first_episodes():
     assert np.unique(ep[engine.first_per_source(ep, src, {3: 3, 7: 1})]).tolist() == [0, 1, 2, 3]
     assert not engine.first_per_source(ep, src, 0).any()
     assert engine.first_per_source(ep, src, {7: 9}).tolist() == np.isin(ep, [2, 4, 5]).tolist()
+
+
+def test_the_check_command_tells_a_newcomer_what_is_wrong_before_a_long_run():
+    """Issue 46 #4: python -m datagen.check TASK runs the start round-trip, the episode limit, the expert,
+    the ranges and the zero-perturbation replay, one line each. Each check can fail: a start_of that
+    drops the block's yaw, a max_steps that is not the env's, a reach that excludes the path (the line
+    names the subtask and the waypoint)."""
+    from conftest import ROOT, run_script
+
+    from datagen.check import checks
+    from datagen.gym_pusht import GymPushT
+    from datagen.pusht import PushT
+
+    r = run_script("-m", "datagen.check", "aloha", "--episodes", "2", cwd=ROOT, check=False)
+    lines = r.stdout.strip().splitlines()
+    assert r.returncode == 0 and len(lines) == 7 and all(" ok: " in x for x in lines[1:]), r.stdout + r.stderr
+    assert run_script("-m", "datagen.check", "nope", cwd=ROOT, check=False).returncode == 2
+
+    class NoYaw(PushT):
+        def start_of(self, state):
+            return super().start_of(state)[:2] + (0.0,) + super().start_of(state)[3:]
+
+    class Shorter(GymPushT):
+        max_steps = 100
+
+    class Fenced(NoYaw):  # started at the wrong yaw, its replays fail; a reach that excludes their paths
+        reach = {"pusher": ((-0.05, 0.05), (-0.05, 0.05))}
+
+    found = {c: {n: p for n, p, _ in checks(c(), 2, 0, 1e-3)} for c in (NoYaw, Shorter, Fenced)}
+    assert "off in block_cos_yaw" in found[NoYaw]["start round-trip"]
+    assert found[Shorter]["episode limit"] == "max_steps 100 but the env stops at 300"
+    out = found[Fenced]["replay"]
+    assert out.startswith(
+        "2 of 2 not reproduced; the first: rollout 0: path_out_of_reach (subtask 'push': "
+    ), out
+    assert "waypoint 0 of" in out and "beyond its reach" in out

@@ -1,6 +1,6 @@
-"""How good is the scripted expert on LeRobot's own PushT? GymPushTExpert (scripted_expert.py) on gym-pusht
-(LeRobot's `pusht` extra), judged by gym-pusht's own success (info["is_success"]: more than 95% of the
-goal T covered). Prints figures; writes nothing.
+"""How good is the scripted expert on LeRobot's own PushT? GymPushTExpert (datagen/gym_pusht_expert.py) on
+gym-pusht (LeRobot's `pusht` extra), judged by gym-pusht's own success (info["is_success"]: more than 95% of
+the goal T covered). Prints figures; writes nothing.
 
     python -m tools.gym_pusht_expert                          # 50 seeded starts, seeds 0..49
     python -m tools.gym_pusht_expert --episodes 200 --seed 1000 --noise 5
@@ -22,7 +22,7 @@ import numpy as np
 
 from ch37 import errors
 from ch37.config import check, parser
-from scripted_expert import GymPushTExpert
+from datagen.gym_pusht_expert import GymPushTExpert
 
 ENV_ID = "gym_pusht/PushT-v0"
 OBS_TYPE = "environment_state_agent_pos"

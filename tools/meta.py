@@ -61,7 +61,8 @@ META_STATIC = {
                 "path": "mimicgen/utils/pose_utils.py",
                 "symbol": "transform_source_data_segment_using_object_pose",
                 "why": "how MimicGen moves a source end-effector segment into the new object's frame; "
-                "datagen.task.transform_segment is its planar (SE(2)) analog, used by --aug_mode replay; "
+                "datagen.poses.transform_segment is it in SE(3) (planar tasks: SE(2)), "
+                "used by --aug_mode replay; "
                 "the chapter's default re-solves with its expert, because it owns one for any start",
             },
             {

@@ -22,6 +22,11 @@ the task as the mode describes it (VARIANTS). Modes:
     replay_nearest         gym-pusht only (LeRobot's PushT, --tasks gym_pusht): the one-segment replay
                            from the source nearest the new start
 
+Gymnasium's Pusher-v5 (--tasks pusher; issue 46: a 7-DoF arm, targets in SE(3)): its object's (x, y)
+moved by 0.08 m, kept where Pusher-v5's reset puts it; replay is one segment relative to the object,
+subtasks the approach relative to the object and the push sliding onto the goal (the engine's).
+--pusher_sigma sweeps its perturbation as --aloha_sigma does ALOHA's.
+
 --tasks picks the tasks (default: pusht, aloha and gym_pusht).
 
 Exit codes: 0 ok, 2 bad input.
@@ -44,6 +49,8 @@ from ch37.seeds import env_seed
 from datagen import ALOHA, PUSHT, Perturbation, engine
 from datagen.aloha import WHOLE, Aloha
 from datagen.gym_pusht import GYM_PUSHT
+from datagen.pusher import PUSHER, Pusher
+from datagen.pusher import WHOLE as PUSHER_WHOLE
 from datagen.pusht import BY_CONTACT, BY_CONTACT_BLOCK, PushT
 from datagen.task import Source, rollout
 from tools.common import parser, provenance, rel
@@ -72,7 +79,14 @@ VARIANTS = {
         "replay": (GYM_PUSHT, "own"),
         "replay_nearest": (GYM_PUSHT, "nearest"),
     },
+    "pusher": {  # Gymnasium's Pusher-v5 (issue 46): the engine's replay in SE(3)
+        "resolve": (PUSHER, "own"),
+        "replay": (Pusher(PUSHER_WHOLE), "own"),
+        "subtasks": (PUSHER, "own"),
+        "subtasks_nearest": (PUSHER, "nearest"),
+    },
 }
+DEFAULT_TASKS = ["pusht", "aloha", "gym_pusht"]  # pusher on request (--tasks pusher)
 
 
 def sources(sims: engine.Simulators, task: str, seed: int, n: int) -> dict:
@@ -112,7 +126,11 @@ def cell(
     kept = got.count("kept")
     per_seed = {s: got[i * n * attempts : (i + 1) * n * attempts].count("kept") for i, s in enumerate(seeds)}
     row = {"task": task, "mode": mode, "multiplier": m, "pos_sigma": m * POS_SIGMA}
-    row |= {"yaw_sigma": None if task == "aloha" else m * YAW_SIGMA, "attempts": len(got), "kept": kept}
+    row |= {
+        "yaw_sigma": None if task in ("aloha", "pusher") else m * YAW_SIGMA,
+        "attempts": len(got),
+        "kept": kept,
+    }
     row |= {"yield": kept / len(got), "ci95": wilson(kept / len(got), len(got)), "kept_per_seed": per_seed}
     row["failures"] = {why: got.count(why) for why in sorted(set(got) - {"kept"})}
     row["kept_frames_median"] = float(np.median([f for f in frames if f])) if kept else None
@@ -127,13 +145,16 @@ def main(argv: list[str]) -> int:
     p.add_argument(
         "--aloha_sigma", type=float, nargs="*", default=[], help="ALOHA sweep: multipliers of 0.08 m"
     )
-    p.add_argument("--tasks", nargs="+", choices=list(VARIANTS), default=list(VARIANTS), help="the tasks")
+    p.add_argument(
+        "--pusher_sigma", type=float, nargs="*", default=[], help="Pusher sweep: multipliers of 0.08 m"
+    )
+    p.add_argument("--tasks", nargs="+", choices=list(VARIANTS), default=DEFAULT_TASKS, help="the tasks")
     p.add_argument("--workers", type=int, default=1, help="processes for the attempts")
     p.add_argument("--out", type=Path, default=ROOT / "outputs/replay_yield", help="output folder")
     a = p.parse_args(argv)
     check(a, positive=["seeds", "sources", "attempts", "workers"])
-    if any(not (0 < m < 100) for m in a.aloha_sigma):
-        raise DataError("--aloha_sigma multipliers must be in (0, 100)")
+    if any(not (0 < m < 100) for m in a.aloha_sigma + a.pusher_sigma):
+        raise DataError("--aloha_sigma and --pusher_sigma multipliers must be in (0, 100)")
     if problem := check_out_path(a.out):  # before the work: an earlier run's result may be replaced,
         raise DataError(problem)  # a user's file never
     check_own_result(a.out / f"{KIND}.json", KIND)
@@ -143,8 +164,9 @@ def main(argv: list[str]) -> int:
             work[(task, s)] = sources(sims, task, s, a.sources)
     rows = []
     todo = [(task, mode, 1.0) for task in a.tasks for mode in VARIANTS[task]]
-    if "aloha" in a.tasks:
-        todo += [("aloha", mode, m) for m in sorted(a.aloha_sigma) if m != 1.0 for mode in SIGMA_MODES]
+    for task, sweep in (("aloha", a.aloha_sigma), ("pusher", a.pusher_sigma)):
+        if task in a.tasks:
+            todo += [(task, mode, m) for m in sorted(sweep) if m != 1.0 for mode in SIGMA_MODES]
     for task, mode, m in todo:
         rows.append(r := cell(work, sims, task, mode, seeds, a.sources, a.attempts, m, a.workers))
         got = (
@@ -153,7 +175,8 @@ def main(argv: list[str]) -> int:
         print(f"{task:9s} x{m:<4g} {mode:22s} {got}", flush=True)
     cmd = f"python -m tools.replay_yield --seeds {a.seeds} --sources {a.sources} --attempts {a.attempts}"
     cmd += " --aloha_sigma " + " ".join(f"{m:g}" for m in a.aloha_sigma) if a.aloha_sigma else ""
-    cmd += " --tasks " + " ".join(a.tasks) if a.tasks != list(VARIANTS) else ""
+    cmd += " --pusher_sigma " + " ".join(f"{m:g}" for m in a.pusher_sigma) if a.pusher_sigma else ""
+    cmd += " --tasks " + " ".join(a.tasks) if a.tasks != DEFAULT_TASKS else ""
     res = {"kind": KIND, "command": cmd, "seeds": seeds, "rows": rows} | provenance(a.script)
     a.out.mkdir(parents=True, exist_ok=True)
     f = write_atomic(a.out / f"{KIND}.json", dump_json(round_floats(res, 4)))

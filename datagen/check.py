@@ -1,0 +1,103 @@
+"""python -m datagen.check TASK: what a newcomer needs while writing a task, in seconds, before a long run.
+
+    the contract     the required members (datagen.task.contract_problem) and the episode limit: the
+                     task's max_steps against its env's own (a Gymnasium env's TimeLimit)
+    the start        place(start_of(obs)) puts a fresh env where obs was, on reset and mid-episode
+    the expert       it solves the starts of --episodes resets (seeds --seed ..)
+    the ranges       every state and action of those rollouts lies in state_ranges / action_ranges
+    the replay       every solved rollout, replayed at zero perturbation (MimicGen's move with nothing
+                     moved), succeeds again; a failure names the subtask and the waypoint
+
+One line per check, ok or what is wrong; exit 0 when all pass, 1 when one fails, 2 for an unknown task.
+A task without an expert checks what it can (its start round-trip on resets).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from ch37.errors import DataError, main
+from datagen import replay
+from datagen.source_check import state_range_problem
+from datagen.task import Source, Task, contract_problem, known_tasks, rollout
+
+__all__ = ["checks"]
+
+
+def env_limit(env) -> int | None:
+    """The episode limit an env sets itself (a Gymnasium env's spec), None where it sets none."""
+    spec = getattr(getattr(env, "env", None), "spec", None)
+    return getattr(spec, "max_episode_steps", None)
+
+
+def round_trip(task: Task, obs) -> tuple[float, str]:
+    """How far (largest difference, the observation's name for it) a fresh env placed at start_of(obs) is
+    from obs."""
+    again = np.asarray(task.place(task.make_env(), task.start_of(obs)), np.float64)
+    gap = np.abs(again - np.asarray(obs, np.float64))
+    i = int(np.argmax(gap))
+    return float(gap[i]), task.obs_names[i]
+
+
+def checks(task: Task, episodes: int, seed: int, tol: float):
+    """(name, problem or None, what was found) for each check, in order."""
+    yield "contract", contract_problem(task), "the required members are there"
+    env = task.make_env()
+    limit = env_limit(env)
+    bad = limit is not None and limit != task.max_steps
+    fine = f"max_steps {task.max_steps}" + (", as the env's own" if limit else " (the env sets none)")
+    yield "episode limit", bad and f"max_steps {task.max_steps} but the env stops at {limit}", fine
+    obs = [env.reset(seed=seed + i) for i in range(episodes)]  # a source's first frame is such a start
+    worst = max((round_trip(task, o) for o in obs), key=lambda g: g[0])
+    far = worst[0] > tol and f"place(start_of(obs)) is {worst[0]:.3g} off in {worst[1]} (over --tol {tol:g})"
+    yield "start round-trip", far, f"within {worst[0]:.3g} on {len(obs)} starts"
+    eps = []
+    for i, first in enumerate(obs if task.expert_class is not None else ()):
+        env.reset(seed=seed + i)
+        eps.append(rollout(env, task.expert(), first))
+    if not eps:
+        return
+    solved = [ep for ep in eps if ep["success"]]
+    short = f"the expert solved {len(solved)} of {len(eps)} starts" if len(solved) < len(eps) else None
+    yield "expert", short, f"solved {len(eps)} of {len(eps)} starts"
+    states = np.concatenate([ep["observation.state"] for ep in eps])
+    actions = np.concatenate([ep["action"] for ep in eps])
+    yield "ranges", state_range_problem(task, Path(f"the {task.name} rollouts"), states, actions), "inside"
+    if "replay" not in task.modes:
+        return
+    failed = []
+    for i, ep in enumerate(solved):
+        source = Source(i, ep["observation.state"], ep["action"])
+        got = replay.replay(task, task.make_env(), task.start_of(source.states[0]), source)
+        if not got.kept:
+            failed.append(f"rollout {i}: {got.reason} ({got.detail})")
+    lost = f"{len(failed)} of {len(solved)} not reproduced; the first: {failed[0]}" if failed else None
+    yield "replay", lost, f"{len(solved)} of {len(solved)} rollouts reproduced at zero perturbation"
+
+
+def _main(argv) -> int:
+    tasks = known_tasks()
+    p = argparse.ArgumentParser(prog="python -m datagen.check", description=__doc__.splitlines()[0])
+    p.add_argument("task", help="the task to check: " + ", ".join(tasks))
+    p.add_argument("--episodes", type=int, default=5, help="resets (and expert rollouts) to check")
+    p.add_argument("--seed", type=int, default=0, help="the first reset seed")
+    p.add_argument("--tol", type=float, default=1e-3, help="round-trip slack, in the task's own units")
+    a = p.parse_args(argv)
+    if a.task not in tasks:
+        raise DataError(f"unknown task {a.task!r}: pick one of {', '.join(tasks)}")
+    if a.episodes < 1:
+        raise DataError("--episodes must be at least 1")
+    task = tasks[a.task]
+    print(f"checking {task.name} ({task.title}), {a.episodes} starts from seed {a.seed}", flush=True)
+    ok = True
+    for name, problem, fine in checks(task, a.episodes, a.seed, a.tol):
+        print(f"  {name:<17} {'FAIL: ' + problem if problem else 'ok: ' + fine}", flush=True)
+        ok &= not problem
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    main(_main)

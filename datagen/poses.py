@@ -1,0 +1,150 @@
+"""The engine's geometry: object frames and arm targets in SE(3), as MimicGen's pose_utils has them.
+
+A pose is a (4, 4) homogeneous matrix: rotation R (3, 3) top left, position p (3,) in metres (or the
+task's own length unit) top right, [0, 0, 0, 1] below; an orientation is a rotation matrix (3, 3)
+(quaternions, w first, only inside slerp). A planar task (a robot on a table, frames that turn about z
+alone) gives its frames as (x, y, yaw) triples and its paths as (T, 2) points: the special case
+z = 0, roll = pitch = 0, computed here with its own SE(2) arithmetic, so a planar task's bytes do not
+depend on the 3-D path (tests/test_replay.py shows the two agree).
+
+    transform_segment(points, vectors, src, new, rotations=None)   a path made relative to a frame at
+        `src`, re-expressed for that frame at `new` (MimicGen's transform_source_data_segment_using_
+        object_pose): points p' = M p, vectors v' = R_M v, rotations R' = R_M R, with M = new src^-1
+    interpolate(a, b, s)     the pose a fraction s of the way from a to b: position linear, orientation
+                             by slerp (planar: yaw the short way)
+    planar_pose(x, y, yaw)   the (4, 4) pose of a planar frame
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = [
+    "interpolate",
+    "is_planar",
+    "planar_pose",
+    "quat_of",
+    "rigid_inverse",
+    "rotation",
+    "rotation_of",
+    "slerp",
+    "transform_segment",
+]
+
+
+def rotation(yaw: float) -> np.ndarray:
+    """The 2x2 rotation by `yaw` (rad)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s], [s, c]])
+
+
+def is_planar(pose) -> bool:
+    """Whether `pose` is a planar frame, an (x, y, yaw) triple, rather than a (4, 4) matrix."""
+    return np.shape(pose) == (3,)
+
+
+def planar_pose(x: float, y: float, yaw: float, z: float = 0.0) -> np.ndarray:
+    """The (4, 4) pose of the planar frame (x, y, yaw), at height z."""
+    out = np.eye(4)
+    out[:2, :2] = rotation(yaw)
+    out[:3, 3] = (x, y, z)
+    return out
+
+
+def _matrix(pose) -> np.ndarray:
+    return planar_pose(*(float(v) for v in pose)) if is_planar(pose) else np.asarray(pose, np.float64)
+
+
+def rigid_inverse(pose) -> np.ndarray:
+    """The inverse of a (4, 4) pose, [R^T, -R^T p]: exact where a general inverse rounds (an unmoved
+    frame gives the identity, so a replay at zero perturbation commands the source's own targets)."""
+    rot, pos = np.asarray(pose, np.float64)[:3, :3], np.asarray(pose, np.float64)[:3, 3]
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = rot.T, -(rot.T @ pos)
+    return out
+
+
+def transform_segment(points, vectors, src_pose, new_pose, rotations=None):
+    """Re-express a path that was made relative to an object at `src_pose` for the object at `new_pose`.
+
+    Planar (both poses (x, y, yaw) triples): points (T, 2) world positions and vectors (T, 2) world
+    velocities; a point is first written in the source object's frame, q = R(-yaw0) (p - xy0), then put
+    back in the world from the new pose, p' = R(yaw1) q + xy1; a velocity only rotates, v' = R(yaw1 -
+    yaw0) v (the SE(2) analog of MimicGen's transform_source_data_segment_using_object_pose).
+    SE(3) (either pose a (4, 4) matrix): points (T, 3), vectors (T, 3) or None, rotations (T, 3, 3) or
+    None (the arm's orientation along the path): with M = new src^-1, p' = M p, v' = R_M v, R' = R_M R.
+    Returns (points', vectors') planar, (points', vectors', rotations') in SE(3) (None stays None); an
+    identical pose returns the inputs (to float rounding).
+    """
+    if is_planar(src_pose) and is_planar(new_pose) and rotations is None:
+        x0, y0, yaw0 = (float(v) for v in src_pose)
+        x1, y1, yaw1 = (float(v) for v in new_pose)
+        in_object = (np.asarray(points, np.float64) - (x0, y0)) @ rotation(-yaw0).T  # (T, 2) object frame
+        moved = in_object @ rotation(yaw1).T + (x1, y1)
+        turned = np.asarray(vectors, np.float64) @ rotation(yaw1 - yaw0).T
+        return moved, turned
+    src, new = _matrix(src_pose), _matrix(new_pose)
+    rel = new @ rigid_inverse(src)  # (4, 4): the world moved with the object
+    turn = rel[:3, :3]
+    moved = np.asarray(points, np.float64).reshape(-1, 3) @ turn.T + rel[:3, 3]
+    turned = None if vectors is None else np.asarray(vectors, np.float64).reshape(-1, 3) @ turn.T
+    spun = None if rotations is None else turn @ np.asarray(rotations, np.float64)  # (T, 3, 3)
+    return moved, turned, spun
+
+
+def quat_of(rot) -> np.ndarray:
+    """The unit quaternion (w, x, y, z), w >= 0, of a rotation matrix (3, 3) (Shepperd's method)."""
+    m = np.asarray(rot, np.float64)
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    if tr > 0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    else:
+        i = int(np.argmax(np.diag(m)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(max(1.0 + m[i, i] - m[j, j] - m[k, k], 0.0))
+        q = [0.0] * 4
+        q[0] = (m[k, j] - m[j, k]) / s
+        q[1 + i], q[1 + j], q[1 + k] = 0.25 * s, (m[j, i] + m[i, j]) / s, (m[k, i] + m[i, k]) / s
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return -q if q[0] < 0 else q
+
+
+def rotation_of(q) -> np.ndarray:
+    """The rotation matrix (3, 3) of a quaternion (w, x, y, z) (normalised first)."""
+    w, x, y, z = np.asarray(q, np.float64) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def slerp(r0, r1, s: float) -> np.ndarray:
+    """The rotation (3, 3) a fraction s (0..1) of the way from r0 to r1 along the shorter arc."""
+    q0, q1 = quat_of(r0), quat_of(r1)
+    dot = float(q0 @ q1)
+    if dot < 0:  # q and -q are one rotation: take the short way
+        q1, dot = -q1, -dot
+    if dot > 1 - 1e-12:
+        return rotation_of(q0 + s * (q1 - q0))
+    theta = math.acos(min(dot, 1.0))
+    return rotation_of((math.sin((1 - s) * theta) * q0 + math.sin(s * theta) * q1) / math.sin(theta))
+
+
+def interpolate(a, b, s: float):
+    """The pose a fraction s (0..1) of the way from a to b: planar triples give a triple (x, y linear; yaw
+    the short way), (4, 4) poses a (4, 4) pose (position linear, orientation by slerp)."""
+    if is_planar(a) and is_planar(b):
+        dyaw = math.remainder(float(b[2]) - float(a[2]), math.tau)
+        return (a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1]), float(a[2]) + s * dyaw)
+    a, b = _matrix(a), _matrix(b)
+    out = np.eye(4)
+    out[:3, :3] = slerp(a[:3, :3], b[:3, :3], s)
+    out[:3, 3] = a[:3, 3] + s * (b[:3, 3] - a[:3, 3])
+    return out
