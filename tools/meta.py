@@ -61,7 +61,7 @@ META_STATIC = {
                 "path": "mimicgen/utils/pose_utils.py",
                 "symbol": "transform_source_data_segment_using_object_pose",
                 "why": "how MimicGen moves a source end-effector segment into the new object's frame; "
-                "datagen.poses.transform_segment is it in SE(3) (planar tasks: SE(2)), "
+                "datagen.poses.transform_segment is it in SE(3), with planar tasks as its SE(2) case, "
                 "used by --aug_mode replay; "
                 "the chapter's default re-solves with its expert, because it owns one for any start",
             },
