@@ -229,11 +229,16 @@ class Replay:
                     obs = yield task.target_to_action(obs, wp, vel, g, turns)
                     self.watch(obs, env)
                 self.end_bridge(obs)
+            some = segs[next(iter(segs))]  # what every arm's segment holds: velocities? orientations?
+            moving, turning = some[1] is not None, some[3] is not None
             for t in range(seg.stop - seg.start):
                 if grips is not None:
                     grips = {a: float(segs[a][2][t]) for a in task.arms}
-                turns = at(segs, 3, t) or turns
-                obs = yield task.target_to_action(obs, at(segs, 0, t), at(segs, 1, t), grips, turns)
+                if turning:
+                    turns = {a: segs[a][3][t] for a in task.arms}
+                wp = {a: segs[a][0][t] for a in task.arms}
+                vel = {a: segs[a][1][t] for a in task.arms} if moving else None
+                obs = yield task.target_to_action(obs, wp, vel, grips, turns)
                 self.watch(obs, env)
         self.planned = True
         for _ in range(task.hold_steps):  # hold still so a success hold can complete
