@@ -15,6 +15,7 @@ from datagen import aloha as at
 from datagen import pusht as pt
 from datagen import replay as rp
 from datagen import task as dt
+from datagen.poses import rotation
 from datagen.task import rollout
 from scripted_expert import AlohaExpert, PushTExpert
 
@@ -115,7 +116,8 @@ def test_arm_segment_identity_returns_the_source_columns(env):
     plan = rp.cut(ALOHA, src)
     run = rp.Replay(ALOHA, src, plan, at.start_of(src.states[0]))
     for sub in plan:
-        for arm, (pts, vel, grip) in run.segment(sub, src.states[sub.start]).items():
+        for arm, (pts, vel, grip, turns) in run.segment(sub, src.states[sub.start]).items():
+            assert turns is None  # a planar arm: no orientation
             rows = slice(sub.start, sub.stop)
             assert np.array_equal(pts, src.states[rows, at.XY[arm]].astype(np.float64))
             assert np.array_equal(vel, src.actions[rows, at.XY[arm]].astype(np.float64))
@@ -129,7 +131,7 @@ def test_arm_segment_translates_with_its_frame_and_stays_rigid(env):
     now = src.states[place.start].copy()
     now[8:10] += (0.03, -0.05)  # the target moved; the cube did not
     segs = rp.Replay(ALOHA, src, plan, at.start_of(src.states[0])).segment(place, now)
-    pts, vel, _ = segs["left"]
+    pts, vel, *_ = segs["left"]
     old = src.states[place.start : place.stop, 3:5].astype(np.float64)
     np.testing.assert_allclose(pts - old, np.tile((0.03, -0.05), (len(old), 1)), atol=1e-7)
     np.testing.assert_allclose(vel, src.actions[place.start : place.stop, 3:5], atol=1e-12)
@@ -138,7 +140,7 @@ def test_arm_segment_translates_with_its_frame_and_stays_rigid(env):
         pts - now[8:10].astype(np.float64), old - src.states[place.start, 8:10], atol=1e-7
     )
     # the handoff frame moves with the target's y only; the cube frame not at all here
-    hand, _, _ = segs["right"]
+    hand, *_ = segs["right"]
     np.testing.assert_allclose(
         hand - src.states[place.start : place.stop, 0:2], [[0.0, -0.05]] * len(old), atol=1e-7
     )
@@ -152,26 +154,26 @@ def test_pusht_segment_rotates_about_the_block_and_slides_onto_the_target():
     approach, push = plan
     run = rp.Replay(by_contact, src, plan, by_contact.start_of(src.states[0]))
     first = src.states[0]
-    same, _, _ = run.segment(approach, first)["pusher"]
+    same, *_ = run.segment(approach, first)["pusher"]
     np.testing.assert_allclose(same, src.states[: approach.stop, :2], atol=1e-12)  # identity
     turned = first.copy()  # the block turned by +90 degrees about its own origin
     yaw = math.atan2(first[4], first[5]) + math.pi / 2
     turned[4], turned[5] = math.sin(yaw), math.cos(yaw)
-    pts, vel, _ = run.segment(approach, turned)["pusher"]
+    pts, vel, *_ = run.segment(approach, turned)["pusher"]
     rel_old = src.states[: approach.stop, :2] - first[2:4]
     rel_new = pts - first[2:4]
-    np.testing.assert_allclose(rel_new, rel_old @ dt.rotation(math.pi / 2).T, atol=1e-6)  # rotated
+    np.testing.assert_allclose(rel_new, rel_old @ rotation(math.pi / 2).T, atol=1e-6)  # rotated
     np.testing.assert_allclose(np.linalg.norm(rel_new, axis=1), np.linalg.norm(rel_old, axis=1), atol=1e-6)
-    np.testing.assert_allclose(vel, src.actions[: approach.stop] @ dt.rotation(math.pi / 2).T, atol=1e-6)
+    np.testing.assert_allclose(vel, src.actions[: approach.stop] @ rotation(math.pi / 2).T, atol=1e-6)
     # the push relative to the block and the target starts on the moved block, ends on the source's end
     moved = src.states[push.start].copy()
     moved[2:4] += (0.04, -0.02)
-    pts, _, _ = run.segment(push, moved)["pusher"]
+    pts, *_ = run.segment(push, moved)["pusher"]
     np.testing.assert_allclose(pts[0], src.states[push.start, :2] + (0.04, -0.02), atol=1e-6)
     np.testing.assert_allclose(pts[-1], src.states[-1, :2], atol=1e-6)
     block_only = pt.PushT(pt.BY_CONTACT_BLOCK)
     plan = rp.cut(block_only, src)
-    blk, _, _ = rp.Replay(block_only, src, plan, None).segment(plan[1], moved)["pusher"]
+    blk, *_ = rp.Replay(block_only, src, plan, None).segment(plan[1], moved)["pusher"]
     np.testing.assert_allclose(blk - src.states[push.start :, :2], [[0.04, -0.02]] * len(blk), atol=1e-6)
 
 
@@ -284,7 +286,8 @@ def test_replay_yield_tool_counts_every_attempt_of_every_cell(tmp_path):
     assert replay_yield.main(argv) == 0
     res = json.loads((tmp_path / "replay_yield.json").read_text())
     rows = {(r["task"], r["mode"], r["multiplier"]): r for r in res["rows"]}
-    want = {(t, m, 1.0) for t, modes in replay_yield.VARIANTS.items() for m in modes}
+    tasks = replay_yield.DEFAULT_TASKS  # pusher only on request (tests/test_pusher_task.py's own size)
+    want = {(t, m, 1.0) for t in tasks for m in replay_yield.VARIANTS[t]}
     assert set(rows) == want | {("aloha", m, 2.0) for m in replay_yield.SIGMA_MODES}
     for r in rows.values():
         assert r["attempts"] == 2 and r["kept"] + sum(r["failures"].values()) == 2
