@@ -1,13 +1,18 @@
 """The data engine: grow a demo set of any task that implements datagen.task.Task, MimicGen-style.
 
-task       Task (what a task describes, in MimicGen's division: its env, starts and their
-           perturbation, its arms and reach, object frames, subtasks and their signals, the action
-           conversion, an optional expert), Subtask, Outcome (what one attempt came to), Perturbation,
-           Source, rollout, write_dataset (a stamped set)
+task       Task (what a task describes, in MimicGen's division: an abstract base with ten required
+           members: its env, starts and their perturbation, its arms and reach, object frames, subtasks
+           and their signals, the action conversion, an optional expert), Subtask, Outcome (what one
+           attempt came to), Perturbation, Source, rollout, write_dataset (a stamped set)
+poses      SE(3): transform_segment, interpolate (slerp), planar_pose; planar tasks are its SE(2) case
+check      python -m datagen.check TASK: a task's contract, starts, expert, ranges and replay, in seconds
 demos      expert demo sets of a task: generate, ensure_demos (the chapter's private demo cache),
            check_given (a set you name, checked and never modified), video_problem (whether --video can)
 pusht      PUSHT: PushT described as a task (the only module here that imports pusht_env and its expert)
 aloha      ALOHA: the ALOHA cube handoff described as a task (the only module here that imports aloha_env)
+gym_pusht  LeRobot's own PushT (gym-pusht) as a task; its expert beside it (gym_pusht_expert)
+pusher     Gymnasium's 7-DoF Pusher-v5 as a task, in SE(3); its controller and expert beside it
+           (pusher_expert)
 engine     one attempt in either mode, keep_first, grow, run_attempts, save: task-agnostic
 replay     the one replay for every task (MimicGen's generation loop): cut a source at its subtask
            signals, re-express each segment in the new object frames, bridge, execute, keep on success

@@ -8,22 +8,27 @@ Task subclass that its module registers as it is imported (TASK = register(MyTas
 finds it, no list names it, and the digests that guard resumed shards and cached demo sets read its
 code from what the run imported.
 
-In MimicGen's division of work, a task only describes (Task below: each attribute and method with its
-inputs, outputs and units):
+In MimicGen's division of work, a task only describes (Task below, an abstract base: ten required
+members, each attribute and method with its inputs, outputs and units; everything else a default):
 
-    its env              make_env (our envs, or a Gymnasium env through GymnasiumEnv), place (a
-                         start, fully), success, max_steps, the ranges of its states
-                         and actions; start_of (the start an observation shows), perturb (a start near
-                         a source's first observation), start_names (a start's numbers: aug.start)
-    its robot            arms (each controlled point's columns in an observation), reach,
-                         action_to_target and target_to_action (how an action becomes a world-frame
-                         target and back: a velocity command, or a position target)
-    its objects          object_pose, frame_pose (the object frames its subtasks live in),
-                         start_distance (what "nearest source" means)
+    required             name, env_module (what its sets record), start_names, arms; make_env (our
+                         envs, or a Gymnasium env through GymnasiumEnv), start_of (the start an
+                         observation shows), perturb (a start near a source's first observation),
+                         object_pose, action_to_target and target_to_action (how an action becomes a
+                         world-frame target and back: a velocity command, a position target, a pose
+                         target through the robot's controller)
+    its env (defaults)   place (env.set_start), success (env.success), max_steps (the spec's), the
+                         ranges of its states and actions, state_problem
+    its robot            reach (in_reach), arm_pose (where an observation does not show the hand's
+                         orientation), bridge_speed, bridge_tol, bridge_turn_speed, hold_steps
+    its objects          frame_pose (the object frames its subtasks live in), start_distance
     its subtasks         subtasks (per arm, the frame each lives in; the signal that ends it; whether
                          it is entered by interpolation), signals (the env's subtask-end signals)
     its expert           expert_class (optional: a task without one only replays; the demo generators
                          roll it out with default_noise), batch_expert (optional)
+
+Poses are SE(3) (datagen.poses); a planar task's (x, y, yaw) frames and (x, y) points are the special case.
+python -m datagen.check TASK runs what a task must satisfy before a long run.
 
 and the engine does the rest: the modes ("resolve": perturb, the expert re-solves, keep on success;
 "replay": perturb, the source's subtasks re-expressed in the new object frames and executed, keep on
