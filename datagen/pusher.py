@@ -32,10 +32,11 @@ from __future__ import annotations
 
 import math
 
+import mujoco
 import numpy as np
 
 from datagen.poses import quat_of, rotation_of
-from datagen.pusher_expert import PoseControl, PusherExpert, hand_rotation, held
+from datagen.pusher_expert import PoseControl, PusherExpert, hand_rotation, held, model
 from datagen.task import GymnasiumEnv, Perturbation, Subtask, Task, register
 
 __all__ = ["PUSHER", "Pusher", "START_NAMES", "SUBTASKS", "Spec", "WHOLE"]
@@ -55,19 +56,14 @@ JOINTS = (
     "wrist_flex",
     "wrist_roll",
 )
-START_NAMES = (
-    tuple(f"q_{j}" for j in JOINTS)
-    + tuple(f"qd_{j}" for j in JOINTS)
-    + ("object_x", "object_y", "goal_x", "goal_y")
-)
+ARM = tuple(f"q_{j}" for j in JOINTS) + tuple(f"qd_{j}" for j in JOINTS)  # rad, rad/s
+START_NAMES = ARM + ("object_x", "object_y", "goal_x", "goal_y")
 
 
 class Spec:
     """What a LeRobot set of this task records: the arm in observation.state, the objects beside it."""
 
-    STATE_NAMES = (
-        tuple(f"q_{j}" for j in JOINTS) + tuple(f"qd_{j}" for j in JOINTS) + ("hand_x", "hand_y", "hand_z")
-    )
+    STATE_NAMES = ARM + ("hand_x", "hand_y", "hand_z")  # the hand: tips_arm, the wrist centre (m)
     ENV_STATE_NAMES = ("object_x", "object_y", "object_z", "goal_x", "goal_y", "goal_z")  # m
     OBS_NAMES = STATE_NAMES + ENV_STATE_NAMES  # Pusher-v5's own observation, in its order
     ACTION_NAMES = ("target_x", "target_y", "target_z", "target_qw", "target_qx", "target_qy", "target_qz")
@@ -96,6 +92,12 @@ def _reached(obs, info) -> bool:
     return bool(np.hypot(*(obs[OBJECT][:2] - obs[GOAL][:2])) < GOAL_TOL)
 
 
+def _scratch(env) -> mujoco.MjData:
+    """A scratch MjData for the hand's kinematics: the env's controller's (PoseControl.scratch: it reloads
+    its state every step), or a new one where there is no env (a source cut from its recorded frames)."""
+    return mujoco.MjData(model()) if env is None else env.env.scratch
+
+
 def _observe(obs) -> np.ndarray:
     return np.asarray(obs, np.float32)
 
@@ -115,10 +117,10 @@ class Pusher(Task):
     bridge_tol = math.inf
     resimulate = False  # "held" shows in an observation
 
+    expert_class = PusherExpert
+
     def __init__(self, subtasks: tuple[Subtask, ...] = SUBTASKS):
         self.subtasks = subtasks
-
-    expert_class = PusherExpert
 
     def make_env(self, share=None):
         import gymnasium  # its MuJoCo envs load here, when the task runs
@@ -148,10 +150,10 @@ class Pusher(Task):
         return _pose(state[OBJECT] if frame == "object" else state[GOAL])
 
     def signals(self, obs, env) -> dict[str, bool]:
-        return {"held": held(obs)}
+        return {"held": held(obs, _scratch(env))}
 
     def arm_pose(self, arm: str, obs, env):
-        return np.asarray(obs[HAND], np.float64), hand_rotation(obs)
+        return np.asarray(obs[HAND], np.float64), hand_rotation(obs, _scratch(env))
 
     def action_to_target(self, states, actions) -> dict:
         a = np.asarray(actions, np.float64)

@@ -10,7 +10,7 @@ gravity; dt 0.05 s (5 Euler steps of 0.01 s).
     controller(model, data, obs, pos, quat)   torques that drive the hand toward a pose target
     PoseControl(env)                          Pusher-v5 taking pose targets as its action
     PusherExpert(noise=, seed=)               act(obs) -> the next pose target (7,)
-    held(obs), hand_rotation(obs)             what the engine reads of the hand
+    held(obs, data), hand_rotation(obs, data) what the engine reads of the hand (data: a scratch MjData)
 """
 
 from __future__ import annotations
@@ -49,19 +49,18 @@ def load_obs(m: mujoco.MjModel, data: mujoco.MjData, obs) -> None:
     mujoco.mj_forward(m, data)
 
 
-def hand_rotation(obs) -> np.ndarray:
-    """The hand's orientation (3, 3) in the world, from the observed joint angles."""
-    m = model()
-    data = mujoco.MjData(m)
+def hand_rotation(obs, data: mujoco.MjData) -> np.ndarray:
+    """The hand's orientation (3, 3) in the world, from the observed joint angles: the arm's kinematics in
+    `data`, a scratch MjData of Pusher's model (making one costs ~0.3 ms, so its caller keeps one)."""
     data.qpos[:7] = obs[QPOS]
-    mujoco.mj_kinematics(m, data)
-    return data.xmat[m.body("tips_arm").id].reshape(3, 3).copy()
+    mujoco.mj_kinematics(data.model, data)
+    return data.xmat[data.model.body("tips_arm").id].reshape(3, 3).copy()
 
 
-def held(obs) -> bool:
+def held(obs, data: mujoco.MjData) -> bool:
     """Whether the object sits in the hand's U: the hand at the object's height (within 3 cm) and the
-    object's centre between the U's walls in the hand's own frame (2 cm margins)."""
-    xa = hand_rotation(obs)[:2, 0]
+    object's centre between the U's walls in the hand's own frame (2 cm margins). data: as hand_rotation's."""
+    xa = hand_rotation(obs, data)[:2, 0]
     xa = xa / np.linalg.norm(xa)
     rel = np.asarray(obs[OBJ][:2], np.float64) - obs[TIPS][:2]
     rx, ry = rel @ xa, rel @ np.array([-xa[1], xa[0]])
@@ -123,8 +122,8 @@ class PoseControl:
     the hand's target position (m) and orientation quaternion (w, x, y, z), world frame; each step the
     controller turns it into Pusher-v5's torques from the last observation. place(start) sets the whole
     state (START_NAMES' order: joint angles and speeds, the object's and the goal's (x, y)) through
-    MuJoCo's state, the env's own set_state. (A plain wrapper: importing this module imports no
-    Gymnasium.)"""
+    MuJoCo's state, the env's own set_state. scratch: its MjData for the controller, which the task's
+    signals may use between steps. (A plain wrapper: importing this module imports no Gymnasium.)"""
 
     def __init__(self, env):
         self.env, self.unwrapped, self.render_mode, self.spec = env, env.unwrapped, env.render_mode, env.spec
@@ -245,7 +244,7 @@ class PusherExpert:
         push = goal[:2] - obj[:2]
         xy, yaw = self.push_pose(obj, np.arctan2(push[1], push[0]), np.linalg.norm(push), self.beta)
         near = np.linalg.norm(obs[TIPS][:2] - xy) < self.NEAR
-        pos = np.r_[xy, obj[2] + (0.0 if held(obs) or near else self.HOVER)]
+        pos = np.r_[xy, obj[2] + (0.0 if held(obs, self.data) or near else self.HOVER)]
         if self.noise > 0:
             pos = pos + self.rng.normal(0.0, self.noise, 3)
         return np.r_[pos, yaw_quat(yaw)].astype(np.float32)

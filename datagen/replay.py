@@ -143,9 +143,8 @@ class Replay:
         self.planned = False  # the plan ran to its end with the episode still going
         self.bridging = None  # the object pose a bridge under way started from
         self.current = None  # the subtask under way
-        self.beyond = self.bumped = (
-            None  # the first waypoint found beyond reach, the bridge that hit the object
-        )
+        self.beyond = None  # where the first waypoint beyond reach was found, in words
+        self.bumped = None  # which bridge moved the object, in words
 
     def segment(self, seg: Segment, now) -> dict:
         """{arm: (waypoints (T, d), velocities (T, d) or None, gripper commands (T,) or None, orientations
@@ -194,13 +193,11 @@ class Replay:
         fps = task.env_module.FPS
         obs = yield
         grips, turns = None, None  # what each gripper and each arm's orientation was last told
-
-        def at(segs, i: int, t: int) -> dict | None:  # column i of every arm's segment at frame t
-            return None if segs[next(iter(segs))][i] is None else {a: segs[a][i][t] for a in task.arms}
-
         for seg in self.plan:
             self.current = seg.subtask.name
             segs = self.segment(seg, obs)
+            some = segs[next(iter(segs))]  # what every arm's segment holds: velocities? grips? orientations?
+            moving, gripping, turning = (some[i] is not None for i in (1, 2, 3))
             for arm, (pts, *_) in segs.items():
                 inside = task.in_reach(arm, pts)
                 if not inside.all() and not self.out_of_reach:
@@ -211,26 +208,25 @@ class Replay:
                         "is beyond its reach"
                     )
                 self.out_of_reach |= not inside.all()
-            if grips is None and at(segs, 2, 0) is not None:
-                grips = {a: float(g) for a, g in at(segs, 2, 0).items()}
+            if grips is None and gripping:
+                grips = {a: float(segs[a][2][0]) for a in task.arms}
             if seg.subtask.bridge:
                 poses = {a: task.arm_pose(a, obs, env) for a in task.arms}
                 here = {a: p for a, (p, _) in poses.items()}
                 first = {a: segs[a][0][0] for a in task.arms}
                 facing = {a: r for a, (_, r) in poses.items()}
-                n = self.bridge_steps(here, first, facing, at(segs, 3, 0), self.bridge_speed(segs))
+                aims = {a: segs[a][3][0] for a in task.arms} if turning else None
+                n = self.bridge_steps(here, first, facing, aims, self.bridge_speed(segs))
                 self.bridging = task.object_pose(obs)
                 for i in range(n):  # linear interpolation (orientation: slerp), all arms in step
                     wp = {a: here[a] + i / n * (first[a] - here[a]) for a in task.arms}
                     vel = {a: (first[a] - here[a]) * fps / n for a in task.arms}
-                    if at(segs, 3, 0) is not None:
-                        turns = {a: self.turned(poses[a][1], segs[a][3][0], i / n) for a in task.arms}
+                    if turning:
+                        turns = {a: self.turned(facing[a], aims[a], i / n) for a in task.arms}
                     g = None if grips is None else dict(grips)
                     obs = yield task.target_to_action(obs, wp, vel, g, turns)
                     self.watch(obs, env)
                 self.end_bridge(obs)
-            some = segs[next(iter(segs))]  # what every arm's segment holds: velocities? orientations?
-            moving, turning = some[1] is not None, some[3] is not None
             for t in range(seg.stop - seg.start):
                 if grips is not None:
                     grips = {a: float(segs[a][2][t]) for a in task.arms}
