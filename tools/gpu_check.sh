@@ -1,0 +1,94 @@
+#!/usr/bin/env bash
+# The GPU check (../shared/GPU.md), one call on a bare GPU machine that has PyTorch and no registry:
+# install the carried wheels, then time the lesson on cuda and write what it printed to $OUT.
+#
+#   here:   bash tools/gpu_check.sh --wheels     # download the wheels the lesson needs beyond the
+#                                                # GPU image into .whl/ (git-ignored, about 58 MiB)
+#   there:  bash tools/gpu_check.sh              # OUT=<folder> (default /tmp/gpu_check)
+#
+# What it runs there, in this order (each step's output in $OUT/gpu_check.log):
+#   1. the smoke run on cuda (seconds; stops the check early when the set-up is broken)
+#   2. python -m tools.wallclock: the default run at seed 0, cold, its wallclock.csv row for this card
+#   3. the default run at seed 0 on cuda, cold (fresh folder), then warm (same folder: demo sets
+#      reused, result cache off), each timed, their metrics.json kept
+#   4. one training step of bc_recipe.train at the default shapes (hidden 512, batch 128, both data
+#      arms stacked), on cuda and on this machine's CPU, seconds per step, median of 5 rounds
+# Wheels: the lesson's imports (mujoco, lerobot and what lerobot's dataset code imports) minus what the
+# image holds; mujoco-studio (the viewer, 13 MB) is left out: the lesson never draws through it.
+set -uo pipefail
+cd "$(dirname "$0")/.."
+
+if [ "${1:-}" = "--wheels" ]; then
+    py=.venv/bin/python
+    plat="--platform manylinux1_x86_64 --platform manylinux2014_x86_64"
+    for n in 17 24 27 28; do plat+=" --platform manylinux_2_${n}_x86_64"; done
+    mkdir -p .whl
+    grep -qx '/.whl/' .git/info/exclude 2>/dev/null || echo /.whl/ >>.git/info/exclude
+    for name in av datasets diffusers dill draccus glfw gymnasium lerobot mergedeep mujoco mujoco-core \
+        multiprocess pytz farama-notifications cffi pycparser tzdata; do
+        pin=$(grep -io "^$name==[^ ;]*" requirements.lock) || { echo "$name: not in requirements.lock"; exit 2; }
+        # shellcheck disable=SC2086
+        $py -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+            $plat -d .whl "$pin" || exit 2
+    done
+    du -sh .whl
+    exit 0
+fi
+
+OUT=${OUT:-/tmp/gpu_check}
+mkdir -p "$OUT"
+exec > >(tee "$OUT/gpu_check.log") 2>&1
+export PYTHONUNBUFFERED=1
+python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site \
+    .whl/*.whl || exit 2
+export PYTHONPATH=/tmp/site
+step() { echo; echo "=== $* ($(date -u +%H:%M:%S))"; }
+
+step machine
+nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader
+grep -m1 "model name" /proc/cpuinfo
+nproc
+git log -1 --format='commit %H' 2>/dev/null || echo "commit: (no git here)"
+python3 -c "import platform, numpy, torch, mujoco, lerobot; \
+print('python', platform.python_version(), '| torch', torch.__version__, '| cuda', torch.version.cuda, \
+'| numpy', numpy.__version__, '| mujoco', mujoco.__version__, '| lerobot', lerobot.__version__)" || exit 1
+python3 -m pip list 2>/dev/null | grep -iE "^(pandas|pyarrow|huggingface|datasets|pillow|matplotlib) " >"$OUT/pip.txt"
+
+step "1. smoke on cuda"
+timed() { local t0=$SECONDS; "$@"; local rc=$?; echo "[$((SECONDS - t0)) s, rc $rc] $*"; return $rc; }
+timed python3 scale_data.py --smoke --seed 0 --device cuda --no-rerun --no-cache --out /tmp/smoke || exit 1
+cp /tmp/smoke/metrics.json "$OUT/metrics_smoke.json"
+
+step "2. wallclock row (default run, seed 0, cold)"
+timed python3 -m tools.wallclock && cp wallclock.csv "$OUT/wallclock.csv"
+
+step "3a. default run, cold"
+timed python3 scale_data.py --seed 0 --device cuda --no-rerun --no-cache --out /tmp/run &&
+    cp /tmp/run/metrics.json "$OUT/metrics_cold.json"
+step "3b. default run, warm (demo sets reused, result cache off)"
+timed python3 scale_data.py --seed 0 --device cuda --no-rerun --no-cache --out /tmp/run &&
+    cp /tmp/run/metrics.json "$OUT/metrics_warm.json"
+
+step "4. one training step (hidden 512, batch 128, both arms stacked)"
+python3 - <<'EOF' | tee "$OUT/step.json"
+import json, statistics, time
+import numpy as np, torch
+import bc_recipe as bc
+
+rng = np.random.default_rng(0)
+data = [(rng.normal(size=(n, 10)).astype(np.float32), rng.normal(size=(n, 2)).astype(np.float32))
+        for n in (420, 3490)]
+init = bc.init_weights(512, 0)
+out = {}
+for device, steps in (("cuda", 2000), ("cpu", 300)):
+    bc.train(data, 50, init, batch_size=128, lr=1e-3, seed=0, device=device)  # warm-up
+    times = []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        bc.train(data, steps, init, batch_size=128, lr=1e-3, seed=0, device=device)  # ends on .item(): synchronised
+        times.append((time.perf_counter() - t0) / steps)
+    out[device] = {"s_per_step_median": statistics.median(times), "rounds": times, "steps": steps,
+                   "threads": torch.get_num_threads()}
+print(json.dumps(out, indent=1))
+EOF
+step done
