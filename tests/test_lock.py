@@ -1,7 +1,10 @@
 """requirements.lock (tools/lock.py): .venv is exactly the lock, the lock covers pyproject.toml, and
 meta.yaml records the lock its numbers ran on."""
 
+import json
 import os
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -181,3 +184,18 @@ def test_the_set_up_refuses_a_venv_it_cannot_use_and_leaves_it_as_it_is(tmp_path
     lines = out.strip().splitlines()
     assert code == 2 and len(lines) == 1 and lines[0].startswith("error: .venv "), out
     assert "run again" in lines[0] and state() == before
+
+
+def test_a_timing_names_the_versions_its_imports_load_also_from_pythonpath(tmp_path):
+    """The GPU check carries wheels on PYTHONPATH (tools/gpu_check.sh): a wallclock.csv row must still name
+    mujoco's and lerobot's versions. A distribution found only on PYTHONPATH, ahead of .venv's, wins."""
+    info = tmp_path / "mujoco-9.9.9.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: mujoco\nVersion: 9.9.9\n")
+    code = "import json; from tools.lock import ran_versions; print(json.dumps(ran_versions()))"
+    env = {**os.environ, "PYTHONPATH": str(tmp_path)}
+    p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    got = json.loads(p.stdout)
+    assert got["mujoco"] == "9.9.9"
+    assert got["torch"] == lock.locked_here()["torch"] and got["lerobot"] == lock.locked_here()["lerobot"]

@@ -128,11 +128,17 @@ def versions(path: Path = LOCK) -> dict[str, str]:
 
 
 def ran_versions(names=("python", *META_PACKAGES)) -> dict[str, str]:
-    """This interpreter's python and the installed versions of `names`: what a timing ran on."""
-    have = installed()
-    return {
-        n: platform.python_version() if n == "python" else have.get(canonicalize_name(n), "") for n in names
-    }
+    """This interpreter's python and the versions of `names` its imports load: what a timing ran on.
+    Looked up along sys.path, as an import is, so a package carried on PYTHONPATH (the GPU check's
+    wheels, tools/gpu_check.sh) is named too; one not found at all is ""."""
+
+    def version(name: str) -> str:
+        try:
+            return importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            return ""
+
+    return {n: platform.python_version() if n == "python" else version(n) for n in names}
 
 
 def environment_section(path: Path = LOCK, python: str | None = None) -> dict:
