@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ch37.errors import DataError, main
-from datagen import replay
+from datagen.lockstep import replay_from
 from datagen.source_check import state_range_problem
 from datagen.task import Source, Task, contract_problem, known_tasks, rollout
 
@@ -71,7 +71,7 @@ def checks(task: Task, episodes: int, seed: int, tol: float):
     failed = []
     for i, ep in enumerate(solved):
         source = Source(i, ep["observation.state"], ep["action"])
-        got = replay.replay(task, task.make_env(), task.start_of(source.states[0]), source)
+        got = replay_from(task, task.make_env(), task.start_of(source.states[0]), source)
         if not got.kept:
             failed.append(f"rollout {i}: {got.reason} ({got.detail})")
     lost = f"{len(failed)} of {len(solved)} not reproduced; the first: {failed[0]}" if failed else None

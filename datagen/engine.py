@@ -4,32 +4,35 @@ start, re-solve or replay it, keep it if it succeeds.
     attempt(task, source, k, how, mode="resolve") -> an Outcome (datagen.task.Outcome: kept or why not)
 
 is a pure function of its arguments: attempt k of source episode e draws from its own generator,
-np.random.default_rng([env_seed(seed, "aug", e), k]), and the sim is fully reset at the perturbed
-start (task.place), so the result never depends on which process runs it, in what order, or with
-what else. scale_data.py's augment region and augment_demos.py (through datagen.run) call the
-same function. The modes are the engine's (resolve here, replay: datagen.replay), the parts they use
-the task's (datagen.task.Task); the kept episode
-carries its provenance on every frame: aug.source_episode and aug.start (the start it was made from).
+np.random.default_rng([env_seed(seed, "aug", e), k]) (attempt_rng), and the sim is fully reset at the
+perturbed start (task.place), so the result never depends on which process runs it, in what order, or
+with what else. Every attempt runs through the engine's one runner (datagen.lockstep: one lane here,
+many lanes where a worker runs a batch), which records the frames and attaches the provenance:
+aug.source_episode and aug.start (the start it was made from) on every frame of a kept episode. The
+modes are the engine's (resolve: the task's expert; replay: datagen.replay), the parts they use the
+task's (datagen.task.Task).
 
 keep_first(...) grows a set the MimicGen way: attempts k = 0, 1, 2, ... per source demo until
 per_source of them are kept (or cap x per_source were tried); the kept set is the first per_source
-successes in k order, whatever batches the attempts ran in. grow() is keep_first over run_attempts.
+successes in k order, whatever batches the attempts ran in. grow() is keep_first over run_attempts,
+the lesson's path (scale_data.py's augment region); augment_demos.py's shards (datagen.shards) run
+the same attempts_lockstep on their workers.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 
 from ch37.parallel import map_jobs
-from ch37.seeds import env_seed
-from datagen import replay
-from datagen.task import Outcome, Perturbation, Source, Task, ended, rollout
+from datagen import lockstep
+from datagen.lockstep import Simulators, attempt_rng, with_provenance
+from datagen.task import Outcome, Perturbation, Source, Task
 
 __all__ = [
     "ATTEMPTS_PER_KEPT",
+    "RUNS_PER_WORKER",
     "Simulators",
     "KEPT_KEYS",
     "SELECTS",
@@ -49,6 +52,7 @@ __all__ = [
 KEPT_KEYS = ("observation.state", "action", "episode_index", "aug.source_episode", "aug.start")
 SELECTS = ("own", "nearest")  # which source a replay transforms: the attempt's own, or MimicGen's nearest
 ATTEMPTS_PER_KEPT = 10  # keep_first gives up on a source demo after this many attempts per wanted demo
+RUNS_PER_WORKER = 4  # run_attempts' cuts per worker: lanes wide enough to pay, a bar that still moves
 
 
 def provenance(task: Task) -> dict:
@@ -68,51 +72,12 @@ def sources(arrays: dict) -> dict[int, Source]:
     return out
 
 
-def attempt_rng(seed: int, episode: int, k: int) -> np.random.Generator:
-    """The generator of attempt k of source episode `episode`: its own stream, whatever else runs."""
-    return np.random.default_rng([env_seed(seed, "aug", episode), k])
-
-
 def empty_kept(task: Task) -> dict:
     """KEPT_KEYS' columns of a set of `task` with no episode, for a run that kept none."""
     m = task.env_module
     widths = {"observation.state": m.OBS_DIM, "action": m.ACT_DIM, "aug.start": len(task.start_names)}
     out = {k: np.zeros((0, w), np.float32) for k, w in widths.items()}
     return out | {"episode_index": np.zeros(0, np.int64), "aug.source_episode": np.zeros((0, 1), np.int64)}
-
-
-class Simulators:
-    """What a worker keeps between the attempts it runs: per task, the env of attempts one at a time
-    (env), the envs of lockstep's lanes (lanes), and the sources' replay plans (plans, a cache the task's
-    replay fills: ALOHA's subtasks). Each attempt fully resets its env (task.place), so reuse changes no
-    bit. Made by whoever runs the attempts (run_attempts, a run's shards) and passed down explicitly;
-    a copy sent to another process (pickled: Ray) arrives empty, and a forked worker fills its own."""
-
-    def __init__(self):
-        self._env: dict[str, object] = {}  # task name -> its env for attempts one at a time
-        self._lanes: dict[str, list] = {}  # task name -> lockstep's envs, the first shared by the rest
-        self.plans: dict = {}  # the task's key for a source -> its replay plan
-
-    def env(self, task: Task):
-        if task.name not in self._env:
-            self._env[task.name] = task.make_env()
-        return self._env[task.name]
-
-    def lanes(self, task: Task, n: int) -> list:
-        """n envs of `task` for lockstep's lanes, made once and reused. One compiled model for all (a load
-        is ~4 ms), and where the env can, one MjData (~1 ms each to make, and 256 of them compete for
-        the cache): the lanes share the first env (task.make_env(share=))."""
-        pool = self._lanes.setdefault(task.name, [])
-        if not pool:
-            pool.append(task.make_env())
-        pool += [task.make_env(share=pool[0]) for _ in range(n - len(pool))]
-        return pool[:n]
-
-    def __getstate__(self):
-        return {}
-
-    def __setstate__(self, state):
-        self.__init__()
 
 
 def attempt(
@@ -127,7 +92,8 @@ def attempt(
     sims: Simulators | None = None,
 ) -> Outcome:
     """Attempt k from `source`: its Outcome, a kept one's episode with its provenance on every frame
-    (arrays per frame), a failed one's without frames (episode None; steps says how many ran).
+    (arrays per frame), a failed one's without frames (episode None; steps says how many ran). Run by
+    the engine's one attempt runner in one lane (datagen.lockstep.one_lane).
     pool: {episode: Source} a replay chooses its source from (the nearest, MimicGen's selection);
     None replays the attempt's own. aug.source_episode is the source actually replayed.
     env: the simulator to use (else sims' env for the task, else a new one); sims: what a worker keeps
@@ -135,27 +101,8 @@ def attempt(
     if env is None:
         env = sims.env(task) if sims is not None else task.make_env()
     plans = sims.plans if sims is not None else None
-    start = task.perturb(source.states[0], attempt_rng(how.seed, source.episode, k), how)
-    if start is None:
-        got = Outcome("no_valid_start", source_episode=source.episode)
-    elif mode == "resolve":  # the expert solves the start itself: no source is replayed
-        ep = rollout(env, task.expert(), task.place(env, start))
-        got = ended(ep, None if ep["success"] else "expert_failed", start, source.episode)
-    else:  # MimicGen's replay of the attempt's own source, or of the pool's nearest to the start
-        chosen = pool[replay.nearest(task, pool, start)] if pool else source
-        got = replay.replay(task, env, start, chosen, plans)
-    if not got.kept:
-        return replace(got, episode=None)
-    return replace(got, episode=with_provenance(got.episode, got.source_episode, got.start))
-
-
-def with_provenance(ep: dict, source_episode: int, start) -> dict:
-    """`ep` with its provenance on every frame: aug.source_episode (n, 1), the source it was made from,
-    and aug.start (n, len(start_names)), the start it was made from."""
-    n = len(ep["action"])
-    ep["aug.source_episode"] = np.full((n, 1), source_episode, np.int64)
-    ep["aug.start"] = np.repeat(np.float32(start)[None], n, axis=0)
-    return ep
+    parts, _ = lockstep.mode_parts(task, {source.episode: source}, how, mode, pool=pool, plans=plans)
+    return lockstep.one_lane(task, env, (source.episode, k), parts)
 
 
 def keep_first(episodes, per_source: int, run_jobs, *, reasons, cap: int = ATTEMPTS_PER_KEPT):
@@ -225,17 +172,25 @@ def run_attempts(
     bar=None,
     sims: Simulators | None = None,
 ):
-    """[attempt(task, sources[e], k, how, mode=mode) for (e, k) in jobs], in order, on `workers` processes.
-    select "nearest": each replay transforms the source of `sources` nearest its start (SELECTS).
-    sims: the Simulators the attempts reuse (a new one when None; a forked worker fills its own copy)."""
-    pool = sources if select == "nearest" else None
+    """[attempt(task, sources[e], k, how, mode=mode) for (e, k) in jobs], in order, on `workers`
+    processes: the jobs cut into a few runs per worker, each run by the engine's one runner in lanes
+    (datagen.lockstep.attempts_lockstep, the same bytes). select "nearest": each replay transforms the
+    source of `sources` nearest its start (SELECTS). bar: advanced once per attempt. sims: the
+    Simulators the attempts reuse (a new one when None; a forked worker fills its own copy)."""
     sims = Simulators() if sims is None else sims
+    jobs = list(jobs)
+    size = max(1, math.ceil(len(jobs) / (RUNS_PER_WORKER * workers)))
+    runs = [jobs[i : i + size] for i in range(0, len(jobs), size)]
 
-    def one(job):
-        e, k = job
-        return attempt(task, sources[e], k, how, mode=mode, pool=pool, sims=sims)
+    def one(run):
+        return lockstep.attempts_lockstep(task, sources, run, how, mode=mode, select=select, sims=sims)
 
-    return list(map_jobs(one, jobs, workers=workers, bar=bar))
+    out = []
+    for got in map_jobs(one, runs, workers=workers):
+        out += got
+        if bar is not None:
+            bar.update(len(got))
+    return out
 
 
 def grow(

@@ -1,65 +1,107 @@
-"""Lockstep attempts: a worker runs a batch of the engine's attempts together, one env per live attempt,
-and the expert (or replay) decides for all of them in one call.
+"""The engine's one attempt runner: every attempt, in either mode, one at a time or many stepped
+together, goes through run_lanes. One attempt = draw its perturbed start, place the env there, act
+until the episode ends, keep it on success; the frames, the attempt's start and its provenance are
+recorded here and nowhere else.
 
-    attempts_lockstep(task, sources, jobs, how, mode=, select=, lanes=) -> [result per job]
+    attempts_lockstep(task, sources, jobs, how, mode=, select=, lanes=) -> [Outcome per job]
+    one_lane(task, env, job, parts)     -> one attempt's Outcome (datagen.engine.attempt)
+    replay_from(task, env, start, source) -> a replay from a given start (datagen.check, the tests)
 
-returns exactly what [datagen.engine.attempt(task, sources[e], k, how, ...) for (e, k) in jobs]
-returns, frame for frame and bit for bit (tests/test_lockstep.py), at a fraction of the Python cost
-per frame: the engine's one-at-a-time path pays the expert's ~40 small numpy calls for every frame of
-every attempt, where here they are paid once per control step for up to `lanes` attempts (the task's
-batch_expert: datagen.fast_experts), and the env steps them all in one call where it can (the task's
-step_batch: datagen.fast_pusht.step_many). Each attempt still gets its own simulator state, fully
-reset at its start (PushT's lanes keep theirs apart in one shared MjData: fast_pusht.SharedPushTEnv),
-so its frames do not depend on what shares its batch, on the lane it runs in, or on when it was started.
+attempts_lockstep returns exactly what [datagen.engine.attempt(task, sources[e], k, how, ...) for (e, k)
+in jobs] returns, frame for frame and bit for bit (tests/test_lockstep.py): it is the same runner with
+more lanes. Where the task decides for a batch (resolve: its batch_expert, datagen.fast_experts; replay:
+a task that steps its envs as one batch, its step_batch, PushT's datagen.fast_pusht.step_many), up to
+`lanes` attempts are stepped together and the expert's ~40 small numpy calls per frame are paid once
+per control step for all of them; otherwise the runner runs one lane, each attempt in turn. Each attempt
+still gets its own simulator state, fully reset at its start (PushT's lanes keep theirs apart in one
+shared MjData: fast_pusht.SharedPushTEnv), so its frames do not depend on what shares its batch, on the
+lane it runs in, or on when it was started.
 
-The runner (run_lanes) knows no task. A mode hands it
+The runner (run_lanes) knows no task. A mode (mode_parts: resolve_lanes, replay_lanes) hands it
     envs                         the lanes' envs, each with step(action) -> (obs, reward, done,
-                                    info["success"]); made by the caller (datagen.engine.Simulators:
-                                    sharing the first's model, and PushT's MjData) and reused between
-                                    calls: begin resets an env fully
+                                    info["success"]); made by the caller (Simulators: sharing the first's
+                                    model, and PushT's MjData) and reused between calls: begin resets an
+                                    env fully
     step(envs, actions)          -> (obs, success, done) for the live lanes' envs in one call: the
-                                    task's step_batch (PushT's: datagen.fast_pusht.step_many; by
-                                    default env.step per env), ch37.parallel.step_envs when not given
+                                    task's step_batch where lanes run together, env.step per env
+                                    (ch37.parallel.step_each) for one lane
     begin(job, env)              -> a Lane placed at its start (lane.obs: its first observation), or a
                                     final result (an Outcome) when there is nothing to simulate
-    decide(lanes, envs, obs)     -> (actions (N, act_dim) float32, stop (N,) bool or None): one call for
-                                    every live lane; a stopped lane ends before this step (replay's
-                                    segment ran out) and is not stepped
+    decide(lanes, envs, obs)     -> (actions (N, act_dim), stop (N,) bool or None): one call for every
+                                    live lane; a stopped lane ends before this step (replay's plan ran
+                                    out) and is not stepped
     finish(lane, env, episode, last_obs)
                                  -> the attempt's result, from the frames recorded for it (last_obs: the
                                     observation after its last step)
 and the runner keeps `lanes` envs busy, refilling a lane as soon as its attempt ends, recording every
-frame into preallocated arrays (lanes x max_frames), and returns the results in job order.
-Mode "resolve" is built here for every task from its parts (perturb, place, batch_expert, step_batch,
-max_steps: the Task contract, datagen.task); mode "replay" is the engine's one replay as lanes
-(replay_lanes: each lane runs datagen.replay's generator, as one attempt does), for both --select, for
-a task that steps its envs as one batch (its own step_batch). A task without a batch expert runs
-"resolve", and one without a batch step "replay", one attempt at a time through datagen.engine.attempt,
-the same bytes.
+frame into preallocated arrays (lanes x max_steps), and returns the results in job order. datagen.task's
+rollout runs an expert for the demo generators (gen_demos.py, with --video's frames); no attempt uses it.
 """
 
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import replace
 
 import numpy as np
 
-from ch37.parallel import step_envs
-from datagen import engine, replay
-from datagen.task import Outcome, Perturbation, Task
+from ch37.parallel import step_each, step_envs
+from ch37.seeds import env_seed
+from datagen import replay
+from datagen.task import Outcome, Perturbation, Source, Task
 
 __all__ = [
     "LANES",
     "Lane",
+    "Simulators",
+    "attempt_rng",
     "attempts_lockstep",
     "kept_or_not",
+    "mode_parts",
+    "one_lane",
+    "replay_from",
     "replay_lanes",
     "resolve_lanes",
     "run_lanes",
     "start_of_job",
+    "with_provenance",
 ]
 
 LANES = 256  # attempts stepped together per worker (ALOHA's lane: an MjData, 0.44 MiB, ~1 ms to make)
+
+
+class Simulators:
+    """What a worker keeps between the attempts it runs: per task, the env of attempts one at a time
+    (env), the envs of the lanes (lanes), and the sources' replay plans (plans, a cache the task's
+    replay fills: ALOHA's subtasks). Each attempt fully resets its env (task.place), so reuse changes no
+    bit. Made by whoever runs the attempts (run_attempts, a run's shards) and passed down explicitly;
+    a copy sent to another process (pickled: Ray) arrives empty, and a forked worker fills its own."""
+
+    def __init__(self):
+        self._env: dict[str, object] = {}  # task name -> its env for attempts one at a time
+        self._lanes: dict[str, list] = {}  # task name -> the lanes' envs, the first shared by the rest
+        self.plans: dict = {}  # the task's key for a source -> its replay plan
+
+    def env(self, task: Task):
+        if task.name not in self._env:
+            self._env[task.name] = task.make_env()
+        return self._env[task.name]
+
+    def lanes(self, task: Task, n: int) -> list:
+        """n envs of `task` for the lanes, made once and reused. One compiled model for all (a load is
+        ~4 ms), and where the env can, one MjData (~1 ms each to make, and 256 of them compete for the
+        cache): the lanes share the first env (task.make_env(share=))."""
+        pool = self._lanes.setdefault(task.name, [])
+        if not pool:
+            pool.append(task.make_env())
+        pool += [task.make_env(share=pool[0]) for _ in range(n - len(pool))]
+        return pool[:n]
+
+    def __getstate__(self):
+        return {}
+
+    def __setstate__(self, state):
+        self.__init__()
 
 
 class Lane:
@@ -85,7 +127,8 @@ def run_lanes(
 ):
     """[result of job] for every job, in order, with up to `lanes` attempts stepped together (see the
     module docstring). Frame t of a lane pairs the observation before action t with action t and
-    next.success after it, as datagen.task.rollout records them."""
+    next.success after it, as datagen.task.rollout records them; `actions` reach step as decide made
+    them (their dtype too), and are recorded as float32."""
     results = [None] * len(jobs)
     todo = deque(range(len(jobs)))
     width = max(1, min(lanes, len(jobs), len(envs)))
@@ -137,6 +180,11 @@ def run_lanes(
         obs_buf[slots, at + 1] = o
         succ_buf[slots, at] = success
         t[slots] = at + 1
+        if (t[slots] >= max_frames).any() and not done[t[slots] >= max_frames].all():
+            raise RuntimeError(
+                f"an episode ran past {max_frames} steps without ending: the task's max_steps must be "
+                "the env's own episode limit"
+            )
         for slot in slots[done].tolist():
             end(slot)
     return results
@@ -145,34 +193,59 @@ def run_lanes(
 # ----------------------------------------------------------------------------------------------
 # The modes as lanes, for any task
 # ----------------------------------------------------------------------------------------------
+def attempt_rng(seed: int, episode: int, k: int) -> np.random.Generator:
+    """The generator of attempt k of source episode `episode`: its own stream, whatever else runs."""
+    return np.random.default_rng([env_seed(seed, "aug", episode), k])
+
+
 def start_of_job(task: Task, sources: dict, job, how: Perturbation):
-    """The perturbed start of attempt (e, k), drawn as datagen.engine.attempt draws it, or None."""
+    """The perturbed start of attempt (e, k): task.perturb of source e's first state with attempt (e, k)'s
+    own generator (attempt_rng), or None when the task finds no valid start."""
     e, k = job
-    return task.perturb(sources[e].states[0], engine.attempt_rng(how.seed, e, k), how)
+    return task.perturb(sources[e].states[0], attempt_rng(how.seed, e, k), how)
+
+
+def with_provenance(ep: dict, source_episode: int, start) -> dict:
+    """`ep` with its provenance on every frame: aug.source_episode (n, 1), the source it was made from,
+    and aug.start (n, len(start_names)), the start it was made from."""
+    n = len(ep["action"])
+    ep["aug.source_episode"] = np.full((n, 1), source_episode, np.int64)
+    ep["aug.start"] = np.repeat(np.float32(start)[None], n, axis=0)
+    return ep
 
 
 def kept_or_not(lane: Lane, episode: dict, success: bool, reason: str) -> Outcome:
-    """The Outcome datagen.engine.attempt gives for the frames `episode` recorded for `lane`: kept with
-    its provenance when `success` (for resolve: the last frame's, as rollout's), else `reason`."""
+    """The Outcome of the frames `episode` recorded for `lane`: kept with its provenance when `success`
+    (for resolve: the last frame's), else `reason` and no frames."""
     e, steps = lane.job[0], len(episode["action"])
     if not success:
         return Outcome(reason, None, lane.start, e, steps)
-    episode = engine.with_provenance(episode | {"success": success}, e, lane.start)
+    episode = with_provenance(episode | {"success": success}, e, lane.start)
     return Outcome(None, episode, lane.start, e, steps)
 
 
-def resolve_lanes(task: Task, sources: dict, how: Perturbation) -> dict:
-    """Mode "resolve": the task's noise-free expert from each perturbed start, kept on success."""
+def resolve_lanes(task: Task, sources: dict, how: Perturbation, start_for=None) -> dict:
+    """Mode "resolve": the task's noise-free expert from each perturbed start, kept on success. The
+    task's batch_expert decides for all lanes in one call; without one, each lane runs its own
+    task.expert(), reset at its start. start_for(job): a given start instead of the drawn one."""
     act_batch = task.batch_expert()
+    start_for = start_for or (lambda job: start_of_job(task, sources, job, how))
 
     def begin(job, env):
-        start = start_of_job(task, sources, job, how)
+        start = start_for(job)
         if start is None:
             return Outcome("no_valid_start", source_episode=job[0])
-        return Lane(job, task.place(env, start), start=start)
+        if act_batch is not None:
+            return Lane(job, task.place(env, start), start=start)
+        expert = task.expert()
+        lane = Lane(job, task.place(env, start), start=start, expert=expert)
+        expert.reset()
+        return lane
 
     def decide(lanes, envs, obs):
-        return act_batch(obs), None
+        if act_batch is not None:
+            return act_batch(obs), None
+        return np.stack([lane.expert.act(o) for lane, o in zip(lanes, obs)]), None
 
     def finish(lane, env, episode, last_obs):
         return kept_or_not(lane, episode, bool(episode["next.success"][-1, 0]), "expert_failed")
@@ -180,13 +253,17 @@ def resolve_lanes(task: Task, sources: dict, how: Perturbation) -> dict:
     return {"begin": begin, "decide": decide, "finish": finish}
 
 
-def replay_lanes(task: Task, sources: dict, how: Perturbation, pool: dict | None, plans: dict) -> dict:
-    """The engine's one replay as lanes: each lane runs datagen.replay.Replay.steps, so a lane's frames
-    are datagen.replay.replay's, bit for bit (tests/test_lockstep.py). pool: the sources --select
-    nearest chooses from (None: the attempt's own); plans: the worker's cut sources."""
+def replay_lanes(
+    task: Task, sources: dict, how: Perturbation, pool: dict | None, plans: dict | None, start_for=None
+) -> dict:
+    """Mode "replay": the engine's one replay (datagen.replay.Replay.steps, a generator per lane) of
+    the attempt's own source, or of the pool's nearest to its start (MimicGen's selection; pool None:
+    its own). plans: the worker's cut sources (None: cut for this call). start_for(job): a given start
+    instead of the drawn one."""
+    start_for = start_for or (lambda job: start_of_job(task, sources, job, how))
 
     def begin(job, env):
-        start = start_of_job(task, sources, job, how)
+        start = start_for(job)
         if start is None:
             return Outcome("no_valid_start", source_episode=job[0])
         source = pool[replay.nearest(task, pool, start)] if pool else sources[job[0]]
@@ -201,21 +278,58 @@ def replay_lanes(task: Task, sources: dict, how: Perturbation, pool: dict | None
         return Lane(job, obs, run=run, gen=gen)
 
     def decide(lanes, envs, obs):
-        actions = np.zeros((len(lanes), task.env_module.ACT_DIM), np.float32)
-        stop = np.zeros(len(lanes), bool)
+        actions, stop = [None] * len(lanes), np.zeros(len(lanes), bool)
         for j, lane in enumerate(lanes):
             try:
                 actions[j] = lane.gen.send(obs[j])
             except StopIteration:
                 stop[j] = True
-        return actions, stop
+        made = [a for a in actions if a is not None]
+        if not made:
+            return np.zeros((len(lanes), task.env_module.ACT_DIM), np.float32), stop
+        out = np.zeros((len(lanes), len(made[0])), np.result_type(*made))  # the actions as made
+        for j, a in enumerate(actions):
+            if a is not None:
+                out[j] = a
+        return out, stop
 
     def finish(lane, env, episode, last_obs):
         got = lane.run.outcome(env, last_obs, episode)
-        kept = engine.with_provenance(got.episode, got.source_episode, got.start) if got.kept else None
-        return Outcome(got.reason, kept, got.start, got.source_episode, got.steps)
+        kept = with_provenance(got.episode, got.source_episode, got.start) if got.kept else None
+        return replace(got, episode=kept)
 
     return {"begin": begin, "decide": decide, "finish": finish}
+
+
+def mode_parts(
+    task: Task, sources: dict, how: Perturbation, mode: str, *, pool=None, plans=None
+) -> tuple[dict, bool]:
+    """(the runner's parts for `mode`, whether its lanes can run together): resolve with the task's
+    batch_expert, replay where the task steps its envs as one batch (its own step_batch). A replay
+    decides lane by lane, so its lanes pay only where the envs step as one batch; stepped env by env
+    they cost more than one at a time."""
+    if mode == "resolve":
+        return resolve_lanes(task, sources, how), task.batch_expert() is not None
+    parts = replay_lanes(task, sources, how, pool, plans)
+    return parts, type(task).step_batch is not Task.step_batch
+
+
+def _dims(task: Task) -> dict:
+    m = task.env_module
+    return {"max_frames": task.max_steps, "obs_dim": m.OBS_DIM, "act_dim": m.ACT_DIM}
+
+
+def one_lane(task: Task, env, job, parts: dict) -> Outcome:
+    """One attempt `job` through the runner, in one lane on `env`, stepped by env.step."""
+    return run_lanes([job], envs=[env], step=step_each, lanes=1, **parts, **_dims(task))[0]
+
+
+def replay_from(task: Task, env, start, source: Source, plans: dict | None = None) -> Outcome:
+    """One replay of `source` from the given `start` (not a drawn one), in `env`: its Outcome, the
+    frames executed with the provenance of a kept attempt (datagen.check's zero-perturbation replay,
+    the tests). plans: a cache of cut sources (None: cut now)."""
+    parts = replay_lanes(task, {source.episode: source}, None, None, plans, start_for=lambda job: start)
+    return one_lane(task, env, (source.episode, 0), parts)
 
 
 def attempts_lockstep(
@@ -227,30 +341,17 @@ def attempts_lockstep(
     mode="resolve",
     select="own",
     lanes=LANES,
-    sims: engine.Simulators | None = None,
+    sims: Simulators | None = None,
 ) -> list:
     """[datagen.engine.attempt(task, sources[e], k, how, mode=mode, pool=...) for (e, k) in jobs], the
-    same bytes, stepped in lockstep where the mode has lanes (else one attempt at a time). sims: the
-    worker's Simulators (its lanes' envs, kept between shards; a new one when None)."""
-    sims = engine.Simulators() if sims is None else sims
+    same bytes, up to `lanes` stepped together where the mode's lanes can run together (else one lane).
+    sims: the worker's Simulators (its envs, kept between shards; a new one when None)."""
+    sims = Simulators() if sims is None else sims
     jobs = list(jobs)
-    parts = None
-    if mode == "resolve" and task.batch_expert() is not None:
-        parts = resolve_lanes(task, sources, how)
-    # a replay decides lane by lane: lanes pay where the task steps its envs as one batch (PushT's
-    # step_many); stepped env by env (the default step_batch) they cost more than one at a time
-    if mode == "replay" and type(task).step_batch is not Task.step_batch:
-        parts = replay_lanes(task, sources, how, sources if select == "nearest" else None, sims.plans)
-    if parts is None:  # no lanes for this task and mode: the same results, one at a time
-        return engine.run_attempts(task, sources, jobs, how, mode=mode, select=select, workers=1, sims=sims)
-    m = task.env_module
-    return run_lanes(
-        jobs,
-        envs=sims.lanes(task, max(1, min(lanes, len(jobs)))),
-        step=task.step_batch,
-        **parts,
-        max_frames=task.max_steps,
-        obs_dim=m.OBS_DIM,
-        act_dim=m.ACT_DIM,
-        lanes=lanes,
-    )
+    pool = sources if select == "nearest" else None
+    parts, together = mode_parts(task, sources, how, mode, pool=pool, plans=sims.plans)
+    if not together:  # one lane, each attempt in turn on the worker's env
+        return run_lanes(jobs, envs=[sims.env(task)], step=step_each, lanes=1, **parts, **_dims(task))
+    width = max(1, min(lanes, len(jobs)))
+    envs = sims.lanes(task, width)
+    return run_lanes(jobs, envs=envs, step=task.step_batch, lanes=width, **parts, **_dims(task))

@@ -1,9 +1,9 @@
 """The engine's one replay, for every task: MimicGen's generation loop (its data_generator.py), with the
 task only describing (datagen.task.Task: arms, subtasks, frames, signals, the action conversion).
 
-    plan = cut(task, source)                      # the source's subtasks: [Segment], by the task's signals
-    got = replay(task, env, start, source, plan)  # an Outcome: reason None (kept) or why not
-    e = nearest(task, pool, start)                # MimicGen's nearest source selection
+    plan = cut(task, source)                # the source's subtasks: [Segment], by the task's signals
+    run = Replay(task, source, plan, start)  # one attempt: run.steps(env) its actions, run.outcome(...)
+    e = nearest(task, pool, start)          # MimicGen's nearest source selection
 
 A source is cut into the task's subtasks at its signals: a subtask with `ends` stops at the first frame
 after its start at which that signal turns on, found by re-simulating the source from its first frame
@@ -29,9 +29,9 @@ REASONS that applies:
     finished_off_target   the plan ran to its end without success
     source_not_split      the source cannot be cut into the task's subtasks (cut raises ValueError)
 
-One attempt is a generator (Replay.steps) that receives each observation and yields each action, so the
-same code runs one attempt at a time (replay) and as lockstep's lanes (datagen.lockstep.replay_lanes):
-the same bytes.
+One attempt is a generator (Replay.steps) that receives each observation and yields each action; the
+engine's one attempt runner executes it (datagen.lockstep.replay_lanes), one attempt at a time or many
+in lanes, the same bytes; datagen.lockstep.replay_from replays a source from a given start.
 """
 
 from __future__ import annotations
@@ -43,9 +43,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from datagen.poses import interpolate, is_planar, slerp, transform_segment
-from datagen.task import Outcome, Source, Subtask, Task, ended, recorded
+from datagen.task import Outcome, Source, Subtask, Task, ended
 
-__all__ = ["Replay", "Segment", "cut", "nearest", "plan_of", "replay", "signals"]
+__all__ = ["Replay", "Segment", "cut", "nearest", "plan_of", "signals"]
 
 
 @dataclass(frozen=True)
@@ -313,30 +313,3 @@ class Replay:
             why, detail = "finished_off_target", f"{where}: its last waypoint reached without success"
         got = ended(episode | {"success": success}, why, self.start, self.source.episode)
         return replace(got, detail=detail)
-
-
-def replay(task: Task, env, start, source: Source, plans: dict | None = None) -> Outcome:
-    """Replay `source` from `start` in `env`, one attempt: its Outcome (the frames executed, as
-    datagen.task.rollout records them; reason None on the env's success, else why not). plans: the
-    caller's cache of cut sources (plan_of)."""
-    try:
-        plan = plan_of(task, source, plans)
-    except ValueError:
-        return Outcome("source_not_split", None, start, source.episode)
-    run = Replay(task, source, plan, start)
-    obs = task.place(env, start)
-    gen = run.steps(env)
-    next(gen)
-    states, actions, succ = [], [], []
-    while True:
-        try:
-            a = gen.send(obs)
-        except StopIteration:
-            break
-        states.append(obs)
-        actions.append(a)
-        obs, _, done, info = env.step(a)
-        succ.append(bool(info["success"]))
-        if done:
-            break
-    return run.outcome(env, obs, recorded(task.env_module, states, actions, succ, False))

@@ -62,7 +62,6 @@ __all__ = [
     "Task",
     "ended",
     "known_tasks",
-    "recorded",
     "contract_problem",
     "register",
     "rollout",
@@ -190,17 +189,6 @@ def write_dataset(
     how |= dict(repo_id=repo_id, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes)
     with publish_dir(out, stamp) as tmp:
         write_set(tmp, **how)
-
-
-def recorded(env_module, states, actions, succ, success: bool) -> dict:
-    """A replay's recorded frames as an episode: observation.state (T, OBS_DIM) float32, action
-    (T, ACT_DIM) float32, next.success (T, 1) bool (shapes kept for T = 0), and whether it succeeded."""
-    return {
-        "observation.state": np.asarray(states, np.float32).reshape(-1, env_module.OBS_DIM),
-        "action": np.asarray(actions, np.float32).reshape(-1, env_module.ACT_DIM),
-        "next.success": np.asarray(succ, bool).reshape(-1, 1),
-        "success": success,
-    }
 
 
 def rollout(env, policy, obs, *, render: bool = False) -> dict:

@@ -15,6 +15,7 @@ from datagen import aloha as at
 from datagen import pusht as pt
 from datagen import replay as rp
 from datagen import task as dt
+from datagen.lockstep import replay_from
 from datagen.poses import rotation
 from datagen.task import rollout
 from scripted_expert import AlohaExpert, PushTExpert
@@ -182,7 +183,7 @@ def test_identity_replay_reproduces_the_source_frames(env):
     """A source replayed from its own start, with no perturbation, is its own frames, byte for byte:
     every frame pose equals its source pose, no bridge is needed, and the tracking term is exactly 0."""
     src = aloha_source(env, 2)
-    got = rp.replay(ALOHA, env, at.start_of(src.states[0]), src)
+    got = replay_from(ALOHA, env, at.start_of(src.states[0]), src)
     ep = got.episode
     assert got.reason is None and ep["success"]
     assert ep["observation.state"].tobytes() == src.states.tobytes()
@@ -193,7 +194,7 @@ def test_identity_replay_of_a_reset_source_is_its_frames_to_float32_rounding(env
     """A source rolled out from reset(seed) started from float64 values its float32 first frame
     rounds; replayed from that frame, it differs from its source by rounding alone."""
     src = aloha_source(env, 2, placed=False)
-    got = rp.replay(ALOHA, env, at.start_of(src.states[0]), src)
+    got = replay_from(ALOHA, env, at.start_of(src.states[0]), src)
     ep = got.episode
     assert got.reason is None and len(ep["action"]) == len(src.actions) == got.steps
     np.testing.assert_allclose(ep["observation.state"], src.states, atol=1e-6)
@@ -227,9 +228,9 @@ def test_subtasks_carry_the_cube_where_one_cube_frame_cannot(env):
     start[2] += 0.06  # target x: still inside its spawn region for this source
     start[3] = -start[3] * 0.5
     assert aloha_env.TARGET_X_RANGE[0] <= start[2] <= aloha_env.TARGET_X_RANGE[1]
-    got = rp.replay(at.Aloha(at.WHOLE), env, start, src)
-    assert got.reason == "finished_off_target" and not got.episode["success"]
-    got = rp.replay(ALOHA, env, start, src)
+    got = replay_from(at.Aloha(at.WHOLE), env, start, src)
+    assert got.reason == "finished_off_target" and got.episode is None
+    got = replay_from(ALOHA, env, start, src)
     assert got.reason is None and got.episode["success"]
 
 
@@ -261,7 +262,7 @@ def test_pusht_split_and_identity_replay():
     d = [pusht_env.t_signed_distance(r[0], r[1], r[2], r[3], math.atan2(r[4], r[5])) for r in s]
     assert min(d[: push.start]) > pusht_env.PUSHER_RADIUS + pt.CONTACT_TOL >= d[push.start]
     start = tuple(float(v) for v in pt.block_pose(s[0])) + (float(s[0][0]), float(s[0][1]))
-    got = rp.replay(by_contact, env, start, src)
+    got = replay_from(by_contact, env, start, src)
     ep = got.episode
     assert got.reason is None
     assert (
