@@ -120,6 +120,106 @@ class PushTBatch:
         # np.clip(v, -1.0, 1.0) as act's, without its wrapper's cost: the same values, NaN included.
         return np.minimum(np.maximum(v, -1.0, out=v), 1.0, out=v).astype(np.float32)
 
+    def _block_frame(self, o: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The expert's first lines over rows: rot (N, 2, 2), e and p (N, 2) in the block frame and eyaw
+        (N,), equal to its yaw, rot, e = rot.T @ (target - bw), eyaw = wrap_angle(...) and
+        p = rot.T @ (pw - bw); the angles with Python's math (rule 1), e and p one gemv each (rule 2)."""
+        n = len(o)
+        sin_b, cos_b, _, _, sin_t, cos_t = o[:, 4:10].T.tolist()
+        yaw = list(map(math.atan2, sin_b, cos_b))
+        c, s = list(map(math.cos, yaw)), list(map(math.sin, yaw))
+        eyaw = np.array(list(map(operator.sub, map(math.atan2, sin_t, cos_t), yaw)))
+        eyaw = (eyaw + math.pi) % (2.0 * math.pi) - math.pi  # wrap_angle (rule 3)
+        rot = np.empty((n, 2, 2))  # C-ordered per env, as the scalar np.array([[c, -s], [s, c]]) is
+        rot[:, 0, 0] = rot[:, 1, 1] = c
+        rot[:, 1, 0] = s
+        np.negative(rot[:, 1, 0], out=rot[:, 0, 1])
+        rot_t = rot.transpose(0, 2, 1)  # each env's rot.T: the same transposed view the scalar gemv gets
+        ep = np.matmul(rot_t[:, None], (o[:, self._ep_cols].reshape(n, 2, 2) - o[:, None, 2:4])[..., None])
+        return rot, ep[:, 0, :, 0], ep[:, 1, :, 0], eyaw
+
+    def _choose(self, o: np.ndarray, rot: np.ndarray, want: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """The expert's steps 1-2 over rows: the chosen candidate's n, t, contact and pre (N, 8), equal to
+        self._n[k], self._t[k], self._contact[k], self._pre[k] for k = argmax(score) (reach, align,
+        travel); want is the desired twist [e, _PT_YAW_LEN * eyaw], normalised here."""
+        want /= np.maximum(_norm(want), 1e-300)[:, None]  # the max only keeps a goal env's 0/0 away
+        align = np.matmul(self._u, want[:, :, None])[:, :, 0]  # (N, K): gemv per row, as self._u @ want
+        rel = p.T[:, :, None] - self._contact_xy  # (2, N, K): x and y of p - contact
+        rn = rel * self._n_xy
+        along = np.maximum(rn[0] + rn[1], -_PT_STANDOFF)  # the einsum, then np.clip (rule 3)
+        np.minimum(along, 0.0, out=along)
+        rel -= along * self._n_xy
+        rel *= rel
+        travel = np.sqrt(rel[0] + rel[1])  # np.linalg.norm(..., axis=1) (rule 3)
+        score = align - _PT_TRAVEL_COST * travel
+        # Reach: pre_w = bw + pre @ rot.T (a gemm per env) within the walls. |pre_w| <= |bw| + |pre|
+        # up to a few roundings, so while every block is far enough from the walls every candidate is
+        # reachable whatever the gemm's last bits (rule 4); else compute it as the scalar path does.
+        bx, by = o[:, 2:4].T.tolist()
+        if max(max(bx), -min(bx), max(by), -min(by)) >= self._reach_free:
+            pre_w = o[:, None, 2:4] + np.matmul(self._pre, rot.transpose(0, 2, 1))  # (N, K, 2): gemm per env
+            bound = np.abs(pre_w) < _pt.WALL_INNER - _PT_R - 0.005
+            score = np.where(bound[:, :, 0] & bound[:, :, 1], score, -np.inf)
+        return self._cand[score.argmax(axis=1)]
+
+    def _push(self, p: np.ndarray, c0: np.ndarray, nt: np.ndarray, twist_err: np.ndarray):
+        """The expert's step 3a over rows: (push, v_push), push (N,) equal to its test `abs(lat) < 0.006
+        and -(_PT_STANDOFF + 0.008) < along < 0.01` and v_push (N, 2) to its `speed * n - 5.0 * lat * t`
+        (block frame), for nt the chosen (n, t) (N, 2, 2) and c0 the contact (N, 2)."""
+        rel = p - c0
+        along_lat = np.matmul(nt[:, :, None, :], rel[:, None, :, None])[:, :, 0, 0]  # rel @ n, rel @ t: dots
+        push = (self._push_lo < along_lat) & (along_lat < self._push_hi)  # |lat| < 6 mm, along in range
+        speed = np.minimum(np.maximum(_PT_PUSH_GAIN * twist_err, _PT_V_PUSH[0]), _PT_V_PUSH[1])
+        return push[:, 0] & push[:, 1], speed[:, None] * nt[:, 0] - (5.0 * along_lat[:, 1:2]) * nt[:, 1]
+
+    @staticmethod
+    def _straight(dg: np.ndarray) -> np.ndarray:
+        """The expert's step 3b's velocity over rows (N, 2), equal to its `speed * dg / max(dist, 1e-9)`
+        (block frame) for dg = g - p."""
+        dist = np.sqrt(_dot(dg, dg))  # np.linalg.norm of a vector: sqrt of its dot with itself
+        speed = np.minimum(np.maximum(_PT_MOVE_GAIN * dist, _PT_V_MOVE[0]), _PT_V_MOVE[1])
+        return speed[:, None] * dg / np.maximum(dist, 1e-9)[:, None]
+
+    def _field(self, p: np.ndarray, dg: np.ndarray) -> np.ndarray:
+        """Every t_sdf the expert takes, in one distance-field call (N, 5 + len(self._seg)): column 0
+        equals t_sdf(p), columns 1-4 the four of _grad(p)'s stencil (after a copy of p), the rest
+        t_sdf(path) for step 3b's path = p + self._seg[:, None] * dg (as f dg + p: IEEE addition
+        commutes). The points x and y apart (2, N, 5 + len(self._seg))."""
+        pts = np.empty((2, len(p), 5 + len(self._seg)))
+        np.add(p.T[:, :, None], self._stencil_xy, out=pts[:, :, :5])
+        np.multiply(dg.T[:, :, None], self._seg, out=pts[:, :, 5:])
+        pts[:, :, 5:] += p.T[:, :, None]
+        return t_sdf_xy(pts[0], pts[1])
+
+    @staticmethod
+    def _grad(sdf: np.ndarray) -> np.ndarray:
+        """The expert's _grad(p) over rows (N, 2), from _field's stencil columns: p + (h, 0), p - (h, 0),
+        p + (0, h), p - (0, h); (0, 1) where the gradient's norm is at most 1e-12."""
+        grad = sdf[:, 1:5:2] - sdf[:, 2:5:2]
+        nrm = _norm(grad)
+        grad /= np.maximum(nrm, 1e-12)[:, None]  # the max only keeps 0/0 away: those rows are set next
+        flat = nrm <= 1e-12
+        if np.count_nonzero(flat):
+            grad[flat] = (0.0, 1.0)
+        return grad
+
+    def _orbit(self, p: np.ndarray, g: np.ndarray, grad: np.ndarray, sdf_p: np.ndarray, orbit: np.ndarray):
+        """The expert's step 3c over rows (N, 2), equal to its `_PT_V_MOVE[1] * v / max(norm(v), 1e-9)`
+        (block frame): around the T at a safe clearance, counter-clockwise unless the way to g is
+        shorter clockwise; the atan2s only for the rows in orbit (indices), the ones that use it."""
+        tang = grad[:, ::-1] * self._ccw  # (-g1, g0)
+        if orbit.size:
+            (px, py), (gx, gy) = (
+                (p[orbit] - _PT_ORBIT_CENTER).T.tolist(),
+                (g[orbit] - _PT_ORBIT_CENTER).T.tolist(),
+            )
+            turn = np.array(list(map(math.atan2, gy, gx))) - np.array(list(map(math.atan2, py, px)))
+            cw = orbit[(turn + math.pi) % (2.0 * math.pi) - math.pi < 0.0]  # wrap_angle (rule 3) < 0
+            tang[cw] *= -1.0
+        radial = np.minimum(np.maximum(20.0 * (_PT_CLEAR - (sdf_p - _PT_R)), -1.0), 1.0)
+        v = tang + radial[:, None] * grad
+        return _PT_V_MOVE[1] * v / np.maximum(_norm(v), 1e-9)[:, None]
+
     def _clean_batch(self, o: np.ndarray) -> np.ndarray:
         """PushTExpert._clean_action over rows, every term computed as the scalar path computes it. The
         rules that keep the bits:
@@ -138,102 +238,31 @@ class PushTBatch:
             remainder, which is Python's float % (an exact fmod, then one add); np.clip and Python's
             min(max(...)) are np.maximum then np.minimum (the same values, no NaN here);
         (4) a branch that the scalar path decides by a comparison may skip computing its operand
-            where an error bound already settles the comparison (the reach test below).
+            where an error bound already settles the comparison (the reach test in _choose).
         Apart from the transcendental calls and BLAS's per-env routines, every step is one numpy call
         over all envs, the goal ones too (their pushes are computed, then dropped): a call costs a few
         microseconds whatever its length, so picking out each branch's rows would cost more."""
-        n = len(o)
-        if n == 0:
+        if len(o) == 0:
             return np.zeros((0, 2))
-        # The per-env angles, with Python's math (rule 1).
-        bx, by, sin_b, cos_b, _, _, sin_t, cos_t = o[:, 2:10].T.tolist()
-        yaw = list(map(math.atan2, sin_b, cos_b))
-        c, s = list(map(math.cos, yaw)), list(map(math.sin, yaw))
-        eyaw = np.array(list(map(operator.sub, map(math.atan2, sin_t, cos_t), yaw)))
-        eyaw = (eyaw + math.pi) % (2.0 * math.pi) - math.pi  # wrap_angle (rule 3)
-        rot = np.empty((n, 2, 2))  # C-ordered per env, as the scalar np.array([[c, -s], [s, c]]) is
-        rot[:, 0, 0] = rot[:, 1, 1] = c
-        rot[:, 1, 0] = s
-        np.negative(rot[:, 1, 0], out=rot[:, 0, 1])
-        rot_t = rot.transpose(0, 2, 1)  # each env's rot.T: the same transposed view the scalar gemv gets
-        # e = rot.T @ (target - block) and p = rot.T @ (pusher - block): one gemv per vector.
-        ep = np.matmul(rot_t[:, None], (o[:, self._ep_cols].reshape(n, 2, 2) - o[:, None, 2:4])[..., None])
-        e, p = ep[:, 0, :, 0], ep[:, 1, :, 0]  # (N, 2) each, block frame (m)
+        rot, e, p, eyaw = self._block_frame(o)
         err = np.array(list(map(math.hypot, *e.T.tolist())))
         yaw_err = _PT_YAW_LEN * eyaw  # m
         twist_err = np.array(list(map(math.hypot, err.tolist(), yaw_err.tolist())))
         goal = (err < _PT_GOAL_POS) & (np.abs(eyaw) < _PT_GOAL_YAW)
-        any_goal = np.count_nonzero(goal) > 0
-
-        # 1-2. Score every candidate push against the desired twist.
-        want = np.concatenate([e, yaw_err[:, None]], axis=1)
-        want /= np.maximum(_norm(want), 1e-300)[:, None]  # the max only keeps a goal env's 0/0 away
-        align = np.matmul(self._u, want[:, :, None])[:, :, 0]  # (N, K): gemv per row, as self._u @ want
-        rel = p.T[:, :, None] - self._contact_xy  # (2, N, K): x and y of p - contact
-        rn = rel * self._n_xy
-        along = np.maximum(rn[0] + rn[1], -_PT_STANDOFF)  # the einsum, then np.clip (rule 3)
-        np.minimum(along, 0.0, out=along)
-        rel -= along * self._n_xy
-        rel *= rel
-        travel = np.sqrt(rel[0] + rel[1])  # np.linalg.norm(..., axis=1) (rule 3)
-        score = align - _PT_TRAVEL_COST * travel
-        # Reach: pre_w = bw + pre @ rot.T (a gemm per env) within the walls. |pre_w| <= |bw| + |pre|
-        # up to a few roundings, so while every block is far enough from the walls every candidate is
-        # reachable whatever the gemm's last bits (rule 4); else compute it as the scalar path does.
-        if max(max(bx), -min(bx), max(by), -min(by)) >= self._reach_free:
-            pre_w = o[:, None, 2:4] + np.matmul(self._pre, rot_t)  # (N, K, 2): gemm per env
-            bound = np.abs(pre_w) < _pt.WALL_INNER - _PT_R - 0.005
-            score = np.where(bound[:, :, 0] & bound[:, :, 1], score, -np.inf)
-        cand = self._cand[score.argmax(axis=1)]  # the chosen candidate's n, t, contact, pre (N, 8)
-        nt, g = cand[:, 0:4].reshape(n, 2, 2), cand[:, 6:8]
-
-        # 3a. Behind the contact and on its line: push through it.
-        rel = p - cand[:, 4:6]
-        along_lat = np.matmul(nt[:, :, None, :], rel[:, None, :, None])[:, :, 0, 0]  # rel @ n, rel @ t: dots
-        push = (self._push_lo < along_lat) & (along_lat < self._push_hi)  # |lat| < 6 mm, along in range
-        push = push[:, 0] & push[:, 1]
-        speed = np.minimum(np.maximum(_PT_PUSH_GAIN * twist_err, _PT_V_PUSH[0]), _PT_V_PUSH[1])
-        v_push = speed[:, None] * nt[:, 0] - (5.0 * along_lat[:, 1:2]) * nt[:, 1]
-        # 3b. Path to the pre-contact point clear of the T: go straight there.
+        cand = self._choose(o, rot, np.concatenate([e, yaw_err[:, None]], axis=1), p)
+        nt, g = cand[:, 0:4].reshape(len(o), 2, 2), cand[:, 6:8]
+        push, v_push = self._push(p, cand[:, 4:6], nt, twist_err)  # 3a
         dg = g - p
-        dist = np.sqrt(_dot(dg, dg))  # np.linalg.norm of a vector: sqrt of its dot with itself
-        speed = np.minimum(np.maximum(_PT_MOVE_GAIN * dist, _PT_V_MOVE[0]), _PT_V_MOVE[1])
-        v_straight = speed[:, None] * dg / np.maximum(dist, 1e-9)[:, None]
-        # One distance-field call for every env's points, x and y apart (2, N, 12): p, _grad's
-        # stencil around p, then the path (p + f dg as f dg + p: IEEE addition commutes).
-        pts = np.empty((2, n, 5 + len(self._seg)))
-        np.add(p.T[:, :, None], self._stencil_xy, out=pts[:, :, :5])
-        np.multiply(dg.T[:, :, None], self._seg, out=pts[:, :, 5:])
-        pts[:, :, 5:] += p.T[:, :, None]
-        sdf = t_sdf_xy(pts[0], pts[1])
+        v_straight = self._straight(dg)  # 3b
+        sdf = self._field(p, dg)
         sdf_p = sdf[:, 0]
         floor = np.minimum(_PT_R + 0.002, sdf_p - 0.001)
         straight = np.minimum.reduce(sdf[:, 5:], axis=1) > floor  # np.all(t_sdf(path) > floor)
-        # _grad from the stencil: p + (h, 0), p - (h, 0), p + (0, h), p - (0, h).
-        grad = sdf[:, 1:5:2] - sdf[:, 2:5:2]
-        nrm = _norm(grad)
-        grad /= np.maximum(nrm, 1e-12)[:, None]  # the max only keeps 0/0 away: those rows are set next
-        flat = nrm <= 1e-12
-        if np.count_nonzero(flat):
-            grad[flat] = (0.0, 1.0)
-        # 3c. Otherwise orbit the T at a safe clearance, the shorter way round: counter-clockwise
-        # unless the way to g is shorter clockwise (the atan2s only for the orbiting envs).
-        tang = grad[:, ::-1] * self._ccw  # (-g1, g0)
-        orbit = (~(push | straight | goal)).nonzero()[0]
-        if orbit.size:
-            (px, py), (gx, gy) = (
-                (p[orbit] - _PT_ORBIT_CENTER).T.tolist(),
-                (g[orbit] - _PT_ORBIT_CENTER).T.tolist(),
-            )
-            turn = np.array(list(map(math.atan2, gy, gx))) - np.array(list(map(math.atan2, py, px)))
-            cw = orbit[(turn + math.pi) % (2.0 * math.pi) - math.pi < 0.0]  # wrap_angle (rule 3) < 0
-            tang[cw] *= -1.0
-        radial = np.minimum(np.maximum(20.0 * (_PT_CLEAR - (sdf_p - _PT_R)), -1.0), 1.0)
-        v = tang + radial[:, None] * grad
-        v_orbit = _PT_V_MOVE[1] * v / np.maximum(_norm(v), 1e-9)[:, None]
+        grad = self._grad(sdf)
+        v_orbit = self._orbit(p, g, grad, sdf_p, (~(push | straight | goal)).nonzero()[0])  # 3c
         move = np.where(push[:, None], v_push, np.where(straight[:, None], v_straight, v_orbit))
-        # 4. At the goal: back away from the block, then stand still (zeros, not a rotated zero).
-        if any_goal:
+        # At the goal: back away from the block, then stand still (zeros, not a rotated zero).
+        if any_goal := np.count_nonzero(goal) > 0:
             move[goal] = 0.1 * grad[goal]
         out = _mv(rot, move)
         if any_goal:

@@ -9,7 +9,7 @@
 # and train extras, for Python 3.12 on every platform (--universal: markers, hashes of every wheel), from
 # PyPI (the CUDA torch build on Linux), less what tools/lock-excludes.txt names (opencv-python: one cv2).
 # uv keeps the pins of the lock it overwrites unless told to move them. A new lock changes what produced
-# the published numbers: re-run them (README, "Reproducing").
+# the published numbers: re-run them (docs/instructors.md, "The versions behind the numbers").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 UV=$(command -v uv || true)
