@@ -59,11 +59,13 @@ class BCPolicy(torch.nn.Module):
         return (self.net(self.norm_s(s)) + 1) / 2 * self.a_span + self.a_lo
 
 
-def init_weights(hidden: int, seed: int, act_dim: int = pusht_env.ACT_DIM) -> dict:
+def init_weights(
+    hidden: int, seed: int, act_dim: int = pusht_env.ACT_DIM, obs_dim: int = pusht_env.OBS_DIM
+) -> dict:
     """The initial weights every arm of a comparison starts from: a pure function of (hidden, seed,
-    act_dim); act_dim 6 for the ALOHA handoff."""
+    act_dim, obs_dim); act_dim 6 for the ALOHA handoff."""
     torch.manual_seed(seed)
-    return mlp(hidden, act_dim=act_dim).state_dict()
+    return mlp(hidden, obs_dim, act_dim).state_dict()
 
 
 def train(

@@ -165,7 +165,7 @@ print(
 )
 print(
     "state index 2 is "
-    + " and ".join(f"{demo['emb'].env_module.STATE_NAMES[2]} in {name}" for name, demo in sets.items())
+    + " and ".join(f"{demo['emb'].spec.state_names[2]} in {name}" for name, demo in sets.items())
     + ": a shared network carries structure across robots, not the meaning of a raw state number"
 )
 
@@ -197,8 +197,8 @@ cross = {
             "id": i,
             "act_dim": int(demo["action"].shape[1]),
             "frames": int(len(demo["action"])),
-            "state_names": list(demo["emb"].env_module.STATE_NAMES),
-            "action_names": list(demo["emb"].env_module.ACTION_NAMES),
+            "state_names": list(demo["emb"].spec.state_names),
+            "action_names": list(demo["emb"].spec.action_names),
             "mask_density": float(density[name]),
             "stats": {
                 part: {k: [float(x) for x in v] for k, v in st.items()} for part, st in demo["stats"].items()
@@ -206,7 +206,7 @@ cross = {
         }
         for i, (name, demo) in enumerate(sets.items())
     ],
-    "state_index_2_means": {name: demo["emb"].env_module.STATE_NAMES[2] for name, demo in sets.items()},
+    "state_index_2_means": {name: demo["emb"].spec.state_names[2] for name, demo in sets.items()},
     "padded_dim_max_grad": pad_grad,
     "quantiles": "q01/q99 over all frames; LeRobot's meta/stats.json averages per-episode quantiles instead",
 }

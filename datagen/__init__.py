@@ -1,9 +1,10 @@
 """The data engine: grow a demo set of any task that implements datagen.task.Task, MimicGen-style.
 
 task       Task (what a task describes, in MimicGen's division: an abstract base with ten required
-           members: its env, starts and their perturbation, its arms and reach, object frames, subtasks
-           and their signals, the action conversion, an optional expert), Subtask, Outcome (what one
-           attempt came to), Perturbation, Source, rollout, write_dataset (a stamped set)
+           members: its EnvSpec, starts and their perturbation, its arms and reach, object frames,
+           subtasks and their signals, the action conversion, an optional expert), EnvSpec, Subtask,
+           Outcome (what one attempt came to), Perturbation, Source, rollout (the demo generators'
+           loop), write_dataset (a stamped set)
 poses      SE(3): transform_segment, interpolate (slerp), planar_pose; planar tasks are its SE(2) case
 check      python -m datagen.check TASK: a task's contract, starts, expert, ranges and replay, in seconds
 demos      expert demo sets of a task: generate, ensure_demos (the chapter's private demo cache),
@@ -16,7 +17,8 @@ pusher     Gymnasium's 7-DoF Pusher-v5 as a task, in SE(3); its controller and e
 engine     one attempt in either mode, keep_first, grow, run_attempts, save: task-agnostic
 replay     the one replay for every task (MimicGen's generation loop): cut a source at its subtask
            signals, re-express each segment in the new object frames, bridge, execute, keep on success
-lockstep   a worker's attempts stepped together (resolve and replay), the same bytes
+lockstep   the one attempt runner (run_lanes): every attempt of either mode, one lane or many stepped
+           together, the frames, starts and provenance recorded there; Simulators
 run        a run on disk (augment_demos.py): run() says the order of its steps, each in its own module:
   source_check   which task a source set is (task_of), whether the engine can grow it (read_source)
   plan           the settings as stamped, the attempts cut into shards (plan), the memory that needs
@@ -48,6 +50,7 @@ from datagen.engine import (
 )
 from datagen.pusht import PUSHT
 from datagen.task import (
+    EnvSpec,
     Outcome,
     Perturbation,
     Source,
@@ -64,6 +67,7 @@ __all__ = [
     "ATTEMPTS_PER_KEPT",
     "KEPT_KEYS",
     "PUSHT",
+    "EnvSpec",
     "Outcome",
     "Perturbation",
     "Subtask",

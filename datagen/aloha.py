@@ -35,7 +35,7 @@ import numpy as np
 
 import aloha_env
 from datagen.fast_experts import AlohaBatch
-from datagen.task import Perturbation, Subtask, Task, register
+from datagen.task import EnvSpec, Perturbation, Subtask, Task, register
 from scripted_expert import AlohaExpert
 
 __all__ = [
@@ -128,7 +128,7 @@ class Aloha(Task):
     cube, target and both end-effectors by pos_sigma (m) each (yaw_sigma is not read: nothing turns)."""
 
     name, title, generator = "aloha", "ALOHA", "gen_demos_aloha.py"
-    env_module = aloha_env
+    spec = EnvSpec.of(aloha_env)
     start_names = START_NAMES
     state_ranges, action_ranges = STATE_RANGES, ACTION_RANGES
     expert_class = AlohaExpert

@@ -31,14 +31,14 @@ from lerobot_v3 import (
 )
 
 
-# Any edit to the code that shapes a set's frames (this module, the task's module, its env and its expert,
-# and every project module they import: ch37.code_files reads them from what was imported), or another
-# lerobot (the writer of its files), changes the version, so a cached set can never outlive the code that
-# made it.
+# Any edit to the code that shapes a set's frames (this module, the task's module and the env it imports,
+# its expert, and every project module they import: ch37.code_files reads them from what was imported), or
+# another lerobot (the writer of its files), changes the version, so a cached set can never outlive the
+# code that made it.
 @functools.cache
 def generator_version(task) -> str:  # at the first set made or checked, not at import
     classes = (task.expert_class, type(task))
-    roots = (sys.modules[__name__], task.env_module) + tuple(sys.modules[c.__module__] for c in classes)
+    roots = (sys.modules[__name__],) + tuple(sys.modules[c.__module__] for c in classes)  # and their imports
     return f"3+{code_digest(roots)}+lerobot{version('lerobot')}"
 
 
@@ -55,7 +55,7 @@ def generate(
     """Write a demo set of the task `emb` (datagen.task.Task: its env, expert_class, name) to `out` and
     return its summary (episodes, frames, successes)."""
     env = emb.make_env()
-    m = emb.env_module
+    m = emb.spec
     summary = {"episodes": 0, "frames": 0, "successes": 0}
 
     def episodes_iter():
@@ -67,9 +67,9 @@ def generate(
             summary["successes"] += ep["success"]
             yield ep
 
-    feats = features(m.STATE_NAMES, m.ACTION_NAMES, video=video, env_state_names=m.ENV_STATE_NAMES)
+    feats = features(m.state_names, m.action_names, video=video, env_state_names=m.env_state_names)
     stamp = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=video)
-    how = dict(repo_id=f"local/{emb.name}_demos", fps=m.FPS, robot_type=m.ROBOT_TYPE, task=m.TASK)
+    how = dict(repo_id=f"local/{emb.name}_demos", fps=m.fps, robot_type=m.robot_type, task=m.task)
     how["obs_names"] = emb.obs_names  # the frames' observations: the set's state (and env state) columns
     # the AV1 encoder (video only) prints its banner unless SVT_LOG says errors only; a value of yours is kept
     with environment(SVT_LOG=os.environ.get("SVT_LOG", "1")):
@@ -159,7 +159,7 @@ def check_given(emb, path: Path, *, episodes: int, seed: int, noise: float) -> s
     key = (emb.name, str(path.resolve()), episodes, seed, noise)
     if key in _GIVEN:
         return _GIVEN[key]
-    m = emb.env_module
+    m = emb.spec
     want = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=False)
     stamp = read_stamp(path)
     ours = is_ours(stamp) and "kind" not in stamp  # a set gen_demos made (stamp_for); others have a kind
@@ -179,9 +179,9 @@ def check_given(emb, path: Path, *, episodes: int, seed: int, noise: float) -> s
         )
     if is_ours(stamp) and stamp.get("kind") == "engine" and not stamp.get("complete"):
         raise DataError(f"{path} is an unfinished augment_demos.py run; finish it with the same command")
-    problem = schema_problem(path, len(m.STATE_NAMES), len(m.ACTION_NAMES))
+    problem = schema_problem(path, len(m.state_names), len(m.action_names))
     if not problem and not ours:  # a set we did not generate: its rate and frames are checked
-        problem = fps_problem(path, m.FPS) or frames_problem(
+        problem = fps_problem(path, m.fps) or frames_problem(
             path, load_arrays(path, keys=("observation.state", "action"))
         )
     if problem:

@@ -74,8 +74,8 @@ def sources(arrays: dict) -> dict[int, Source]:
 
 def empty_kept(task: Task) -> dict:
     """KEPT_KEYS' columns of a set of `task` with no episode, for a run that kept none."""
-    m = task.env_module
-    widths = {"observation.state": m.OBS_DIM, "action": m.ACT_DIM, "aug.start": len(task.start_names)}
+    m = task.spec
+    widths = {"observation.state": m.obs_dim, "action": m.act_dim, "aug.start": len(task.start_names)}
     out = {k: np.zeros((0, w), np.float32) for k, w in widths.items()}
     return out | {"episode_index": np.zeros(0, np.int64), "aug.source_episode": np.zeros((0, 1), np.int64)}
 
@@ -101,7 +101,9 @@ def attempt(
     if env is None:
         env = sims.env(task) if sims is not None else task.make_env()
     plans = sims.plans if sims is not None else None
-    parts, _ = lockstep.mode_parts(task, {source.episode: source}, how, mode, pool=pool, plans=plans)
+    parts, _ = lockstep.mode_parts(
+        task, {source.episode: source}, how, mode, pool=pool, plans=plans, lanes=False
+    )
     return lockstep.one_lane(task, env, (source.episode, k), parts)
 
 
@@ -229,14 +231,14 @@ def save(task: Task, root, kept: list[dict], *, repo_id: str, stamp: dict) -> No
 
     replace_own_dir(root)
     if kept:
-        m = task.env_module
-        feats = features(m.STATE_NAMES, m.ACTION_NAMES, provenance(task), env_state_names=m.ENV_STATE_NAMES)
+        m = task.spec
+        feats = features(m.state_names, m.action_names, provenance(task), env_state_names=m.env_state_names)
         write_dataset(
             root,
             repo_id=repo_id,
-            fps=m.FPS,
-            robot_type=m.ROBOT_TYPE,
-            task=m.TASK,
+            fps=m.fps,
+            robot_type=m.robot_type,
+            task=m.task,
             feats=feats,
             episodes=kept,
             stamp={"made_by": MADE_BY} | stamp,

@@ -33,7 +33,7 @@ import warnings
 import numpy as np
 
 from datagen.gym_pusht_expert import GymPushTExpert, block_pose_from_keypoints, keypoint_residual
-from datagen.task import GymnasiumEnv, Perturbation, Subtask, Task, register
+from datagen.task import EnvSpec, GymnasiumEnv, Perturbation, Subtask, Task, register
 from lerobot_v3 import ENV_STATE_KEY, IMAGE_SIZE
 
 __all__ = [
@@ -63,17 +63,19 @@ BOXES = ((-60.0, 60.0, 0.0, 30.0), (-15.0, 15.0, 30.0, 120.0))  # the T's bar an
 KEYPOINT_TOL = 2.0
 
 
-class Spec:
-    """What a LeRobot set of this task records (the env module's names, for the engine and the writer)."""
-
-    STATE_NAMES = ("agent_x", "agent_y")  # observation.state: the agent's position (px)
-    ENV_STATE_NAMES = tuple(f"keypoint_{i}_{a}" for i in range(8) for a in "xy")  # px
-    OBS_NAMES = STATE_NAMES + ENV_STATE_NAMES  # the engine's observation vector
-    ACTION_NAMES = ("target_x", "target_y")  # the agent's position target (px)
-    FPS = 10
-    ROBOT_TYPE = "gym_pusht"
-    TASK = "Push the T-shaped block onto the T-shaped target."
-    OBS_DIM, ACT_DIM = len(OBS_NAMES), 2
+STATE_NAMES = ("agent_x", "agent_y")  # observation.state: the agent's position (px)
+KEYPOINT_NAMES = tuple(f"keypoint_{i}_{a}" for i in range(8) for a in "xy")  # px
+# What a LeRobot set of this task records (lerobot/pusht_keypoints' columns) and the engine steps
+SPEC = EnvSpec(
+    state_names=STATE_NAMES,
+    action_names=("target_x", "target_y"),  # the agent's position target (px)
+    fps=10,
+    robot_type="gym_pusht",
+    task="Push the T-shaped block onto the T-shaped target.",
+    max_steps=300,  # gym-pusht's registered limit
+    env_state_names=KEYPOINT_NAMES,  # observation.environment_state
+    obs_names=STATE_NAMES + KEYPOINT_NAMES,  # the engine's observation vector
+)
 
 
 def _rot(a: float) -> np.ndarray:
@@ -110,11 +112,10 @@ class GymPushT(Task):
     """gym-pusht's description for the engine (see the module docstring)."""
 
     name, title, generator = "gym_pusht", "gym-pusht (LeRobot's PushT)", "gen_demos.py --task gym_pusht"
-    env_module = Spec
+    spec = SPEC
     start_names = START_NAMES
-    state_ranges = dict.fromkeys(Spec.OBS_NAMES, (-512.0, 1024.0))  # px: keypoints may overhang the table
-    action_ranges = dict.fromkeys(Spec.ACTION_NAMES, (0.0, 512.0))  # px: gym-pusht's action space
-    max_steps = 300  # gym-pusht's registered limit
+    state_ranges = dict.fromkeys(SPEC.obs_names, (-512.0, 1024.0))  # px: keypoints may overhang the table
+    action_ranges = dict.fromkeys(SPEC.action_names, (0.0, 512.0))  # px: gym-pusht's action space
     expert_class = GymPushTExpert
     noise_unit = "px"  # the expert's noise is on its position targets
     arms = {"agent": slice(0, 2)}

@@ -180,7 +180,8 @@ def run_lanes(
         obs_buf[slots, at + 1] = o
         succ_buf[slots, at] = success
         t[slots] = at + 1
-        if (t[slots] >= max_frames).any() and not done[t[slots] >= max_frames].all():
+        full = at + 1 >= max_frames
+        if full.any() and not done[full].all():
             raise RuntimeError(
                 f"an episode ran past {max_frames} steps without ending: the task's max_steps must be "
                 "the env's own episode limit"
@@ -224,11 +225,12 @@ def kept_or_not(lane: Lane, episode: dict, success: bool, reason: str) -> Outcom
     return Outcome(None, episode, lane.start, e, steps)
 
 
-def resolve_lanes(task: Task, sources: dict, how: Perturbation, start_for=None) -> dict:
+def resolve_lanes(task: Task, sources: dict, how: Perturbation, start_for=None, batched: bool = True) -> dict:
     """Mode "resolve": the task's noise-free expert from each perturbed start, kept on success. The
-    task's batch_expert decides for all lanes in one call; without one, each lane runs its own
-    task.expert(), reset at its start. start_for(job): a given start instead of the drawn one."""
-    act_batch = task.batch_expert()
+    task's batch_expert decides for all lanes in one call (when `batched` and the task has one);
+    otherwise each lane runs its own task.expert(), reset at its start (the same bits: the batch expert
+    is the expert's act over a batch). start_for(job): a given start instead of the drawn one."""
+    act_batch = task.batch_expert() if batched else None
     start_for = start_for or (lambda job: start_of_job(task, sources, job, how))
 
     def begin(job, env):
@@ -284,9 +286,11 @@ def replay_lanes(
                 actions[j] = lane.gen.send(obs[j])
             except StopIteration:
                 stop[j] = True
+        if not stop.any():
+            return np.stack(actions), stop  # the actions as made, their dtype too
         made = [a for a in actions if a is not None]
         if not made:
-            return np.zeros((len(lanes), task.env_module.ACT_DIM), np.float32), stop
+            return np.zeros((len(lanes), task.spec.act_dim), np.float32), stop
         out = np.zeros((len(lanes), len(made[0])), np.result_type(*made))  # the actions as made
         for j, a in enumerate(actions):
             if a is not None:
@@ -302,21 +306,23 @@ def replay_lanes(
 
 
 def mode_parts(
-    task: Task, sources: dict, how: Perturbation, mode: str, *, pool=None, plans=None
+    task: Task, sources: dict, how: Perturbation, mode: str, *, pool=None, plans=None, lanes: bool = True
 ) -> tuple[dict, bool]:
     """(the runner's parts for `mode`, whether its lanes can run together): resolve with the task's
     batch_expert, replay where the task steps its envs as one batch (its own step_batch). A replay
     decides lane by lane, so its lanes pay only where the envs step as one batch; stepped env by env
-    they cost more than one at a time."""
+    they cost more than one at a time. lanes False: parts for one lane (resolve: the plain expert, faster
+    on one row than the batch expert)."""
     if mode == "resolve":
-        return resolve_lanes(task, sources, how), task.batch_expert() is not None
+        batched = task.batch_expert() is not None
+        return resolve_lanes(task, sources, how, batched=batched and lanes), batched
     parts = replay_lanes(task, sources, how, pool, plans)
     return parts, type(task).step_batch is not Task.step_batch
 
 
 def _dims(task: Task) -> dict:
-    m = task.env_module
-    return {"max_frames": task.max_steps, "obs_dim": m.OBS_DIM, "act_dim": m.ACT_DIM}
+    m = task.spec
+    return {"max_frames": task.max_steps, "obs_dim": m.obs_dim, "act_dim": m.act_dim}
 
 
 def one_lane(task: Task, env, job, parts: dict) -> Outcome:

@@ -37,9 +37,9 @@ import numpy as np
 
 from datagen.poses import quat_of, rotation_of
 from datagen.pusher_expert import PoseControl, PusherExpert, hand_rotation, held, model
-from datagen.task import GymnasiumEnv, Perturbation, Subtask, Task, register
+from datagen.task import EnvSpec, GymnasiumEnv, Perturbation, Subtask, Task, register
 
-__all__ = ["PUSHER", "Pusher", "START_NAMES", "SUBTASKS", "Spec", "WHOLE"]
+__all__ = ["PUSHER", "Pusher", "START_NAMES", "SUBTASKS", "SPEC", "WHOLE"]
 
 MAX_STEPS = 200  # control steps (10 s at 20 Hz): Pusher-v5's registered 100 cut off 16% of the expert's
 # held-out pushes (its slowest took 123 steps, 190 under 1 N.m of torque noise)
@@ -60,18 +60,18 @@ ARM = tuple(f"q_{j}" for j in JOINTS) + tuple(f"qd_{j}" for j in JOINTS)  # rad,
 START_NAMES = ARM + ("object_x", "object_y", "goal_x", "goal_y")
 
 
-class Spec:
-    """What a LeRobot set of this task records: the arm in observation.state, the objects beside it."""
-
-    STATE_NAMES = ARM + ("hand_x", "hand_y", "hand_z")  # the hand: tips_arm, the wrist centre (m)
-    ENV_STATE_NAMES = ("object_x", "object_y", "object_z", "goal_x", "goal_y", "goal_z")  # m
-    OBS_NAMES = STATE_NAMES + ENV_STATE_NAMES  # Pusher-v5's own observation, in its order
-    ACTION_NAMES = ("target_x", "target_y", "target_z", "target_qw", "target_qx", "target_qy", "target_qz")
-    FPS = 20  # Pusher-v5's dt: 5 MuJoCo steps of 0.01 s
-    ROBOT_TYPE = "gymnasium_pusher"
-    TASK = "Push the cylinder onto the goal."
-    OBS_DIM, ACT_DIM = len(OBS_NAMES), len(ACTION_NAMES)
-    MAX_STEPS = MAX_STEPS
+ENV_STATE_NAMES = ("object_x", "object_y", "object_z", "goal_x", "goal_y", "goal_z")  # m
+# What a LeRobot set of this task records: the arm in observation.state, the objects beside it
+SPEC = EnvSpec(
+    state_names=ARM + ("hand_x", "hand_y", "hand_z"),  # the hand: tips_arm, the wrist centre (m)
+    action_names=("target_x", "target_y", "target_z", "target_qw", "target_qx", "target_qy", "target_qz"),
+    fps=20,  # Pusher-v5's dt: 5 MuJoCo steps of 0.01 s
+    robot_type="gymnasium_pusher",
+    task="Push the cylinder onto the goal.",
+    max_steps=MAX_STEPS,
+    env_state_names=ENV_STATE_NAMES,
+    obs_names=ARM + ("hand_x", "hand_y", "hand_z") + ENV_STATE_NAMES,  # Pusher-v5's own observation, in order
+)
 
 
 HAND, OBJECT, GOAL = slice(14, 17), slice(17, 20), slice(20, 23)  # observation columns
@@ -106,7 +106,7 @@ class Pusher(Task):
     """Pusher-v5's description for the engine (see the module docstring)."""
 
     name, title = "pusher", "Pusher (Gymnasium's Pusher-v5)"
-    env_module = Spec
+    spec = SPEC
     start_names = START_NAMES
     noise_unit = "m (on the hand's target position)"
     default_noise = 0.005

@@ -31,7 +31,7 @@ import numpy as np
 import pusht_env
 from datagen.fast_experts import PushTBatch
 from datagen.fast_pusht import SharedPushTEnv, step_many
-from datagen.task import Perturbation, Subtask, Task, register
+from datagen.task import EnvSpec, Perturbation, Subtask, Task, register
 from scripted_expert import PushTExpert
 
 __all__ = [
@@ -103,7 +103,7 @@ class PushT(Task):
     engine's), or a study's BY_CONTACT / BY_CONTACT_BLOCK."""
 
     name, title, generator = "pusht", "PushT", "gen_demos_pusht.py"
-    env_module = pusht_env
+    spec = EnvSpec.of(pusht_env)
     start_names = START_NAMES
     state_ranges, action_ranges = STATE_RANGES, ACTION_RANGES
     expert_class = PushTExpert

@@ -190,7 +190,7 @@ class Replay:
         then the one after each step) and yielding the next action; it returns when the plan and the
         hold are done. The runner stops sending when the episode ends."""
         task = self.task
-        fps = task.env_module.FPS
+        fps = task.spec.fps
         obs = yield
         grips, turns = None, None  # what each gripper and each arm's orientation was last told
         for seg in self.plan:
@@ -248,7 +248,7 @@ class Replay:
         waypoints `first` (orientations `turns`): the farthest arm at `speed`, or the most
         turned at task.bridge_turn_speed where the task sets one; 0 when every arm is within bridge_tol."""
         task = self.task
-        fps = task.env_module.FPS
+        fps = task.spec.fps
         gaps = [first[a] - here[a] for a in task.arms]  # a planar gap's length as np.hypot gives it
         dist = max(float(np.hypot(*g)) if len(g) == 2 else float(np.linalg.norm(g)) for g in gaps)
         n = math.ceil(dist / (speed / fps) - 1e-9) if dist > task.bridge_tol else 0
@@ -263,7 +263,7 @@ class Replay:
         if self.task.bridge_speed is not None:
             return self.task.bridge_speed
         steps = [np.linalg.norm(np.diff(pts, axis=0), axis=1) for pts, *_ in segs.values() if len(pts) > 1]
-        top = max((float(s.max()) for s in steps if len(s)), default=0.0) * self.task.env_module.FPS
+        top = max((float(s.max()) for s in steps if len(s)), default=0.0) * self.task.spec.fps
         return top if top > 0 else math.inf
 
     @staticmethod

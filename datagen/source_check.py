@@ -56,7 +56,7 @@ def state_range_problem(
 
 def _widths(task: Task) -> tuple[list, list]:
     """The shapes of a set's observation.state and action for `task`."""
-    return [len(task.env_module.STATE_NAMES)], [task.env_module.ACT_DIM]
+    return [len(task.spec.state_names)], [task.spec.act_dim]
 
 
 def task_of(src: Path) -> Task:
@@ -75,13 +75,13 @@ def task_of(src: Path) -> Task:
     shapes = tuple(feats.get(k, {}).get("shape") for k in ("observation.state", "action"))
     robot = info.get("robot_type")
     if robot:  # a set that names its robot is that robot's (an SO-100 set is no PushT set)
-        fits = [t for t in known_tasks().values() if t.env_module.ROBOT_TYPE == robot]
+        fits = [t for t in known_tasks().values() if t.spec.robot_type == robot]
     else:  # a set someone else wrote without a robot_type (LeRobot's writer's default): by its widths
         fits = [t for t in known_tasks().values() if shapes == _widths(t)]
     if len(fits) == 1:
         return fits[0]
     known = "; ".join(
-        f"{t.title}: robot_type '{t.env_module.ROBOT_TYPE}', observation.state {_widths(t)[0]}, "
+        f"{t.title}: robot_type '{t.spec.robot_type}', observation.state {_widths(t)[0]}, "
         f"action {_widths(t)[1]} (make one with {t.generator})"
         for t in known_tasks().values()
     )
@@ -97,23 +97,23 @@ def read_source(task: Task, src: Path) -> dict:
     import datasets
     import pyarrow.parquet as pq
 
-    m, title = task.env_module, task.title
+    m, title = task.spec, task.title
     if not src.is_dir():
         raise DataError(f"--src {src} is not a folder; make a {title} set with {task.generator}")
-    n_state = len(m.STATE_NAMES)
-    problem = schema_problem(src, n_state, m.ACT_DIM)
+    n_state = len(m.state_names)
+    problem = schema_problem(src, n_state, m.act_dim)
     if problem:
-        raise DataError(f"--src {problem} (a {title} set has state [{n_state}] and action [{m.ACT_DIM}])")
+        raise DataError(f"--src {problem} (a {title} set has state [{n_state}] and action [{m.act_dim}])")
     feats = read_json(src / "meta" / "info.json")["features"]
-    for key, want in (("observation.state", m.STATE_NAMES), ("action", m.ACTION_NAMES)):
+    for key, want in (("observation.state", m.state_names), ("action", m.action_names)):
         names = feats[key].get("names")
         # names as a list are checked; the hub's {"motors": [...]} form names the set's own axes
         if isinstance(names, list) and names != list(want):
             raise DataError(f"--src {src}: {key} names {names} are not {title}'s {list(want)}")
-    whole = task.obs_names != tuple(m.STATE_NAMES)  # the observation holds the environment state too
+    whole = task.obs_names != tuple(m.state_names)  # the observation holds the environment state too
     if whole and ENV_STATE_KEY not in feats:
         raise DataError(f"--src {src} has no {ENV_STATE_KEY} (a {title} observation needs it)")
-    problem = fps_problem(src, m.FPS)
+    problem = fps_problem(src, m.fps)
     if problem:
         raise DataError(f"--src {problem}")
     for f in sorted(src.glob("data/*/*.parquet")) + sorted(src.glob("meta/episodes/*/*.parquet")):
@@ -147,10 +147,10 @@ def read_source(task: Task, src: Path) -> dict:
     if len(arrays["action"]) == 0:
         raise DataError(f"--src {src} holds no frames")
     if whole:  # the observation vector the task's env gives: state and environment state together
-        env_names = tuple(m.ENV_STATE_NAMES)
+        env_names = tuple(m.env_state_names)
         if arrays[ENV_STATE_KEY].shape[1:] != (len(env_names),):
             raise DataError(f"--src {src}: {ENV_STATE_KEY} is not [{len(env_names)}] wide")
-        arrays["observation.state"] = observation(arrays, task.obs_names, m.STATE_NAMES, env_names)
+        arrays["observation.state"] = observation(arrays, task.obs_names, m.state_names, env_names)
     problem = frames_problem(src, arrays)
     if problem:
         raise DataError(f"--src {problem}")

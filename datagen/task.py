@@ -11,8 +11,8 @@ code from what the run imported.
 In MimicGen's division of work, a task only describes (Task below, an abstract base: ten required
 members, each attribute and method with its inputs, outputs and units; everything else a default):
 
-    required             name, env_module (what its sets record), start_names, arms; make_env (our
-                         envs, or a Gymnasium env through GymnasiumEnv), start_of (the start an
+    required             name, spec (an EnvSpec: its env, what its sets record), start_names, arms;
+                         make_env (our envs, or a Gymnasium env through GymnasiumEnv), start_of (the start an
                          observation shows), perturb (a start near a source's first observation),
                          object_pose, action_to_target and target_to_action (how an action becomes a
                          world-frame target and back: a velocity command, a position target, a pose
@@ -54,6 +54,7 @@ from ch37.parallel import step_each
 from lerobot_v3 import IMAGE_KEY, IMAGE_SIZE, write_set
 
 __all__ = [
+    "EnvSpec",
     "GymnasiumEnv",
     "Outcome",
     "Perturbation",
@@ -67,6 +68,60 @@ __all__ = [
     "rollout",
     "write_dataset",
 ]
+
+
+@dataclass(frozen=True)
+class EnvSpec:
+    """What a task's env is and what its LeRobot sets record, in one typed place (a task's `spec`).
+    EnvSpec.of(module) reads an env module's constants (pusht_env, aloha_env: STATE_NAMES, ACTION_NAMES,
+    ENV_STATE_NAMES, FPS, ROBOT_TYPE, TASK, MAX_STEPS, and OBS_NAMES where it has them)."""
+
+    state_names: tuple[str, ...]  # observation.state's entries, in order
+    action_names: tuple[str, ...]  # action's entries, in order
+    fps: int  # control steps per second: the set's fps
+    robot_type: str  # the set's robot_type (meta/info.json)
+    task: str  # the set's one task, in words
+    max_steps: int  # the env's episode limit, in control steps
+    env_state_names: tuple[str, ...] = ()  # observation.environment_state's entries: names of state_names
+    # entries (our envs: the objects' share of the state), or, with obs_names, the entries the observation
+    # vector holds beside state_names (lerobot/pusht_keypoints' keypoints)
+    obs_names: tuple[str, ...] = ()  # the env's observation vector where it is more than observation.state
+
+    def __post_init__(self):
+        for name in ("state_names", "action_names", "env_state_names", "obs_names"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))
+        if not self.state_names or not self.action_names:
+            raise TypeError("an EnvSpec needs state_names and action_names")
+        if int(self.fps) <= 0 or int(self.max_steps) <= 0:
+            raise TypeError(
+                f"an EnvSpec's fps and max_steps must be positive, not {self.fps}, {self.max_steps}"
+            )
+
+    @property
+    def obs_dim(self) -> int:
+        """Entries of the env's observation vector."""
+        return len(self.obs_names or self.state_names)
+
+    @property
+    def act_dim(self) -> int:
+        return len(self.action_names)
+
+    @classmethod
+    def of(cls, module) -> EnvSpec:
+        """The spec an env module's constants say; a missing one is a TypeError naming it."""
+        need = ("STATE_NAMES", "ACTION_NAMES", "FPS", "ROBOT_TYPE", "TASK", "MAX_STEPS")
+        if missing := [c for c in need if not hasattr(module, c)]:
+            raise TypeError(f"{getattr(module, '__name__', module)} has no {', '.join(missing)}")
+        return cls(
+            state_names=module.STATE_NAMES,
+            action_names=module.ACTION_NAMES,
+            fps=module.FPS,
+            robot_type=module.ROBOT_TYPE,
+            task=module.TASK,
+            max_steps=module.MAX_STEPS,
+            env_state_names=getattr(module, "ENV_STATE_NAMES", ()),
+            obs_names=getattr(module, "OBS_NAMES", ()),
+        )
 
 
 @dataclass(frozen=True)
@@ -241,19 +296,16 @@ class Task(abc.ABC):
     the engine runs (the modes, the one replay: datagen.replay, lockstep, shards, resume, report, merge).
 
     Required (REQUIRED_ATTRIBUTES and the abstract methods: ten names, checked when the task registers):
-    name, env_module, start_names, arms; make_env, start_of, perturb, object_pose, action_to_target,
+    name, spec, start_names, arms; make_env, start_of, perturb, object_pose, action_to_target,
     target_to_action. Everything else has a default. Units are the task's own (PushT's and ALOHA's
     metres, gym-pusht's pixels; angles in rad, times in s), each attribute saying which; an observation
     is the env's (obs_dim,) float32 vector, an action its (act_dim,) float32 vector."""
 
-    REQUIRED_ATTRIBUTES = ("name", "env_module", "start_names", "arms")
+    REQUIRED_ATTRIBUTES = ("name", "spec", "start_names", "arms")
 
     # ---- what the task is ----
     name: str  # "pusht": its key in known_tasks(), recorded in a run's settings
-    # env_module: STATE_NAMES, ACTION_NAMES, ENV_STATE_NAMES, FPS, ROBOT_TYPE, TASK, OBS_DIM, ACT_DIM (and
-    # OBS_NAMES where the observation vector is more than observation.state: see obs_names; MAX_STEPS, the
-    # env's episode limit, where max_steps is not set): a module or a class holding them (gym_pusht.Spec)
-    env_module: object
+    spec: EnvSpec  # its env and what its sets record (EnvSpec.of(pusht_env), or an EnvSpec(...) of its own)
     start_names: tuple[str, ...]  # a start's numbers, in place()'s order (stored as aug.start)
     state_ranges: dict[str, tuple[float, float]] = {}  # {state name: (low, high)}: a source outside: refused
     action_ranges: dict[str, tuple[float, float]] = {}  # {action name: (low, high)}: the clip range
@@ -273,8 +325,8 @@ class Task(abc.ABC):
 
     @property
     def max_steps(self) -> int:
-        """Control steps an episode may last: the env's limit (env_module.MAX_STEPS by default)."""
-        return int(self.env_module.MAX_STEPS)
+        """Control steps an episode may last: the env's limit (spec.max_steps by default)."""
+        return int(self.spec.max_steps)
 
     # ---- what replay reads (datagen.replay) ----
     # Poses live in SE(3) (datagen.poses): a frame is a (4, 4) pose, an arm's target a position (3,), an
@@ -398,11 +450,10 @@ class Task(abc.ABC):
 
     @property
     def obs_names(self) -> tuple[str, ...]:
-        """The names of the observation vector's entries: env_module.OBS_NAMES where the env's
-        observation holds more than a set's observation.state (its ENV_STATE_NAMES beside it, as
-        lerobot/pusht_keypoints records them), else its STATE_NAMES."""
-        m = self.env_module
-        return tuple(getattr(m, "OBS_NAMES", m.STATE_NAMES))
+        """The names of the observation vector's entries: spec.obs_names where the env's observation holds
+        more than a set's observation.state (its env_state_names beside it, as lerobot/pusht_keypoints
+        records them), else spec.state_names."""
+        return self.spec.obs_names or self.spec.state_names
 
     @property
     def failures(self) -> dict[str, tuple[str, ...]]:
@@ -437,6 +488,8 @@ def contract_problem(task: Task) -> str | None:
     if missing:
         plural = "s" * (len(missing) > 1)
         return f"misses the required attribute{plural} {', '.join(missing)} (datagen.task.Task)"
+    if not isinstance(task.spec, EnvSpec):
+        return f"has a spec of type {type(task.spec).__name__}: give an EnvSpec (datagen.task.EnvSpec)"
     for sub in task.subtasks:
         if len(sub.frames) != len(task.arms):
             return (

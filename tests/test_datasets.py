@@ -33,16 +33,16 @@ def test_round_trip_matches_direct_rollout(tmp_path, gen, emb, noise, capsys):
     ds = lerobot_io.open_dataset(out)
     assert ds.num_episodes == 3 and ds.fps == 10
     info = json.loads((out / "meta" / "info.json").read_text())
-    assert info["robot_type"] == emb.env_module.ROBOT_TYPE
-    assert info["features"]["observation.state"]["names"] == list(emb.env_module.STATE_NAMES)
-    assert info["features"]["action"]["names"] == list(emb.env_module.ACTION_NAMES)
+    assert info["robot_type"] == emb.spec.robot_type
+    assert info["features"]["observation.state"]["names"] == list(emb.spec.state_names)
+    assert info["features"]["action"]["names"] == list(emb.spec.action_names)
     assert (out / "meta" / "stats.json").exists()
     # LeRobot's convention beside the chapter's state: the object and task state, named, equal to
     # the state's columns of the same names (what LeRobot's policies need to train on the set)
-    env_names = list(emb.env_module.ENV_STATE_NAMES)
+    env_names = list(emb.spec.env_state_names)
     assert info["features"][lerobot_io.ENV_STATE_KEY]["names"] == env_names
     assert info["features"][lerobot_io.ENV_STATE_KEY]["shape"] == [len(env_names)]
-    cols = [list(emb.env_module.STATE_NAMES).index(n) for n in env_names]
+    cols = [list(emb.spec.state_names).index(n) for n in env_names]
     d = lerobot_io.load_arrays(out, keys=("observation.state", lerobot_io.ENV_STATE_KEY))
     assert d[lerobot_io.ENV_STATE_KEY].tobytes() == d["observation.state"][:, cols].tobytes()
     item = ds[len(ds) - 1]  # through LeRobotDataset's own item path, as a LeRobot trainer reads it
@@ -55,7 +55,7 @@ def test_round_trip_matches_direct_rollout(tmp_path, gen, emb, noise, capsys):
         rows = d["episode_index"] == i
         assert d["observation.state"][rows].tobytes() == ep["observation.state"].tobytes()
         assert d["action"][rows].tobytes() == ep["action"].tobytes()
-    assert ds[0]["task"] == emb.env_module.TASK
+    assert ds[0]["task"] == emb.spec.task
 
 
 @pytest.mark.parametrize("gen,emb,noise", GENS)
@@ -136,7 +136,7 @@ def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
     before: the schema check, the lesson's read, the data engine's read and its growth."""
     from datagen import PUSHT, Perturbation, engine, ensure_demos, source_check
 
-    emb, m = gen_demos_pusht.PUSHT, gen_demos_pusht.PUSHT.env_module
+    emb, m = gen_demos_pusht.PUSHT, gen_demos_pusht.PUSHT.spec
     env = emb.make_env()
     eps = [
         rollout(env, emb.expert_class(noise=0.0), env.reset(seeds.env_seed(0, "demo", i))) for i in range(2)
@@ -145,10 +145,10 @@ def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
     write_dataset(
         old,
         repo_id="local/old",
-        fps=m.FPS,
-        robot_type=m.ROBOT_TYPE,
-        task=m.TASK,
-        feats=lerobot_io.features(m.STATE_NAMES, m.ACTION_NAMES),
+        fps=m.fps,
+        robot_type=m.robot_type,
+        task=m.task,
+        feats=lerobot_io.features(m.state_names, m.action_names),
         episodes=eps,
         stamp={},
     )

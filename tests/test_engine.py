@@ -722,7 +722,7 @@ def test_aloha_resolve_is_a_lerobot_set_of_the_handoff(aloha_src, tmp_path):
     assert p.stdout.strip().splitlines()[-1].startswith("augment_demos: 6 attempts")
     ds = open_dataset(out)
     rep = json.loads((out / REPORT_NAME).read_text())
-    assert ds.num_episodes == rep["kept"] > 0 and ds.meta.robot_type == ALOHA.env_module.ROBOT_TYPE
+    assert ds.num_episodes == rep["kept"] > 0 and ds.meta.robot_type == ALOHA.spec.robot_type
     assert ds.meta.features["aug.start"]["names"] == list(ALOHA.start_names)
     frame = ds[0]
     assert tuple(frame["action"].shape) == (6,) and tuple(frame["aug.start"].shape) == (8,)

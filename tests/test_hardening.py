@@ -424,13 +424,13 @@ CASES = [
         2,
         "the Hugging Face cache",
     ),
-    # issue 42 #1: aloha_value's --out holding the user's own aloha_value.json; a bad --device up front
+    # issue 42 #1: tools.value's --out holding the user's own aloha_value.json; a bad --device up front
     (
         "aloha-value-out-holds-users-json",
         lambda tmp, ref: (
             [
                 "-m",
-                "tools.aloha_value",
+                "tools.value",
                 "--smoke",
                 "--seeds",
                 "1",
@@ -446,7 +446,7 @@ CASES = [
     (
         "aloha-value-device-bogus",
         lambda tmp, ref: (
-            ["-m", "tools.aloha_value", "--smoke", "--device", "bogus", "--out", tmp / "av"],
+            ["-m", "tools.value", "--smoke", "--device", "bogus", "--out", tmp / "av"],
             [],
             None,
         ),

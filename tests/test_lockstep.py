@@ -206,3 +206,39 @@ def test_the_simulators_a_worker_keeps_are_passed_not_hidden():
     assert sims.lanes(PUSHT, 2) == lanes[:2] and sims.env(PUSHT) is sims.env(PUSHT)
     copy = pickle.loads(pickle.dumps(sims))
     assert copy.lanes(PUSHT, 1)[0] is not lanes[0] and copy.plans == {}
+
+
+def test_experts_without_a_batch_run_one_per_lane_and_equal_one_at_a_time(sources):
+    """The one runner's resolve for a task without a batch expert: each lane runs its own task.expert(),
+    reset at its start. Several lanes at once (refilled) give exactly the one-lane results, and one lane
+    gives exactly the demo generators' rollout of the expert from the same start."""
+    task, how = PlainPushT(), Perturbation(1, 0.08, 0.5)
+    jobs = [(e, k) for e in sorted(sources) for k in range(6)]  # 24 attempts
+    one = [engine.attempt(task, sources[e], k, how) for e, k in jobs]
+    assert sum(r.kept for r in one) >= 12
+    parts, together = lockstep.mode_parts(task, sources, how, "resolve")
+    assert not together  # attempts_lockstep runs such a task in one lane; the lanes still agree
+    sims = engine.Simulators()
+    lanes = lockstep.run_lanes(
+        jobs, envs=sims.lanes(task, 5), **parts, max_frames=task.max_steps, obs_dim=10, act_dim=2, lanes=5
+    )
+    assert_same_results(one, lanes)
+    env = task.make_env()
+    for (e, k), got in zip(jobs[:4], one):
+        start = lockstep.start_of_job(task, sources, (e, k), how)
+        ep = rollout(env, task.expert(), task.place(env, start))
+        assert ep["success"] is got.kept and len(ep["action"]) == got.steps
+        if got.kept:
+            for key in ("observation.state", "action", "next.success"):
+                assert ep[key].tobytes() == got.episode[key].tobytes(), key
+
+
+def test_a_task_whose_max_steps_is_shorter_than_its_env_is_one_line(sources):
+    """An env that runs on past the task's max_steps would overrun the runner's frames: one line, not an
+    index error deep in the arrays."""
+
+    class ShortPushT(type(PUSHT)):
+        max_steps = 5
+
+    with pytest.raises(RuntimeError, match="ran past 5 steps without ending: the task's max_steps"):
+        engine.attempt(ShortPushT(), sources[0], 0, Perturbation(1, 0.08, 0.5))

@@ -3,14 +3,16 @@
 the modules a task imports (ch37.code_files), so no list of files can forget a task's code."""
 
 import sys
+import types
 from pathlib import Path
 
 import pytest
 from conftest import run_script
 
 import datagen
+import pusht_env
 from datagen import ALOHA, PUSHT, demos, run
-from datagen.task import known_tasks, register
+from datagen.task import EnvSpec, known_tasks, register
 
 
 def test_every_task_module_registers_itself_and_no_list_names_them():
@@ -43,13 +45,14 @@ def test_an_edit_to_a_task_module_its_env_or_its_expert_changes_the_digests(monk
     task = known_tasks()[name]
     expert = task.expert_class
     module = sys.modules[type(task).__module__]
+    env = sys.modules[f"{name}_env"]  # pusht_env, aloha_env
     digest_run = lambda: run.engine_version(task)  # noqa: E731
     digest_demos = lambda: demos.generator_version.__wrapped__(task)  # noqa: E731
     before = digest_run(), digest_demos()
     for f, guards_demos in (
         (module.__file__, True),  # the task module: a demo set is made through it (its env, its expert)
-        (task.env_module.__file__, True),
-        (task.env_module.XML_PATH, True),
+        (env.__file__, True),  # the env the task module imports
+        (env.XML_PATH, True),
         (sys.modules[expert.__module__].__file__, True),
     ):
         with monkeypatch.context() as m:
@@ -144,6 +147,19 @@ def test_the_contract_is_small_and_a_task_that_breaks_it_is_refused_in_one_line(
         register(type("NoName", (Task,), parts)())
     assert len(str(e.value).splitlines()) == 1 and "misses the required attribute name" in str(e.value)
     assert "test_registry.py: NoName" in str(e.value), str(e.value)
+
+    class LooseSpec(PushT):  # the env's constants as a plain module, not the typed spec
+        spec = pusht_env
+
+    with pytest.raises(TypeError) as e:
+        register(LooseSpec())
+    assert len(str(e.value).splitlines()) == 1 and "has a spec of type module: give an EnvSpec" in str(
+        e.value
+    )
+    with pytest.raises(TypeError, match="pusht_env has no MAX_STEPS"):
+        EnvSpec.of(
+            types.SimpleNamespace(**{k: getattr(pusht_env, k) for k in dir(pusht_env) if k != "MAX_STEPS"})
+        )
 
     two_arms = PushT(subtasks=(Subtask("push", ("block", "block")),))
     with pytest.raises(

@@ -45,15 +45,15 @@ def synthetic(names, action_dim, lengths, seed, extra=False):
 
 
 def pusht_case():
-    m = gen_demos_pusht.PUSHT.env_module
-    feats = lerobot_io.features(m.STATE_NAMES, m.ACTION_NAMES, PROVENANCE, env_state_names=m.ENV_STATE_NAMES)
-    return feats, synthetic(m.STATE_NAMES, len(m.ACTION_NAMES), [7, 2, 15, 4, 30, 3], 0, extra=True)
+    m = gen_demos_pusht.PUSHT.spec
+    feats = lerobot_io.features(m.state_names, m.action_names, PROVENANCE, env_state_names=m.env_state_names)
+    return feats, synthetic(m.state_names, len(m.action_names), [7, 2, 15, 4, 30, 3], 0, extra=True)
 
 
 def aloha_case():
-    m = gen_demos_aloha.ALOHA.env_module
-    feats = lerobot_io.features(m.STATE_NAMES, m.ACTION_NAMES, env_state_names=m.ENV_STATE_NAMES)
-    return feats, synthetic(m.STATE_NAMES, len(m.ACTION_NAMES), [12, 5, 9], 1)
+    m = gen_demos_aloha.ALOHA.spec
+    feats = lerobot_io.features(m.state_names, m.action_names, env_state_names=m.env_state_names)
+    return feats, synthetic(m.state_names, len(m.action_names), [12, 5, 9], 1)
 
 
 def write_ours(root, feats, eps):
@@ -253,8 +253,8 @@ def test_one_pass_writer_splits_files_as_lerobot_names_them(tmp_path):
     """Past data_files_size_in_mb (1 MB here, ~10,800 frames) data and episodes tables go on in
     chunk-000/file-001, ..., and LeRobot reads the set as the same frames and episodes."""
     feats, _ = pusht_case()
-    m = gen_demos_pusht.PUSHT.env_module
-    eps = synthetic(m.STATE_NAMES, len(m.ACTION_NAMES), [20 + e % 5 for e in range(600)], 2, extra=True)
+    m = gen_demos_pusht.PUSHT.spec
+    eps = synthetic(m.state_names, len(m.action_names), [20 + e % 5 for e in range(600)], 2, extra=True)
     eps = list(lerobot_io._with_env_state(eps, feats))
     split = tmp_path / "split"
     lerobot_io._write_direct(split, fps=10, robot_type="r", task=TASK, feats=feats, episodes=eps, file_mb=1)

@@ -6,7 +6,7 @@
     python -m tools.meta                         meta.yaml: environment, reference_run, exercise_checks, ...
     python -m tools.replay --seeds 5 [--sigma M] replay vs re-solve on the chapter's recipe -> replay_*.json
     python -m tools.replay_yield --seeds 3       yield by task (PushT, ALOHA) and mode -> replay_yield.json
-    python -m tools.aloha_value --seeds 3        ALOHA: +replayed vs +re-solved vs fresh -> aloha_value.json
+    python -m tools.value --task T --seeds 3     what grown demos buy BC (aloha, gym_pusht) -> T_value.json
     python -m tools.wallclock [--dry-run]        time the default run here, write its wallclock.csv row
     python -m tools.notebook [--check]           scale_data.ipynb from the regions
     python -m tools.bench [--smoke]              where the time of one run goes

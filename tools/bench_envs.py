@@ -29,7 +29,7 @@ NOISE = {"pusht": 0.08, "aloha": 0.05}  # the noisy-expert levels the success ta
 def steps_per_second(emb, n: int = 3000) -> float:
     env, rng = emb.make_env(), np.random.default_rng(0)
     env.reset(0)
-    acts = rng.uniform(-1, 1, (n, len(emb.env_module.ACTION_NAMES))).astype(np.float32)
+    acts = rng.uniform(-1, 1, (n, len(emb.spec.action_names))).astype(np.float32)
     t0 = time.perf_counter()
     for a in acts:
         if env.step(a)[2]:

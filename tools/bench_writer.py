@@ -28,12 +28,12 @@ from lerobot_v3 import features
 
 
 def demos(n: int, frames: int, seed: int = 0) -> list[dict]:
-    m = gen_demos_pusht.PUSHT.env_module
+    m = gen_demos_pusht.PUSHT.spec
     rng = np.random.default_rng(seed)
     return [
         {
-            "observation.state": rng.standard_normal((frames, len(m.STATE_NAMES))).astype(np.float32),
-            "action": rng.standard_normal((frames, len(m.ACTION_NAMES))).astype(np.float32),
+            "observation.state": rng.standard_normal((frames, len(m.state_names))).astype(np.float32),
+            "action": rng.standard_normal((frames, len(m.action_names))).astype(np.float32),
             "next.success": (np.arange(frames) == frames - 1)[:, None],
         }
         for _ in range(n)
@@ -42,15 +42,15 @@ def demos(n: int, frames: int, seed: int = 0) -> list[dict]:
 
 def write_seconds(eps: list[dict], root: Path, per_frame: bool = False) -> float:
     """Seconds to write `eps` with write_dataset (per_frame: every feature through LeRobot's path)."""
-    m = gen_demos_pusht.PUSHT.env_module
-    feats = features(m.STATE_NAMES, m.ACTION_NAMES, env_state_names=m.ENV_STATE_NAMES)
+    m = gen_demos_pusht.PUSHT.spec
+    feats = features(m.state_names, m.action_names, env_state_names=m.env_state_names)
     t = time.perf_counter()
     write_dataset(
         root,
         repo_id="local/bench",
-        fps=m.FPS,
-        robot_type=m.ROBOT_TYPE,
-        task=m.TASK,
+        fps=m.fps,
+        robot_type=m.robot_type,
+        task=m.task,
         feats=feats,
         episodes=eps,
         stamp={},

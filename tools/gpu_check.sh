@@ -2,9 +2,11 @@
 # The GPU check (../shared/GPU.md), one call on a bare GPU machine that has PyTorch and no registry:
 # install the carried wheels, then time the lesson on cuda and write what it printed to $OUT.
 #
-#   here:   bash tools/gpu_check.sh --wheels     # download the wheels the lesson needs beyond the
-#                                                # GPU image into .whl/ (git-ignored, about 58 MiB)
-#   there:  bash tools/gpu_check.sh              # OUT=<folder> (default /tmp/gpu_check)
+#   here:   bash tools/gpu_check.sh --wheels [lesson|value]
+#                      download the wheels the lesson (about 58 MiB) or tools.value on gym-pusht (about
+#                      28 MiB: no LeRobot) needs beyond the GPU image into .whl/ (git-ignored)
+#   there:  bash tools/gpu_check.sh              # the check below; OUT=<folder> (default /tmp/gpu_check)
+#   there:  bash tools/gpu_check.sh --run CMD... # install the carried wheels, then run CMD
 #
 # What it runs there, in this order (each step's output in $OUT/gpu_check.log):
 #   1. the smoke run on cuda (seconds; stops the check early when the set-up is broken)
@@ -24,8 +26,13 @@ if [ "${1:-}" = "--wheels" ]; then
     for n in 17 24 27 28; do plat+=" --platform manylinux_2_${n}_x86_64"; done
     mkdir -p .whl
     grep -qx '/.whl/' .git/info/exclude 2>/dev/null || echo /.whl/ >>.git/info/exclude
-    for name in av datasets diffusers dill draccus glfw gymnasium lerobot mergedeep mujoco mujoco-core \
-        multiprocess pytz farama-notifications cffi pycparser tzdata; do
+    common="dill glfw gymnasium mujoco mujoco-core farama-notifications cffi pycparser"
+    case "${2:-lesson}" in
+        lesson) names="$common av datasets diffusers draccus lerobot mergedeep multiprocess pytz tzdata" ;;
+        value) names="$common gym-pusht pymunk pygame shapely" ;;
+        *) echo "--wheels lesson|value"; exit 2 ;;
+    esac
+    for name in $names; do
         pin=$(grep -io "^$name==[^ ;]*" requirements.lock) || { echo "$name: not in requirements.lock"; exit 2; }
         # shellcheck disable=SC2086
         $py -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
@@ -33,6 +40,12 @@ if [ "${1:-}" = "--wheels" ]; then
     done
     du -sh .whl
     exit 0
+fi
+if [ "${1:-}" = "--run" ]; then
+    shift
+    python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site \
+        .whl/*.whl || exit 2
+    PYTHONPATH=/tmp/site PYTHONUNBUFFERED=1 exec "$@"
 fi
 
 OUT=${OUT:-/tmp/gpu_check}
