@@ -3,11 +3,11 @@
 task       Task (what a task describes, in MimicGen's division: an abstract base with ten required
            members: its EnvSpec, starts and their perturbation, its arms and reach, object frames,
            subtasks and their signals, the action conversion, an optional expert), EnvSpec, Subtask,
-           Outcome (what one attempt came to), Perturbation, Source, rollout (the demo generators'
-           loop), write_dataset (a stamped set)
+           Outcome (what one attempt came to), Perturbation, Source
 poses      SE(3): transform_segment, interpolate (slerp), planar_pose; planar tasks are its SE(2) case
 check      python -m datagen.check TASK: a task's contract, starts, expert, ranges and replay, in seconds
-demos      expert demo sets of a task: generate, ensure_demos (the chapter's private demo cache),
+demos      expert demo sets of a task: rollout (the demo generators' loop), write_dataset (a
+           stamped set), generate, ensure_demos (the chapter's private demo cache),
            check_given (a set you name, checked and never modified), video_problem (whether --video can)
 pusht      PUSHT: PushT described as a task (the only module here that imports pusht_env and its expert)
 aloha      ALOHA: the ALOHA cube handoff described as a task (the only module here that imports aloha_env)
@@ -34,7 +34,7 @@ line naming it, its tasks unavailable and the others known.
 """
 
 from datagen.aloha import ALOHA
-from datagen.demos import check_given, check_gl, ensure_demos, generate, video_problem
+from datagen.demos import check_given, check_gl, ensure_demos, generate, rollout, video_problem, write_dataset
 from datagen.engine import (
     ATTEMPTS_PER_KEPT,
     KEPT_KEYS,
@@ -58,8 +58,6 @@ from datagen.task import (
     Task,
     known_tasks,
     register,
-    rollout,
-    write_dataset,
 )
 
 __all__ = [

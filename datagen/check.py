@@ -20,9 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from ch37.errors import DataError, main
+from datagen.demos import rollout
 from datagen.lockstep import replay_from
 from datagen.source_check import state_range_problem
-from datagen.task import Source, Task, contract_problem, known_tasks, rollout
+from datagen.task import Source, Task, contract_problem, known_tasks
 
 __all__ = ["checks"]
 

@@ -1,4 +1,5 @@
-"""Demo sets: roll out an expert, write LeRobot v3, and keep a private cache of generated sets.
+"""Demo sets: roll out an expert (rollout: the demo generators' loop), write LeRobot v3 (write_dataset: a
+stamped set, whole or not at all), and keep a private cache of generated sets.
 
 A demo set is a pure function of (embodiment, episodes, seed, noise, video): episode i of seed s
 is rolled out from env seed seeds.env_seed(s, "demo", i), and the expert's action noise is
@@ -14,21 +15,81 @@ import sys
 from importlib.metadata import version
 from pathlib import Path
 
+import numpy as np
+
 from ch37 import code_digest
 from ch37.errors import DataError
-from ch37.ownership import MADE_BY, changed_files, holds_data, is_ours, read_stamp, replace_own_dir
+from ch37.ownership import (
+    MADE_BY,
+    changed_files,
+    holds_data,
+    is_ours,
+    publish_dir,
+    read_stamp,
+    replace_own_dir,
+)
 from ch37.parallel import progress
 from ch37.process import environment
 from ch37.seeds import env_seed
-from datagen.task import rollout, write_dataset
 from lerobot_v3 import (
+    IMAGE_KEY,
     IMAGE_SIZE,
     features,
     fps_problem,
     frames_problem,
     load_arrays,
     schema_problem,
+    write_set,
 )
+
+
+def write_dataset(
+    out: Path,
+    *,
+    repo_id: str,
+    fps: int,
+    robot_type: str,
+    task: str,
+    feats: dict,
+    episodes,
+    stamp: dict,
+    **how,
+) -> None:
+    """Write `episodes` as a LeRobot v3 set (lerobot_v3.write_set) to the new folder `out`, whole or not
+    at all, under our stamp listing every file with its sha256 (ch37.ownership.publish_dir). `how`:
+    write_set's other options (per_frame)."""
+    how |= dict(repo_id=repo_id, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes)
+    with publish_dir(out, stamp) as tmp:
+        write_set(tmp, **how)
+
+
+def rollout(env, policy, obs, *, render: bool = False) -> dict:
+    """Run `policy` from `obs` (what reset or set_start returned) to the end of the episode.
+
+    Frame t pairs the obs before action t with action t.
+    Returns arrays: observation.state (T, obs_dim) float32, action (T, act_dim) float32,
+    next.success (T, 1) bool, and IMAGE_KEY (T, IMAGE_SIZE, IMAGE_SIZE, 3) uint8 when render is set.
+    """
+    policy.reset()
+    states, actions, succ, frames = [], [], [], []
+    done = False
+    while not done:
+        if render:
+            frames.append(env.render(IMAGE_SIZE))
+        act = policy.act(obs)
+        states.append(obs)
+        actions.append(act)
+        obs, _, done, info = env.step(act)
+        succ.append(bool(info["success"]))
+    ep = {
+        "observation.state": np.asarray(states, np.float32),
+        "action": np.asarray(actions, np.float32),
+        "next.success": np.asarray(succ, bool)[:, None],
+        "success": bool(succ[-1]),
+    }
+    if render:
+        ep[IMAGE_KEY] = np.asarray(frames, np.uint8)
+    return ep
 
 
 # Any edit to the code that shapes a set's frames (this module, the task's module and the env it imports,

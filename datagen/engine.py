@@ -226,7 +226,7 @@ def save(task: Task, root, kept: list[dict], *, repo_id: str, stamp: dict) -> No
     stamp; what was at `root` must be ours (ch37.ownership.replace_own_dir), and nothing is written
     when nothing was kept."""
     from ch37.ownership import MADE_BY, replace_own_dir
-    from datagen.task import write_dataset
+    from datagen.demos import write_dataset
     from lerobot_v3 import features
 
     replace_own_dir(root)

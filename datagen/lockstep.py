@@ -127,7 +127,7 @@ def run_lanes(
 ):
     """[result of job] for every job, in order, with up to `lanes` attempts stepped together (see the
     module docstring). Frame t of a lane pairs the observation before action t with action t and
-    next.success after it, as datagen.task.rollout records them; `actions` reach step as decide made
+    next.success after it, as datagen.demos.rollout records them; `actions` reach step as decide made
     them (their dtype too), and are recorded as float32."""
     results = [None] * len(jobs)
     todo = deque(range(len(jobs)))

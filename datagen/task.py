@@ -49,9 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ch37.ownership import publish_dir
 from ch37.parallel import step_each
-from lerobot_v3 import IMAGE_KEY, IMAGE_SIZE, write_set
 
 __all__ = [
     "EnvSpec",
@@ -65,8 +63,6 @@ __all__ = [
     "known_tasks",
     "contract_problem",
     "register",
-    "rollout",
-    "write_dataset",
 ]
 
 
@@ -224,55 +220,6 @@ class GymnasiumEnv:
         if frame.shape != (size, size, 3):
             raise ValueError(f"its env draws frames of shape {frame.shape}, not {(size, size, 3)}")
         return frame.astype(np.uint8, copy=False)
-
-
-def write_dataset(
-    out: Path,
-    *,
-    repo_id: str,
-    fps: int,
-    robot_type: str,
-    task: str,
-    feats: dict,
-    episodes,
-    stamp: dict,
-    **how,
-) -> None:
-    """Write `episodes` as a LeRobot v3 set (lerobot_v3.write_set) to the new folder `out`, whole or not
-    at all, under our stamp listing every file with its sha256 (ch37.ownership.publish_dir). `how`:
-    write_set's other options (per_frame)."""
-    how |= dict(repo_id=repo_id, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes)
-    with publish_dir(out, stamp) as tmp:
-        write_set(tmp, **how)
-
-
-def rollout(env, policy, obs, *, render: bool = False) -> dict:
-    """Run `policy` from `obs` (what reset or set_start returned) to the end of the episode.
-
-    Frame t pairs the obs before action t with action t.
-    Returns arrays: observation.state (T, obs_dim) float32, action (T, act_dim) float32,
-    next.success (T, 1) bool, and IMAGE_KEY (T, IMAGE_SIZE, IMAGE_SIZE, 3) uint8 when render is set.
-    """
-    policy.reset()
-    states, actions, succ, frames = [], [], [], []
-    done = False
-    while not done:
-        if render:
-            frames.append(env.render(IMAGE_SIZE))
-        act = policy.act(obs)
-        states.append(obs)
-        actions.append(act)
-        obs, _, done, info = env.step(act)
-        succ.append(bool(info["success"]))
-    ep = {
-        "observation.state": np.asarray(states, np.float32),
-        "action": np.asarray(actions, np.float32),
-        "next.success": np.asarray(succ, bool)[:, None],
-        "success": bool(succ[-1]),
-    }
-    if render:
-        ep[IMAGE_KEY] = np.asarray(frames, np.uint8)
-    return ep
 
 
 @dataclass(frozen=True)

@@ -10,9 +10,9 @@ import aloha_env
 import gen_demos_aloha
 import gen_demos_pusht
 import pusht_env
-from datagen import ALOHA, PUSHT, Outcome, Perturbation, engine, lockstep
+from datagen import ALOHA, PUSHT, Outcome, Perturbation, engine, lockstep, rollout
 from datagen.fast_experts import AlohaBatch, PushTBatch
-from datagen.task import Task, rollout
+from datagen.task import Task
 from lerobot_v3.dataset import load_arrays
 from scripted_expert import AlohaExpert, PushTExpert
 
@@ -106,7 +106,7 @@ def test_lockstep_reasons_without_a_start(sources):
 
 def test_the_runner_is_task_agnostic_aloha_episodes_equal_rollout():
     """run_lanes with ALOHA's env and AlohaBatch.act_batch (the shape an ALOHA engine task plugs in):
-    each episode from env.reset(seed) equals datagen.task.rollout's, frame for frame and bit for bit."""
+    each episode from env.reset(seed) equals datagen.demos.rollout's, frame for frame and bit for bit."""
     expert = AlohaBatch()
     seeds = list(range(12))
     got = lockstep.run_lanes(

@@ -46,13 +46,13 @@ from ch37.errors import DataError
 from ch37.ownership import check_out_path, check_own_result, dump_json, round_floats, write_atomic
 from ch37.parallel import map_jobs
 from ch37.seeds import env_seed
-from datagen import ALOHA, PUSHT, Perturbation, engine
+from datagen import ALOHA, PUSHT, Perturbation, engine, rollout
 from datagen.aloha import WHOLE, Aloha
 from datagen.gym_pusht import GYM_PUSHT
 from datagen.pusher import PUSHER, Pusher
 from datagen.pusher import WHOLE as PUSHER_WHOLE
 from datagen.pusht import BY_CONTACT, BY_CONTACT_BLOCK, PushT
-from datagen.task import Source, rollout
+from datagen.task import Source
 from tools.common import parser, provenance, rel
 
 POS_SIGMA, YAW_SIGMA = DEFAULTS["aug_pos_sigma"], DEFAULTS["aug_yaw_sigma"]  # m, rad

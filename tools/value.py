@@ -41,8 +41,8 @@ from ch37.cli import pick_device
 from ch37.config import DEFAULTS, SMOKE, check
 from ch37.ownership import check_out_path, check_own_result, dump_json, round_floats, write_atomic
 from ch37.seeds import env_seed
-from datagen import Perturbation, engine
-from datagen.task import Source, Task, known_tasks, rollout
+from datagen import Perturbation, engine, rollout
+from datagen.task import Source, Task, known_tasks
 from tools.common import parser, provenance, rel
 
 TASKS = {"aloha": ("source", "replayed", "resolved", "fresh"), "gym_pusht": ("source", "resolved", "fresh")}
