@@ -34,7 +34,7 @@ The runner (run_lanes) knows no task. A mode (mode_parts: resolve_lanes, replay_
                                  -> the attempt's result, from the frames recorded for it (last_obs: the
                                     observation after its last step)
 and the runner keeps `lanes` envs busy, refilling a lane as soon as its attempt ends, recording every
-frame into preallocated arrays (lanes x max_steps), and returns the results in job order. datagen.task's
+frame into preallocated arrays (lanes x max_steps), and returns the results in job order. datagen.demos'
 rollout runs an expert for the demo generators (gen_demos.py, with --video's frames); no attempt uses it.
 """
 
