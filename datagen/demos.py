@@ -63,15 +63,23 @@ def write_dataset(
         write_set(tmp, **how)
 
 
-def rollout(env, policy, obs, *, render: bool = False) -> dict:
+REWARD_FEATURES = {  # what a task with records_reward adds to its sets, as lerobot/pusht_keypoints has them
+    "next.reward": {"dtype": "float32", "shape": (1,), "names": None},
+    "next.done": {"dtype": "bool", "shape": (1,), "names": None},
+}
+
+
+def rollout(env, policy, obs, *, render: bool = False, rewards: bool = False) -> dict:
     """Run `policy` from `obs` (what reset or set_start returned) to the end of the episode.
 
     Frame t pairs the obs before action t with action t.
     Returns arrays: observation.state (T, obs_dim) float32, action (T, act_dim) float32,
-    next.success (T, 1) bool, and IMAGE_KEY (T, IMAGE_SIZE, IMAGE_SIZE, 3) uint8 when render is set.
+    next.success (T, 1) bool, with `rewards` next.reward (T, 1) float32 and next.done (T, 1) bool (the
+    step's reward and whether it ended the episode: REWARD_FEATURES), and IMAGE_KEY (T, IMAGE_SIZE,
+    IMAGE_SIZE, 3) uint8 when render is set.
     """
     policy.reset()
-    states, actions, succ, frames = [], [], [], []
+    states, actions, succ, rews, dones, frames = [], [], [], [], [], []
     done = False
     while not done:
         if render:
@@ -79,14 +87,19 @@ def rollout(env, policy, obs, *, render: bool = False) -> dict:
         act = policy.act(obs)
         states.append(obs)
         actions.append(act)
-        obs, _, done, info = env.step(act)
+        obs, reward, done, info = env.step(act)
         succ.append(bool(info["success"]))
+        rews.append(reward)
+        dones.append(bool(done))
     ep = {
         "observation.state": np.asarray(states, np.float32),
         "action": np.asarray(actions, np.float32),
         "next.success": np.asarray(succ, bool)[:, None],
         "success": bool(succ[-1]),
     }
+    if rewards:
+        ep["next.reward"] = np.asarray(rews, np.float32)[:, None]
+        ep["next.done"] = np.asarray(dones, bool)[:, None]
     if render:
         ep[IMAGE_KEY] = np.asarray(frames, np.uint8)
     return ep
@@ -100,7 +113,8 @@ def rollout(env, policy, obs, *, render: bool = False) -> dict:
 def generator_version(task) -> str:  # at the first set made or checked, not at import
     classes = (task.expert_class, type(task))
     roots = (sys.modules[__name__],) + tuple(sys.modules[c.__module__] for c in classes)  # and their imports
-    return f"3+{code_digest(roots)}+lerobot{version('lerobot')}"
+    packages = "".join(f"+{p}{version(p)}" for p in ("lerobot", *task.packages))  # the writer, the simulator
+    return f"3+{code_digest(roots)}{packages}"
 
 
 def generate(
@@ -122,13 +136,15 @@ def generate(
     def episodes_iter():
         for i in progress(range(episodes), total=episodes, desc=f"{emb.name} demos", quiet=quiet):
             s = env_seed(seed, "demo", i)
-            ep = rollout(env, emb.expert_class(noise=noise, seed=s), env.reset(s), render=video)
+            ep = rollout(env, emb.expert_class(noise=noise, seed=s), env.reset(s), render=video, rewards=rew)
             summary["episodes"] += 1
             summary["frames"] += len(ep["action"])
             summary["successes"] += ep["success"]
             yield ep
 
-    feats = features(m.state_names, m.action_names, video=video, env_state_names=m.env_state_names)
+    rew = emb.records_reward
+    extra = REWARD_FEATURES if rew else None
+    feats = features(m.state_names, m.action_names, extra, video=video, env_state_names=m.env_state_names)
     stamp = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=video)
     how = dict(repo_id=f"local/{emb.name}_demos", fps=m.fps, robot_type=m.robot_type, task=m.task)
     how["obs_names"] = emb.obs_names  # the frames' observations: the set's state (and env state) columns

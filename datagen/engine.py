@@ -226,13 +226,14 @@ def save(task: Task, root, kept: list[dict], *, repo_id: str, stamp: dict) -> No
     stamp; what was at `root` must be ours (ch37.ownership.replace_own_dir), and nothing is written
     when nothing was kept."""
     from ch37.ownership import MADE_BY, replace_own_dir
-    from datagen.demos import write_dataset
+    from datagen.demos import REWARD_FEATURES, write_dataset
     from lerobot_v3 import features
 
     replace_own_dir(root)
     if kept:
         m = task.spec
-        feats = features(m.state_names, m.action_names, provenance(task), env_state_names=m.env_state_names)
+        extra = provenance(task) | (REWARD_FEATURES if task.records_reward else {})
+        feats = features(m.state_names, m.action_names, extra, env_state_names=m.env_state_names)
         write_dataset(
             root,
             repo_id=repo_id,

@@ -118,6 +118,8 @@ class GymPushT(Task):
     action_ranges = dict.fromkeys(SPEC.action_names, (0.0, 512.0))  # px: gym-pusht's action space
     expert_class = GymPushTExpert
     noise_unit = "px"  # the expert's noise is on its position targets
+    packages = ("gym-pusht", "pymunk", "shapely")  # the env, its physics, its success (the goal's coverage)
+    records_reward = True  # next.reward (gym-pusht's: the goal's coverage over 95%, at most 1) and next.done
     arms = {"agent": slice(0, 2)}
     reach = {"agent": ((0.0, 512.0), (0.0, 512.0))}  # px: a target outside the action space is none
     subtasks = (Subtask("push", ("block",)),)

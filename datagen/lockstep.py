@@ -124,11 +124,13 @@ def run_lanes(
     act_dim: int,
     lanes: int,
     step=step_envs,
+    reward_of=None,
 ):
     """[result of job] for every job, in order, with up to `lanes` attempts stepped together (see the
     module docstring). Frame t of a lane pairs the observation before action t with action t and
     next.success after it, as datagen.demos.rollout records them; `actions` reach step as decide made
-    them (their dtype too), and are recorded as float32."""
+    them (their dtype too), and are recorded as float32. reward_of(env): the step's reward, recorded as
+    next.reward with next.done (whether the step ended the episode) for a task with records_reward."""
     results = [None] * len(jobs)
     todo = deque(range(len(jobs)))
     width = max(1, min(lanes, len(jobs), len(envs)))
@@ -136,6 +138,8 @@ def run_lanes(
     obs_buf = np.zeros((width, max_frames + 1, obs_dim), np.float32)  # +1: the obs after the last step
     act_buf = np.zeros((width, max_frames, act_dim), np.float32)
     succ_buf = np.zeros((width, max_frames), bool)
+    rew_buf = np.zeros((width, max_frames), np.float32) if reward_of is not None else None
+    done_buf = np.zeros((width, max_frames), bool) if reward_of is not None else None
     live: dict[int, tuple[int, Lane]] = {}  # slot -> (job index, lane)
     t = np.zeros(width, int)  # frames recorded per slot
 
@@ -158,6 +162,9 @@ def run_lanes(
             "action": act_buf[slot, :n].copy(),
             "next.success": succ_buf[slot, :n, None].copy(),
         }
+        if reward_of is not None:
+            episode["next.reward"] = rew_buf[slot, :n, None].copy()
+            episode["next.done"] = done_buf[slot, :n, None].copy()
         results[i] = finish(lane, envs[slot], episode, obs_buf[slot, n])
         fill(slot)
 
@@ -179,6 +186,9 @@ def run_lanes(
         o, success, done = step([envs[s] for s in slots.tolist()], actions)
         obs_buf[slots, at + 1] = o
         succ_buf[slots, at] = success
+        if reward_of is not None:
+            rew_buf[slots, at] = [reward_of(envs[s]) for s in slots.tolist()]
+            done_buf[slots, at] = done
         t[slots] = at + 1
         full = at + 1 >= max_frames
         if full.any() and not done[full].all():
@@ -321,8 +331,8 @@ def mode_parts(
 
 
 def _dims(task: Task) -> dict:
-    m = task.spec
-    return {"max_frames": task.max_steps, "obs_dim": m.obs_dim, "act_dim": m.act_dim}
+    m, reward_of = task.spec, (lambda env: env.reward) if task.records_reward else None
+    return {"max_frames": task.max_steps, "obs_dim": m.obs_dim, "act_dim": m.act_dim, "reward_of": reward_of}
 
 
 def one_lane(task: Task, env, job, parts: dict) -> Outcome:

@@ -2,7 +2,7 @@
 packages whose versions can change its bytes, the attempts cut into shards, and the memory that cut needs.
 
     SETTINGS, stored(settings), attempts_per_demo(config)   the settings and their stored names
-    run_key(config), versions()                             what every shard's stamp carries
+    run_key(config), versions(task)                         what every shard's stamp carries
     plan(episodes, attempts_per_demo, shard_size)           the attempts (e, k), cut into shards
     plan_memory_problem(n_sources, attempts_per_demo, free) whether that cut fits in memory
 
@@ -42,15 +42,17 @@ def run_key(config: dict) -> str:
     return hashlib.sha256(json.dumps(config, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def versions() -> dict:
-    """The packages whose versions can change a shard's bytes (read once per process: every shard's
-    stamp names them, and each lookup parses the package's metadata, ~5 ms)."""
-    return dict(_versions())
+def versions(task=None) -> dict:
+    """The packages whose versions can change a shard's bytes: LeRobot's writer, MuJoCo, numpy, pyarrow,
+    and the task's own simulator packages (task.packages: gym-pusht's pymunk). Read once per process:
+    every shard's stamp names them, and each lookup parses the package's metadata, ~5 ms."""
+    return dict(_versions(tuple(task.packages) if task is not None else ()))
 
 
 @functools.cache
-def _versions() -> tuple:
-    return tuple((name, version(name)) for name in ("lerobot", "mujoco", "numpy", "pyarrow"))
+def _versions(extra: tuple) -> tuple:
+    names = ("lerobot", "mujoco", "numpy", "pyarrow") + tuple(n for n in extra if n != "mujoco")
+    return tuple((name, version(name)) for name in names)
 
 
 def plan(episodes, attempts_per_demo: int, shard_size: int) -> list[list[tuple[int, int]]]:

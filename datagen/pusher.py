@@ -109,6 +109,7 @@ class Pusher(Task):
     spec = SPEC
     start_names = START_NAMES
     noise_unit = "m (on the hand's target position)"
+    packages = ("gymnasium", "mujoco")  # Pusher-v5's env code and its physics
     default_noise = 0.005
     arms = {"hand": HAND}
     # m: the robot's controller approaches any target itself (its error clipped to 0.15 m a step), so the

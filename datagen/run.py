@@ -74,7 +74,7 @@ def run(src: Path, out: Path, settings: dict, *, workers: int, ray: str | None =
         "source": source_identity(arrays),
         "engine": engine_version(task),
     }
-    config["versions"] = versions()
+    config["versions"] = versions(task)
     with resume.taken(out, src, config) as stamp:
         old = resume.completed(out, stamp)
         if old:

@@ -96,7 +96,7 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
         "failures": dict(Counter(r.reason for r in results if not r.kept)),
         "per_source": per_source,
         "lengths": dict(Counter(str(len(r["action"])) for r in kept)),
-        "versions": versions(),
+        "versions": versions(task),
     }
     if not kept:
         return {"files": {STAMP_NAME: dump_json(stamp).encode()}, "stamp": stamp}

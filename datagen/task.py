@@ -174,8 +174,9 @@ class Source:
 class GymnasiumEnv:
     """A Gymnasium env (reset(seed=, options=) -> (obs, info); step -> (obs, reward, terminated,
     truncated, info)) as the engine steps one: reset(seed, options) -> obs, set_start(*start) -> obs (the
-    task's place), step(action) -> (obs, reward, done, info with "success"), success (latched),
-    render(size) (--video's frames).
+    task's place), step(action) -> (obs, reward, done, info with "success"), success (latched), reward
+    (the last step's: what a set's next.reward records, Task.records_reward), render(size) (--video's
+    frames).
 
     observe(obs) -> the task's observation vector ((obs_dim,) float32). What the task is done means:
     success_key, the info key that says so ("is_success"), or for an env that reports none, success(obs,
@@ -187,7 +188,7 @@ class GymnasiumEnv:
     def __init__(self, env, observe, success_key: str = "is_success", *, success=None, set_start=None):
         self.env, self.observe, self.success_key = env, observe, success_key
         self.done_when, self.setter = success, set_start
-        self.success = False
+        self.success, self.reward = False, 0.0
 
     def reset(self, seed=None, options=None) -> np.ndarray:
         obs, _ = self.env.reset(seed=seed, options=options)
@@ -209,6 +210,7 @@ class GymnasiumEnv:
         # an env that reports no success does not end at it either: the predicate's success ends the
         # episode, as gym-pusht's own does
         done = terminated or truncated or (self.done_when is not None and self.success)
+        self.reward = float(reward)
         return seen, reward, bool(done), info | {"success": self.success}
 
     def render(self, size: int) -> np.ndarray:
@@ -259,6 +261,13 @@ class Task(abc.ABC):
     expert_class: type | None = None  # its scripted expert: expert_class(noise=std, seed=int); optional
     default_noise: float = 0.0  # the expert's action noise (std, in noise_unit) in the task's demo sets
     noise_unit: str = "m/s"  # the unit of the expert's noise: its actions' (gen_demos.py --noise)
+    # the third-party packages whose versions can change its frames (its simulator), named in the digest
+    # of its demo sets (datagen.demos) and in every shard's stamp (datagen.plan.versions)
+    packages: tuple[str, ...] = ("mujoco",)
+    # its sets carry next.reward (the env's reward, float32) and next.done (the env ended the episode there)
+    # beside next.success, as the hub's sets of its env do (lerobot/pusht_keypoints); the env keeps its last
+    # step's reward as env.reward (GymnasiumEnv does)
+    records_reward: bool = False
 
     @property
     def title(self) -> str:

@@ -32,12 +32,29 @@ def test_the_demo_set_has_the_hub_schema(source):
 
     ds = LeRobotDataset("local/gp", root=source, video_backend="pyav")
     assert ds.num_episodes == 3 and tuple(ds[0][ENV_STATE_KEY].shape) == (16,)
+    # issue 49 #2: next.reward, next.done and next.success as lerobot/pusht_keypoints records them
+    hub = {"next.reward": ("float32", [1]), "next.done": ("bool", [1]), "next.success": ("bool", [1])}
+    assert {k: (info["features"][k]["dtype"], info["features"][k]["shape"]) for k in hub} == hub
+    d = load_arrays(source, keys=("next.reward", "next.done", "next.success", "episode_index"))
+    last = np.r_[np.diff(d["episode_index"]) != 0, True]  # each episode's last frame
+    done, success, r = (np.ravel(d[k]) for k in ("next.done", "next.success", "next.reward"))
+    assert np.array_equal(done, last) and np.array_equal(success, last)
+    assert np.all(r[last] == 1.0) and np.all(((0 <= r) & (r < 1))[~last])
 
 
 def replays_exactly(kept_set) -> int:
     """Re-execute every kept episode open-loop in a fresh gym-pusht from its aug.start: its recorded
-    agent positions and keypoints, and gym-pusht's own success at its end. Returns the episodes checked."""
-    keys = ("observation.state", ENV_STATE_KEY, "action", "episode_index", "aug.start")
+    agent positions and keypoints, gym-pusht's reward and termination (next.reward, next.done) at every
+    frame, and its own success at its end. Returns the episodes checked."""
+    keys = (
+        "observation.state",
+        ENV_STATE_KEY,
+        "action",
+        "episode_index",
+        "aug.start",
+        "next.reward",
+        "next.done",
+    )
     d = load_arrays(kept_set, keys=keys)
     episodes = np.unique(d["episode_index"])
     for e in episodes:
@@ -48,7 +65,8 @@ def replays_exactly(kept_set) -> int:
             assert np.array_equal(obs[:2], d["observation.state"][r]) and np.array_equal(
                 obs[2:], d[ENV_STATE_KEY][r]
             )
-            obs, _, done, info = env.step(d["action"][r])
+            obs, reward, done, info = env.step(d["action"][r])
+            assert np.ravel(d["next.reward"])[r] == np.float32(reward) and np.ravel(d["next.done"])[r] == done
         assert info["is_success"] and done
     return len(episodes)
 
@@ -183,3 +201,56 @@ def test_gym_pusht_s_own_keypoints_fit_the_t_well_inside_the_tolerance(source):
     d = load_arrays(source, keys=(ENV_STATE_KEY,))
     assert keypoint_residual(d[ENV_STATE_KEY]).max() < KEYPOINT_TOL / 100
     assert TASK.state_problem(np.hstack([np.zeros((len(d[ENV_STATE_KEY]), 2)), d[ENV_STATE_KEY]])) is None
+
+
+def test_the_engines_guarantees_hold_on_gym_pusht(source, tmp_path):
+    """Issue 49 #3: growing LeRobot's own PushT gives the same bytes for --workers 1 and 2, on a private
+    local Ray, and after a run killed (SIGKILL) once its first shard is on disk and finished by the same
+    command: every attempt carries its own seed, and a resumed run reuses the shards it finds."""
+    import signal
+    import sys
+
+    from test_engine import killed_after_its_first_shard, tree
+
+    flags = ["--src", source, "--per_demo", "4", "--shard_size", "2", "--seed", "2", "--quiet"]
+
+    def grow(out, *more):
+        r = run_script(ROOT / "augment_demos.py", *flags, "--out", out, *more)
+        assert r.returncode == 0, r.stderr
+        return tree(out)
+
+    want = grow(tmp_path / "w1", "--workers", "1")
+    report = json.loads((tmp_path / "w1" / "generation_report.json").read_text())
+    assert report["attempts"] == 12 and report["kept"] >= 10 and report["shards"]["made_this_run"] == 6
+    assert grow(tmp_path / "w2", "--workers", "2") == want
+    assert grow(tmp_path / "ray", "--ray", "--workers", "2") == want
+    out = tmp_path / "killed"
+    cmd = [
+        sys.executable,
+        str(ROOT / "augment_demos.py"),
+        *map(str, flags),
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+    ]
+    proc = killed_after_its_first_shard(cmd, out)
+    assert proc.returncode == -signal.SIGKILL and not (out / "meta").exists()
+    assert grow(out, "--workers", "1") == want
+    assert json.loads((out / "generation_report.json").read_text())["shards"]["reused"] >= 1
+
+
+def test_an_upgrade_of_gym_pusht_or_pymunk_remakes_cached_sets_and_refuses_old_shards(source, tmp_path):
+    """Issue 49 #2: the digest a demo set is stamped with (datagen.demos.generator_version: a cached set
+    with another digest is made again) and every grown run's settings (what a resumed shard must match)
+    name the versions of gym-pusht, pymunk and shapely, the packages that make its frames and its success."""
+    from importlib.metadata import version
+
+    digest = json.loads((source / "scale_data_stamp.json").read_text())["generator_version"]
+    out = tmp_path / "grown"
+    r = run_script(ROOT / "augment_demos.py", "--src", source, "--out", out, "--per_demo", "1", "--quiet")
+    assert r.returncode == 0, r.stderr
+    ran = json.loads((out / "scale_data_stamp.json").read_text())["config"]["versions"]
+    for p in TASK.packages:
+        assert f"+{p}{version(p)}" in digest and ran[p] == version(p)
+    assert {"gym-pusht", "pymunk"} <= set(TASK.packages)
