@@ -117,6 +117,16 @@ def generator_version(task) -> str:  # at the first set made or checked, not at 
     return f"3+{code_digest(roots)}{packages}"
 
 
+def expert_episodes(task, env, seed: int, n: int, *, noise: float = 0.0, render: bool = False):
+    """Episodes 0..n-1 of the seed's demo set of `task`, one by one: episode i rolled out in `env` from
+    env.reset(env_seed(seed, "demo", i)) by task.expert_class seeded with that same number (its action
+    noise `noise`), with next.reward and next.done for a task with records_reward."""
+    for i in range(n):
+        s = env_seed(seed, "demo", i)
+        expert = task.expert_class(noise=noise, seed=s)
+        yield rollout(env, expert, env.reset(s), render=render, rewards=task.records_reward)
+
+
 def generate(
     emb,
     out: Path,
@@ -134,16 +144,14 @@ def generate(
     summary = {"episodes": 0, "frames": 0, "successes": 0}
 
     def episodes_iter():
-        for i in progress(range(episodes), total=episodes, desc=f"{emb.name} demos", quiet=quiet):
-            s = env_seed(seed, "demo", i)
-            ep = rollout(env, emb.expert_class(noise=noise, seed=s), env.reset(s), render=video, rewards=rew)
+        made = expert_episodes(emb, env, seed, episodes, noise=noise, render=video)
+        for ep in progress(made, total=episodes, desc=f"{emb.name} demos", quiet=quiet):
             summary["episodes"] += 1
             summary["frames"] += len(ep["action"])
             summary["successes"] += ep["success"]
             yield ep
 
-    rew = emb.records_reward
-    extra = REWARD_FEATURES if rew else None
+    extra = REWARD_FEATURES if emb.records_reward else None
     feats = features(m.state_names, m.action_names, extra, video=video, env_state_names=m.env_state_names)
     stamp = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=video)
     how = dict(repo_id=f"local/{emb.name}_demos", fps=m.fps, robot_type=m.robot_type, task=m.task)

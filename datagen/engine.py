@@ -104,7 +104,7 @@ def attempt(
     parts, _ = lockstep.mode_parts(
         task, {source.episode: source}, how, mode, pool=pool, plans=plans, lanes=False
     )
-    return lockstep.one_lane(task, env, (source.episode, k), parts)
+    return lockstep.one_lane(task, env, [(source.episode, k)], parts)[0]
 
 
 def keep_first(episodes, per_source: int, run_jobs, *, reasons, cap: int = ATTEMPTS_PER_KEPT):

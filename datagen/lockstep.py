@@ -4,7 +4,7 @@ until the episode ends, keep it on success; the frames, the attempt's start and 
 recorded here and nowhere else.
 
     attempts_lockstep(task, sources, jobs, how, mode=, select=, lanes=) -> [Outcome per job]
-    one_lane(task, env, job, parts)     -> one attempt's Outcome (datagen.engine.attempt)
+    one_lane(task, env, jobs, parts)    -> their Outcomes, one attempt at a time (datagen.engine.attempt)
     replay_from(task, env, start, source) -> a replay from a given start (datagen.check, the tests)
 
 attempts_lockstep returns exactly what [datagen.engine.attempt(task, sources[e], k, how, ...) for (e, k)
@@ -235,12 +235,11 @@ def kept_or_not(lane: Lane, episode: dict, success: bool, reason: str) -> Outcom
     return Outcome(None, episode, lane.start, e, steps)
 
 
-def resolve_lanes(task: Task, sources: dict, how: Perturbation, start_for=None, batched: bool = True) -> dict:
-    """Mode "resolve": the task's noise-free expert from each perturbed start, kept on success. The
-    task's batch_expert decides for all lanes in one call (when `batched` and the task has one);
-    otherwise each lane runs its own task.expert(), reset at its start (the same bits: the batch expert
-    is the expert's act over a batch). start_for(job): a given start instead of the drawn one."""
-    act_batch = task.batch_expert() if batched else None
+def resolve_lanes(task: Task, sources: dict, how: Perturbation, act_batch=None, start_for=None) -> dict:
+    """Mode "resolve": the task's noise-free expert from each perturbed start, kept on success.
+    act_batch (the task's batch_expert()) decides for all lanes in one call; without it each lane runs
+    its own task.expert(), reset at its start (the same bits: the batch expert is the expert's act over
+    a batch). start_for(job): a given start instead of the drawn one."""
     start_for = start_for or (lambda job: start_of_job(task, sources, job, how))
 
     def begin(job, env):
@@ -296,16 +295,10 @@ def replay_lanes(
                 actions[j] = lane.gen.send(obs[j])
             except StopIteration:
                 stop[j] = True
-        if not stop.any():
-            return np.stack(actions), stop  # the actions as made, their dtype too
-        made = [a for a in actions if a is not None]
-        if not made:
+        if stop.all():  # nothing is stepped: the rows are never read
             return np.zeros((len(lanes), task.spec.act_dim), np.float32), stop
-        out = np.zeros((len(lanes), len(made[0])), np.result_type(*made))  # the actions as made
-        for j, a in enumerate(actions):
-            if a is not None:
-                out[j] = a
-        return out, stop
+        blank = np.zeros_like(next(a for a in actions if a is not None))  # a stopped lane's row
+        return np.stack([blank if a is None else a for a in actions]), stop  # as made, their dtype too
 
     def finish(lane, env, episode, last_obs):
         got = lane.run.outcome(env, last_obs, episode)
@@ -322,10 +315,10 @@ def mode_parts(
     batch_expert, replay where the task steps its envs as one batch (its own step_batch). A replay
     decides lane by lane, so its lanes pay only where the envs step as one batch; stepped env by env
     they cost more than one at a time. lanes False: parts for one lane (resolve: the plain expert, faster
-    on one row than the batch expert)."""
+    on one row than the batch expert, which is then not made)."""
     if mode == "resolve":
-        batched = task.batch_expert() is not None
-        return resolve_lanes(task, sources, how, batched=batched and lanes), batched
+        act_batch = task.batch_expert() if lanes else None
+        return resolve_lanes(task, sources, how, act_batch), act_batch is not None
     parts = replay_lanes(task, sources, how, pool, plans)
     return parts, type(task).step_batch is not Task.step_batch
 
@@ -335,9 +328,10 @@ def _dims(task: Task) -> dict:
     return {"max_frames": task.max_steps, "obs_dim": m.obs_dim, "act_dim": m.act_dim, "reward_of": reward_of}
 
 
-def one_lane(task: Task, env, job, parts: dict) -> Outcome:
-    """One attempt `job` through the runner, in one lane on `env`, stepped by env.step."""
-    return run_lanes([job], envs=[env], step=step_each, lanes=1, **parts, **_dims(task))[0]
+def one_lane(task: Task, env, jobs, parts: dict) -> list:
+    """[Outcome of job] for `jobs`, each attempt in turn through the runner in one lane on `env`, stepped
+    by env.step."""
+    return run_lanes(jobs, envs=[env], step=step_each, lanes=1, **parts, **_dims(task))
 
 
 def replay_from(task: Task, env, start, source: Source, plans: dict | None = None) -> Outcome:
@@ -345,7 +339,7 @@ def replay_from(task: Task, env, start, source: Source, plans: dict | None = Non
     frames executed with the provenance of a kept attempt (datagen.check's zero-perturbation replay,
     the tests). plans: a cache of cut sources (None: cut now)."""
     parts = replay_lanes(task, {source.episode: source}, None, None, plans, start_for=lambda job: start)
-    return one_lane(task, env, (source.episode, 0), parts)
+    return one_lane(task, env, [(source.episode, 0)], parts)[0]
 
 
 def attempts_lockstep(
@@ -367,7 +361,7 @@ def attempts_lockstep(
     pool = sources if select == "nearest" else None
     parts, together = mode_parts(task, sources, how, mode, pool=pool, plans=sims.plans)
     if not together:  # one lane, each attempt in turn on the worker's env
-        return run_lanes(jobs, envs=[sims.env(task)], step=step_each, lanes=1, **parts, **_dims(task))
+        return one_lane(task, sims.env(task), jobs, parts)
     width = max(1, min(lanes, len(jobs)))
     envs = sims.lanes(task, width)
     return run_lanes(jobs, envs=envs, step=task.step_batch, lanes=width, **parts, **_dims(task))

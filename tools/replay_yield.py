@@ -45,9 +45,9 @@ from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
 from ch37.ownership import check_out_path, check_own_result, dump_json, round_floats, write_atomic
 from ch37.parallel import map_jobs
-from ch37.seeds import env_seed
-from datagen import ALOHA, PUSHT, Perturbation, engine, rollout
+from datagen import ALOHA, PUSHT, Perturbation, engine
 from datagen.aloha import WHOLE, Aloha
+from datagen.demos import expert_episodes
 from datagen.gym_pusht import GYM_PUSHT
 from datagen.pusher import PUSHER, Pusher
 from datagen.pusher import WHOLE as PUSHER_WHOLE
@@ -92,12 +92,8 @@ DEFAULT_TASKS = ["pusht", "aloha", "gym_pusht"]  # pusher on request (--tasks pu
 def sources(sims: engine.Simulators, task: str, seed: int, n: int) -> dict:
     """The chapter's n source demos of `task` at `seed`, rolled out as the demo generators do."""
     t = VARIANTS[task]["resolve"][0]
-    env, out = sims.env(t), {}
-    for i in range(n):
-        s = env_seed(seed, "demo", i)
-        ep = rollout(env, t.expert_class(noise=t.default_noise, seed=s), env.reset(s))
-        out[i] = Source(i, ep["observation.state"], ep["action"])
-    return out
+    eps = expert_episodes(t, sims.env(t), seed, n, noise=t.default_noise)
+    return {i: Source(i, ep["observation.state"], ep["action"]) for i, ep in enumerate(eps)}
 
 
 def one(work: dict, sims: engine.Simulators, job) -> tuple[str, int]:

@@ -41,7 +41,9 @@ from ch37.cli import pick_device
 from ch37.config import DEFAULTS, SMOKE, check
 from ch37.ownership import check_out_path, check_own_result, dump_json, round_floats, write_atomic
 from ch37.seeds import env_seed
-from datagen import Perturbation, engine, rollout
+from datagen import Perturbation
+from datagen import grow as grow_demos
+from datagen.demos import expert_episodes
 from datagen.task import Source, Task, known_tasks
 from tools.common import parser, provenance, rel
 
@@ -64,33 +66,13 @@ def config(smoke: bool) -> dict:
     return c
 
 
-def expert_demos(task: Task, env, seed: int, n: int) -> list[dict]:
-    """Episodes 0..n-1 of the seed's noise-free demo set of `task`, as gen_demos.py rolls them out."""
-    eps = []
-    for i in range(n):
-        s = env_seed(seed, "demo", i)
-        eps.append(rollout(env, task.expert_class(noise=0.0, seed=s), env.reset(s)))
-    return eps
-
-
-def grow(task: Task, env, sources: dict, mode: str, seed: int, c: dict) -> tuple[list[dict], dict]:
-    """The first per_demo kept attempts (k order) of each source demo in `mode`, and the counts."""
-    sims = engine.Simulators()  # the sources' cut, made once
+def grow(task: Task, sources: dict, mode: str, seed: int, c: dict) -> tuple[list[dict], dict]:
+    """The first per_demo kept attempts (k order) of each source demo in `mode` (datagen.grow: at most
+    tries x per_demo attempts each), and the counts."""
     how = Perturbation(seed, c["aug_pos_sigma"], c["aug_yaw_sigma"])  # ALOHA reads no yaw
-    kept, attempts, failures = [], 0, {}
-    for e, src in sources.items():
-        n = 0
-        for k in range(c["tries"] * c["per_demo"]):
-            if n == c["per_demo"]:
-                break
-            attempts += 1
-            r = engine.attempt(task, src, k, how, mode=mode, env=env, sims=sims)
-            if r.kept:
-                kept.append(r.episode)
-                n += 1
-            else:
-                failures[r.reason] = failures.get(r.reason, 0) + 1
-    return kept, {"attempts": attempts, "kept": len(kept), "failures": failures}
+    kept, attempts, failures = grow_demos(task, sources, c["per_demo"], how, mode=mode, cap=c["tries"])
+    seen = {reason: n for reason, n in failures.items() if n}
+    return kept, {"attempts": attempts, "kept": len(kept), "failures": seen}
 
 
 def stack(eps: list[dict]) -> tuple[np.ndarray, np.ndarray]:
@@ -103,14 +85,14 @@ def one_seed(task: Task, arms: tuple, seed: int, c: dict, workers: int, device: 
     t0 = time.perf_counter()
     env = task.make_env()
     n_src, n_all = c["source_episodes"], c["source_episodes"] * (1 + c["per_demo"])
-    fresh = expert_demos(task, env, seed, n_all)
+    fresh = list(expert_episodes(task, env, seed, n_all))
     src_eps = fresh[:n_src]
     sources = {i: Source(i, e["observation.state"], e["action"]) for i, e in enumerate(src_eps)}
     data, row = {"source": stack(src_eps), "fresh": stack(fresh)}, {"seed": seed}
     grown = {}
     for arm, mode in (("replayed", "replay"), ("resolved", "resolve")):
         if arm in arms:
-            grown[arm], row[mode] = grow(task, env, sources, mode, seed, c)
+            grown[arm], row[mode] = grow(task, sources, mode, seed, c)
             data[arm] = stack(src_eps + grown[arm])
     steps = math.ceil(c["epochs"] * max(len(data[a][0]) for a in arms) / c["batch_size"])
     init = bc.init_weights(c["hidden_dim"], seed, act_dim=task.spec.act_dim, obs_dim=task.spec.obs_dim)
