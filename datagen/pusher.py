@@ -60,17 +60,18 @@ ARM = tuple(f"q_{j}" for j in JOINTS) + tuple(f"qd_{j}" for j in JOINTS)  # rad,
 START_NAMES = ARM + ("object_x", "object_y", "goal_x", "goal_y")
 
 
+STATE_NAMES = ARM + ("hand_x", "hand_y", "hand_z")  # the hand: tips_arm, the wrist centre (m)
 ENV_STATE_NAMES = ("object_x", "object_y", "object_z", "goal_x", "goal_y", "goal_z")  # m
 # What a LeRobot set of this task records: the arm in observation.state, the objects beside it
 SPEC = EnvSpec(
-    state_names=ARM + ("hand_x", "hand_y", "hand_z"),  # the hand: tips_arm, the wrist centre (m)
+    state_names=STATE_NAMES,
     action_names=("target_x", "target_y", "target_z", "target_qw", "target_qx", "target_qy", "target_qz"),
     fps=20,  # Pusher-v5's dt: 5 MuJoCo steps of 0.01 s
     robot_type="gymnasium_pusher",
     task="Push the cylinder onto the goal.",
     max_steps=MAX_STEPS,
     env_state_names=ENV_STATE_NAMES,
-    obs_names=ARM + ("hand_x", "hand_y", "hand_z") + ENV_STATE_NAMES,  # Pusher-v5's own observation, in order
+    obs_names=STATE_NAMES + ENV_STATE_NAMES,  # Pusher-v5's own observation, in order
 )
 
 
