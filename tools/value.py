@@ -47,8 +47,8 @@ from datagen.demos import expert_episodes
 from datagen.task import Source, Task, known_tasks
 from tools.common import parser, provenance, rel
 
-TASKS = {"aloha": ("source", "replayed", "resolved", "fresh"), "gym_pusht": ("source", "resolved", "fresh")}
 ARMS = ("source", "replayed", "resolved", "fresh")
+TASKS = {"aloha": ARMS, "gym_pusht": ("source", "resolved", "fresh")}  # each task's arms by default
 DIFFS = (("replayed", "source"), ("resolved", "source"), ("resolved", "replayed"), ("fresh", "resolved"))
 DIFFS += (("fresh", "replayed"),)
 
