@@ -83,6 +83,9 @@ def train(
     ]
     orders = [BatchOrder(len(x), batch_size, seed) for x, _ in tensors]  # same seed for every arm
     model = MLPStack([init] * len(pols)).to(device)  # arm e = slice e of every weight (ch37.ensemble)
+    threads = torch.get_num_threads()
+    if model.on_numpy():  # its arms take the cores (ch37.ensemble); torch's ops here are too small to split
+        torch.set_num_threads(1)
     opt = torch.optim.Adam(model.parameters(), lr=lr, fused=device.type in ("cpu", "cuda"))  # one kernel
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=steps)  # lr cosine-decayed to 0
     bar = progress(None, total=steps, desc="train", quiet=quiet)
@@ -97,6 +100,7 @@ def train(
         sched.step()
         bar.update()
     bar.close()
+    torch.set_num_threads(threads)
     with torch.no_grad():  # fit on each arm's whole training set, a digit-level fingerprint of the run
         nets = [model.load_into(p.net, e) for e, p in enumerate(pols)]
         fits = [torch.nn.functional.mse_loss(net(x), y).item() for net, (x, y) in zip(nets, tensors)]

@@ -33,12 +33,16 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-# One path through the matrix kernels on every x86-64 CPU, Intel or AMD. MKL does torch's CPU matrix
-# products and picks its kernels by the CPU's maker and instruction set; kernels round differently, so
-# one seed would train another policy on another machine (docs/reproducibility.md). MKL's conditional
-# numerical reproducibility holds it to one branch: COMPATIBLE runs the same code on Intel and AMD (its
-# AVX2 branch is Intel's alone). Set before torch loads MKL; an MKL_CBWR of yours is kept.
+from ch37.process import has_avx2_fma
+
+# One path through the matrix kernels on every x86-64 CPU, Intel or AMD. Kernels round differently, and
+# torch's MKL picks its own by the CPU's maker, so one seed would train another policy on another machine
+# (docs/reproducibility.md). The training's products run on numpy's OpenBLAS (ch37/ensemble.py), held to
+# its Haswell kernels (AVX2 + FMA: the same code on Intel and AMD); MKL's few (the rollouts' small ones)
+# to its COMPATIBLE branch. Set before numpy and torch load them; a value of yours is kept.
 os.environ.setdefault("MKL_CBWR", "COMPATIBLE")
+if has_avx2_fma():  # without them, OpenBLAS's own choice: another draw (the banner says so)
+    os.environ.setdefault("OPENBLAS_CORETYPE", "Haswell")
 
 import numpy as np
 

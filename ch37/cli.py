@@ -268,9 +268,13 @@ def reference_words(ref: dict | None, seed: int, effect: float) -> str:
     return text
 
 
-# The kernel path the published numbers ran on: an x86-64 CPU, MKL held to this branch (MKL_CBWR, set by
-# scale_data.py's setup region before torch loads). docs/reproducibility.md says why and what it costs.
+# The kernel path the published numbers ran on, set by scale_data.py's setup region before numpy and torch
+# load: an x86-64 CPU with AVX2 and FMA, the training's products on numpy's OpenBLAS held to these kernels
+# (OPENBLAS_CORETYPE; ch37.ensemble), torch's others on MKL held to this branch (MKL_CBWR).
+# docs/reproducibility.md says why and what it costs.
+PUBLISHED_BLAS_CORE = "Haswell"
 PUBLISHED_MKL_CBWR = "COMPATIBLE"
+PUBLISHED_PATH = f"x86-64 CPU, OPENBLAS_CORETYPE={PUBLISHED_BLAS_CORE}, MKL_CBWR={PUBLISHED_MKL_CBWR}"
 # MKL's branch codes (mkl_cbwr.h) as MKL_CBWR spells them; 1 (MKL_CBWR_BRANCH_OFF) is MKL_CBWR unset
 MKL_BRANCHES = {1: "", 2: "AUTO", 3: "COMPATIBLE", 4: "SSE2", 6: "SSSE3", 7: "SSE4_1", 8: "SSE4_2", 9: "AVX"}
 MKL_BRANCHES |= {10: "AVX2", 11: "AVX512_MIC", 12: "AVX512", 13: "AVX512_MIC_E1", 14: "AVX512_E1"}
@@ -298,12 +302,16 @@ def mkl_branch() -> str:
 
 def other_draw(device: str) -> str | None:
     """Why this run cannot reproduce the published numbers bit for bit (a CUDA or MPS device, a CPU that
-    is not x86-64, another MKL branch in force: mkl_branch), or None when it runs on the published
-    kernel path."""
+    is not x86-64, numpy's OpenBLAS on other kernels or absent, another MKL branch in force: mkl_branch),
+    or None when it runs on the published kernel path."""
+    from ch37.ensemble import blas_core
+
     if device != "cpu":
         return f"device {device}"
     if platform.machine().lower() not in ("x86_64", "amd64"):
-        return f"a {platform.machine() or 'non-x86'} CPU (MKL runs on x86-64 only)"
+        return f"a {platform.machine() or 'non-x86'} CPU (the published kernels are x86-64's)"
+    if (core := blas_core()) != PUBLISHED_BLAS_CORE:
+        return f"numpy's OpenBLAS on {f'its {core} kernels' if core else 'no OpenBLAS at all'}"
     branch, asked = mkl_branch(), os.environ.get("MKL_CBWR", "")
     if branch == asked != PUBLISHED_MKL_CBWR:
         return f"MKL_CBWR={asked} (published: {PUBLISHED_MKL_CBWR})"
@@ -330,8 +338,8 @@ def banner(args: argparse.Namespace, reminder=None) -> None:
     default = not args.smoke and five_seed_reference(result_config(args)) is not None  # ex1's experiment
     if default and (why := other_draw(args.device)):
         print(
-            f"another draw: {why} rounds differently from the published runs (x86-64 CPU, MKL_CBWR="
-            f"{PUBLISHED_MKL_CBWR}), so this seed's numbers differ; compare with the five-seed mean"
+            f"another draw: {why} rounds differently from the published runs ({PUBLISHED_PATH}), so"
+            " this seed's numbers differ; compare with the five-seed mean"
         )
     if default and reminder and (line := reminder()):
         print(line)

@@ -11,11 +11,97 @@ tests/test_ensemble.py checks that an arm trained in the stack ends with the wei
     stack = MLPStack([net.state_dict()] * 2)      # two copies of a Linear/ReLU Sequential
     pred = stack(x)                               # x (E, B, in) -> (E, B, out)
     stack.load_into(net, e)                       # arm e's trained weights back into a Sequential
+
+On the CPU the stack's matrix products run on numpy's OpenBLAS, one single-threaded sgemm per arm, the
+arms on threads of their own: the published numbers' kernel path (docs/reproducibility.md). torch's
+products go through MKL, whose kernels depend on the CPU's maker; OpenBLAS held to one kernel set
+(OPENBLAS_CORETYPE=Haswell: AVX2 and FMA, on every x86-64 CPU since 2013, Intel or AMD) and to one
+thread per product computes the same bits on any of them, for any thread count (OpenBLAS's own threads
+split a product by rows and columns, and a split moves which elements take its edge kernels).
 """
 
 from __future__ import annotations
 
+import ctypes
+import re
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
 import torch
+
+
+def openblas() -> tuple[ctypes.CDLL, str] | None:
+    """numpy's OpenBLAS, loaded in this process, and its symbols' suffix ("64_" for the wheels' 64-bit
+    build), or None where numpy has none (macOS's Accelerate, another BLAS, not Linux)."""
+    maps = Path("/proc/self/maps")
+    names = (
+        {m.group(0) for m in re.finditer(r"/\S*openblas\S*\.so\S*", maps.read_text())}
+        if maps.exists()
+        else ()
+    )
+    for name in sorted(names):
+        lib = ctypes.CDLL(name)
+        for prefix, suffix in (("scipy_openblas_", "64_"), ("scipy_openblas_", ""), ("openblas_", "")):
+            if hasattr(lib, f"{prefix}get_corename{suffix}"):
+                return lib, (prefix, suffix)
+    return None
+
+
+def blas_core() -> str:
+    """The kernel set numpy's OpenBLAS runs in this process ("Haswell", "SkylakeX", ...), chosen once as
+    it loads (OPENBLAS_CORETYPE, else this CPU); "" where numpy has no OpenBLAS."""
+    found = openblas()
+    if found is None:
+        return ""
+    (lib, (prefix, suffix)) = found
+    get = getattr(lib, f"{prefix}get_corename{suffix}")
+    get.restype = ctypes.c_char_p
+    return get().decode()
+
+
+def one_blas_thread() -> bool:
+    """Hold numpy's OpenBLAS to one thread per product (its own threads would change the bits with their
+    number); False where numpy has no OpenBLAS."""
+    found = openblas()
+    if found is None:
+        return False
+    (lib, (prefix, suffix)) = found
+    getattr(lib, f"{prefix}set_num_threads{suffix}")(1)
+    return True
+
+
+def arms_matmul(a: torch.Tensor, b: torch.Tensor, pool: ThreadPoolExecutor | None) -> torch.Tensor:
+    """a @ b per arm, (E, m, k) @ (E, k, n) -> (E, m, n), float32 CPU tensors: one numpy (OpenBLAS) sgemm
+    per arm, arms 1.. on `pool` while this thread does arm 0. Where a product is too small to pay for a
+    thread's hand-off, numpy loops over the arms itself: the same sgemm per arm, the same bits."""
+    x, y = a.detach().numpy(), b.detach().numpy()
+    if pool is None or x.shape[1] * x.shape[2] * y.shape[2] < 1_000_000:
+        return torch.from_numpy(np.matmul(x, y))
+    out = np.empty((x.shape[0], x.shape[1], y.shape[2]), np.float32)
+    jobs = [pool.submit(np.matmul, x[e], y[e], out=out[e]) for e in range(1, len(x))]
+    np.matmul(x[0], y[0], out=out[0])
+    for j in jobs:
+        j.result()
+    return torch.from_numpy(out)
+
+
+class ArmsLinear(torch.autograd.Function):
+    """b + x @ w per arm, and its gradients, through arms_matmul: (E, B, in), (E, in, out), (E, 1, out)."""
+
+    @staticmethod
+    def forward(ctx, x, w, b, pool):
+        ctx.save_for_backward(x, w)
+        ctx.pool = pool
+        return arms_matmul(x, w, pool).add_(b)
+
+    @staticmethod
+    def backward(ctx, gy):
+        x, w = ctx.saved_tensors
+        gy = gy.contiguous()
+        gx = arms_matmul(gy, w.transpose(1, 2), ctx.pool) if ctx.needs_input_grad[0] else None  # (E, B, in)
+        gw = arms_matmul(x.transpose(1, 2), gy, ctx.pool)  # (E, in, out)
+        return gx, gw, gy.sum(1, keepdim=True), None
 
 
 class MLPStack(torch.nn.Module):
@@ -30,11 +116,24 @@ class MLPStack(torch.nn.Module):
         biases = [torch.stack([s[f"{n}.bias"] for s in states]).unsqueeze(1) for n in names]  # (E, 1, out)
         self.weights = torch.nn.ParameterList(map(torch.nn.Parameter, weights))
         self.biases = torch.nn.ParameterList(map(torch.nn.Parameter, biases))
+        self.blas, self.pool = None, None  # numpy's OpenBLAS found, the arms' threads: at the first forward
+        self.threads = torch.get_num_threads()  # the threads its arms may take, as the stack is built
+
+    def on_numpy(self) -> bool:
+        """Whether the products run on numpy's OpenBLAS, the arms on threads: float32 weights on the CPU
+        and a numpy with OpenBLAS (asked once). The caller may then leave torch's own ops one thread."""
+        if self.blas is None:
+            self.blas = one_blas_thread()
+        w = self.weights[0]
+        return self.blas and w.device.type == "cpu" and w.dtype == torch.float32
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:  # (E, B, in) -> (E, B, out)
+        numpy_path = self.on_numpy()
+        if numpy_path and self.pool is None and min(len(x), self.threads) > 1:  # threads for arms 1..
+            self.pool = ThreadPoolExecutor(min(len(x), self.threads) - 1)
         last = len(self.weights) - 1
         for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            x = torch.baddbmm(b, x, w)  # b + x @ w, per arm
+            x = ArmsLinear.apply(x, w, b, self.pool) if numpy_path else torch.baddbmm(b, x, w)  # b + x @ w
             if i < last:
                 x = x.relu()
         return x

@@ -4,7 +4,8 @@ Workers die with the run: each asks the kernel for SIGKILL when its parent dies 
 PR_SET_PDEATHSIG; elsewhere a thread watching the parent pid), and Ctrl-C is the parent's alone
 (workers ignore SIGINT; the parent stops them). forking() blocks the stop signals around a fork.
 max_workers and available_memory bound the flags that spend cores and memory; environment() scopes an
-environment variable to the call that needs it; headless_gl() picks a rendering program's GL backend.
+environment variable to the call that needs it; headless_gl() picks a rendering program's GL backend;
+has_avx2_fma() says whether this CPU runs the published kernel path's OpenBLAS kernels (ch37.cli).
 (The main process's exit codes and its SIGTERM handler are ch37.errors'; a forked worker's copy of a
 run's lock is closed by ch37.ownership's at-fork hook.)
 """
@@ -85,6 +86,18 @@ def worker_setup(parent: int) -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     if hasattr(signal, "pthread_sigmask"):
         signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
+
+
+def has_avx2_fma() -> bool:
+    """Whether this CPU has AVX2 and FMA (Linux's /proc/cpuinfo; False elsewhere): OpenBLAS's Haswell
+    kernels, the published numbers' training kernels, need both; told to use them without, they fault."""
+    info = Path("/proc/cpuinfo")
+    flags = (
+        next((ln for ln in info.read_text().splitlines() if ln.startswith("flags")), "")
+        if info.exists()
+        else ""
+    )
+    return {"avx2", "fma"} <= set(flags.split())
 
 
 def max_workers() -> int:

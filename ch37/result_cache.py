@@ -65,10 +65,13 @@ def result_key(config: dict) -> str:
         json.dumps({k: str(v) for k, v in config.items() if k not in NOT_IN_KEY}, sort_keys=True).encode()
     )
     h.update(f"cache format {CACHE_FORMAT}".encode())
-    # MKL's kernel branch decides the trained weights' bits (docs/reproducibility.md): a run on another
-    # branch is another result, never this one replayed. The branch MKL runs, not MKL_CBWR as set now:
-    # MKL reads it once per process (a notebook's %env between two Run-alls changes nothing)
+    # The kernels decide the bits (docs/reproducibility.md): OpenBLAS's the training's, MKL's branch the
+    # rollouts'; a run on others is another result, never this one replayed. The kernels in force, not
+    # the variables as set now: both read them once per process (a notebook's %env changes nothing)
     h.update(f"MKL branch={mkl_branch()}".encode())
+    from ch37.ensemble import blas_core  # here, not at the top: it loads torch, and flags are read before
+
+    h.update(f"OpenBLAS kernels={blas_core()}".encode())
     for pkg in ("torch", "lerobot", "mujoco", "numpy"):
         h.update(f"{pkg}=={version(pkg)}".encode())
     for key in ("pusht_data", "aloha_data"):  # a user's own set: its bytes are part of the input

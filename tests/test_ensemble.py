@@ -5,6 +5,7 @@ import pytest
 import torch
 
 from ch37.ensemble import BatchOrder, MLPStack
+from ch37.process import has_avx2_fma
 
 
 def mlp(hidden=32):
@@ -101,3 +102,51 @@ def test_batch_order_streams_full_batches_and_repeats_by_seed():
     assert not torch.equal(torch.cat([BatchOrder(10, 4, 8).next() for _ in range(5)]), rows)
     small = BatchOrder(3, 8, 0).next()  # fewer rows than a batch: still a full batch
     assert len(small) == 8 and set(small.tolist()) == {0, 1, 2}
+
+
+# Issue 47: the stack's products on numpy's OpenBLAS (Haswell's kernels, one thread per product) give
+# the same weights whatever the thread counts, torch's vector kernels or MKL's branch; other OpenBLAS
+# kernels give others (so the check can fail).
+TRAIN_BITS = r"""
+import hashlib, sys
+import numpy as np, torch
+import bc_recipe as bc
+torch.set_num_threads(int(sys.argv[1]))
+rng = np.random.default_rng(0)
+data = [(rng.normal(size=(n, 10)), rng.normal(size=(n, 2))) for n in (60, 300)]
+data = [(x.astype(np.float32), y.astype(np.float32)) for x, y in data]
+pols, _ = bc.train(data, 30, bc.init_weights(512, 0), batch_size=128, lr=1e-3, seed=0)
+weights = [t.numpy().tobytes() for p in pols for t in p.net.state_dict().values()]
+print(hashlib.sha256(b"".join(weights)).hexdigest())
+"""
+
+
+def trained_bits(threads: int, **env: str) -> str:
+    import os
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+
+    base = {k: v for k, v in os.environ.items() if k not in ("MKL_CBWR", "ATEN_CPU_CAPABILITY")}
+    p = subprocess.run(
+        [sys.executable, "-c", TRAIN_BITS, str(threads)],
+        cwd=ROOT,
+        env=base | {"OPENBLAS_CORETYPE": "Haswell"} | env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert p.returncode == 0, p.stderr
+    return p.stdout.strip()
+
+
+@pytest.mark.skipif(
+    not has_avx2_fma(), reason="the published kernel path needs an x86-64 CPU with AVX2 and FMA"
+)
+def test_the_training_bits_hold_across_threads_vector_kernels_and_mkl_branches():
+    held = trained_bits(2, MKL_CBWR="COMPATIBLE")
+    assert trained_bits(1) == held  # one thread: no arm threads, MKL's own branch
+    assert trained_bits(4, MKL_CBWR="AVX2") == held  # more threads than arms
+    assert trained_bits(2, ATEN_CPU_CAPABILITY="avx2") == held  # torch's AVX2 vector kernels
+    assert trained_bits(2, OPENBLAS_CORETYPE="Sandybridge") != held  # OpenBLAS's AVX kernels: other bits

@@ -6,7 +6,7 @@ switch once).
 
 A command's own main flow may set its process's environment: a program's `if __name__ == "__main__":`
 block (the demo generators choose MuJoCo's GL backend there), and scale_data.py, the lesson, which is
-a script from its first line (its setup region holds MKL's kernel path before numpy loads).
+a script from its first line (its setup region holds the kernel path before numpy and torch load).
 """
 
 import ast
@@ -16,7 +16,9 @@ import pytest
 from test_package_layering import MODULES, ROOT
 
 ENVIRON_CALLS = {"setdefault", "update", "pop", "popitem", "clear", "__setitem__", "__delitem__"}
-SCRIPT = {"scale_data": {"MKL_CBWR"}}  # a script whose module level is its main flow: the variables it sets
+SCRIPT = {
+    "scale_data": {"MKL_CBWR", "OPENBLAS_CORETYPE"}
+}  # a script whose module level is its main flow: the variables it sets
 HF = ("lerobot", "datasets", "huggingface_hub")
 OFFLINE_FIRST = {"hub_offline", "check_hf_cache", "_lerobot_dataset_class"}  # each starts with hub_offline
 

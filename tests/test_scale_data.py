@@ -3,7 +3,6 @@
 import hashlib
 import json
 import os
-import platform
 import re
 import shutil
 import subprocess
@@ -14,6 +13,7 @@ import pytest
 from conftest import ROOT, run_script
 
 from ch37 import ownership
+from ch37.process import has_avx2_fma
 from ch37.seeds import env_seed
 from lerobot_v3 import dataset as lerobot_io
 
@@ -395,7 +395,7 @@ print(json.dumps(got))
 
 
 @pytest.mark.skipif(
-    platform.machine().lower() not in ("x86_64", "amd64"), reason="MKL's kernel path exists on x86-64 only"
+    not has_avx2_fma(), reason="the published kernel path needs an x86-64 CPU with AVX2 and FMA"
 )
 def test_the_cache_and_the_banner_name_the_mkl_branch_in_force():
     """Issue 48 #10: MKL reads MKL_CBWR once per process, at its first use. A notebook that changed
@@ -409,7 +409,7 @@ def test_the_cache_and_the_banner_name_the_mkl_branch_in_force():
         p = subprocess.run(
             [sys.executable, "-c", MKL_KEYS, *later],
             cwd=ROOT,
-            env=dict(env, MKL_CBWR=first),
+            env=dict(env, MKL_CBWR=first, OPENBLAS_CORETYPE="Haswell"),  # the published training kernels
             capture_output=True,
             text=True,
             timeout=120,
@@ -422,3 +422,43 @@ def test_the_cache_and_the_banner_name_the_mkl_branch_in_force():
     assert keys("COMPATIBLE", "AVX2") == [compatible, compatible]  # MKL still runs COMPATIBLE
     first, changed = keys("AVX2", "COMPATIBLE")
     assert first == avx2 and changed[0] == avx2[0] and changed[1]  # still AVX2's (AUTO's on AMD)
+
+
+@pytest.mark.skipif(
+    not has_avx2_fma(), reason="the published kernel path needs an x86-64 CPU with AVX2 and FMA"
+)
+def test_the_cache_and_the_banner_name_the_openblas_kernels_in_force():
+    """Issue 47: the training's products run on numpy's OpenBLAS, whose kernels are chosen once, as numpy
+    loads. A process on other kernels (Sandybridge's AVX code here) is another result and another draw;
+    setting OPENBLAS_CORETYPE after numpy loaded changes neither."""
+
+    def keys(core, *later):
+        p = subprocess.run(
+            [sys.executable, "-c", BLAS_KEYS, *later],
+            cwd=ROOT,
+            env=dict(os.environ, MKL_CBWR="COMPATIBLE", OPENBLAS_CORETYPE=core),
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert p.returncode == 0, p.stderr
+        return json.loads(p.stdout)
+
+    (haswell,), (sandy,) = keys("Haswell"), keys("Sandybridge")
+    assert haswell[1] is None and haswell[0] != sandy[0]
+    assert "Sandybridge" in sandy[1]  # the banner's line names the kernels in force
+    assert keys("Haswell", "Sandybridge") == [haswell, haswell]  # numpy's OpenBLAS still runs Haswell's
+
+
+BLAS_KEYS = r"""
+import json, os, sys
+import numpy
+from ch37 import cli, result_cache
+
+base = {"seed": 0, "epochs": 500, "smoke": False, "device": "cpu"}
+got = [[result_cache.result_key(base), cli.other_draw("cpu")]]
+for value in sys.argv[1:]:  # a notebook's %env OPENBLAS_CORETYPE=... between two Run-alls
+    os.environ["OPENBLAS_CORETYPE"] = value
+    got.append([result_cache.result_key(base), cli.other_draw("cpu")])
+print(json.dumps(got))
+"""

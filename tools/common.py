@@ -23,6 +23,7 @@ from pathlib import Path
 
 from ch37 import ROOT, cli, config
 from ch37.errors import DataError
+from ch37.process import has_avx2_fma
 
 SCRIPT = ROOT / "scale_data.py"
 META = ROOT / "meta.yaml"
@@ -202,14 +203,17 @@ def _version(pkg: str) -> str | None:
         return None
 
 
-def _mkl_branch(script: Path) -> str:
-    """The MKL branch (MKL_CBWR) the runs of `script` take: one set here is theirs, else scale_data.py's
-    setup region holds its runs to ch37.cli.PUBLISHED_MKL_CBWR (docs/reproducibility.md)."""
-    if os.environ.get("MKL_CBWR"):
-        return os.environ["MKL_CBWR"]
-    if Path(script).name == "scale_data.py":
-        return f"{cli.PUBLISHED_MKL_CBWR} (scale_data.py's setup region)"
-    return "unset: MKL's own branch for this CPU"
+def _kernel_path(script: Path) -> str:
+    """The kernel path (OPENBLAS_CORETYPE, MKL_CBWR) the runs of `script` take: what is set here is
+    theirs, else scale_data.py's setup region holds its runs to ch37.cli's published path
+    (docs/reproducibility.md)."""
+    lesson = Path(script).name == "scale_data.py"
+    core = os.environ.get("OPENBLAS_CORETYPE") or (
+        cli.PUBLISHED_BLAS_CORE if lesson and has_avx2_fma() else ""
+    )
+    mkl = os.environ.get("MKL_CBWR") or (cli.PUBLISHED_MKL_CBWR if lesson else "")
+    held = " (scale_data.py's setup region)" if lesson else ""
+    return f"OpenBLAS {core or 'own choice'}, MKL {mkl or 'own branch'}{held}"
 
 
 def provenance(script: Path) -> dict:
@@ -227,7 +231,7 @@ def provenance(script: Path) -> dict:
             "machine": platform.machine(),
             "cpu_count": os.cpu_count(),
             "cpu_model": _cpu_model(),
-            "mkl_cbwr": _mkl_branch(script),
+            "kernel_path": _kernel_path(script),
         },
         "packages": {p: _version(p) for p in ("torch", "lerobot", "mujoco", "numpy")},
         "script_region_hashes": hashes,

@@ -143,7 +143,7 @@ def environment(meta: dict, lock: Path = LOCK) -> dict:
     """meta.yaml's `environment`: the lock's versions, and the CPU and MKL kernel branch the reference
     run's numbers came from (docs/reproducibility.md: the same branch gives the same bits on any x86-64)."""
     ran = run_platform(meta)
-    where = {"cpu": ran.get("cpu_model"), "kernel_path": ran.get("mkl_cbwr")}
+    where = {"cpu": ran.get("cpu_model"), "kernel_path": ran.get("kernel_path") or ran.get("mkl_cbwr")}
     return environment_section(lock, ran.get("python")) | {k: v for k, v in where.items() if v}
 
 
