@@ -1122,10 +1122,10 @@ def _info_edited(edit, command="augment"):
 
 
 def _tool_over_users_result(name, command):
-    """A tool (`command`: "-m tools.X flags", bench_engine's --src the reference set) whose --out holds
+    """A tool (`command`: "-m tools.X flags", bench engine's --src the reference set) whose --out holds
     the user's own file `name`."""
     return lambda tmp, ref: (
-        [*command.split(), *(["--src", ref["pusht"]] if "bench_engine" in command else [])]
+        [*command.split(), *(["--src", ref["pusht"]] if "bench engine" in command else [])]
         + ["--out", _user_result(tmp, name)],
         [tmp / "u" / name],
         None,
@@ -1195,7 +1195,7 @@ ISSUE48_CASES = [
         "bench-engine-costs-out-holds-users-json",
         _tool_over_users_result(
             "bench_engine_costs.json",
-            "-m tools.bench_engine --costs_only --cost_repeats 1 --cost_attempts_per_demo 1",
+            "-m tools.bench engine --costs_only --cost_repeats 1 --cost_attempts_per_demo 1",
         ),
         2,
         "bench_engine_costs.json exists and was not written by this tool; pass another --out",
@@ -1203,7 +1203,7 @@ ISSUE48_CASES = [
     (
         "bench-engine-out-holds-users-json",
         _tool_over_users_result(
-            "bench_engine.json", "-m tools.bench_engine --cost_repeats 0 --sizes 1 --executors local"
+            "bench_engine.json", "-m tools.bench engine --cost_repeats 0 --sizes 1 --executors local"
         ),
         2,
         "bench_engine.json exists and was not written by this tool; pass another --out",
@@ -1250,3 +1250,14 @@ def test_a_tools_figure_is_replaced_only_beside_its_own_result(tmp_path):
         ownership.check_own_result(tmp_path / "replay_sigma.json", "replay_sigma", beside=[png])
     (tmp_path / "replay_sigma.json").write_text(json.dumps({"kind": "replay_sigma"}))
     ownership.check_own_result(tmp_path / "replay_sigma.json", "replay_sigma", beside=[png])
+
+
+@pytest.mark.parametrize("task", ["pusher", "gym_pusht"])
+def test_bench_engine_refuses_a_task_it_cannot_measure_in_one_line(tmp_path, task):
+    """Issue 51 #2: `python -m tools.bench engine --task pusher` (or gym_pusht) made a source set, then
+    ended in a traceback: its in-process costs read a set's observation.state as the task's whole state,
+    which only PushT's and ALOHA's sets are. One `error:` line, exit 2, before anything is made."""
+    p = run("-m", "tools.bench", "engine", "--task", task, "--costs_only", "--out", tmp_path / "o")
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(err) == 1 and f"invalid choice: '{task}'" in err[0], p.stderr[-2000:]
+    assert not (tmp_path / "o").exists()
