@@ -424,13 +424,14 @@ CASES = [
         2,
         "the Hugging Face cache",
     ),
-    # issue 42 #1: tools.value's --out holding the user's own aloha_value.json; a bad --device up front
+    # issue 42 #1: tools.replay value's --out holding the user's own aloha_value.json; a bad --device up front
     (
         "aloha-value-out-holds-users-json",
         lambda tmp, ref: (
             [
                 "-m",
-                "tools.value",
+                "tools.replay",
+                "value",
                 "--smoke",
                 "--seeds",
                 "1",
@@ -446,7 +447,7 @@ CASES = [
     (
         "aloha-value-device-bogus",
         lambda tmp, ref: (
-            ["-m", "tools.value", "--smoke", "--device", "bogus", "--out", tmp / "av"],
+            ["-m", "tools.replay", "value", "--smoke", "--device", "bogus", "--out", tmp / "av"],
             [],
             None,
         ),
@@ -1164,21 +1165,21 @@ ISSUE48_CASES = [
     (
         "replay-yield-out-holds-users-json",
         _tool_over_users_result(
-            "replay_yield.json", "-m tools.replay_yield --tasks pusht --seeds 1 --sources 1 --attempts 1"
+            "replay_yield.json", "-m tools.replay yield --tasks pusht --seeds 1 --sources 1 --attempts 1"
         ),
         2,
         "replay_yield.json exists and was not written by this tool; pass another --out",
     ),
     (
         "replay-compare-out-holds-users-json",
-        _tool_over_users_result("replay_compare.json", "-m tools.replay --smoke --seeds 1"),
+        _tool_over_users_result("replay_compare.json", "-m tools.replay compare --smoke --seeds 1"),
         2,
         "replay_compare.json exists and was not written by this tool; pass another --out",
     ),
     (
         "replay-sigma-out-holds-users-json",
         _tool_over_users_result(
-            "replay_sigma.json", "-m tools.replay --smoke --sigma 1 --attempts 1 --sigma_seeds 1"
+            "replay_sigma.json", "-m tools.replay compare --smoke --sigma 1 --attempts 1 --sigma_seeds 1"
         ),
         2,
         "replay_sigma.json exists and was not written by this tool; pass another --out",
@@ -1186,7 +1187,7 @@ ISSUE48_CASES = [
     (
         "replay-sigma-out-holds-users-png",
         _tool_over_users_result(
-            "replay_sigma.png", "-m tools.replay --smoke --sigma 1 --attempts 1 --sigma_seeds 1"
+            "replay_sigma.png", "-m tools.replay compare --smoke --sigma 1 --attempts 1 --sigma_seeds 1"
         ),
         2,
         "replay_sigma.png exists and was not written by this tool; pass another --out",
@@ -1240,8 +1241,8 @@ def test_out_inside_the_source_is_refused_before_anything_is_written_there(ref, 
 
 
 def test_a_tools_figure_is_replaced_only_beside_its_own_result(tmp_path):
-    """Issue 48 #12: a figure (tools.replay's replay_sigma.png) has no mark of its own: it may be replaced
-    beside a result of the tool, never where the user's file of that name stands alone."""
+    """Issue 48 #12: a figure (tools.replay compare's replay_sigma.png) has no mark of its own: it may be
+    replaced beside a result of the tool, never where the user's file of that name stands alone."""
     from ch37.errors import DataError
 
     png = tmp_path / "replay_sigma.png"
