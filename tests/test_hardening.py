@@ -399,14 +399,14 @@ CASES = [
     # issue 31 #4: the LeRobot lab's flags go through the one checker, its --out through the one error path
     (
         "lab-seeds-negative",
-        lambda tmp, ref: (["-m", "tools.lerobot_lab", "--seeds", "-1", "--out", tmp / "ll"], [], None),
+        lambda tmp, ref: (["-m", "tools.lerobot", "lab", "--seeds", "-1", "--out", tmp / "ll"], [], None),
         2,
         "--seeds must be >= 0, got -1",
     ),
     (
         "lab-out-is-a-file",
         lambda tmp, ref: (
-            ["-m", "tools.lerobot_lab", "--seeds", "0", "--out", _file(tmp)],
+            ["-m", "tools.lerobot", "lab", "--seeds", "0", "--out", _file(tmp)],
             [tmp / "afile"],
             None,
         ),
