@@ -1,21 +1,16 @@
 """How fast the chapter's parts run, and where the time goes: one entry point, a subcommand per part.
 
-    python -m tools.bench lesson [--smoke]     where the time of one scale_data.py run goes
-    python -m tools.bench engine               the data engine: validated demos/s local vs Ray, peak memory,
-                                               against its own physics (writes OUT/bench_engine.json)
-    python -m tools.bench envs                 speed and competence of the two embodiments and their experts
-    python -m tools.bench gym_pusht            the scripted expert on LeRobot's own PushT, by its success rule
-    python -m tools.bench kernels              what holding MKL to one kernel branch costs the training
-    python -m tools.bench writer               the one-pass LeRobot v3 writer vs LeRobot's per-frame path
+    python -m tools.bench lesson [--smoke]  where the time of one scale_data.py run goes
+    python -m tools.bench engine            the data engine: validated demos/s local vs Ray, peak memory,
+                                            against its own physics (writes OUT/bench_engine.json)
+    python -m tools.bench envs              speed and competence of the two embodiments and their experts
+    python -m tools.bench gym_pusht         the scripted expert on LeRobot's own PushT, by its success rule
+    python -m tools.bench kernels           what holding MKL to one kernel branch costs the training
+    python -m tools.bench writer            the one-pass LeRobot v3 writer vs LeRobot's per-frame path
 
-`python -m tools.bench SUBCOMMAND --help` says what each one measures and takes. Their measurements
-share one path: each variant is measured once per round, the order reversed every other round so that
-a drift of the machine's speed falls on all of them alike (alternate), medians reported; where a setting
-is read once per process (MKL's kernel branch) each measurement runs in a fresh process
-(in_fresh_process). Only `engine` writes a file; the others print. Run them alone: another busy process
-moves the figures more than most changes do. Nothing here asserts.
-
-Exit codes: 0 ok, 2 bad input (one `error:` line).
+`SUBCOMMAND --help` says what each measures. One timing path: alternate() (every variant once a round,
+the order reversed every other round, medians), in_fresh_process() where a setting is read once per
+process. Run them alone: another busy process moves the figures. Exit codes: 0 ok, 2 bad input.
 """
 
 from __future__ import annotations
@@ -434,15 +429,14 @@ def physics_floor(task, runs, repeats: int = 1) -> float:
     of `repeats` passes."""
     env = task.make_env()
     runs = [([float(v) for v in start], list(actions)) for start, actions in runs]
-    best = math.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
+
+    def steps():
         for start, actions in runs:
             task.place(env, start)
             for act in actions:
                 env.step(act)
-        best = min(best, time.perf_counter() - t0)
-    return best
+
+    return min(clock(steps)[0] for _ in range(repeats))
 
 
 def kept_runs(root: Path) -> list:

@@ -18,13 +18,18 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
 
+import pusht_env
 from bc_recipe import wilson  # the lesson's 95% interval
 from ch37 import ROOT, config, errors
+from ch37.cli import pick_device
 from ch37.config import DEFAULTS, NON_NEGATIVE, POSITIVE, check, flag
 from ch37.errors import DataError
 from ch37.ownership import check_out_path, check_own_result
-from ch37.seeds import MAX_SEED, SEED_BLOCK
+from ch37.parallel import map_jobs
+from ch37.seeds import MAX_SEED, SEED_BLOCK, env_seed
+from lerobot_v3.dataset import ENV_STATE_KEY, columns
 from tools.common import parser, subcommands, write_result
 
 # --- eval: a LeRobot checkpoint in our PushT env, on the lesson's held-out starts -----------------------
@@ -58,11 +63,6 @@ def load_policy(path: Path, device: str):
 
 def observation_builder(policy):
     """obs float32 (10,) or (B, 10) -> the batch the policy reads: its input features of our state, (B, D)"""
-    import torch
-
-    import pusht_env
-    from lerobot_v3.dataset import ENV_STATE_KEY, columns
-
     ours = {
         "observation.state": list(range(pusht_env.OBS_DIM)),
         ENV_STATE_KEY: columns(pusht_env.STATE_NAMES, pusht_env.ENV_STATE_NAMES),
@@ -91,7 +91,6 @@ def evaluate(policy, pre, post, seeds, name: str = "the policy") -> list[dict]:
     lesson's start s): {"seed", "success", "steps"}, the lesson's success rule (terminated = success).
     A non-finite action is the checkpoint's problem (`name` it), a DataError, never the env's ValueError."""
     import gymnasium as gym
-    import torch
 
     import gym_envs
 
@@ -161,8 +160,6 @@ def eval_main(argv: list[str] | None = None) -> int:
         raise DataError(f"--policy {a.policy} is not a folder")
     out = a.out or a.policy.parent / f"{EVAL_KIND}_seed{a.seed}_n{a.eval_episodes}.json"
     check_own_result(out, EVAL_KIND)  # ours from an earlier run may be replaced; anything else is the user's
-    from ch37.cli import pick_device
-    from ch37.seeds import env_seed
 
     device = pick_device(a.device)
     policy, pre, post = load_policy(a.policy, device)
@@ -261,16 +258,12 @@ def samples(lengths, cfg) -> dict:
 def policy_and_processors(stats: dict, seed: int):
     """A fresh LeRobot DiffusionPolicy (CONFIG) with its pre/post processors normalizing by `stats`."""
     from lerobot_v3 import hub_offline
-    from lerobot_v3.dataset import ENV_STATE_KEY
 
     hub_offline()  # before LeRobot's policies import huggingface_hub
-    import torch
     from lerobot.configs.types import FeatureType, PolicyFeature
     from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
     from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
     from lerobot.policies.factory import make_pre_post_processors
-
-    import pusht_env
 
     cfg = DiffusionConfig(
         input_features={
@@ -289,9 +282,6 @@ def policy_and_processors(stats: dict, seed: int):
 
 def frame_arrays(episodes) -> dict:
     """The set's frames: observation.state (F, 10), its environment_state columns (F, 8), action (F, 2)."""
-    import pusht_env
-    from lerobot_v3.dataset import ENV_STATE_KEY, columns
-
     x = np.concatenate([e["observation.state"] for e in episodes]).astype(np.float32)
     env_cols = columns(pusht_env.STATE_NAMES, pusht_env.ENV_STATE_NAMES)
     y = np.concatenate([e["action"] for e in episodes]).astype(np.float32)
@@ -300,8 +290,6 @@ def frame_arrays(episodes) -> dict:
 
 def batch_of(frames: dict, s: dict, idx) -> dict:
     """LeRobotDataset's items for the samples `idx`, stacked: (B, 2, D) observations, (B, 16, 2) actions."""
-    import torch
-
     b = {k: torch.from_numpy(v[s["obs"][idx]]) for k, v in frames.items() if k != "action"}
     b |= {f"{k}_is_pad": torch.from_numpy(s["obs_pad"][idx]) for k in list(b)}
     b["action"] = torch.from_numpy(frames["action"][s["act"][idx]])
@@ -315,8 +303,6 @@ def train(episodes, steps: int, seed: int, lr: float, log_every: int = 100, chec
     in eval mode after every check_every-th step (0: never); it must leave torch's global RNG as it
     found it (the training's noise and timesteps come from it), so a checked run trains as an
     unchecked one."""
-    import torch
-
     frames = frame_arrays(episodes)
     stats = {
         k: {"min": v.min(0), "max": v.max(0), "mean": v.mean(0), "std": v.std(0)} for k, v in frames.items()
@@ -356,10 +342,6 @@ def rollouts(policy, pre, post, seeds: list[int]) -> list[dict]:
     episode that has ended keeps its last observation and its env is not stepped again. The denoising
     noise is drawn for the whole batch, so an outcome depends on the batch it ran in (the seeds);
     `lerobot eval` runs one episode at a time instead, ~50x slower here."""
-    import torch
-
-    import pusht_env
-
     envs, build = [pusht_env.PushTEnv() for _ in seeds], observation_builder(policy)
     obs = np.stack([env.reset(s) for env, s in zip(envs, seeds, strict=True)])  # (B, 10)
     done, steps, success = np.zeros(len(seeds), bool), np.zeros(len(seeds), int), np.zeros(len(seeds), bool)
@@ -380,10 +362,6 @@ def rollouts(policy, pre, post, seeds: list[int]) -> list[dict]:
 def one_run(job) -> dict:
     """(point, seed, steps, lr, eval_episodes, out): train (or read the model a run with these
     steps and lr saved), roll out; one JSON under out."""
-    import torch
-
-    from ch37.seeds import env_seed
-
     point, seed, steps, lr, n_eval, out = job
     torch.set_num_threads(1)
     folder = out / f"{point}_seed{seed}"
@@ -432,7 +410,6 @@ def same_run(record: dict, steps: int, lr: float) -> bool:
 def rollout_check(starts: list[int], record: list, label: str = ""):
     """A check for train(): the policy's success on `starts` appended to `record` (and printed after
     `label`), torch's global RNG put back as it was."""
-    import torch
 
     def check(step, policy, pre, post):
         rng = torch.get_rng_state()  # the rollouts seed torch; the training goes on as if unchecked
@@ -448,10 +425,6 @@ def pilot(job) -> dict:
     """(point, seed, steps, lr, eval_every, eval_episodes, out): one long run's loss curve and, every
     eval_every steps (0: never), its success on the held-out starts, mid-schedule (the learning rate
     decays to zero at `steps`): how long a run must be. Written to OUT/pilot_{point}_seed{seed}.json."""
-    import torch
-
-    from ch37.seeds import env_seed
-
     point, seed, steps, lr, every, n_eval, out = job
     torch.set_num_threads(1)
     t0, checks = time.perf_counter(), []
@@ -560,8 +533,6 @@ def lab_args(argv: list[str] | None):
 
 def lab_pilots(a) -> int:
     """--pilot: each (point, seed)'s long run, its loss curve and checkpoints (pilot)."""
-    from ch37.parallel import map_jobs
-
     jobs = [(p, s, a.pilot, a.lr, a.eval_every, a.eval_episodes, a.out) for p in a.points for s in a.seeds]
     for r in map_jobs(pilot, jobs, workers=min(a.workers, len(jobs)), ordered=False):
         print(f"{r['point']:8s} seed {r['seed']}: loss {r['loss_curve'][-1][1]:.4f}, {r['seconds']:.0f} s")
@@ -570,7 +541,6 @@ def lab_pilots(a) -> int:
 
 def lab_runs(a) -> int:
     """Every (point, seed) not done yet with these flags (one_run), then OUT/lerobot_lab.json's table."""
-    from ch37.parallel import map_jobs
 
     def done(point, seed):
         path = a.out / f"{point}_seed{seed}.json"

@@ -1,18 +1,13 @@
-"""Replay or re-solve? The data engine's two moves side by side (docs/replay.md): one entry point, a
-subcommand per study.
+"""Replay or re-solve? The data engine's two moves side by side (docs/replay.md), a subcommand per study.
 
     python -m tools.replay compare --seeds 5         PushT, the chapter's recipe: what each move's demos
                                                      buy BC -> OUT/replay_compare.json
     python -m tools.replay compare --sigma 0.5 1 2   PushT: yields as the perturbation grows -> replay_sigma.*
-    python -m tools.replay yield --seeds 3           yield by task (PushT, ALOHA, gym-pusht) and mode
-                                                     -> OUT/replay_yield.json
-    python -m tools.replay value --task T --seeds 3  what grown demos buy BC on ALOHA or gym-pusht
-                                                     -> OUT/T_value.json
+    python -m tools.replay yield --seeds 3           yield by task and mode, every robot -> replay_yield.json
+    python -m tools.replay value --task T --seeds 3  what grown demos buy BC, ALOHA or gym-pusht -> T_value
 
-`python -m tools.replay SUBCOMMAND --help` says what each one does and takes. Each checks its --out before
-any work: an earlier run's result there may be replaced, a file of the user's never.
-
-Exit codes: 0 ok, 2 bad input (one `error:` line).
+`SUBCOMMAND --help` says what each does. Each checks its --out first: an earlier run's result there may be
+replaced, a user's file never. Exit codes: 0 ok, 2 bad input (one `error:` line).
 """
 
 from __future__ import annotations
@@ -24,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+import bc_recipe as bc
 import datagen
 from ch37 import ROOT, errors
 from ch37.cli import pick_device
@@ -39,6 +35,7 @@ from datagen.pusher import PUSHER, Pusher
 from datagen.pusher import WHOLE as PUSHER_WHOLE
 from datagen.pusht import BY_CONTACT, BY_CONTACT_BLOCK, PushT
 from datagen.task import Source, Task, known_tasks
+from lerobot_v3.dataset import load_arrays
 from tools.common import check_results, parser, provenance, rel, subcommands, write_result
 
 POS_SIGMA, YAW_SIGMA = DEFAULTS["aug_pos_sigma"], DEFAULTS["aug_yaw_sigma"]  # m, rad
@@ -47,13 +44,11 @@ POS_SIGMA, YAW_SIGMA = DEFAULTS["aug_pos_sigma"], DEFAULTS["aug_yaw_sigma"]  # m
 def pooled_and_differences(rows: list[dict], n_eval: int, arms, pairs, signs: bool = False) -> dict:
     """Each arm's successes pooled over seeds (Wilson 95%), and each pair's paired differences (hi - lo per
     seed, their mean; with `signs` how many are positive and negative)."""
-    from bc_recipe import wilson
-
     n = n_eval * len(rows)
     pooled, diffs = {}, {}
     for a in arms:
         k = sum(round(r["arms"][a]["success"] * n_eval) for r in rows)
-        pooled[a] = {"successes": k, "episodes": n, "rate": k / n, "ci95": wilson(k / n, n)}
+        pooled[a] = {"successes": k, "episodes": n, "rate": k / n, "ci95": bc.wilson(k / n, n)}
     for hi, lo in pairs:
         d = [r["arms"][hi]["success"] - r["arms"][lo]["success"] for r in rows]
         diffs[f"{hi}_vs_{lo}"] = {"per_seed": d, "mean": float(np.mean(d))}
@@ -80,8 +75,6 @@ def config(smoke: bool) -> dict:
 
 def source_set(out: Path, seed: int, episodes: int, quiet: bool) -> dict:
     """The chapter's PushT source demos of `seed` (generated once under OUT/demos, then read back)."""
-    from lerobot_v3.dataset import load_arrays
-
     path = out / "demos" / f"pusht_seed{seed}_ep{episodes}"
     noise = PUSHT.default_noise
     datagen.ensure_demos(
@@ -93,9 +86,6 @@ def source_set(out: Path, seed: int, episodes: int, quiet: bool) -> dict:
 def grow(out: Path, mode: str, sources: dict, seed: int, c: dict, workers: int) -> tuple[dict, dict]:
     """The kept set of `mode` written under OUT/demos and read back (training reads what is on disk),
     and its row: attempts, yield, failures by reason, start coverage."""
-    import bc_recipe as bc
-    from lerobot_v3.dataset import load_arrays
-
     t = time.perf_counter()
     how = Perturbation(seed=seed, **SIGMAS)
     kept, attempts, failures = datagen.grow(
@@ -138,8 +128,6 @@ def train_and_evaluate(
     """{arm: its demos, frames, success, final loss}: the arms of `data` ({arm: (states, actions, ...)})
     trained side by side from one init (the chapter's recipe at c's sizes) for `steps`, each rolled out on
     the seed's held-out starts of `task` (None: the lesson's PushT env, its default shapes)."""
-    import bc_recipe as bc
-
     shapes = {} if task is None else dict(act_dim=task.spec.act_dim, obs_dim=task.spec.obs_dim)
     init = bc.init_weights(c["hidden_dim"], seed, **shapes)
     hp = dict(batch_size=c["batch_size"], lr=DEFAULTS["lr"], seed=seed, device=device)
@@ -165,8 +153,6 @@ def train_arms(data: dict, seed: int, c: dict, workers: int) -> dict:
 
 def compare_seed(out: Path, seed: int, c: dict, workers: int, quiet: bool) -> dict:
     """One seed: both modes grown from its source demos, then the four arms trained and evaluated."""
-    import bc_recipe as bc
-
     t0 = time.perf_counter()
     src = source_set(out, seed, c["source_episodes"], quiet)
     sources = datagen.sources(src)
@@ -193,8 +179,6 @@ def summarize(rows: list[dict], eval_episodes: int) -> dict:
 
 def sigma_row(srcs: dict, m: float, mode: str, attempts: int, workers: int) -> dict:
     """`attempts` attempts per source demo of every seed in `srcs` at m x the chapter's sigmas."""
-    from bc_recipe import wilson
-
     t = time.perf_counter()
     results, shift = [], []  # shift: m, from each kept start's block to its source start's
     for s, sources in srcs.items():
@@ -206,7 +190,7 @@ def sigma_row(srcs: dict, m: float, mode: str, attempts: int, workers: int) -> d
                 shift.append(math.hypot(*(r.episode["aug.start"][0][:2] - sources[e].states[0][2:4])))
     n, kept = len(results), len(shift)
     row = {"multiplier": m, "pos_sigma": m * POS_SIGMA, "yaw_sigma": m * YAW_SIGMA, "mode": mode}
-    row |= {"attempts": n, "kept": kept, "yield": kept / n, "ci95": wilson(kept / n, n)}
+    row |= {"attempts": n, "kept": kept, "yield": kept / n, "ci95": bc.wilson(kept / n, n)}
     reasons = [r.reason for r in results]
     row["failures"] = {why: reasons.count(why) for why in PUSHT.failures[mode]}
     stats = {"median": np.median, "max": np.max}
