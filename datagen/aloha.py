@@ -24,7 +24,7 @@ The only engine module that imports aloha_env and its expert.
     nearest    the source whose cube and target start nearest (object_distance)
 
 Aloha(subtasks=WHOLE) replays the whole demo as one segment with both arms relative to the cube:
-MimicGen's move without its subtasks, for contrast (tools/replay_yield.py).
+MimicGen's move without its subtasks, for contrast (tools.replay yield).
 """
 
 from __future__ import annotations

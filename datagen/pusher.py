@@ -80,7 +80,7 @@ SUBTASKS = (  # the engine's: the approach relative to the object, then the push
     Subtask("approach", ("object",), ends="held"),
     Subtask("push", ("object",), bridge=False, onto=("goal",)),
 )
-WHOLE = (Subtask("push", ("object",)),)  # MimicGen's move without subtasks, for contrast (tools.replay_yield)
+WHOLE = (Subtask("push", ("object",)),)  # MimicGen's move without subtasks, for contrast (tools.replay yield)
 
 
 def _pose(position) -> np.ndarray:

@@ -19,7 +19,7 @@ signal: pusht_env.t_signed_distance within PUSHER_RADIUS + CONTACT_TOL) into an 
 block and a push whose frame slides from the block onto the target (our reading of "relative to the block
 and the target": MimicGen gives every subtask one object, PushT's push has two, the block it moves and the
 target it must end on); PushT(subtasks=BY_CONTACT_BLOCK) keeps the push relative to the block alone.
-tools/replay_yield.py studies both; the engine's --aug_mode replay uses the one segment (PUSHT).
+tools/replay.py (yield) studies both; the engine's --aug_mode replay uses the one segment (PUSHT).
 """
 
 from __future__ import annotations

@@ -280,10 +280,10 @@ def test_pusht_nearest_weighs_yaw_by_the_success_tolerances():
 
 
 def test_replay_yield_tool_counts_every_attempt_of_every_cell(tmp_path):
-    from tools import replay_yield
+    from tools import replay as replay_yield
 
     argv = ["--seeds", "1", "--sources", "2", "--attempts", "1", "--aloha_sigma", "2", "--out", str(tmp_path)]
-    assert replay_yield.main(argv) == 0
+    assert replay_yield.yield_main(argv) == 0
     res = json.loads((tmp_path / "replay_yield.json").read_text())
     rows = {(r["task"], r["mode"], r["multiplier"]): r for r in res["rows"]}
     tasks = replay_yield.DEFAULT_TASKS  # pusher only on request (tests/test_pusher_task.py's own size)

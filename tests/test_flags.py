@@ -15,7 +15,7 @@ import gen_demos
 import scale_lab
 from ch37 import config
 from ch37.errors import DataError
-from tools import lerobot_eval
+from tools import lerobot as lerobot_eval  # its Args: `python -m tools.lerobot eval`'s flags
 
 # the groups several commands take (Chapter is the lesson's experiment: another command's --seed or
 # --eval_episodes is its own knob, with its own default, and is checked by name below)

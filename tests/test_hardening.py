@@ -399,14 +399,14 @@ CASES = [
     # issue 31 #4: the LeRobot lab's flags go through the one checker, its --out through the one error path
     (
         "lab-seeds-negative",
-        lambda tmp, ref: (["-m", "tools.lerobot_lab", "--seeds", "-1", "--out", tmp / "ll"], [], None),
+        lambda tmp, ref: (["-m", "tools.lerobot", "lab", "--seeds", "-1", "--out", tmp / "ll"], [], None),
         2,
         "--seeds must be >= 0, got -1",
     ),
     (
         "lab-out-is-a-file",
         lambda tmp, ref: (
-            ["-m", "tools.lerobot_lab", "--seeds", "0", "--out", _file(tmp)],
+            ["-m", "tools.lerobot", "lab", "--seeds", "0", "--out", _file(tmp)],
             [tmp / "afile"],
             None,
         ),
@@ -424,13 +424,14 @@ CASES = [
         2,
         "the Hugging Face cache",
     ),
-    # issue 42 #1: tools.value's --out holding the user's own aloha_value.json; a bad --device up front
+    # issue 42 #1: tools.replay value's --out holding the user's own aloha_value.json; a bad --device up front
     (
         "aloha-value-out-holds-users-json",
         lambda tmp, ref: (
             [
                 "-m",
-                "tools.value",
+                "tools.replay",
+                "value",
                 "--smoke",
                 "--seeds",
                 "1",
@@ -446,7 +447,7 @@ CASES = [
     (
         "aloha-value-device-bogus",
         lambda tmp, ref: (
-            ["-m", "tools.value", "--smoke", "--device", "bogus", "--out", tmp / "av"],
+            ["-m", "tools.replay", "value", "--smoke", "--device", "bogus", "--out", tmp / "av"],
             [],
             None,
         ),
@@ -1122,10 +1123,10 @@ def _info_edited(edit, command="augment"):
 
 
 def _tool_over_users_result(name, command):
-    """A tool (`command`: "-m tools.X flags", bench_engine's --src the reference set) whose --out holds
+    """A tool (`command`: "-m tools.X flags", bench engine's --src the reference set) whose --out holds
     the user's own file `name`."""
     return lambda tmp, ref: (
-        [*command.split(), *(["--src", ref["pusht"]] if "bench_engine" in command else [])]
+        [*command.split(), *(["--src", ref["pusht"]] if "bench engine" in command else [])]
         + ["--out", _user_result(tmp, name)],
         [tmp / "u" / name],
         None,
@@ -1164,21 +1165,21 @@ ISSUE48_CASES = [
     (
         "replay-yield-out-holds-users-json",
         _tool_over_users_result(
-            "replay_yield.json", "-m tools.replay_yield --tasks pusht --seeds 1 --sources 1 --attempts 1"
+            "replay_yield.json", "-m tools.replay yield --tasks pusht --seeds 1 --sources 1 --attempts 1"
         ),
         2,
         "replay_yield.json exists and was not written by this tool; pass another --out",
     ),
     (
         "replay-compare-out-holds-users-json",
-        _tool_over_users_result("replay_compare.json", "-m tools.replay --smoke --seeds 1"),
+        _tool_over_users_result("replay_compare.json", "-m tools.replay compare --smoke --seeds 1"),
         2,
         "replay_compare.json exists and was not written by this tool; pass another --out",
     ),
     (
         "replay-sigma-out-holds-users-json",
         _tool_over_users_result(
-            "replay_sigma.json", "-m tools.replay --smoke --sigma 1 --attempts 1 --sigma_seeds 1"
+            "replay_sigma.json", "-m tools.replay compare --smoke --sigma 1 --attempts 1 --sigma_seeds 1"
         ),
         2,
         "replay_sigma.json exists and was not written by this tool; pass another --out",
@@ -1186,7 +1187,7 @@ ISSUE48_CASES = [
     (
         "replay-sigma-out-holds-users-png",
         _tool_over_users_result(
-            "replay_sigma.png", "-m tools.replay --smoke --sigma 1 --attempts 1 --sigma_seeds 1"
+            "replay_sigma.png", "-m tools.replay compare --smoke --sigma 1 --attempts 1 --sigma_seeds 1"
         ),
         2,
         "replay_sigma.png exists and was not written by this tool; pass another --out",
@@ -1195,7 +1196,7 @@ ISSUE48_CASES = [
         "bench-engine-costs-out-holds-users-json",
         _tool_over_users_result(
             "bench_engine_costs.json",
-            "-m tools.bench_engine --costs_only --cost_repeats 1 --cost_attempts_per_demo 1",
+            "-m tools.bench engine --costs_only --cost_repeats 1 --cost_attempts_per_demo 1",
         ),
         2,
         "bench_engine_costs.json exists and was not written by this tool; pass another --out",
@@ -1203,7 +1204,7 @@ ISSUE48_CASES = [
     (
         "bench-engine-out-holds-users-json",
         _tool_over_users_result(
-            "bench_engine.json", "-m tools.bench_engine --cost_repeats 0 --sizes 1 --executors local"
+            "bench_engine.json", "-m tools.bench engine --cost_repeats 0 --sizes 1 --executors local"
         ),
         2,
         "bench_engine.json exists and was not written by this tool; pass another --out",
@@ -1240,8 +1241,8 @@ def test_out_inside_the_source_is_refused_before_anything_is_written_there(ref, 
 
 
 def test_a_tools_figure_is_replaced_only_beside_its_own_result(tmp_path):
-    """Issue 48 #12: a figure (tools.replay's replay_sigma.png) has no mark of its own: it may be replaced
-    beside a result of the tool, never where the user's file of that name stands alone."""
+    """Issue 48 #12: a figure (tools.replay compare's replay_sigma.png) has no mark of its own: it may be
+    replaced beside a result of the tool, never where the user's file of that name stands alone."""
     from ch37.errors import DataError
 
     png = tmp_path / "replay_sigma.png"
@@ -1250,3 +1251,14 @@ def test_a_tools_figure_is_replaced_only_beside_its_own_result(tmp_path):
         ownership.check_own_result(tmp_path / "replay_sigma.json", "replay_sigma", beside=[png])
     (tmp_path / "replay_sigma.json").write_text(json.dumps({"kind": "replay_sigma"}))
     ownership.check_own_result(tmp_path / "replay_sigma.json", "replay_sigma", beside=[png])
+
+
+@pytest.mark.parametrize("task", ["pusher", "gym_pusht"])
+def test_bench_engine_refuses_a_task_it_cannot_measure_in_one_line(tmp_path, task):
+    """Issue 51 #2: `python -m tools.bench engine --task pusher` (or gym_pusht) made a source set, then
+    ended in a traceback: its in-process costs read a set's observation.state as the task's whole state,
+    which only PushT's and ALOHA's sets are. One `error:` line, exit 2, before anything is made."""
+    p = run("-m", "tools.bench", "engine", "--task", task, "--costs_only", "--out", tmp_path / "o")
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(err) == 1 and f"invalid choice: '{task}'" in err[0], p.stderr[-2000:]
+    assert not (tmp_path / "o").exists()

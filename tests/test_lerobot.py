@@ -1,5 +1,5 @@
 """LeRobot's own policies on our sets: lerobot-train reads a set we write as it is (PushT and ALOHA,
-generated or grown), and a checkpoint it writes is rolled out in our PushT env by tools.lerobot_eval.
+generated or grown), and a checkpoint it writes is rolled out in our PushT env by tools.lerobot eval.
 Training runs only under -m slow."""
 
 import json
@@ -103,7 +103,8 @@ def test_a_lerobot_checkpoint_rolls_out_in_our_env(grown, tmp_path):
     out = tmp_path / "eval.json"
     p = run_script(
         "-m",
-        "tools.lerobot_eval",
+        "tools.lerobot",
+        "eval",
         "--policy",
         model,
         "--seed",
@@ -127,7 +128,7 @@ def test_a_lerobot_checkpoint_rolls_out_in_our_env(grown, tmp_path):
 def test_lerobot_eval_bad_policy_is_one_line(tmp_path):
     (tmp_path / "config.json").write_text('{"type": "no_such_policy"}')
     for policy in (tmp_path / "absent", tmp_path):
-        p = run_script("-m", "tools.lerobot_eval", "--policy", policy, "--episodes", "1", check=False)
+        p = run_script("-m", "tools.lerobot", "eval", "--policy", policy, "--episodes", "1", check=False)
         assert p.returncode == 2 and p.stderr.strip().startswith("error:"), p.stderr
         assert len(p.stderr.strip().splitlines()) == 1
 
@@ -162,7 +163,8 @@ def test_lerobot_eval_of_a_checkpoint_with_nan_weights_is_one_line(tmp_path):
     out = tmp_path / "eval.json"
     p = run_script(
         "-m",
-        "tools.lerobot_eval",
+        "tools.lerobot",
+        "eval",
         "--policy",
         model,
         "--episodes",
@@ -180,7 +182,7 @@ def test_lerobot_eval_of_a_checkpoint_with_nan_weights_is_one_line(tmp_path):
 
 
 def test_lerobot_lab_samples_are_lerobot_datasets_items(grown):
-    """tools.lerobot_lab's own loader gives, for every training sample, what lerobot-train's loader
+    """tools.lerobot lab's own loader gives, for every training sample, what lerobot-train's loader
     gives: LeRobotDataset's item (observation windows, action chunk, pad flags) at the frames its
     EpisodeAwareSampler draws."""
     import numpy as np
@@ -188,7 +190,7 @@ def test_lerobot_lab_samples_are_lerobot_datasets_items(grown):
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     from lerobot_v3.dataset import ENV_STATE_KEY, load_arrays
-    from tools import lerobot_lab
+    from tools import lerobot as lerobot_lab
 
     info = json.loads((grown / "meta" / "info.json").read_text())
     a = load_arrays(grown, keys=("observation.state", "action", "episode_index"))
@@ -231,7 +233,17 @@ def test_lerobot_lab_samples_are_lerobot_datasets_items(grown):
 def test_lerobot_lab_runs_end_to_end(tmp_path):
     """A few steps on each point and one start: the pipeline, its JSON and the saved checkpoint."""
     p = run_script(
-        "-m", "tools.lerobot_lab", "--steps", "3", "--seeds", "0", "--eval_episodes", "1", "--out", tmp_path
+        "-m",
+        "tools.lerobot",
+        "lab",
+        "--steps",
+        "3",
+        "--seeds",
+        "0",
+        "--eval_episodes",
+        "1",
+        "--out",
+        tmp_path,
     )
     r = json.loads((tmp_path / "lerobot_lab.json").read_text())
     assert set(r["table"]) == {"source", "fresh", "resolve", "exchange_rate"}, p.stdout
@@ -247,7 +259,7 @@ def test_lerobot_lab_checkpoint_rollouts_leave_the_training_as_it_was(grown):
     import numpy as np
 
     from lerobot_v3.dataset import load_arrays
-    from tools import lerobot_lab
+    from tools import lerobot as lerobot_lab
 
     a = load_arrays(grown, keys=("observation.state", "action", "episode_index"))
     episodes = [

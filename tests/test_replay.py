@@ -274,14 +274,14 @@ def test_augment_demos_replay_reports_reasons(tmp_path):
 
 
 def test_tools_replay_smoke_feeds_meta_yaml(tmp_path):
-    """python -m tools.replay (smoke) writes both files; tools.meta turns them into meta.yaml's
+    """python -m tools.replay compare (smoke) writes both files; tools.meta turns them into meta.yaml's
     `replay` section, marked provisional, and leaves the section as found when they are absent."""
     import yaml
     from conftest import run_script
     from test_packaging import sweep_files
 
     out = tmp_path / "replay"
-    run_script("-m", "tools.replay", "--smoke", "--seeds", "1", "--sigma", "1", "--attempts", "2",
+    run_script("-m", "tools.replay", "compare", "--smoke", "--seeds", "1", "--sigma", "1", "--attempts", "2",
                "--sigma_seeds", "1", "--out", out)  # fmt: skip
     cmp_ = json.loads((out / "replay_compare.json").read_text())
     (row,) = cmp_["rows"]

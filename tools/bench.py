@@ -1,32 +1,87 @@
-"""Where the time of one scale_data.py run goes. Prints figures; asserts nothing.
+"""How fast the chapter's parts run, and where the time goes: one entry point, a subcommand per part.
 
-    python -m tools.bench                 # the default run (seed 0), --no-rerun --no-cache
-    python -m tools.bench --smoke         # the smoke run
-    python -m tools.bench --repeat 3      # median of 3 runs per phase
-    python -m tools.bench --epochs 100    # other flags go to scale_data.py
+    python -m tools.bench lesson [--smoke]  where the time of one scale_data.py run goes
+    python -m tools.bench engine            the data engine: validated demos/s local vs Ray, peak memory,
+                                            against its own physics (writes OUT/bench_engine.json)
+    python -m tools.bench envs              speed and competence of the two embodiments and their experts
+    python -m tools.bench gym_pusht         the scripted expert on LeRobot's own PushT, by its success rule
+    python -m tools.bench kernels           what the kernel path costs the training, and its bits
+    python -m tools.bench writer            the one-pass LeRobot v3 writer vs LeRobot's per-frame path
 
-It runs scale_data.py in this process as `python scale_data.py` would (runpy), charges the time
-between two lines of the script's own top level to the region of the first (sys.monitoring line events
-on that code only, so nothing else slows down), and wraps the shared functions the script calls (demo
-generation, dataset loading and writing, the engine's attempts, bc_recipe's training and rollouts) to
-attribute their time. For training it reports achieved GFLOP/s next to a dense fp32 matmul measured in
-the same process, i.e. how close training runs to the machine's limit.
+`SUBCOMMAND --help` says what each measures. One timing path: alternate() (every variant once a round,
+the order reversed every other round, medians), in_fresh_process() where a setting is read once per
+process. Run them alone: another busy process moves the figures. Exit codes: 0 ok, 2 bad input.
 """
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import importlib
+import json
+import math
+import os
 import resource
 import runpy
+import secrets
+import shutil
+import socket
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
+import warnings
+from collections.abc import Callable
 from pathlib import Path
 
-from ch37 import errors
-from tools.common import parse_regions, parser
+# numpy and torch are imported where used: `lesson` times torch's import (numpy's included) itself
+from ch37 import ROOT, config, errors
+from ch37.config import DEFAULTS, check
+from ch37.errors import DataError
+from ch37.ownership import is_ours, read_stamp
+from tools.common import META, check_results, parse_regions, parser, provenance, subcommands, write_result
 
+
+# --- The one timing path --------------------------------------------------------------------------------
+def clock(fn: Callable, *args, **kwargs) -> tuple[float, object]:
+    """(wall seconds, result) of one call."""
+    t0 = time.perf_counter()
+    result = fn(*args, **kwargs)
+    return time.perf_counter() - t0, result
+
+
+def alternate(measure: dict[str, Callable[[int], object]], rounds: int, after_round=None) -> dict[str, list]:
+    """{name: [what measure[name](round) returned, one per round]}: every variant once per round, in the
+    order given on even rounds and reversed on odd ones (a machine that speeds up or slows down over the
+    run charges every variant alike); after_round(round, so_far) runs after each round (a progress line,
+    a check across the variants)."""
+    got: dict[str, list] = {name: [] for name in measure}
+    for r in range(rounds):
+        for name in list(measure) if r % 2 == 0 else reversed(list(measure)):
+            got[name].append(measure[name](r))
+        if after_round:
+            after_round(r, got)
+    return got
+
+
+def medians(got: dict[str, list[float]]) -> dict[str, float]:
+    return {name: float(statistics.median(v)) for name, v in got.items()}
+
+
+def in_fresh_process(
+    code: str, args: list, env: dict | None = None, what: str = "the timing process"
+) -> dict:
+    """Run `code` in a new Python (its arguments `args`, environment `env`); the JSON of its last line."""
+    p = subprocess.run(
+        [sys.executable, "-c", code, *map(str, args)], cwd=ROOT, env=env, capture_output=True, text=True
+    )
+    if p.returncode != 0:
+        raise DataError(f"{what} failed: {(p.stderr.strip().splitlines() or [''])[-1]}")
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+# --- lesson: where the time of one scale_data.py run goes -----------------------------------------------
 MON = sys.monitoring
 
 
@@ -94,7 +149,7 @@ def run_once(script: Path, argv: list[str]) -> dict:
     import bc_recipe
     import datagen
     import lerobot_v3
-    from datagen import engine, task
+    from datagen import demos, engine
 
     inner: dict[str, float] = {}  # calls inside the regions: "of which" lines
     facts: dict = {"train_steps": {}, "train_rows": {}}
@@ -124,7 +179,7 @@ def run_once(script: Path, argv: list[str]) -> dict:
     patches = [  # (module, name, phase): the script looks these up on their module when it calls them
         (datagen, "ensure_demos", "demo generation (or cache check)"),  # the faces the lesson imports
         (lerobot_v3, "load_arrays", "load LeRobot sets (all three)"),
-        (task, "write_dataset", "write augmented LeRobot set"),  # datagen.save looks it up there
+        (demos, "write_dataset", "write augmented LeRobot set"),  # datagen.save looks it up there
         (engine, "run_attempts", "augmentation attempts"),
         (bc_recipe, "evaluate", "rollouts (all arms)"),
         (bc_recipe, "train", "train"),
@@ -192,24 +247,773 @@ def report(runs: list[dict], walls: list[float], import_s: float, title: str) ->
     print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
 
 
-def main(argv: list[str]) -> int:
-    p = parser("bench", __doc__)
-    p.add_argument("--smoke", action="store_true", help="benchmark the smoke run")
-    p.add_argument("--repeat", type=int, default=1, help="runs per phase; the median is printed")
-    p.add_argument("--seed", type=int, default=0)
+def lesson_main(argv: list[str]) -> int:
+    """Where the time of one scale_data.py run goes. Prints figures; asserts nothing.
+
+        python -m tools.bench lesson                 # the default run (seed 0), --no-rerun --no-cache
+        python -m tools.bench lesson --smoke         # the smoke run
+        python -m tools.bench lesson --repeat 3      # median of 3 runs per phase
+        python -m tools.bench lesson --epochs 100    # other flags go to scale_data.py
+
+    It runs scale_data.py in this process as `python scale_data.py` would (runpy), charges the time
+    between two lines of the script's own top level to the region of the first (sys.monitoring line events
+    on that code only, so nothing else slows down), and wraps the shared functions the script calls (demo
+    generation, dataset loading and writing, the engine's attempts, bc_recipe's training and rollouts) to
+    attribute their time. For training it reports achieved GFLOP/s next to a dense fp32 matmul measured in
+    the same process, i.e. how close training runs to the machine's limit.
+    """
+    p = parser("bench lesson", lesson_main.__doc__)
+    arg = p.add_argument
+    arg("--smoke", action="store_true", help="benchmark the smoke run")
+    arg("--repeat", type=int, default=1, help="runs per phase; the median is printed")
+    arg("--seed", type=int, default=0)
     a, extra = p.parse_known_args(argv)  # anything else goes to scale_data.py, e.g. --epochs 100
-    t0 = time.perf_counter()
-    importlib.import_module("torch")  # here, after the flags: its import time is a phase of the report
-    import_s = time.perf_counter() - t0
-    runs, walls = [], []
+    import_s, _ = clock(importlib.import_module, "torch")  # after the flags: a phase of the report
     with tempfile.TemporaryDirectory(prefix="ch37-bench-") as tmp:
-        for i in range(a.repeat):
+
+        def run(i: int) -> dict:
             args = ["--seed", str(a.seed), "--no-rerun", "--no-cache", "--out", f"{tmp}/run{i}"]
-            t0 = time.perf_counter()
-            runs.append(run_once(a.script, args + ["--smoke"] * a.smoke + extra))
-            walls.append(time.perf_counter() - t0)
-    report(runs, walls, import_s, f"{a.script.name} {'--smoke' if a.smoke else '(default)'} seed {a.seed}")
+            wall, got = clock(run_once, a.script, args + ["--smoke"] * a.smoke + extra)
+            return got | {"wall": wall}
+
+        runs = alternate({"run": run}, a.repeat)["run"]
+    title = f"{a.script.name} {'--smoke' if a.smoke else '(default)'} seed {a.seed}"
+    report(runs, [r["wall"] for r in runs], import_s, title)
     return 0
+
+
+# --- engine: validated demos per second of the data engine, against its own physics ---------------------
+SOURCE_EPISODES = DEFAULTS["source_episodes"]
+TABLE = {  # printed column: row key
+    "wall s": "wall_s",
+    "gen s": "generate_s",
+    "write s": "write_s",
+    "merge s": "merge_s",
+    "merge %": "merge_pct",
+    "demos/s": "demos_per_s",
+    "/worker": "generate_demos_per_s_per_worker",
+    "phys s": "physics_s",
+    "x phys": "gen_over_physics",
+}
+KIND, COSTS = "bench_engine", "bench_engine_costs"  # each JSON's "kind" and name: a re-run replaces its own
+EXECUTORS = ("local", "ray", "ray2")  # ray2: two Ray nodes on this machine, joined by address
+# the tasks it measures: its in-process costs read a set's observation.state as the task's whole state, which
+# PushT's and ALOHA's sets are (pusher's and gym_pusht's keep part of it in observation.environment_state)
+MEASURED = ("aloha", "pusht")
+FLOOR_REPEATS = 3  # a run's floor is the least of 3: bursts of load on this machine slow one by up to 1.7x
+
+
+def tree_digest(root: Path) -> str:
+    """sha256 over every file of a run but its report (which holds timings)."""
+    h = hashlib.sha256()
+    for p in sorted(root.rglob("*")):
+        if p.is_file() and p.name != "generation_report.json":
+            h.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes())
+    return h.hexdigest()
+
+
+def run_sampled(cmd: list[str], env: dict | None = None) -> dict:
+    """Run `cmd`; wall seconds and peak RSS (MB) of the driver, of the largest process, of the tree
+    (the tree: the driver's descendants; a joined cluster's workers are not its children)."""
+    import psutil
+
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    root = psutil.Process(proc.pid)
+    peak = {"driver": 0, "largest": 0, "tree": 0}
+    while proc.poll() is None:
+        try:
+            procs = [root, *root.children(recursive=True)]
+        except psutil.NoSuchProcess:
+            break
+        rss = {}
+        for p in procs:
+            try:
+                rss[p.pid] = p.memory_info().rss
+            except psutil.Error:
+                pass
+        peak["driver"] = max(peak["driver"], rss.get(proc.pid, 0))
+        peak["largest"] = max(peak["largest"], max(rss.values(), default=0))
+        peak["tree"] = max(peak["tree"], sum(rss.values()))
+        time.sleep(0.2)
+    out, err = proc.communicate()
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        last = (err.strip().splitlines() or [""])[-1]
+        raise DataError(f"{' '.join(cmd[1:])} exited {proc.returncode}: {last}")
+    return {"wall_s": wall, **{f"peak_rss_{k}_mb": v / 2**20 for k, v in peak.items()}, "stdout": out}
+
+
+@contextlib.contextmanager
+def two_ray_nodes(workers: int):
+    """A Ray cluster of two nodes on this machine, as an operator starts one: its address, then stopped.
+    `ray start` enables token authentication, so the nodes and the run that joins get RAY_AUTH_MODE=token
+    and this cluster's own token (none is in ~/.ray/auth_token on a fresh machine)."""
+    ray = [str(Path(sys.executable).with_name("ray"))]
+    env = os.environ | {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32)}
+    with socket.socket() as s:  # a free port for the head's GCS
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    cpus = [str(max(1, workers // 2)), str(max(1, workers - workers // 2))]
+    quiet = dict(env=env, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        head = ["--head", f"--port={port}", "--include-dashboard=false"]
+        for where, n in ((head, cpus[0]), ([f"--address=127.0.0.1:{port}"], cpus[1])):
+            subprocess.run([*ray, "start", *where, f"--num-cpus={n}", "--disable-usage-stats"], **quiet)
+        yield f"127.0.0.1:{port}", env
+    finally:
+        subprocess.run(
+            [*ray, "stop", "--force"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        )
+
+
+def remove_run(run_dir: Path) -> None:
+    """Remove an engine run this tool made (resume.foreign finds nothing else in it); refuse otherwise."""
+    from datagen import resume
+
+    if not run_dir.exists():
+        return
+    stamp = read_stamp(run_dir)
+    if not is_ours(stamp) or stamp.get("kind") != "engine" or resume.foreign(run_dir, stamp):
+        raise DataError(f"{run_dir} holds files this tool did not write; move it elsewhere")
+    shutil.rmtree(run_dir)
+
+
+def point(src: Path, out: Path, n: int, executor: str, a) -> dict:
+    """One real augment_demos.py run of n demos on `executor`, timed from outside: its table row."""
+    from datagen import known_tasks
+
+    workers, shard_size = a.workers, a.shard_size
+    run_dir = out / "runs" / f"n{n}-{executor}"
+    remove_run(run_dir)  # an earlier run of this tool; anything else is refused
+    cmd = [sys.executable, str(a.checkout / "augment_demos.py"), "--src", str(src), "--out", str(run_dir)]
+    # --per_demo: augment_demos' --attempts_per_demo under the spelling every --checkout understands
+    cmd += ["--per_demo", str(math.ceil(n / SOURCE_EPISODES)), "--workers", str(workers), "--quiet"]
+    cmd += ["--shard_size", str(shard_size)] if shard_size else []
+    cmd += ["--seed", str(a.seed), "--mode", a.mode]
+    if executor == "ray2":
+        with two_ray_nodes(workers) as (address, env):
+            m = run_sampled([*cmd, "--ray", address], env)
+    else:
+        m = run_sampled(cmd + (["--ray"] if executor == "ray" else []))
+    rep = json.loads((run_dir / "generation_report.json").read_text())
+    gen, start, merge = rep["seconds_generate"], rep["seconds_start_executor"], rep["seconds_merge"]
+    shards, wall = rep["shards"]["total"], m.pop("wall_s")
+    row = {"demos_requested": n, "executor": executor, "workers": workers, "shards": shards}
+    row |= {k: rep[k] for k in ("attempts", "kept", "yield", "frames")} | {"wall_s": wall}
+    row |= {"generate_s": gen, "start_executor_s": start, "merge_s": merge}  # start_executor_s: of generate_s
+    row |= {"write_s": rep.get("seconds_write", math.nan)}  # worker seconds, inside generate_s
+    row |= {
+        "other_s": wall - gen - merge,
+        "demos_per_s": rep["kept"] / wall,
+        "merge_s_per_shard": merge / shards,
+        "merge_s_per_demo": merge / max(rep["kept"], 1),
+        "merge_pct": 100 * merge / wall,
+    }
+    row |= {"generate_demos_per_s_per_worker": rep["kept"] / (gen - start) / workers}
+    row |= {"shard_size": rep["settings"]["shard_size"], "sha256": tree_digest(run_dir)}
+    # the run's generation worker-seconds (its shard writes included) over its kept frames' physics
+    kept = rep["kept"]
+    row["physics_s"] = (
+        physics_floor(known_tasks()[a.task], kept_runs(run_dir), FLOOR_REPEATS) if kept else math.nan
+    )
+    row["gen_over_physics"] = (gen - start) * workers / row["physics_s"]
+    row |= {"summary": m.pop("stdout").strip().splitlines()[-1], **m}  # m: the peak RSS
+    remove_run(run_dir)
+    return row
+
+
+def physics_floor(task, runs, repeats: int = 1) -> float:
+    """Seconds the env alone takes over kept frames: for each (start, actions (T, act_dim)) in `runs`,
+    task.place(env, start) then env.step per action; no expert, no recording, no writing. The least
+    of `repeats` passes."""
+    env = task.make_env()
+    runs = [([float(v) for v in start], list(actions)) for start, actions in runs]
+
+    def steps():
+        for start, actions in runs:
+            task.place(env, start)
+            for act in actions:
+                env.step(act)
+
+    return min(clock(steps)[0] for _ in range(repeats))
+
+
+def kept_runs(root: Path) -> list:
+    """(recorded start, recorded actions) of every episode of an engine run's merged set."""
+    import numpy as np
+
+    from lerobot_v3.dataset import load_arrays
+
+    arrays = load_arrays(root, keys=("episode_index", "action", "aug.start"))
+    cuts = np.flatnonzero(np.diff(arrays["episode_index"])) + 1
+    return [(s[0], a) for s, a in zip(np.split(arrays["aug.start"], cuts), np.split(arrays["action"], cuts))]
+
+
+def per_demo_costs(
+    task, src: Path, attempts_per_demo: int, seed: int, repeats: int, mode: str = "resolve"
+) -> dict:
+    """Where one core's time goes, in this process, for augment_demos.py's first attempts_per_demo
+    attempts of every source episode at `seed` in `mode`: one attempt at a time, in lockstep (where the
+    task's mode has lanes; else the same one at a time), the physics floor of the kept frames, and the
+    engine's write of the kept set; `repeats` rounds, alternated, medians."""
+    from datagen import Perturbation, engine, lockstep
+    from lerobot_v3.dataset import load_arrays
+
+    sources = engine.sources(load_arrays(src))
+    jobs = [(e, k) for e in sorted(sources) for k in range(attempts_per_demo)]
+    how = Perturbation(seed=seed, pos_sigma=DEFAULTS["aug_pos_sigma"], yaw_sigma=DEFAULTS["aug_yaw_sigma"])
+    sims = engine.Simulators()  # the envs (and plans) both sides reuse, made once
+    engine.attempt(task, sources[jobs[0][0]], 10**6, how, mode=mode, sims=sims)  # warm up
+    got = {}  # each variant's last results: lockstep's kept episodes feed the floor and the write
+
+    def one_at_a_time(_):
+        s, got["one"] = clock(
+            lambda: [engine.attempt(task, sources[e], k, how, mode=mode, sims=sims) for e, k in jobs]
+        )
+        return s
+
+    def together(_):
+        s, results = clock(lockstep.attempts_lockstep, task, sources, jobs, how, mode=mode, sims=sims)
+        got["kept"] = [r.episode for r in results if r.kept]
+        return s
+
+    def write(_):
+        with tempfile.TemporaryDirectory() as tmp:  # the engine's own writer, whatever columns it adds
+            return clock(engine.save, task, Path(tmp) / "set", got["kept"], repo_id="local/x", stamp={})[0]
+
+    def same_kept(_, __):
+        if sum(r.kept for r in got["one"]) != len(got["kept"]):
+            raise DataError("lockstep kept another set than one attempt at a time")
+
+    measure = {
+        "one_at_a_time_s": one_at_a_time,
+        "lockstep_s": together,
+        "physics_s": lambda _: physics_floor(
+            task, ((ep["aug.start"][0], ep["action"]) for ep in got["kept"])
+        ),
+        "write_s": write,
+    }
+    times = alternate(measure, repeats, after_round=same_kept)
+    med, kept = medians(times), got["kept"]
+    frames = sum(len(ep["action"]) for ep in kept)
+    return {
+        "task": task.name,
+        "mode": mode,
+        "attempts": len(jobs),
+        "kept": len(kept),
+        "frames": frames,
+        **med,
+        "runs": times,
+        "one_at_a_time_over_physics": med["one_at_a_time_s"] / med["physics_s"],
+        "lockstep_over_physics": med["lockstep_s"] / med["physics_s"],
+        "lockstep_and_write_over_physics": (med["lockstep_s"] + med["write_s"]) / med["physics_s"],
+        "physics_us_per_frame": med["physics_s"] / frames * 1e6,
+        "write_us_per_frame": med["write_s"] / frames * 1e6,
+    }
+
+
+def estimate(rows: list[dict], cores_list=(64, 1024)) -> dict:
+    """10^5 and 10^6 demos on clusters of `cores_list` cores, from the largest measured local run."""
+    big = max(r["demos_requested"] for r in rows)
+    at = {r["executor"]: r for r in rows if r["demos_requested"] == big}
+    base = at.get("local") or next(iter(at.values()))
+    rate = base["generate_demos_per_s_per_worker"]  # validated demos per second per core, write included
+    ray = at.get("ray2") or at.get("ray")
+    busy = lambda r: r["generate_s"] - r["start_executor_s"]  # noqa: E731
+    ray_factor = busy(ray) / busy(base) if ray and base is not ray else 1.0
+    fixed = (ray or base)["other_s"] + (ray or base)["start_executor_s"]  # imports, source, Ray
+    merge_per_demo = base["merge_s_per_demo"]
+    out = {
+        "measured_at_demos": big,
+        "per_core_demos_per_s": rate,
+        "ray_vs_local_generate_time": ray_factor,
+        "fixed_s": fixed,
+        "merge_s_per_demo": merge_per_demo,
+        "assumptions": [
+            f"every cluster core makes demos at this machine's measured rate per worker ({rate:.1f}/s, "
+            "write included) and shards scale perfectly (they share nothing)",
+            f"Ray's overhead on the generation is the measured ratio to the local pool ({ray_factor:.2f})",
+            f"fixed cost (imports, reading the source, starting Ray) as measured here ({fixed:.0f} s)",
+            f"the merge runs on the driver alone, linear in demos at {merge_per_demo * 1e3:.2f} ms a demo"
+            " (it places each shard once, counts the stats as it writes, and reads the numbers back"
+            " once or twice for the exact quantiles)",
+            "shard bytes reach the driver as fast as they are made (~0.4 MB per 100 demos; 10^6: ~4 GB)",
+            "yield as measured (about 1.0 for resolve)",
+        ],
+    }
+    for cores in cores_list:
+        for n in (10**5, 10**6):
+            gen = n / (rate * cores) * ray_factor
+            merge = n * merge_per_demo
+            total = fixed + gen + merge
+            out[f"{n}@{cores}"] = dict(generate_s=gen, merge_s=merge, total_s=total, demos_per_s=n / total)
+    return out
+
+
+def engine_args(argv: list[str]):
+    """engine's flags, checked; its --out refused before anything is made under it."""
+    p = parser("bench engine", engine_main.__doc__)
+    arg = p.add_argument
+    arg("--task", choices=MEASURED, default="pusht", help="the task grown (its generator's set)")
+    arg("--mode", choices=("resolve", "replay"), default="resolve", help="augment_demos.py's --mode")
+    arg("--sizes", type=int, nargs="+", default=[1000, 10000, 100000], help="demos per run")
+    arg("--executors", nargs="+", choices=EXECUTORS, default=list(EXECUTORS))
+    arg("--workers", type=int, default=os.cpu_count() or 1, help="processes / Ray CPUs")
+    arg("--shard_size", type=int, help="attempts per shard (default: augment_demos.py's)")
+    arg("--seed", type=int, default=1, help="augment_demos.py's --seed for every run and the costs")
+    arg("--cost_attempts_per_demo", type=int, default=50, help="attempts per source episode of the costs")
+    arg("--cost_repeats", type=int, default=3, help="rounds of the in-process costs (0: none)")
+    arg("--costs_only", action="store_true", help="only the in-process costs (no runs)")
+    arg("--src", type=Path, help="a set of --task (default: a 12-episode set made under --out)")
+    arg("--out", type=Path, default=ROOT / "outputs" / "bench_engine")
+    help = "the checkout whose augment_demos.py runs (default this one); another commit's for a before/after"
+    arg("--checkout", type=Path, default=ROOT, help=help)
+    a = p.parse_args(argv)
+    check(a, positive=("workers", "cost_attempts_per_demo"), non_negative=("seed", "cost_repeats"))
+    if not (a.checkout / "augment_demos.py").is_file():
+        raise DataError(f"--checkout {a.checkout} has no augment_demos.py")
+    if min(a.sizes) < 1:
+        raise DataError("--sizes must be positive")
+    check_results(a.out, COSTS if a.costs_only else KIND)  # before the source set and the runs are made
+    return a
+
+
+def engine_source(task, a) -> Path:
+    """--src, or the 12-episode set of `task` this bench makes under --out (once; then reused)."""
+    import gen_demos
+
+    src = a.src or a.out / f"src_{task.name}_seed0_ep{SOURCE_EPISODES}"
+    if a.src is None and not (src / "meta" / "info.json").exists():
+        if gen_demos.main(task, ["--episodes", str(SOURCE_EPISODES), "--out", str(src), "--quiet"]) != 0:
+            raise DataError(f"could not make the source set at {src}")
+    return src
+
+
+def engine_costs(task, src: Path, a) -> dict:
+    """per_demo_costs at --cost_* and its line ({} with --cost_repeats 0)."""
+    if not a.cost_repeats:
+        return {}
+    c = per_demo_costs(task, src, a.cost_attempts_per_demo, a.seed, a.cost_repeats, a.mode)
+    print(
+        f"this checkout, one core, {task.title} {a.mode}: {c['attempts']} attempts, {c['kept']} kept "
+        f"({c['frames']} frames), "
+        f"medians of {a.cost_repeats} in this process: one at a time {c['one_at_a_time_s']:.2f} s, "
+        f"lockstep {c['lockstep_s']:.2f} s, physics floor {c['physics_s']:.2f} s, write "
+        f"{c['write_s']:.2f} s; lockstep {c['lockstep_over_physics']:.2f}x the physics "
+        f"({c['lockstep_and_write_over_physics']:.2f}x with the write), "
+        f"one at a time {c['one_at_a_time_over_physics']:.2f}x"
+    )
+    return c
+
+
+def engine_runs(src: Path, a) -> list[dict]:
+    """point() for every size and executor, a table line each, and whether a size's bytes agreed."""
+    rows = []
+    head = " ".join(f"{h:>7s}" for h in TABLE)
+    print(f"{'demos':>6s} {'executor':8s} {'kept':>6s} {head} {'RSS MB driver/largest/tree':>27s}")
+    for n in a.sizes:
+        for ex in a.executors:
+            r = point(src, a.out, n, ex, a)
+            rows.append(r)
+            rss = f"{r['peak_rss_driver_mb']:.0f}/{r['peak_rss_largest_mb']:.0f}/{r['peak_rss_tree_mb']:.0f}"
+            cells = " ".join(f"{r[k]:7.1f}" for k in TABLE.values())
+            print(f"{n:6d} {ex:8s} {r['kept']:6d} {cells} {rss:>27s}", flush=True)
+        same = {r["sha256"] for r in rows if r["demos_requested"] == n}
+        if len(a.executors) > 1:
+            print(f"{n:6d} outputs byte-identical across {', '.join(a.executors)}: {len(same) == 1}")
+    return rows
+
+
+def print_estimate(est: dict) -> None:
+    for key, e in est.items():
+        if "@" in key:
+            n, cores = map(int, key.split("@"))
+            print(
+                f"estimate {n:>9,d} demos on {cores:>5,d} Ray cores: {e['total_s'] / 60:6.1f} min "
+                f"({e['demos_per_s']:.0f} demos/s; generate {e['generate_s'] / 60:.1f} min, "
+                f"merge {e['merge_s'] / 60:.1f} min)"
+            )
+    print("assumptions: " + "; ".join(est["assumptions"]))
+
+
+def engine_main(argv: list[str]) -> int:
+    """Validated demos per second of the data engine, end to end: local processes, Ray, two Ray nodes,
+    each beside the cost of its own physics.
+
+        python -m tools.bench engine                                 # 10^3, 10^4, 10^5; local, ray, ray2
+        python -m tools.bench engine --sizes 1000 --executors local  # quicker
+        python -m tools.bench engine --task aloha --costs_only       # where one core's time goes (ALOHA)
+
+    Each point is one real `augment_demos.py` run (re-solve + shard write + merge + stats) from a
+    12-episode gen_demos_pusht.py set, timed from outside, with the peak memory of its process tree
+    sampled every 0.2 s (psutil): the driver alone, the largest single process, and the whole tree.
+    `ray` is a private local Ray of --workers CPUs; `ray2` is a cluster of two Ray nodes on this
+    machine (`ray start --head` and a second `ray start --address`, --workers / 2 CPUs each) that the
+    run joins with `--ray ADDRESS`. Runs of one size must give the same bytes on every executor; the
+    table says whether they did. Then an estimate for 10^5 and 10^6 demos on 64 and 1,024 cores from
+    the measured per-core rate and the measured merge cost per demo (assumptions printed beside it).
+    The physics floor: the env alone stepped through the very frames a run kept, from their recorded
+    starts (aug.start, the task's place()) with their recorded actions; no expert, no recording, no
+    writing (the least of FLOOR_REPEATS passes, right after the run). A row's "x phys" is the run's
+    generation worker-seconds (the shard writes included) over that floor: 1.0 would be a generator that
+    costs only its physics. First, in this process, the same split for the first --cost_attempts_per_demo
+    attempts of every source episode: one attempt at a time (datagen.engine.attempt), in lockstep
+    (datagen.lockstep.attempts_lockstep), the floor, and the write of the kept set (datagen.engine.save),
+    each run --cost_repeats times alternated, medians. PushT and ALOHA only (MEASURED).
+    Writes OUT/bench_engine.json (default outputs/bench_engine; bench_engine_costs.json with
+    --costs_only); the runs' own folders are removed. Asserts nothing: the figures are for
+    docs/engine.md.
+    """
+    from datagen import known_tasks
+
+    a = engine_args(argv)
+    task = known_tasks()[a.task]
+    src = engine_source(task, a)
+    costs = engine_costs(task, src, a)
+    if a.costs_only:
+        result = {"kind": COSTS, "per_demo_costs": costs, "provenance": provenance(a.script)}
+        path = write_result(a.out / f"{COSTS}.json", result)
+        print(f"wrote {path}")
+        return 0
+    rows = engine_runs(src, a)
+    est = estimate(rows)
+    print_estimate(est)
+    same = {str(n): len({r["sha256"] for r in rows if r["demos_requested"] == n}) == 1 for n in a.sizes}
+    result = {
+        "kind": KIND,
+        "task": task.name,
+        "per_demo_costs": costs,
+        "runs": rows,
+        "estimate": est,
+        "checkout": str(a.checkout.resolve()),
+    }
+    result |= {"provenance": provenance(a.script), "identical_across_executors": same}
+    path = write_result(a.out / f"{KIND}.json", result)
+    print(f"wrote {path}")
+    return 0
+
+
+# --- envs: speed and competence of the two embodiments and their experts --------------------------------
+NOISE = {"pusht": 0.08, "aloha": 0.05}  # the noisy-expert levels the success targets are stated at
+
+
+def steps_per_second(emb, n: int = 3000) -> float:
+    import numpy as np
+
+    env, rng = emb.make_env(), np.random.default_rng(0)
+    env.reset(0)
+    acts = rng.uniform(-1, 1, (n, len(emb.spec.action_names))).astype(np.float32)
+    t0 = time.perf_counter()
+    for a in acts:
+        if env.step(a)[2]:
+            env.reset(int(rng.integers(1 << 30)))
+    return n / (time.perf_counter() - t0)
+
+
+def expert_record(emb, starts: int, noise: float) -> tuple[int, float]:
+    from datagen import rollout
+
+    env, wins, lengths = emb.make_env(), 0, []
+    for s in range(starts):
+        ep = rollout(env, emb.expert_class(noise=noise, seed=s), env.reset(s))
+        wins += ep["success"]
+        lengths.append(len(ep["action"]))
+    return wins, statistics.median(lengths)
+
+
+def generation_fps(emb, episodes: int = 12) -> float:
+    from datagen import demos
+
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        s = demos.generate(
+            emb, Path(tmp) / "set", episodes=episodes, seed=0, noise=emb.default_noise, quiet=True
+        )
+        return s["frames"] / (time.perf_counter() - t0)
+
+
+def envs_main(argv: list[str]) -> int:
+    """Speed and competence of the two embodiments and their experts. Prints figures; asserts nothing.
+
+        python -m tools.bench envs              # 50 seeded starts per expert and noise level
+        python -m tools.bench envs --starts 10  # quicker
+
+    For each env: control steps per second under random actions, the expert's success count and
+    median episode length with and without action noise, and demo generation frames per second
+    (rollout + LeRobot v3 write, through the same code as gen_demos_*.py).
+    """
+    import gen_demos_aloha
+    import gen_demos_pusht
+    from datagen import demos
+
+    p = parser("bench envs", envs_main.__doc__, script=False)
+    arg = p.add_argument
+    arg("--starts", type=int, default=50, help="seeded starts per expert and noise level")
+    a = p.parse_args(argv)
+    check(a, positive=["starts"])
+    warm = Path(tempfile.mkdtemp()) / "warm"  # the first set pays for the imports and the encoder
+    demos.generate(gen_demos_pusht.PUSHT, warm, episodes=1, seed=0, noise=0.0, quiet=True)
+    head = f"{'expert (noise 0)':>22s} {'expert (noisy)':>26s} {'demo gen frames/s':>18s}"
+    print(f"{'env':6s} {'steps/s':>9s} {head}")
+    for emb in (gen_demos_pusht.PUSHT, gen_demos_aloha.ALOHA):
+        sps = steps_per_second(emb)
+        w0, m0 = expert_record(emb, a.starts, 0.0)
+        wn, mn = expert_record(emb, a.starts, NOISE[emb.name])
+        fps = generation_fps(emb)
+        print(
+            f"{emb.name:6s} {sps:9.0f} {f'{w0}/{a.starts}, median {m0:g} steps':>22s} "
+            f"{f'{wn}/{a.starts} at {NOISE[emb.name]}, median {mn:g}':>26s} {fps:18.0f}"
+        )
+    return 0
+
+
+# --- gym_pusht: the scripted expert on LeRobot's own PushT ----------------------------------------------
+GYM_PUSHT_ID, GYM_PUSHT_OBS = "gym_pusht/PushT-v0", "environment_state_agent_pos"
+
+
+def gym_pusht_episode(env, expert, seed: int) -> dict:
+    """One episode from env.reset(seed=seed): success, control steps, final coverage, start pose.
+    The expert reads gym-pusht's observation flattened: agent x, y then the 16 keypoint coordinates."""
+    import numpy as np
+
+    obs, info = env.reset(seed=seed)
+    start = info["block_pose"]
+    expert.reset()
+    steps, done = 0, False
+    while not done:
+        flat = np.concatenate([obs["agent_pos"], obs["environment_state"]])
+        obs, _, terminated, truncated, info = env.step(expert.act(flat))
+        steps += 1
+        done = terminated or truncated
+    return {
+        "seed": seed,
+        "success": bool(info["is_success"]),
+        "steps": steps,
+        "coverage": float(info["coverage"]),
+        "start": [round(float(v), 2) for v in start],
+    }
+
+
+def gym_pusht_main(argv: list[str]) -> int:
+    """How good is the scripted expert on LeRobot's own PushT? GymPushTExpert
+    (datagen/gym_pusht_expert.py) on gym-pusht (LeRobot's `pusht` extra), judged by gym-pusht's own
+    success (info["is_success"]: more than 95% of the goal T covered). Prints figures; writes nothing.
+
+        python -m tools.bench gym_pusht                          # 50 seeded starts, seeds 0..49
+        python -m tools.bench gym_pusht --episodes 200 --seed 1000 --noise 5
+
+    Episode i starts from env.reset(seed=SEED + i), gym-pusht's own random start (agent anywhere in
+    [50, 450]^2, block in [100, 400]^2 at any angle), and runs until success ends it or gym-pusht's
+    episode limit (300 control steps at 10 Hz, as lerobot-eval's) cuts it. The observation is
+    "environment_state_agent_pos", flattened as the expert reads it: agent_pos then environment_state.
+    """
+    p = parser("bench gym_pusht", gym_pusht_main.__doc__, script=False)
+    arg = p.add_argument
+    arg("--episodes", type=int, default=50, help="seeded starts")
+    arg("--seed", type=int, default=0, help="episode i resets with seed SEED + i")
+    arg("--noise", type=float, default=0.0, help="std (px) of Gaussian noise on every target")
+    a = p.parse_args(argv)
+    check(a, positive=["episodes"], non_negative=["seed"], finite=["noise"])
+    import gymnasium
+
+    from datagen.gym_pusht_expert import GymPushTExpert
+
+    with warnings.catch_warnings():  # pygame (gym-pusht draws with it): pkg_resources is deprecated
+        warnings.simplefilter("ignore", UserWarning)
+        import gym_pusht  # noqa: F401  (registers gym_pusht/PushT-v0)
+
+        env = gymnasium.make(GYM_PUSHT_ID, obs_type=GYM_PUSHT_OBS)
+    expert = GymPushTExpert(noise=a.noise, seed=a.seed)
+    wall, runs = clock(lambda: [gym_pusht_episode(env, expert, a.seed + i) for i in range(a.episodes)])
+    env.close()
+    won = [r for r in runs if r["success"]]
+    limit = env.spec.max_episode_steps
+    print(f"gym-pusht {GYM_PUSHT_ID} ({GYM_PUSHT_OBS}), episode limit {limit} steps, noise {a.noise:g} px")
+    seeds = f"seeds {a.seed}..{a.seed + a.episodes - 1}"
+    print(f"success {len(won)}/{a.episodes} = {len(won) / a.episodes:.3f} ({seeds})")
+    if won:
+        steps = [r["steps"] for r in won]
+        mean, median = statistics.mean(steps), statistics.median(steps)
+        print(f"steps to success: mean {mean:.1f}, median {median:g}, max {max(steps)}")
+    for r in runs:
+        if not r["success"]:
+            print(f"failed: seed {r['seed']}, start block {r['start']}, final coverage {r['coverage']:.3f}")
+    print(f"{wall:.1f} s, {sum(r['steps'] for r in runs) / wall:.0f} steps/s")
+    return 0
+
+
+# --- kernels: what the lesson's kernel path costs its training, and the bits each path gives --------------
+# The environment and the stack's products of each path ("torch": MLPStack's products on torch's MKL)
+KERNEL_PATHS = {
+    "held": ({"OPENBLAS_CORETYPE": "Haswell", "MKL_CBWR": "COMPATIBLE"}, "numpy"),
+    "compatible": ({"MKL_CBWR": "COMPATIBLE"}, "torch"),
+    "native": ({}, "torch"),
+}
+# One measurement: the default recipe's shapes (hidden 512, batch 128, two arms of 420 and 3,490 frames:
+# the seed-0 source and source + augmented sizes, from its budgets; a step's time does not depend on
+# them), `steps` timed after a warm-up of 50; the weights' sha256 after the timed steps.
+TRAIN_STEP = """
+import hashlib, json, sys, time
+import numpy as np, torch
+import bc_recipe as bc
+from ch37 import ensemble
+steps, hidden, batch, threads = map(int, sys.argv[1:5])
+if sys.argv[5] == "torch":  # the products on torch (MKL), as MLPStack runs them without numpy's OpenBLAS
+    ensemble.one_blas_thread = lambda: False
+torch.set_num_threads(threads)
+rng = np.random.default_rng(0)
+data = [(rng.normal(size=(n, 10)).astype(np.float32), rng.normal(size=(n, 2)).astype(np.float32))
+        for n in (420, 3490)]
+init = bc.init_weights(hidden, 0)
+bc.train(data, 50, init, batch_size=batch, lr=1e-3, seed=0)
+t0 = time.perf_counter()
+pols, _ = bc.train(data, steps, init, batch_size=batch, lr=1e-3, seed=0)
+dt = time.perf_counter() - t0
+weights = b"".join(t.numpy().tobytes() for p in pols for t in p.net.state_dict().values())
+print(json.dumps({"s_per_step": dt / steps, "sha256": hashlib.sha256(weights).hexdigest()[:8],
+                  "blas": ensemble.blas_core()}))
+"""
+
+
+def train_step(path: str, steps: int, hidden: int, batch: int, threads: int) -> dict:
+    """Seconds per training step and the weights' hash, in a fresh process on kernel path `path`."""
+    env, products = KERNEL_PATHS[path]
+    base = {k: v for k, v in os.environ.items() if k not in ("MKL_CBWR", "OPENBLAS_CORETYPE")}
+    args = [steps, hidden, batch, threads, products]
+    return in_fresh_process(TRAIN_STEP, args, base | env, f"the timing process for {path}")
+
+
+def kernels_main(argv: list[str]) -> int:
+    """What the lesson's kernel path costs its training: milliseconds per step of bc_recipe.train (both
+    data arms side by side, the default recipe's shapes) on each path, and the trained weights' hash on
+    each, each measurement in a fresh process (numpy's OpenBLAS and torch's MKL choose their kernels
+    once, as they load), the paths alternated, medians printed.
+
+        python -m tools.bench kernels                    # the three paths below, 5 rounds of 1,000 steps
+        python -m tools.bench kernels --paths held native --rounds 7 --steps 2000 --threads 1 2
+
+    "held" is the published path (the stack's products on numpy's OpenBLAS held to its Haswell kernels,
+    MKL_CBWR=COMPATIBLE: scale_data.py's setup region); "compatible" the products on torch's MKL held to
+    COMPATIBLE (the published path before issue 47); "native" MKL's own kernels for this CPU. Run it
+    alone: another busy process moves the figures far more than the path does.
+    """
+    import yaml
+
+    p = parser("bench kernels", kernels_main.__doc__)
+    arg = p.add_argument
+    arg("--paths", nargs="+", default=list(KERNEL_PATHS), choices=list(KERNEL_PATHS), help="kernel paths")
+    arg("--threads", nargs="+", type=int, default=[2], help="torch threads of each measurement")
+    arg("--rounds", type=int, default=5, help="measurements per path, alternated")
+    arg("--steps", type=int, default=1000, help="timed training steps per measurement")
+    a = p.parse_args(argv)
+    config.check(a, positive=("rounds", "steps"))
+    if min(a.threads) < 1:
+        raise DataError(f"--threads must be at least 1, got {min(a.threads)}")
+    shape = (a.steps, config.CHAPTER.hidden_dim, config.CHAPTER.batch_size)
+    runs = {f"{path} {t}": (path, t) for path in a.paths for t in a.threads}
+    got = alternate({k: lambda _, p=p, t=t: train_step(p, *shape, t) for k, (p, t) in runs.items()}, a.rounds)
+    seed0 = yaml.safe_load(META.read_text())["reference_run"]["seeds"]["rows"][0]["steps"]
+    full = seed0["full"] + seed0["short"]  # the default run's steps at seed 0, both budgets
+    med = medians({k: [m["s_per_step"] for m in ms] for k, ms in got.items()})
+    first = next(iter(runs))
+    print(f"training steps, {a.steps} per measurement, {a.rounds} rounds alternated, medians:")
+    for k, ms in got.items():
+        each = ", ".join(f"{m['s_per_step'] * 1e3:.3f}" for m in ms)
+        hashes = ", ".join(sorted({m["sha256"] for m in ms}))
+        print(
+            f"  {k:12s} threads {med[k] * 1e3:7.3f} ms/step (runs {each})  x{med[k] / med[first]:.2f} of"
+            f" {first}; a default run's {full} steps: {med[k] * full:.1f} s; weights {hashes}"
+            f" (OpenBLAS {ms[0]['blas'] or 'absent'})"
+        )
+    return 0
+
+
+# --- writer: the one-pass LeRobot v3 writer vs LeRobot's per-frame path ---------------------------------
+def synthetic_demos(n: int, frames: int, seed: int = 0) -> list[dict]:
+    """n demos of `frames` frames: random float32 arrays of the PushT set's features."""
+    import numpy as np
+
+    import gen_demos_pusht
+
+    m = gen_demos_pusht.PUSHT.spec
+    rng = np.random.default_rng(seed)
+    return [
+        {
+            "observation.state": rng.standard_normal((frames, len(m.state_names))).astype(np.float32),
+            "action": rng.standard_normal((frames, len(m.action_names))).astype(np.float32),
+            "next.success": (np.arange(frames) == frames - 1)[:, None],
+        }
+        for _ in range(n)
+    ]
+
+
+def write_seconds(eps: list[dict], root: Path, per_frame: bool = False) -> float:
+    """Seconds to write `eps` with write_dataset (per_frame: every feature through LeRobot's path)."""
+    import gen_demos_pusht
+    from datagen import write_dataset
+    from lerobot_v3 import features
+
+    m = gen_demos_pusht.PUSHT.spec
+    feats = features(m.state_names, m.action_names, env_state_names=m.env_state_names)
+    kw = dict(repo_id="local/bench", fps=m.fps, robot_type=m.robot_type, task=m.task, feats=feats)
+    seconds, _ = clock(write_dataset, root, **kw, episodes=eps, stamp={}, per_frame=per_frame)
+    shutil.rmtree(root)
+    return seconds
+
+
+def writer_main(argv: list[str]) -> int:
+    """Seconds to write N PushT demos with lerobot_v3.dataset.write_dataset: the one-pass writer vs
+    LeRobot's per-frame path (what write_dataset did before issue 19), alternating. Asserts nothing.
+
+        python -m tools.bench writer                 # 1,000 demos of 30 frames, 3 rounds, medians
+        python -m tools.bench writer --demos 200 --rounds 1
+
+    The demos are synthetic float32 arrays of the PushT set's features (gen_demos_pusht.py's, with
+    observation.environment_state filled from the state), so the time is the writer's alone. The
+    LeRobot path is taken through the same write_dataset (folder, stamp, rename) with per_frame=True.
+    """
+    p = parser("bench writer", writer_main.__doc__, script=False)
+    arg = p.add_argument
+    arg("--demos", type=int, default=1000)
+    arg("--frames", type=int, default=30, help="frames per demo")
+    arg("--rounds", type=int, default=3)
+    a = p.parse_args(argv)
+    if min(a.demos, a.frames, a.rounds) < 1:
+        raise DataError("--demos, --frames and --rounds must be positive")
+    eps = synthetic_demos(a.demos, a.frames)
+
+    def said(r, times):
+        print(
+            f"round {r}: lerobot {times['lerobot'][-1]:.2f} s, direct {times['direct'][-1]:.2f} s", flush=True
+        )
+
+    with tempfile.TemporaryDirectory() as tmp:
+        write_seconds(eps[:2], Path(tmp) / "warm")  # imports and caches, not timed
+        measure = {
+            "lerobot": lambda r: write_seconds(eps, Path(tmp) / f"lerobot{r}", per_frame=True),
+            "direct": lambda r: write_seconds(eps, Path(tmp) / f"direct{r}"),
+        }
+        old, new = medians(alternate(measure, a.rounds, after_round=said)).values()
+    n = a.demos
+    print(f"{n} demos x {a.frames} frames, median of {a.rounds} rounds:")
+    print(f"  LeRobot per-frame path {old:.2f} s ({1e3 * old / n:.1f} ms/demo)")
+    print(f"  one-pass writer        {new:.2f} s ({1e3 * new / n:.2f} ms/demo), {old / new:.1f}x faster")
+    return 0
+
+
+SUBCOMMANDS = {
+    "lesson": lesson_main,
+    "engine": engine_main,
+    "envs": envs_main,
+    "gym_pusht": gym_pusht_main,
+    "kernels": kernels_main,
+    "writer": writer_main,
+}
+
+
+def main(argv: list[str]) -> int:
+    return subcommands("bench", SUBCOMMANDS, argv, __doc__)
 
 
 if __name__ == "__main__":

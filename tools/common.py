@@ -1,5 +1,5 @@
-"""What every tool shares: the paths it works on, its flag parser, the regions of scale_data.py
-(parsed and hashed), and the provenance a result records.
+"""What every tool shares: the paths it works on, its flag parser and subcommands, its --out check, the
+regions of scale_data.py (parsed and hashed), and the provenance a result records.
 
 Region hash: sha256 (hex) of the region's body, that is the lines strictly between its
 `# --- region: NAME ---` and `# --- endregion ---` markers, each line ending in "\\n", UTF-8.
@@ -13,6 +13,7 @@ import ast
 import datetime
 import hashlib
 import importlib.metadata
+import inspect
 import os
 import platform
 import re
@@ -23,6 +24,7 @@ from pathlib import Path
 
 from ch37 import ROOT, cli, config
 from ch37.errors import DataError
+from ch37.ownership import check_out_path, check_own_result, dump_json, round_floats, write_atomic
 from ch37.process import has_avx2_fma
 
 SCRIPT = ROOT / "scale_data.py"
@@ -31,11 +33,40 @@ WALLCLOCK = ROOT / "wallclock.csv"
 NOTEBOOK = ROOT / "scale_data.ipynb"
 
 
-def parser(name: str, doc: str) -> argparse.ArgumentParser:
-    """ch37.config.parser for `python -m tools.NAME`, with the --script every tool reads the chapter from."""
-    p = config.parser(doc, prog=f"python -m tools.{name}")
-    p.add_argument("--script", type=Path, default=SCRIPT, help="chapter script (default scale_data.py)")
+def parser(name: str, doc: str, script: bool = True) -> argparse.ArgumentParser:
+    """ch37.config.parser for `python -m tools.NAME` (NAME: a tool, or a tool and its subcommand), with the
+    --script a tool reads the chapter from (`script`); `doc` (a function's docstring too) unindented."""
+    p = config.parser(inspect.cleandoc(doc), prog=f"python -m tools.{name}")
+    if script:
+        p.add_argument("--script", type=Path, default=SCRIPT, help="chapter script (default scale_data.py)")
     return p
+
+
+def subcommands(tool: str, commands: dict, argv: list[str], doc: str) -> int:
+    """`python -m tools.TOOL SUBCOMMAND [FLAGS]`: commands[SUBCOMMAND](FLAGS), each subcommand parsing its
+    own flags (`SUBCOMMAND --help`); --help alone prints `doc`, the tool's list of them."""
+    if argv[:1] in (["-h"], ["--help"]):
+        print(doc.strip())
+        return 0
+    if not argv or argv[0] not in commands:
+        got = f"unknown subcommand {argv[0]!r}" if argv else "a subcommand is missing"
+        raise DataError(f"{got}: python -m tools.{tool} takes one of {', '.join(commands)} (see --help)")
+    return commands[argv[0]](argv[1:])
+
+
+def check_results(out: Path, *kinds: str, beside: dict | None = None) -> None:
+    """A tool's --out, before any work: refused (one line) if it cannot hold results, or if OUT/KIND.json
+    for one of `kinds` is not this tool's (an earlier run's may be replaced, a user's file never);
+    beside {kind: files written after that result, a figure} (ch37.ownership.check_own_result)."""
+    if problem := check_out_path(out):
+        raise DataError(problem)
+    for kind in kinds:
+        check_own_result(out / f"{kind}.json", kind, beside=(beside or {}).get(kind, ()))
+
+
+def write_result(path: Path, result: dict) -> Path:
+    """A tool's JSON result, floats to 4 digits (ch37.ownership.round_floats), written whole or not at all."""
+    return write_atomic(path, dump_json(round_floats(result)))
 
 
 def rel(p: Path) -> str:

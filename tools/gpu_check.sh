@@ -3,8 +3,8 @@
 # install the carried wheels, then time the lesson on cuda and write what it printed to $OUT.
 #
 #   here:   bash tools/gpu_check.sh --wheels [lesson|value]
-#                      download the wheels the lesson (about 58 MiB) or tools.value on gym-pusht (about
-#                      28 MiB: no LeRobot) needs beyond the GPU image into .whl/ (git-ignored)
+#                      download the wheels the lesson (about 58 MiB) or tools.replay value on gym-pusht
+#                      (about 28 MiB: no LeRobot) needs beyond the GPU image into .whl/ (git-ignored)
 #   there:  bash tools/gpu_check.sh              # the check below; OUT=<folder> (default /tmp/gpu_check)
 #   there:  bash tools/gpu_check.sh --run CMD... # install the carried wheels, then run CMD
 #

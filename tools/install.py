@@ -40,13 +40,17 @@ def dependencies(root: Path) -> list[str]:
     return tomllib.loads(text)["project"]["dependencies"]
 
 
-def _norm(name: str) -> str:
+def canonicalize_name(name: str) -> str:
+    """A distribution's name as PEP 503 compares it (packaging.utils.canonicalize_name, without needing
+    packaging: this module runs before anything is installed, tools.lock in a .venv whose set-up stopped)."""
     return re.sub(r"[-_.]+", "-", name).lower()
 
 
 def installed() -> dict[str, str]:
     """{distribution name (normalised): version} of every package this Python sees."""
-    return {_norm(d.metadata["Name"]): d.version for d in md.distributions() if d.metadata["Name"]}
+    return {
+        canonicalize_name(d.metadata["Name"]): d.version for d in md.distributions() if d.metadata["Name"]
+    }
 
 
 def changes(before: dict, after: dict) -> tuple[dict, dict]:
@@ -61,7 +65,7 @@ def imported(names, modules=None) -> list[str]:
     default sys.modules)."""
     modules = sys.modules if modules is None else modules
     owners = md.packages_distributions()  # top-level module -> the distributions that provide it
-    hit = {_norm(d) for top, dists in owners.items() if top in modules for d in dists}
+    hit = {canonicalize_name(d) for top, dists in owners.items() if top in modules for d in dists}
     return sorted(set(names) & hit)
 
 

@@ -25,6 +25,7 @@ from pathlib import Path
 from ch37 import ROOT, errors
 from ch37.errors import DataError
 from tools.common import parser, rel
+from tools.install import canonicalize_name  # stdlib only, as this module must be
 
 LOCK = ROOT / "requirements.lock"
 # meta.yaml's and wallclock.csv's record of what the numbers came from: the packages that move floats
@@ -33,12 +34,6 @@ META_PACKAGES = ("torch", "numpy", "mujoco", "lerobot", "gymnasium", "ray")
 # installed by the venv itself, never by the lock: the installer
 UNLOCKED_OK = {"pip"}
 PIN = re.compile(r"^([A-Za-z0-9][A-Za-z0-9._-]*)==([^\s;\\]+)\s*(?:;\s*([^\\]+?))?\s*\\?$")
-
-
-def canonicalize_name(name: str) -> str:
-    """A distribution's name as PEP 503 compares it (packaging.utils.canonicalize_name, without needing
-    packaging: this module must diagnose a .venv whose set-up stopped before packaging was installed)."""
-    return re.sub(r"[-_.]+", "-", name).lower()
 
 
 def read_lock(path: Path = LOCK) -> dict[str, tuple[str, str | None]]:

@@ -5,7 +5,7 @@
 
 reference_run comes from the seed sweep (--sweep, from `python -m tools.sweep --seeds 3`) and the aug
 sweep (--aug-sweep, from `python -m tools.sweep --aug 0 4 8`), exercise_checks from them through
-exercises/rules.py; `replay` from --replay DIR (`python -m tools.replay --seeds 5` and `--sigma ...`)
+exercises/rules.py; `replay` from --replay DIR (`python -m tools.replay compare --seeds 5` and `--sigma ...`)
 and `scale_lab` from --scale-lab (`python scale_lab.py`) when their files exist, left as found
 otherwise. What smoke-sized runs give is marked `provisional: true`. id, title, track, objectives and
 mimicgen are kept as found in meta.yaml.
@@ -222,7 +222,8 @@ def _compare(d: dict) -> dict:
 
 
 def replay_section(folder: Path) -> dict | None:
-    """meta.yaml's `replay` section from tools.replay's two files in `folder` (None if neither is there)."""
+    """meta.yaml's `replay` section from `tools.replay compare`'s two files in `folder` (None if
+    neither is there)."""
     out = {}
     for name, kind in (("replay_compare.json", "compare"), ("replay_sigma.json", "sigma")):
         f = Path(folder) / name
@@ -238,7 +239,8 @@ def replay_section(folder: Path) -> dict | None:
             out["provisional"] = bool(out.get("provisional") or d.get("smoke"))
         except (OSError, ValueError, KeyError, TypeError) as e:
             raise DataError(
-                f"{rel(f)} is not a complete tools.replay file ({e}); re-run python -m tools.replay"
+                f"{rel(f)} is not a complete tools.replay compare file ({e}); "
+                "re-run python -m tools.replay compare"
             ) from None
     return out or None
 
@@ -294,7 +296,7 @@ def main(argv: list[str]) -> int:
     out = ROOT / "outputs"
     p.add_argument("--sweep", type=Path, default=out / "sweep/sweep_seeds.json", help="the seed sweep")
     p.add_argument("--aug-sweep", type=Path, default=out / "sweep/sweep_aug.json", help="the aug sweep")
-    p.add_argument("--replay", type=Path, default=out / "replay", help="python -m tools.replay's folder")
+    p.add_argument("--replay", type=Path, default=out / "replay", help="tools.replay compare's folder")
     p.add_argument("--scale-lab", type=Path, default=out / "scale_lab/scale_lab.json", help="the lab's")
     p.add_argument("--meta", type=Path, default=META, help="default meta.yaml")
     p.add_argument("--environment", action="store_true", help="refresh the environment (the lock) alone")

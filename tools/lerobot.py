@@ -1,46 +1,195 @@
-"""LeRobot's diffusion policy beside the chapter's MLP on three of the Scale Lab's points.
+"""LeRobot's own policies on the chapter's data (docs/lerobot.md): one entry point, a subcommand per job.
 
-    python -m tools.lerobot_lab                          # 3 points x seeds 0..2, 40,000 steps, 100 starts
-    python -m tools.lerobot_lab --pilot 40000 --eval_every 5000 --points fresh resolve --seeds 0
-                                                         # the length: loss curves, success at checkpoints
-    python -m tools.lerobot_lab --steps 30 --seeds 0 --eval_episodes 2 --out /tmp/ll   # seconds: the pipeline
+    python -m tools.lerobot eval --policy DIR   a LeRobot checkpoint on the lesson's held-out PushT starts
+    python -m tools.lerobot lab [FLAGS]         LeRobot's diffusion policy trained on the Scale Lab's points
 
-The points and their data are the lab's own (scale_lab.py): `source` (N = 12: episodes 0..11 of the
-chapter's PushT demo generator at the seed), `fresh` (N = 108: episodes 0..107) and `resolve` (12 +
-96: the 12 sources and the first 8 re-solved demos of each, exactly the lab's resolve point at 108).
-Each is trained with LeRobot's DiffusionPolicy (its config, network, noise scheduler, normalizer and
-optimizer and LR-scheduler presets, `policy.forward` + `loss.backward()`), a configuration small
-enough for a 2-core CPU (CONFIG below: the Diffusion Policy paper's PushT horizons, a 2-level U-Net),
-then rolled out through tools.lerobot_eval on the lab's held-out starts with the lesson's success
-rule and Wilson interval.
+`python -m tools.lerobot SUBCOMMAND --help` says what each one does and takes.
 
-What is ours is the data loader: lerobot-train reads each sample through LeRobotDataset (about 7 ms
-a sample here, 0.43 s of a 0.7 s step at batch 64), so this tool builds the same samples from the
-arrays: for frame t of an episode, observations at t-1, t and actions at t-1 .. t+14, clamped to
-the episode with `*_is_pad` flags, never the last `drop_n_last_frames` frames of an episode as a
-start (LeRobot's EpisodeAwareSampler). tests/test_lerobot.py checks them against LeRobotDataset's
-own items. Each run saves a `pretrained_model` folder (policy and processors) that tools.lerobot_eval
-and lerobot's own tools read. One JSON per (point, seed) under --out, kept across runs (a re-run
-skips what is done), and OUT/lerobot_lab.json with the pooled table.
+Exit codes: 0 ok, 2 bad input (one `error:` line).
 """
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
 
-from bc_recipe import wilson
-from ch37 import ROOT
-from ch37.config import DEFAULTS, check, parser
+import pusht_env
+from bc_recipe import wilson  # the lesson's 95% interval
+from ch37 import ROOT, config, errors
+from ch37.cli import pick_device
+from ch37.config import DEFAULTS, NON_NEGATIVE, POSITIVE, check, flag
 from ch37.errors import DataError
-from ch37.errors import main as run
-from ch37.ownership import check_out_path, dump_json, round_floats, write_atomic
-from ch37.seeds import MAX_SEED
+from ch37.ownership import check_out_path, check_own_result
+from ch37.parallel import map_jobs
+from ch37.seeds import MAX_SEED, SEED_BLOCK, env_seed
+from lerobot_v3.dataset import ENV_STATE_KEY, columns
+from tools.common import parser, subcommands, write_result
 
+# --- eval: a LeRobot checkpoint in our PushT env, on the lesson's held-out starts -----------------------
+EVAL_KIND = "lerobot_eval"  # marks the JSON as this tool's, so a re-run may replace it and nothing else
+
+
+def load_policy(path: Path, device: str):
+    """(policy, preprocessor, postprocessor) from a `pretrained_model` folder, moved to `device`."""
+    if not (path / "config.json").is_file():
+        raise DataError(f"--policy {path} is not a LeRobot pretrained_model folder (no config.json)")
+    from lerobot_v3 import hub_offline
+
+    hub_offline()  # a file missing from the folder is an error, never a download from the Hub
+    try:
+        from lerobot.configs.policies import PreTrainedConfig
+        from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+
+        cfg = PreTrainedConfig.from_pretrained(path)
+        cfg.device = device
+        policy = get_policy_class(cfg.type).from_pretrained(path, config=cfg)
+        pre, post = make_pre_post_processors(
+            cfg, pretrained_path=str(path), preprocessor_overrides={"device_processor": {"device": device}}
+        )
+    except (KeyboardInterrupt, MemoryError):
+        raise
+    except Exception as e:  # draccus, safetensors and torch each raise their own kinds on a bad folder
+        why = " ".join(str(e).split())[:160]
+        raise DataError(f"--policy {path} cannot be loaded ({type(e).__name__}: {why})") from e
+    return policy.eval(), pre, post
+
+
+def observation_builder(policy):
+    """obs float32 (10,) or (B, 10) -> the batch the policy reads: its input features of our state, (B, D)"""
+    ours = {
+        "observation.state": list(range(pusht_env.OBS_DIM)),
+        ENV_STATE_KEY: columns(pusht_env.STATE_NAMES, pusht_env.ENV_STATE_NAMES),
+    }
+    feats = policy.config.input_features
+    for key, f in feats.items():
+        if key not in ours:
+            raise DataError(f"the policy reads {key!r}; our PushT env gives {sorted(ours)} (no images)")
+        if tuple(f.shape) != (len(ours[key]),):
+            raise DataError(f"the policy's {key} has shape {tuple(f.shape)}; PushT's is ({len(ours[key])},)")
+    act = policy.config.output_features.get("action")
+    if act is None or tuple(act.shape) != (pusht_env.ACT_DIM,):
+        raise DataError(f"the policy's action has shape {act and tuple(act.shape)}; PushT's is (2,)")
+    device = policy.config.device
+
+    def build(obs):  # (10,) or (B, 10)
+        x = torch.as_tensor(np.atleast_2d(obs), dtype=torch.float32)
+        batch = {key: x[:, ours[key]].to(device) for key in feats}
+        return batch | {"task": [pusht_env.TASK] * len(x)}
+
+    return build
+
+
+def evaluate(policy, pre, post, seeds, name: str = "the policy") -> list[dict]:
+    """One episode per env seed through Gymnasium (gym_envs' ch37/PushT-v0, whose reset(seed=s) is the
+    lesson's start s): {"seed", "success", "steps"}, the lesson's success rule (terminated = success).
+    A non-finite action is the checkpoint's problem (`name` it), a DataError, never the env's ValueError."""
+    import gymnasium as gym
+
+    import gym_envs
+
+    env, build = gym.make(gym_envs.PUSHT_ID), observation_builder(policy)
+    episodes = []
+    with torch.inference_mode():
+        for s in seeds:
+            torch.manual_seed(s)  # diffusion's sampling noise: a pure function of the start
+            policy.reset()  # empties the action queue and the observation history
+            (obs, _), terminated, truncated, steps = env.reset(seed=s), False, False, 0
+            while not (terminated or truncated):
+                action = post(policy.select_action(pre(build(obs))))[0].cpu().numpy().astype(np.float32)
+                if not np.all(np.isfinite(action)):  # m/s
+                    raise DataError(
+                        f"{name} gives a non-finite action {action} (start seed {s}, step {steps}): its "
+                        "weights or normalization statistics hold NaN or inf; pass another checkpoint"
+                    )
+                obs, _, terminated, truncated, _ = env.step(action)
+                steps += 1
+            episodes.append({"seed": s, "success": bool(terminated), "steps": steps})
+    env.close()
+    return episodes
+
+
+@dataclass(frozen=True)
+class Args:
+    """A LeRobot policy checkpoint in our PushT env, on the lesson's held-out starts."""
+
+    policy: Path = flag(None, "a pretrained_model folder from lerobot-train", type=Path, required=True)
+    seed: int = flag(
+        0,
+        "the lesson's --seed: which held-out starts",
+        bound=NON_NEGATIVE,
+        at_most=MAX_SEED,
+        why="every env seed fits in 63 bits",
+    )
+    eval_episodes: int = flag(
+        50,
+        "held-out starts (the lesson's --eval_episodes)",
+        bound=POSITIVE,
+        at_most=SEED_BLOCK,
+        why="one seed block",
+        aliases=("episodes",),
+    )
+    device: str = flag("auto", "auto: cuda > mps > cpu", choices=("auto", "cpu", "cuda", "mps"))
+    out: Path = flag(None, "JSON path (default: beside --policy)", type=Path)
+
+
+def eval_main(argv: list[str] | None = None) -> int:
+    """A LeRobot policy checkpoint in our PushT env, on the lesson's held-out starts, judged by the lesson's
+    rule.
+
+        python -m tools.lerobot eval --policy OUT/checkpoints/last/pretrained_model --eval_episodes 50
+
+    --policy is a `pretrained_model` folder that lerobot-train wrote (diffusion, ACT, ... trained on a set
+    this project wrote: observation.state [10] and observation.environment_state [8], no images). Episode
+    j starts from gymnasium.make("ch37/PushT-v0").reset(seed=ch37.seeds.env_seed(seed, "eval", j)), the
+    starts the lesson's measure region evaluates its MLP on (gym_envs.py); it succeeds when the env says
+    terminated (the lesson's success rule) and ends there or truncated (300 control steps). The policy is
+    reset and torch is seeded with that start's seed before each episode, so an episode's outcome does not
+    depend on the ones before it. Prints the success rate with the lesson's 95% Wilson interval and writes
+    it as JSON beside the policy folder (--out to choose): lerobot_eval_seed{S}_n{N}.json.
+    """
+    doc = inspect.cleandoc(eval_main.__doc__)
+    a = config.parse(Args, argv, prog="python -m tools.lerobot eval", description=doc)
+    if not a.policy.is_dir():
+        raise DataError(f"--policy {a.policy} is not a folder")
+    out = a.out or a.policy.parent / f"{EVAL_KIND}_seed{a.seed}_n{a.eval_episodes}.json"
+    check_own_result(out, EVAL_KIND)  # ours from an earlier run may be replaced; anything else is the user's
+
+    device = pick_device(a.device)
+    policy, pre, post = load_policy(a.policy, device)
+    seeds = [env_seed(a.seed, "eval", j) for j in range(a.eval_episodes)]
+    t0 = time.perf_counter()
+    episodes = evaluate(policy, pre, post, seeds, name=f"--policy {a.policy}")
+    k, n = sum(e["success"] for e in episodes), len(episodes)
+    result = {
+        "kind": EVAL_KIND,
+        "policy": str(a.policy.resolve()),
+        "policy_type": policy.config.type,
+        "device": device,
+        "seed": a.seed,
+        "episodes": n,
+        "successes": k,
+        "success": k / n,
+        "ci95": wilson(k / n, n),
+        "per_episode": episodes,
+    }
+    write_result(out, result)
+    lo, hi = result["ci95"]
+    print(
+        f"{policy.config.type} on {n} held-out PushT starts (seed {a.seed}): success {k / n:.2f} "
+        f"[{lo:.2f}, {hi:.2f}] ({k}/{n}, {time.perf_counter() - t0:.0f} s on {device})"
+    )
+    print(f"wrote {out}")
+    return 0
+
+
+# --- lab: LeRobot's diffusion policy beside the chapter's MLP on three of the Scale Lab's points --------
 SOURCES = DEFAULTS["source_episodes"]  # 12
 N = 108  # the lab's point where the MLP's exchange rate is 0.65
 POINTS = ("source", "fresh", "resolve")
@@ -51,7 +200,7 @@ POINTS = ("source", "fresh", "resolve")
 CONFIG = dict(horizon=16, n_action_steps=8, n_obs_steps=2, down_dims=(64, 128), num_inference_steps=10)
 BATCH = 64
 LR = 1e-4  # LeRobot's DiffusionConfig.optimizer_lr
-KIND = "lerobot_lab"
+LAB_KIND = "lerobot_lab"
 
 
 def point_episodes(point: str, seed: int, cache: Path) -> list[dict]:
@@ -109,16 +258,12 @@ def samples(lengths, cfg) -> dict:
 def policy_and_processors(stats: dict, seed: int):
     """A fresh LeRobot DiffusionPolicy (CONFIG) with its pre/post processors normalizing by `stats`."""
     from lerobot_v3 import hub_offline
-    from lerobot_v3.dataset import ENV_STATE_KEY
 
     hub_offline()  # before LeRobot's policies import huggingface_hub
-    import torch
     from lerobot.configs.types import FeatureType, PolicyFeature
     from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
     from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
     from lerobot.policies.factory import make_pre_post_processors
-
-    import pusht_env
 
     cfg = DiffusionConfig(
         input_features={
@@ -137,9 +282,6 @@ def policy_and_processors(stats: dict, seed: int):
 
 def frame_arrays(episodes) -> dict:
     """The set's frames: observation.state (F, 10), its environment_state columns (F, 8), action (F, 2)."""
-    import pusht_env
-    from lerobot_v3.dataset import ENV_STATE_KEY, columns
-
     x = np.concatenate([e["observation.state"] for e in episodes]).astype(np.float32)
     env_cols = columns(pusht_env.STATE_NAMES, pusht_env.ENV_STATE_NAMES)
     y = np.concatenate([e["action"] for e in episodes]).astype(np.float32)
@@ -148,8 +290,6 @@ def frame_arrays(episodes) -> dict:
 
 def batch_of(frames: dict, s: dict, idx) -> dict:
     """LeRobotDataset's items for the samples `idx`, stacked: (B, 2, D) observations, (B, 16, 2) actions."""
-    import torch
-
     b = {k: torch.from_numpy(v[s["obs"][idx]]) for k, v in frames.items() if k != "action"}
     b |= {f"{k}_is_pad": torch.from_numpy(s["obs_pad"][idx]) for k in list(b)}
     b["action"] = torch.from_numpy(frames["action"][s["act"][idx]])
@@ -163,8 +303,6 @@ def train(episodes, steps: int, seed: int, lr: float, log_every: int = 100, chec
     in eval mode after every check_every-th step (0: never); it must leave torch's global RNG as it
     found it (the training's noise and timesteps come from it), so a checked run trains as an
     unchecked one."""
-    import torch
-
     frames = frame_arrays(episodes)
     stats = {
         k: {"min": v.min(0), "max": v.max(0), "mean": v.mean(0), "std": v.std(0)} for k, v in frames.items()
@@ -203,12 +341,7 @@ def rollouts(policy, pre, post, seeds: list[int]) -> list[dict]:
     runs vectorised envs): {"seed", "success", "steps"} per start, the lesson's success rule. An
     episode that has ended keeps its last observation and its env is not stepped again. The denoising
     noise is drawn for the whole batch, so an outcome depends on the batch it ran in (the seeds);
-    tools.lerobot_eval runs one episode at a time instead, ~50x slower here."""
-    import torch
-
-    import pusht_env
-    from tools.lerobot_eval import observation_builder
-
+    `lerobot eval` runs one episode at a time instead, ~50x slower here."""
     envs, build = [pusht_env.PushTEnv() for _ in seeds], observation_builder(policy)
     obs = np.stack([env.reset(s) for env, s in zip(envs, seeds, strict=True)])  # (B, 10)
     done, steps, success = np.zeros(len(seeds), bool), np.zeros(len(seeds), int), np.zeros(len(seeds), bool)
@@ -229,11 +362,6 @@ def rollouts(policy, pre, post, seeds: list[int]) -> list[dict]:
 def one_run(job) -> dict:
     """(point, seed, steps, lr, eval_episodes, out): train (or read the model a run with these
     steps and lr saved), roll out; one JSON under out."""
-    import torch
-
-    from ch37.seeds import env_seed
-    from tools.lerobot_eval import load_policy
-
     point, seed, steps, lr, n_eval, out = job
     torch.set_num_threads(1)
     folder = out / f"{point}_seed{seed}"
@@ -256,11 +384,11 @@ def one_run(job) -> dict:
             "loss_curve": curve,
             "seconds_train": time.perf_counter() - t0,
         }
-        write_atomic(trained, dump_json(round_floats(record)))
+        write_result(trained, record)
     t0 = time.perf_counter()
     eps = rollouts(policy, pre, post, [env_seed(seed, "eval", j) for j in range(n_eval)])
     k = sum(e["success"] for e in eps)
-    result = {"kind": KIND, "point": point, "seed": seed, **record, "batch_size": BATCH}
+    result = {"kind": LAB_KIND, "point": point, "seed": seed, **record, "batch_size": BATCH}
     result |= {
         "config": {k: list(v) if isinstance(v, tuple) else v for k, v in CONFIG.items()},
         "successes": k,
@@ -270,7 +398,7 @@ def one_run(job) -> dict:
         "seconds_eval": time.perf_counter() - t0,
         "per_episode": eps,
     }
-    write_atomic(out / f"{point}_seed{seed}.json", dump_json(round_floats(result)))
+    write_result(out / f"{point}_seed{seed}.json", result)
     return result
 
 
@@ -282,7 +410,6 @@ def same_run(record: dict, steps: int, lr: float) -> bool:
 def rollout_check(starts: list[int], record: list, label: str = ""):
     """A check for train(): the policy's success on `starts` appended to `record` (and printed after
     `label`), torch's global RNG put back as it was."""
-    import torch
 
     def check(step, policy, pre, post):
         rng = torch.get_rng_state()  # the rollouts seed torch; the training goes on as if unchecked
@@ -298,10 +425,6 @@ def pilot(job) -> dict:
     """(point, seed, steps, lr, eval_every, eval_episodes, out): one long run's loss curve and, every
     eval_every steps (0: never), its success on the held-out starts, mid-schedule (the learning rate
     decays to zero at `steps`): how long a run must be. Written to OUT/pilot_{point}_seed{seed}.json."""
-    import torch
-
-    from ch37.seeds import env_seed
-
     point, seed, steps, lr, every, n_eval, out = job
     torch.set_num_threads(1)
     t0, checks = time.perf_counter(), []
@@ -310,9 +433,9 @@ def pilot(job) -> dict:
     )
     episodes = point_episodes(point, seed, out / "demos")
     _, _, _, curve = train(episodes, steps, seed, lr, log_every=250, check=rolls, check_every=every)
-    record = {"kind": KIND, "point": point, "seed": seed, "steps": steps, "lr": lr, "episodes": n_eval}
+    record = {"kind": LAB_KIND, "point": point, "seed": seed, "steps": steps, "lr": lr, "episodes": n_eval}
     record |= {"loss_curve": curve, "checkpoints": checks, "seconds": time.perf_counter() - t0}
-    write_atomic(out / f"pilot_{point}_seed{seed}.json", dump_json(round_floats(record)))
+    write_result(out / f"pilot_{point}_seed{seed}.json", record)
     return record
 
 
@@ -344,31 +467,53 @@ def table(results: list[dict], seeds: list[int]) -> dict:
     return rows
 
 
-def main(argv=None) -> int:
-    p = parser(__doc__, prog="python -m tools.lerobot_lab")
-    p.add_argument(
-        "--steps",
-        type=int,
-        default=40000,
-        help="gradient steps per run (docs/lerobot.md: success levels off by 30-40k)",
-    )
-    p.add_argument(
-        "--lr", type=float, default=1e-3, help="peak learning rate (docs/lerobot.md; LeRobot's preset: 1e-4)"
-    )
-    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="the lab's seeds")
-    p.add_argument("--points", nargs="+", choices=POINTS, default=list(POINTS), help="which points")
-    p.add_argument("--eval_episodes", type=int, default=100, help="held-out starts per run (the lab's 100)")
-    p.add_argument("--workers", type=int, default=2, help="runs at once, one torch thread each")
-    p.add_argument(
-        "--pilot",
-        type=int,
-        default=0,
-        help="instead: runs of this many steps, their loss curves (the length)",
-    )
-    p.add_argument(
-        "--eval_every", type=int, default=0, help="with --pilot: roll out every this many steps (0: never)"
-    )
-    p.add_argument("--out", type=Path, default=ROOT / "outputs" / "lerobot_lab", help="results folder")
+def lab_main(argv: list[str] | None = None) -> int:
+    """LeRobot's diffusion policy beside the chapter's MLP on three of the Scale Lab's points.
+
+        python -m tools.lerobot lab                       # 3 points x seeds 0..2, 40,000 steps, 100 starts
+        python -m tools.lerobot lab --pilot 40000 --eval_every 5000 --points fresh resolve --seeds 0
+                                                          # the length: loss curves, success at checkpoints
+        python -m tools.lerobot lab --steps 30 --seeds 0 --eval_episodes 2 --out /tmp/ll  # seconds: pipeline
+
+    The points and their data are the lab's own (scale_lab.py): `source` (N = 12: episodes 0..11 of the
+    chapter's PushT demo generator at the seed), `fresh` (N = 108: episodes 0..107) and `resolve` (12 +
+    96: the 12 sources and the first 8 re-solved demos of each, exactly the lab's resolve point at 108).
+    Each is trained with LeRobot's DiffusionPolicy (its config, network, noise scheduler, normalizer and
+    optimizer and LR-scheduler presets, `policy.forward` + `loss.backward()`), a configuration small
+    enough for a 2-core CPU (CONFIG below: the Diffusion Policy paper's PushT horizons, a 2-level U-Net),
+    then rolled out through `lerobot eval`'s code on the lab's held-out starts with the lesson's success
+    rule and Wilson interval.
+
+    What is ours is the data loader: lerobot-train reads each sample through LeRobotDataset (about 7 ms
+    a sample here, 0.43 s of a 0.7 s step at batch 64), so this tool builds the same samples from the
+    arrays: for frame t of an episode, observations at t-1, t and actions at t-1 .. t+14, clamped to
+    the episode with `*_is_pad` flags, never the last `drop_n_last_frames` frames of an episode as a
+    start (LeRobot's EpisodeAwareSampler). tests/test_lerobot.py checks them against LeRobotDataset's
+    own items. Each run saves a `pretrained_model` folder (policy and processors) that `lerobot eval`
+    and lerobot's own tools read. One JSON per (point, seed) under --out, kept across runs (a re-run
+    skips what is done), and OUT/lerobot_lab.json with the pooled table.
+    """
+    a = lab_args(argv)
+    import scale_lab
+
+    for s in a.seeds:  # the lab's fresh set, made here before the workers that read it
+        scale_lab.fresh_demos(a.out / "demos" / f"pusht_seed{s}_ep{N}", s, N)
+    return lab_pilots(a) if a.pilot else lab_runs(a)
+
+
+def lab_args(argv: list[str] | None):
+    """lab's flags, checked; --out made once it can be."""
+    p = parser("lerobot lab", lab_main.__doc__, script=False)
+    arg = p.add_argument
+    arg("--steps", type=int, default=40000, help="steps a run (success levels off by 30-40k)")
+    arg("--lr", type=float, default=1e-3, help="peak learning rate (docs/lerobot.md; LeRobot's preset: 1e-4)")
+    arg("--seeds", type=int, nargs="+", default=[0, 1, 2], help="the lab's seeds")
+    arg("--points", nargs="+", choices=POINTS, default=list(POINTS), help="which points")
+    arg("--eval_episodes", type=int, default=100, help="held-out starts per run (the lab's 100)")
+    arg("--workers", type=int, default=2, help="runs at once, one torch thread each")
+    arg("--pilot", type=int, default=0, help="instead: runs this many steps long, their loss curves")
+    arg("--eval_every", type=int, default=0, help="with --pilot: roll out every this many steps (0: never)")
+    arg("--out", type=Path, default=ROOT / "outputs" / "lerobot_lab", help="results folder")
     a = p.parse_args(argv)
     check(
         a,
@@ -383,20 +528,19 @@ def main(argv=None) -> int:
     if problem:
         raise DataError(problem)
     a.out.mkdir(parents=True, exist_ok=True)
-    import scale_lab
-    from ch37.parallel import map_jobs
+    return a
 
-    for s in a.seeds:  # the lab's fresh set, made here before the workers that read it
-        scale_lab.fresh_demos(a.out / "demos" / f"pusht_seed{s}_ep{N}", s, N)
-    if a.pilot:
-        jobs = [
-            (p, s, a.pilot, a.lr, a.eval_every, a.eval_episodes, a.out) for p in a.points for s in a.seeds
-        ]
-        for r in map_jobs(pilot, jobs, workers=min(a.workers, len(jobs)), ordered=False):
-            print(
-                f"{r['point']:8s} seed {r['seed']}: loss {r['loss_curve'][-1][1]:.4f}, {r['seconds']:.0f} s"
-            )
-        return 0
+
+def lab_pilots(a) -> int:
+    """--pilot: each (point, seed)'s long run, its loss curve and checkpoints (pilot)."""
+    jobs = [(p, s, a.pilot, a.lr, a.eval_every, a.eval_episodes, a.out) for p in a.points for s in a.seeds]
+    for r in map_jobs(pilot, jobs, workers=min(a.workers, len(jobs)), ordered=False):
+        print(f"{r['point']:8s} seed {r['seed']}: loss {r['loss_curve'][-1][1]:.4f}, {r['seconds']:.0f} s")
+    return 0
+
+
+def lab_runs(a) -> int:
+    """Every (point, seed) not done yet with these flags (one_run), then OUT/lerobot_lab.json's table."""
 
     def done(point, seed):
         path = a.out / f"{point}_seed{seed}.json"
@@ -418,12 +562,19 @@ def main(argv=None) -> int:
         )
         results.append(r)
     rows = table(results, a.seeds)
-    summary = {"kind": KIND, "steps": a.steps, "lr": a.lr, "seeds": a.seeds, "table": rows}
-    write_atomic(a.out / "lerobot_lab.json", dump_json(round_floats(summary)))
+    summary = {"kind": LAB_KIND, "steps": a.steps, "lr": a.lr, "seeds": a.seeds, "table": rows}
+    write_result(a.out / "lerobot_lab.json", summary)
     for k, v in rows.items():
         print(k, v)
     return 0
 
 
+SUBCOMMANDS = {"eval": eval_main, "lab": lab_main}
+
+
+def main(argv: list[str]) -> int:
+    return subcommands("lerobot", SUBCOMMANDS, argv, __doc__)
+
+
 if __name__ == "__main__":
-    run(main)
+    errors.main(main)
