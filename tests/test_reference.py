@@ -1,6 +1,7 @@
 """The published numbers, reproduced: scale_data.py's default configuration at seed 0 gives meta.yaml's
 seed-0 row exactly (every arm's successes, both budgets' steps, the augmentation's counts) wherever it
-runs on the published kernel path: an x86-64 CPU, MKL held to one branch by the setup region
+runs on the published kernel path: an x86-64 CPU with AVX2 and FMA, the training's products on numpy's
+OpenBLAS held to its Haswell kernels and MKL held to one branch, both by the setup region
 (docs/reproducibility.md). A learner's `bash run_chapter.sh` prints this row. Not slow-marked: CI runs
 it (a default run, about 2-3 minutes on 2 cores)."""
 
@@ -13,15 +14,17 @@ import yaml
 from conftest import ROOT, run_script
 
 from ch37 import cli
+from ch37.process import has_avx2_fma
 from exercises.rules import ARMS
 
 
 @pytest.mark.skipif(
-    platform.machine().lower() not in ("x86_64", "amd64"), reason="MKL's kernel path exists on x86-64 only"
+    not has_avx2_fma(), reason="the published kernel path needs an x86-64 CPU with AVX2 and FMA"
 )
 @pytest.mark.skipif(
-    os.environ.get("MKL_CBWR", cli.PUBLISHED_MKL_CBWR) != cli.PUBLISHED_MKL_CBWR,
-    reason="MKL_CBWR is set to another branch in this environment: another draw, by design",
+    os.environ.get("MKL_CBWR", cli.PUBLISHED_MKL_CBWR) != cli.PUBLISHED_MKL_CBWR
+    or os.environ.get("OPENBLAS_CORETYPE", cli.PUBLISHED_BLAS_CORE) != cli.PUBLISHED_BLAS_CORE,
+    reason="MKL_CBWR or OPENBLAS_CORETYPE names other kernels in this environment: another draw, by design",
 )
 def test_the_default_run_at_seed_0_is_meta_yamls_seed_0_row(tmp_path):
     row = next(r for r in yaml.safe_load((ROOT / "meta.yaml").read_text())["reference_run"]["seeds"]["rows"])
