@@ -1,11 +1,11 @@
 """What a run finds in its --out, and what it leaves there for a re-run to finish.
 
-    check_out_first(out, src)        before the source is read: a folder not ours, refused at once
-    taken(out, src, config)          the folder checked again and held under its lock while the run writes
-    completed(out, stamp)            the report of a run already complete (nothing to do), else None
-    begin(out, config)               the run's stamp, not yet complete: the folder is ours from here on
-    finished(out, config, shards)    the whole shards of an earlier run of these settings, judged
-    complete(out, run_stamp, report) the report written, the run stamped complete, its shards removed
+    claim(out, src) -> RunClaim     before the source is read: --out judged, nothing created; the one
+                                    object the later steps get of the folder
+    taken(claim, config, shards)    held under its lock while the run writes (judged again there): the
+                                    claim then holds a complete run's report, or the run's stamp and
+                                    the whole shards of an earlier run of these settings
+    complete(claim, report)         the report written, the run stamped complete, its shards removed
 
 A run's stamp (OUT/scale_data_stamp.json: made_by, kind "engine", its settings, complete) is what a
 re-run reads: the same command on the same --out finishes the run (only the missing shards are made)
@@ -22,6 +22,7 @@ import contextlib
 import re
 import shutil
 from collections import Counter
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ch37.errors import DataError
@@ -54,86 +55,80 @@ from datagen.task import known_tasks
 RUN_NAMES = {STAMP_NAME, LOCK_NAME, REPORT_NAME, SHARDS_DIR, "data", "meta", MERGE_DIR}
 
 
-def check_out_first(out: Path, src: Path) -> None:
-    """Before the source is read: DataError (one line) unless `out` is a path this program can write and
-    either new or a run of this command (check_out)."""
-    check_apart(out, src)  # before check_out_path's probe file, which would land inside --src
-    problem = check_out_path(out)  # a path the file system or pyarrow cannot take, before anything
-    if problem:
-        raise DataError(problem)
-    check_out(out, src)
+@dataclass
+class RunClaim:
+    """An engine run's --out as judged (ch37.ownership.Claim is a results folder's): claim() makes it,
+    taken() fills it in under the lock, the steps that write the run read it."""
+
+    out: Path
+    stamp: dict | None  # the run's stamp: an earlier run's as found (None: a new run); this run's once begun
+    report: dict | None = None  # the report of a run already complete: nothing to do
+    done: dict[int, dict] = field(default_factory=dict)  # {shard index: stamp}: an earlier run's whole shards
+
+    def refuse_other_settings(self, config: dict) -> None:
+        """DataError if the folder holds a run of settings other than `config`."""
+        if self.stamp is None or self.stamp.get("config") == config:
+            return
+        old = self.stamp.get("config") or {}
+        diff = ", ".join(
+            f"{k} differs" if isinstance(v, dict) else f"{k}={old.get(k)} (now {v})"
+            for k, v in config.items()
+            if old.get(k) != v
+        )
+        raise DataError(f"{self.out} holds a run with other settings ({diff}); pass another --out")
 
 
-def check_apart(out: Path, src: Path) -> None:
-    """DataError unless `out` and `src` are apart (neither is or holds the other): the source is never
-    written, not even a probe file."""
+def claim(out: Path, src: Path) -> RunClaim:
+    """Before the source is read, creating nothing: DataError (one line) unless `out` and `src` are apart
+    (the source is never written, not even a probe file), `out` is a path this program can write, and it
+    is new or a run of this command."""
     o, s = out.resolve(), src.resolve()
     if o == s or s in o.parents or o in s.parents:
         raise DataError(f"--out {out} overlaps --src {src}; the source is never written: pick another --out")
-
-
-def check_out(out: Path, src: Path, config: dict | None = None) -> dict | None:
-    """None for a new run; the run's stamp for a run of this command (with `config`, when given);
-    DataError for anything else: --out overlapping --src, data this program did not make, other settings."""
-    check_apart(out, src)
-    stamp = check_ours(out, "engine")
-    if stamp is None or config is None or stamp.get("config") == config:
-        return stamp
-    old = stamp.get("config") or {}
-    diff = ", ".join(
-        f"{k} differs" if isinstance(v, dict) else f"{k}={old.get(k)} (now {v})"
-        for k, v in config.items()
-        if old.get(k) != v
-    )
-    raise DataError(f"{out} holds a run with other settings ({diff}); pass another --out")
+    problem = check_out_path(out)  # a path the file system or pyarrow cannot take, before anything
+    if problem:
+        raise DataError(problem)
+    return RunClaim(out, check_ours(out, "engine"))
 
 
 @contextlib.contextmanager
-def taken(out: Path, src: Path, config: dict):
-    """Hold `out` for a run of `config` (ch37.ownership.lock; a second run on it waits for the first) and
-    yield its stamp (None for a new run). Every refusal comes before anything is created, and again under
-    the lock: a run waited for may have changed the folder; files this command did not write are refused
-    before anything is written (foreign). The lock file is left empty at the end: a finished run's folder
-    is the same bytes every time."""
-    check_out(out, src, config)  # every refusal comes before anything is created
-    out.mkdir(parents=True, exist_ok=True)
-    lock(out)
+def taken(c: RunClaim, config: dict, shards: list):
+    """Hold c.out for a run of `config` (ch37.ownership.lock; a second run on it waits for the first),
+    judged again under the lock (a run waited for may have changed the folder); files this command did
+    not write are refused before anything is written (foreign). c then holds the report of a run already
+    complete, or the whole shards of `shards` (the plan) an earlier run made and this run's stamp. The
+    lock file is left empty at the end: a finished run's folder is the same bytes every time."""
+    c.refuse_other_settings(config)  # every refusal comes before anything is created
+    c.out.mkdir(parents=True, exist_ok=True)
+    lock(c.out)
     try:
-        stamp = check_out(out, src, config)  # again: a run waited for may have changed the folder
-        bad = foreign(out, stamp) if stamp else []
+        c.stamp = check_ours(c.out, "engine")  # again: a run waited for may have changed the folder
+        c.refuse_other_settings(config)
+        bad = foreign(c.out, c.stamp) if c.stamp else []
         if bad:  # before anything is written: a resume deletes what a killed run left, never these
             raise DataError(
-                f"{out} holds files this command did not write ({names(bad)}); move them elsewhere "
+                f"{c.out} holds files this command did not write ({names(bad)}); move them elsewhere "
                 "and run the same command again (nothing was changed)"
             )
-        yield stamp
+        c.report = read_json(c.out / REPORT_NAME) if c.stamp and c.stamp.get("complete") else None
+        if c.report:
+            remove_shards(c.out)  # left over if a run was stopped right after its stamp
+        else:
+            c.done = finished(c.out, config, shards)
+            # this run's stamp, not yet complete (the merge records the files it writes in it)
+            c.stamp = {"made_by": MADE_BY, "kind": "engine", "config": config, "complete": False}
+            write_atomic(c.out / STAMP_NAME, dump_json(c.stamp))
+        yield c
     finally:
-        unlock(out)
+        unlock(c.out)
 
 
-def completed(out: Path, stamp: dict | None) -> dict | None:
-    """The report of a run of `stamp` that is complete (its shards removed, left over if it was stopped
-    right after its stamp), else None."""
-    old = read_json(out / REPORT_NAME) if stamp and stamp.get("complete") else None
-    if old:
-        remove_shards(out)  # left over if a run was stopped right after its stamp
-    return old
-
-
-def begin(out: Path, config: dict) -> dict:
-    """Write the run's stamp, not yet complete: the folder is ours from here on. Returns it (the merge
-    records the files it writes in it: datagen.shards.merge)."""
-    run_stamp = {"made_by": MADE_BY, "kind": "engine", "config": config, "complete": False}
-    write_atomic(out / STAMP_NAME, dump_json(run_stamp))
-    return run_stamp
-
-
-def complete(out: Path, run_stamp: dict, report: dict) -> None:
+def complete(c: RunClaim, report: dict) -> None:
     """Write the run's report (floats rounded to 4 places), then stamp the run complete, then remove its
     shards: they are in the merged set."""
-    write_atomic(out / REPORT_NAME, dump_json(round_floats(report, 4)))
-    write_atomic(out / STAMP_NAME, dump_json(run_stamp | {"complete": True}))
-    remove_shards(out)
+    write_atomic(c.out / REPORT_NAME, dump_json(round_floats(report, 4)))
+    write_atomic(c.out / STAMP_NAME, dump_json(c.stamp | {"complete": True}))
+    remove_shards(c.out)
 
 
 def foreign(out: Path, stamp: dict) -> list[str]:

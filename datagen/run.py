@@ -7,7 +7,8 @@ them; each step lives in a module named for its job, and those alone call ch37.o
 
     datagen.source_check   which task --src is, whether the engine can grow it, its identity
     datagen.plan           the settings as stamped, the attempts cut into shards, the memory they need
-    datagen.resume         --out checked and held, the run's stamp, an earlier run's shards judged
+    datagen.resume         --out claimed and judged once (a RunClaim, passed to the later steps), held
+                           under its lock, the run's stamp, an earlier run's shards judged
     datagen.shards         a shard made by a worker (a local process or a Ray task: ch37.parallel),
                            saved as it arrives, the shards merged (lerobot_v3.merge_sets), removed
     datagen.report         the generation report
@@ -61,7 +62,7 @@ def run(src: Path, out: Path, settings: dict, *, workers: int, ray: str | None =
     Returns the generation report."""
     task = task_of(src)
     t0 = time.perf_counter()
-    resume.check_out_first(out, src)  # before reading the source: a folder not ours is refused at once
+    claim = resume.claim(out, src)  # before reading the source: a folder not ours is refused at once
     arrays, note = successful_only(read_source(task, src), src)
     if note:
         print(note, flush=True)
@@ -75,20 +76,17 @@ def run(src: Path, out: Path, settings: dict, *, workers: int, ray: str | None =
         "engine": engine_version(task),
     }
     config["versions"] = versions(task)
-    with resume.taken(out, src, config) as stamp:
-        old = resume.completed(out, stamp)
-        if old:
-            print("already complete (same command, same settings); nothing to do")
-            return old
-        return _generate(
-            src, out, engine.sources(arrays), config, workers=workers, ray=ray, quiet=quiet, t0=t0
-        )
-
-
-def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
-    run_stamp = resume.begin(out, config)  # the folder is ours from here on
+    sources = engine.sources(arrays)
     shards = plan(sources, attempts_per_demo(config), config["shard_size"])
-    done = resume.finished(out, config, shards)
+    with resume.taken(claim, config, shards):
+        if claim.report:
+            print("already complete (same command, same settings); nothing to do")
+            return claim.report
+        return _generate(src, claim, sources, shards, config, workers=workers, ray=ray, quiet=quiet, t0=t0)
+
+
+def _generate(src, claim, sources, shards, config, *, workers, ray, quiet, t0) -> dict:
+    out, done = claim.out, claim.done
     todo = [i for i in range(len(shards)) if i not in done]
     note = many_files_note(len(shards), sum(map(len, shards)), config["shard_size"], out) if todo else None
     if note:
@@ -124,7 +122,7 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
     t_gen = time.perf_counter()
     made = collect(out, results, done, config["versions"], total=sum(map(len, shards)), quiet=quiet)
     t_merge = time.perf_counter()
-    merged = merge(out, len(shards), run_stamp)
+    merged = merge(out, len(shards), claim.stamp)
     seconds = time.perf_counter() - t0
     report = report_of(
         [done[i] for i in range(len(shards))],
@@ -144,7 +142,7 @@ def _generate(src, out, sources, config, *, workers, ray, quiet, t0) -> dict:
         },
     )
     assert report["kept"] == merged, (report["kept"], merged)
-    resume.complete(out, run_stamp, report)
+    resume.complete(claim, report)
     if merged == 0:
         print(f"no attempt succeeded: no dataset written, only {out / REPORT_NAME}")
     return report
