@@ -424,7 +424,7 @@ def test_live_replay_re_expresses_the_rest_of_the_segment_once_the_block_drifts(
 
 def test_live_replay_keeps_a_start_open_loop_replay_loses(env):
     """Issue 49 #4: from the same perturbed start (source 0, 2 cm and 0.12 rad, attempt 2), open-loop replay
-    pushes the block off target; the replay that follows the block's live pose re-anchors and keeps it, and
+    pushes the block off target; the replay that follows the block's live pose keeps it, and
     the kept demo re-executes from its recorded start to its recorded frames and success."""
     source, _ = expert_source(env, 0)
     how = Perturbation(0, 0.02, 0.12)
