@@ -54,7 +54,7 @@ class Args(config.Perturbation, config.Mode, config.Ray):
     select: str = flag(
         "own",
         "the source a replay transforms: own (the attempt's own source demo) or nearest (the source demo "
-        "whose objects start nearest the new start: MimicGen's selection); --aug_mode replay",
+        "whose objects start nearest the new start: MimicGen's selection); --aug_mode replay or replay_live",
         choices=("own", "nearest"),  # datagen.engine.SELECTS
     )
     shard_size: int = flag(SHARD_SIZE, "attempts per shard; part of the run's settings", bound=POSITIVE)
@@ -64,10 +64,10 @@ class Args(config.Perturbation, config.Mode, config.Ray):
 def parse(argv=None):
     a = config.parse(Args, argv, prog="augment_demos.py", description=__doc__.split("\n\n")[0])
     a.workers = config.default_workers() if a.workers is None else a.workers
-    if a.select != "own" and a.aug_mode != "replay":
+    if a.select != "own" and a.aug_mode == "resolve":
         raise errors.DataError(
-            "--select nearest chooses the source a replay transforms; use it with --aug_mode replay "
-            "(see --help)"
+            "--select nearest chooses the source a replay transforms; use it with --aug_mode replay or "
+            "replay_live (see --help)"
         )
     return a
 

@@ -35,7 +35,7 @@ BOUNDS = (POSITIVE, NON_NEGATIVE, FINITE, FINITE_POSITIVE)
 # (datagen.pusht.R_LO, R_HI), so a 10 m std almost never lands one, and a yaw wraps every 6.3 rad;
 # beyond that a value can only waste attempts, and 1e308 overflows the angle to inf (math domain error).
 SIGMA_MAX = 10.0
-MODES = ("resolve", "replay")  # datagen.Task.modes (not imported here: --help stays instant)
+MODES = ("resolve", "replay", "replay_live")  # datagen.Task.modes (not imported here: --help stays instant)
 
 
 def flag(default, help: str, *, bound=None, at_most=None, aliases=(), why=None, **argparse_kw):
@@ -285,7 +285,10 @@ class Mode:
         "resolve",
         "resolve: the expert solves each perturbed start; replay: MimicGen's move, the source path "
         "transformed into the new object poses and executed open-loop (no solver), kept only on success "
-        "(on PushT most attempts fail here; ALOHA replays subtask by subtask)",
+        "(on PushT most attempts fail here; ALOHA replays subtask by subtask); replay_live: the same replay "
+        "following the object's live pose: once an object frame lies farther from where the replayed segment "
+        "expects it than the task's follow tolerance (PushT 2 mm and 0.02 rad, gym-pusht 2 px and 0.02 rad: "
+        "more than contact jitter), the rest of the segment is re-expressed from its pose now (no solver)",
         choices=MODES,
         aliases=("mode",),
     )

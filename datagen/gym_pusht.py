@@ -19,6 +19,7 @@ ours. The only engine module that imports gym_pusht (at the first env made, not 
     frames     block (its pose recovered from the keypoints: gym_pusht_expert.block_pose_from_keypoints, so
                a set that records only keypoints works), goal (fixed)
     subtasks   one: the whole push relative to the block, entered by a bridge from where the agent is
+               (ONE_SEGMENT; GymPushT(ONTO_GOAL), a study's, slides the push's frame onto the goal)
     actions    position targets (px): a replayed step commands the segment's re-expressed target
     success    gym-pusht's own info["is_success"] (coverage of the goal above 0.95; it ends the episode)
     video      (--video) gym-pusht's own render(): the table drawn IMAGE_SIZE square (pygame, no OpenGL),
@@ -39,6 +40,8 @@ from lerobot_v3 import ENV_STATE_KEY, IMAGE_SIZE
 __all__ = [
     "GYM_PUSHT",
     "KEYPOINT_TOL",
+    "ONE_SEGMENT",
+    "ONTO_GOAL",
     "GymPushT",
     "START_NAMES",
     "keypoint_residual",
@@ -62,6 +65,9 @@ BOXES = ((-60.0, 60.0, 0.0, 30.0), (-15.0, 15.0, 30.0, 120.0))  # the T's bar an
 # off; scaled x2 or collapsed onto a point, 76 px; mirrored (x -> 512 - x), 120 px.
 KEYPOINT_TOL = 2.0
 
+
+ONE_SEGMENT = (Subtask("push", ("block",)),)  # the engine's: the whole push relative to the block
+ONTO_GOAL = (Subtask("push", ("block",), onto=("goal",)),)  # a study's: its frame sliding onto the goal
 
 STATE_NAMES = ("agent_x", "agent_y")  # observation.state: the agent's position (px)
 KEYPOINT_NAMES = tuple(f"keypoint_{i}_{a}" for i in range(8) for a in "xy")  # px
@@ -122,10 +128,13 @@ class GymPushT(Task):
     records_reward = True  # next.reward (gym-pusht's: the goal's coverage over 95%, at most 1) and next.done
     arms = {"agent": slice(0, 2)}
     reach = {"agent": ((0.0, 512.0), (0.0, 512.0))}  # px: a target outside the action space is none
-    subtasks = (Subtask("push", ("block",)),)
     bridge_speed = 300.0  # px/s: the expert's top pushing speed
     bridge_tol = 120.0  # px: how far ahead of the agent the expert's own targets lead (0.2 s x 600 px/s)
     bridge_moves = (2.0, 0.02)  # px, rad: a bridge that moves the block more has hit it
+    follow_tol = (2.0, 0.02)  # px, rad: replay_live re-anchors beyond this (PushT's 2 mm at 1 px = 1 mm)
+
+    def __init__(self, subtasks: tuple[Subtask, ...] = ONE_SEGMENT):
+        self.subtasks = subtasks
 
     def make_env(self, share=None):
         import gymnasium

@@ -265,12 +265,19 @@ def resolve_lanes(task: Task, sources: dict, how: Perturbation, act_batch=None, 
 
 
 def replay_lanes(
-    task: Task, sources: dict, how: Perturbation, pool: dict | None, plans: dict | None, start_for=None
+    task: Task,
+    sources: dict,
+    how: Perturbation,
+    pool: dict | None,
+    plans: dict | None,
+    start_for=None,
+    follow=None,
 ) -> dict:
     """Mode "replay": the engine's one replay (datagen.replay.Replay.steps, a generator per lane) of
     the attempt's own source, or of the pool's nearest to its start (MimicGen's selection; pool None:
     its own). plans: the worker's cut sources (None: cut for this call). start_for(job): a given start
-    instead of the drawn one."""
+    instead of the drawn one. follow: (length, rad), mode "replay_live" (task.follow_tol): each lane
+    re-anchors the rest of a segment on the object's live pose once it drifts that far (None: open loop)."""
     start_for = start_for or (lambda job: start_of_job(task, sources, job, how))
 
     def begin(job, env):
@@ -282,7 +289,7 @@ def replay_lanes(
             plan = replay.plan_of(task, source, plans)
         except ValueError:
             return Outcome("source_not_split", None, start, source.episode)
-        run = replay.Replay(task, source, plan, start)
+        run = replay.Replay(task, source, plan, start, follow)
         obs = task.place(env, start)
         gen = run.steps(env)
         next(gen)
@@ -319,7 +326,8 @@ def mode_parts(
     if mode == "resolve":
         act_batch = task.batch_expert() if lanes else None
         return resolve_lanes(task, sources, how, act_batch), act_batch is not None
-    parts = replay_lanes(task, sources, how, pool, plans)
+    follow = task.follow_tol if mode == "replay_live" else None
+    parts = replay_lanes(task, sources, how, pool, plans, follow=follow)
     return parts, type(task).step_batch is not Task.step_batch
 
 

@@ -10,6 +10,9 @@ depend on the 3-D path (tests/test_replay.py shows the two agree).
     transform_segment(points, vectors, src, new, rotations=None)   a path made relative to a frame at
         `src`, re-expressed for that frame at `new` (MimicGen's transform_source_data_segment_using_
         object_pose): points p' = M p, vectors v' = R_M v, rotations R' = R_M R, with M = new src^-1
+    transform_pose(pose, src, new)   a pose made relative to a frame at `src` (an object's, say),
+                             re-expressed for that frame at `new`: the pose M pose, M = new src^-1
+    pose_gap(a, b)           how far apart two poses are: (distance, angle in rad)
     interpolate(a, b, s)     the pose a fraction s of the way from a to b: position linear, orientation
                              by slerp (planar: yaw the short way)
     planar_pose(x, y, yaw)   the (4, 4) pose of a planar frame
@@ -25,11 +28,14 @@ __all__ = [
     "interpolate",
     "is_planar",
     "planar_pose",
+    "pose_gap",
     "quat_of",
     "rigid_inverse",
     "rotation",
+    "rotation_angle",
     "rotation_of",
     "slerp",
+    "transform_pose",
     "transform_segment",
 ]
 
@@ -92,6 +98,31 @@ def transform_segment(points, vectors, src_pose, new_pose, rotations=None):
     turned = None if vectors is None else np.asarray(vectors, np.float64).reshape(-1, 3) @ turn.T
     spun = None if rotations is None else turn @ np.asarray(rotations, np.float64)  # (T, 3, 3)
     return moved, turned, spun
+
+
+def transform_pose(pose, src_pose, new_pose):
+    """`pose` (a frame's pose where an object's frame was at `src_pose`) re-expressed for the object's frame
+    at `new_pose`, as transform_segment moves a path: planar, an (x, y, yaw) triple (its yaw turned by
+    yaw1 - yaw0); in SE(3), the (4, 4) pose M pose, M = new src^-1."""
+    if is_planar(pose) and is_planar(src_pose) and is_planar(new_pose):
+        (xy,), _ = transform_segment([np.asarray(pose[:2], np.float64)], np.zeros((1, 2)), src_pose, new_pose)
+        return np.array([xy[0], xy[1], float(pose[2]) + float(new_pose[2]) - float(src_pose[2])])
+    return _matrix(new_pose) @ rigid_inverse(_matrix(src_pose)) @ _matrix(pose)
+
+
+def pose_gap(a, b) -> tuple[float, float]:
+    """(distance between the two poses' positions, angle in rad of the rotation from a's orientation to
+    b's): planar triples give the xy distance and the yaw difference wrapped to [0, pi]."""
+    if is_planar(a) and is_planar(b):
+        shift = np.asarray(b) - np.asarray(a)
+        return math.hypot(shift[0], shift[1]), abs(math.remainder(shift[2], math.tau))
+    a, b = _matrix(a), _matrix(b)
+    return float(np.linalg.norm(b[:3, 3] - a[:3, 3])), rotation_angle(a[:3, :3], b[:3, :3])
+
+
+def rotation_angle(r0, r1) -> float:
+    """The angle (rad) of the rotation that takes orientation r0 (3, 3) to r1."""
+    return math.acos(min(1.0, max(-1.0, (float(np.trace(np.asarray(r0).T @ r1)) - 1) / 2)))
 
 
 def quat_of(rot) -> np.ndarray:

@@ -18,7 +18,12 @@ subtask's `onto` makes an arm's frame slide onto another over the subtask). A su
 entered by linear interpolation from where the arms are to their first waypoints, all arms in step, at up
 to task.bridge_speed (none when every arm is within task.bridge_tol); each gripper keeps its last command.
 Then every step is task.target_to_action of each arm's waypoint, velocity and gripper command of that
-frame. After the last subtask the arms hold still for task.hold_steps steps (so a success that must be
+frame. Mode "replay_live" (Replay's follow, task.follow_tol) follows the objects' live poses: before each
+step of a subtask every object frame of it is read, and once one lies beyond follow from where the segment
+as re-expressed expects it (the source's own pose of that frame, moved as the waypoints were), the rest of
+the segment is re-expressed from the poses now, as its start was (a frame sliding onto another slides
+again from there over the remaining frames): still no expert, only the source's path relative to its
+objects. After the last subtask the arms hold still for task.hold_steps steps (so a success that must be
 held can complete). The attempt is kept only on the env's success; otherwise the first reason of
 REASONS that applies:
 
@@ -42,7 +47,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from datagen.poses import interpolate, is_planar, slerp, transform_segment
+from datagen.poses import interpolate, pose_gap, rotation_angle, slerp, transform_pose, transform_segment
 from datagen.task import Outcome, Source, Subtask, Task, ended
 
 __all__ = ["Replay", "Segment", "cut", "nearest", "plan_of", "signals"]
@@ -126,17 +131,17 @@ def _moved(points, vectors, rotations, was, now):
     return got if len(got) == 3 else (*got, None)
 
 
-def _angle(r0, r1) -> float:
-    """The angle (rad) of the rotation that takes orientation r0 (3, 3) to r1."""
-    return math.acos(min(1.0, max(-1.0, (float(np.trace(np.asarray(r0).T @ r1)) - 1) / 2)))
-
-
 class Replay:
     """One attempt's replay of `plan` (a source's Segments) from `start`: what it found so far and its
     steps (see the module docstring)."""
 
-    def __init__(self, task: Task, source: Source, plan: list[Segment], start):
+    def __init__(self, task: Task, source: Source, plan: list[Segment], start, follow=None):
         self.task, self.source, self.plan, self.start = task, source, plan, start
+        # (length, rad), task.follow_tol: re-express the rest of a segment from the object frames' live
+        # poses once one drifts this far from where the segment expects it (None: open loop)
+        self.follow = follow
+        self.reanchored = 0  # how often the rest of a segment was re-expressed from live poses
+        self._source_poses = {}  # frame -> its pose in every source frame (follow's expectations)
         self.out_of_reach = False  # a re-expressed waypoint beyond its arm's reach
         self.blocked = False  # a bridge moved the object
         self.seen = dict.fromkeys((s.ends for s in task.subtasks if s.ends), False)  # signals ever on
@@ -185,10 +190,59 @@ class Replay:
             if name in self.seen:
                 self.seen[name] |= bool(on)
 
+    def expected(self, seg: Segment, now) -> dict:
+        """{frame: its pose at each of seg's frames} for every object frame of seg's subtask: where the
+        segment re-expressed for the observation `now` expects it, the source's own poses of that frame
+        moved as segment moves the waypoints (a frame that slides onto another: the pose of that step)."""
+        task, first, out = self.task, self.source.states[seg.start], {}
+        onto = seg.subtask.onto or (None,) * len(task.arms)
+        for frame, to in zip(seg.subtask.frames, onto):
+            if frame in out:
+                continue
+            if frame not in self._source_poses:
+                self._source_poses[frame] = [task.frame_pose(frame, s) for s in self.source.states]
+            poses = self._source_poses[frame][seg.start : seg.stop]
+            a0, b0 = task.frame_pose(frame, first), task.frame_pose(frame, now)
+            if to is None:
+                out[frame] = [transform_pose(p, a0, b0) for p in poses]
+                continue
+            a1, b1 = task.frame_pose(to, first), task.frame_pose(to, now)
+            k = max(len(poses) - 1, 1)
+            out[frame] = [
+                transform_pose(p, interpolate(a0, a1, t / k), interpolate(b0, b1, t / k))
+                for t, p in enumerate(poses)
+            ]
+        return out
+
+    def drifted(self, expect: dict, i: int, obs) -> bool:
+        """Whether an object frame in `obs` lies farther than self.follow from where `expect` (expected's)
+        puts it at its step i."""
+        far, turned = self.follow
+        for frame, poses in expect.items():
+            d, a = pose_gap(poses[i], self.task.frame_pose(frame, obs))
+            if d > far or a > turned:
+                return True
+        return False
+
+    def check_reach(self, segs: dict) -> None:
+        """Note (once) the first re-expressed waypoint of `segs` beyond its arm's reach."""
+        for arm, (pts, *_) in segs.items():
+            inside = self.task.in_reach(arm, pts)
+            if not inside.all() and not self.out_of_reach:
+                i = int(np.argmin(inside))
+                at_ = ", ".join(f"{v:.4g}" for v in pts[i])
+                self.beyond = (
+                    f"subtask {self.current!r}: waypoint {i} of {len(pts)} for arm {arm} ({at_}) "
+                    "is beyond its reach"
+                )
+            self.out_of_reach |= not inside.all()
+
     def steps(self, env):
         """The attempt's actions: a generator primed with next(), then sent each observation (the first,
         then the one after each step) and yielding the next action; it returns when the plan and the
-        hold are done. The runner stops sending when the episode ends."""
+        hold are done. The runner stops sending when the episode ends. With self.follow, before each step
+        of a segment the object frames are read: once one has drifted beyond it from where the segment
+        expects it, the segment's remaining frames are re-expressed from the poses now (re-anchored)."""
         task = self.task
         fps = task.spec.fps
         obs = yield
@@ -198,16 +252,8 @@ class Replay:
             segs = self.segment(seg, obs)
             some = segs[next(iter(segs))]  # what every arm's segment holds: velocities? grips? orientations?
             moving, gripping, turning = (some[i] is not None for i in (1, 2, 3))
-            for arm, (pts, *_) in segs.items():
-                inside = task.in_reach(arm, pts)
-                if not inside.all() and not self.out_of_reach:
-                    i = int(np.argmin(inside))
-                    at_ = ", ".join(f"{v:.4g}" for v in pts[i])
-                    self.beyond = (
-                        f"subtask {self.current!r}: waypoint {i} of {len(pts)} for arm {arm} ({at_}) "
-                        "is beyond its reach"
-                    )
-                self.out_of_reach |= not inside.all()
+            self.check_reach(segs)
+            expect = self.expected(seg, obs) if self.follow is not None else None
             if grips is None and gripping:
                 grips = {a: float(segs[a][2][0]) for a in task.arms}
             if seg.subtask.bridge:
@@ -227,13 +273,20 @@ class Replay:
                     obs = yield task.target_to_action(obs, wp, vel, g, turns)
                     self.watch(obs, env)
                 self.end_bridge(obs)
+            at = 0  # the segment's frame its re-expressed waypoints start from (later once re-anchored)
             for t in range(seg.stop - seg.start):
+                if expect is not None and self.drifted(expect, t - at, obs):
+                    rest = Segment(seg.subtask, seg.start + t, seg.stop)
+                    segs, expect, at = self.segment(rest, obs), self.expected(rest, obs), t
+                    self.reanchored += 1
+                    self.check_reach(segs)
+                i = t - at
                 if grips is not None:
-                    grips = {a: float(segs[a][2][t]) for a in task.arms}
+                    grips = {a: float(segs[a][2][i]) for a in task.arms}
                 if turning:
-                    turns = {a: segs[a][3][t] for a in task.arms}
-                wp = {a: segs[a][0][t] for a in task.arms}
-                vel = {a: segs[a][1][t] for a in task.arms} if moving else None
+                    turns = {a: segs[a][3][i] for a in task.arms}
+                wp = {a: segs[a][0][i] for a in task.arms}
+                vel = {a: segs[a][1][i] for a in task.arms} if moving else None
                 obs = yield task.target_to_action(obs, wp, vel, grips, turns)
                 self.watch(obs, env)
         self.planned = True
@@ -253,7 +306,7 @@ class Replay:
         dist = max(float(np.hypot(*g)) if len(g) == 2 else float(np.linalg.norm(g)) for g in gaps)
         n = math.ceil(dist / (speed / fps) - 1e-9) if dist > task.bridge_tol else 0
         if turns is not None and task.bridge_turn_speed is not None:
-            angle = max(_angle(facing[a], turns[a]) for a in task.arms if facing[a] is not None)
+            angle = max(rotation_angle(facing[a], turns[a]) for a in task.arms if facing[a] is not None)
             n = max(n, math.ceil(angle / (task.bridge_turn_speed / fps) - 1e-9))
         return n
 
@@ -275,13 +328,7 @@ class Replay:
         """Whether the bridge that started at self.bridging moved the object beyond task.bridge_moves."""
         tol = self.task.bridge_moves
         if self.bridging is not None and tol is not None:
-            now, was = self.task.object_pose(obs), self.bridging
-            if is_planar(was):
-                shift = now - was
-                moved, turned = math.hypot(shift[0], shift[1]), abs(math.remainder(shift[2], math.tau))
-            else:
-                moved = float(np.linalg.norm(now[:3, 3] - was[:3, 3]))
-                turned = _angle(was[:3, :3], now[:3, :3])
+            moved, turned = pose_gap(self.bridging, self.task.object_pose(obs))
             if (moved > tol[0] or turned > tol[1]) and not self.blocked:
                 self.bumped = (
                     f"subtask {self.current!r}: its bridge moved the object {moved:.4g} and turned it "

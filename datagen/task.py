@@ -21,7 +21,7 @@ members, each attribute and method with its inputs, outputs and units; everythin
                          ranges of its states and actions, state_problem
     its robot            reach (in_reach), arm_pose (where an observation does not show the hand's
                          orientation), bridge_speed, bridge_tol, bridge_turn_speed, hold_steps
-    its objects          frame_pose (the object frames its subtasks live in), start_distance
+    its objects          frame_pose (the object frames its subtasks live in), start_distance, follow_tol
     its subtasks         subtasks (per arm, the frame each lives in; the signal that ends it; whether
                          it is entered by interpolation), signals (the env's subtask-end signals)
     its expert           expert_class (optional: a task without one only replays; the demo generators
@@ -32,7 +32,8 @@ python -m datagen.check TASK runs what a task must satisfy before a long run.
 
 and the engine does the rest: the modes ("resolve": perturb, the expert re-solves, keep on success;
 "replay": perturb, the source's subtasks re-expressed in the new object frames and executed, keep on
-success: datagen.replay), lockstep, shards, resume, report and merge.
+success: datagen.replay; "replay_live": the same, re-expressed again from the objects' live poses once
+they drift beyond follow_tol), lockstep, shards, resume, report and merge.
 """
 
 from __future__ import annotations
@@ -297,6 +298,11 @@ class Task(abc.ABC):
     bridge_moves: tuple[float, float] | None = None  # (length, rad): a bridge moving the object more hit it
     bridge_turn_speed: float | None = None  # rad/s: a bridge's top turning speed (None: turns don't count)
     hold_steps: int = 0  # steps the arms hold still after the plan, for a success that must be held
+    # (length, rad): mode "replay_live" re-expresses the rest of a segment from the object frames' live poses
+    # once one lies farther than this from where the re-expressed segment expects it (datagen.replay). The
+    # default, 2 mm and 0.02 rad for a task in metres, is bridge_moves' "the object moved": contact jitter
+    # stays below it, so a segment that tracks is left as it was
+    follow_tol: tuple[float, float] = (0.002, 0.02)
 
     @abc.abstractmethod
     def make_env(self, share=None):
@@ -420,7 +426,8 @@ class Task(abc.ABC):
         blocked = ("approach_blocked",) if self.bridge_moves is not None else ()
         missed = tuple(f"{s.ends}_missed" for s in self.subtasks if s.ends)
         tail = ("out_of_time", "finished_off_target", "source_not_split", "no_valid_start")
-        return resolve | {"replay": ("path_out_of_reach",) + blocked + missed + tail}
+        replay = ("path_out_of_reach",) + blocked + missed + tail
+        return resolve | {"replay": replay, "replay_live": replay}
 
     @property
     def modes(self) -> tuple[str, ...]:

@@ -254,3 +254,22 @@ def test_an_upgrade_of_gym_pusht_or_pymunk_remakes_cached_sets_and_refuses_old_s
     for p in TASK.packages:
         assert f"+{p}{version(p)}" in digest and ran[p] == version(p)
     assert {"gym-pusht", "pymunk"} <= set(TASK.packages)
+
+
+def test_live_replay_gives_the_same_bytes_for_any_workers_and_every_kept_episode_re_executes(
+    source, tmp_path
+):
+    """Issue 49 #4: --aug_mode replay_live (the replay that re-anchors on the block's live pose) grows
+    LeRobot's own PushT through the engine's runner: the same bytes with --workers 1 and 2, its failures
+    among the mode's reasons, and every kept episode re-executed open-loop in a fresh gym-pusht."""
+    from test_engine import tree
+
+    flags = ["--src", source, "--per_demo", "3", "--seed", "1", "--aug_mode", "replay_live", "--quiet"]
+    flags += ["--aug_pos_sigma", "0.001", "--aug_yaw_sigma", "0.005", "--shard_size", "2"]
+    for w in ("1", "2"):
+        r = run_script(ROOT / "augment_demos.py", *flags, "--out", tmp_path / w, "--workers", w)
+        assert r.returncode == 0, r.stderr
+    assert tree(tmp_path / "1") == tree(tmp_path / "2")
+    report = json.loads((tmp_path / "1" / "generation_report.json").read_text())
+    assert report["attempts"] == 9 and set(report["failures"]) <= set(TASK.failures["replay_live"])
+    assert report["kept"] >= 1 and replays_exactly(tmp_path / "1") == report["kept"]

@@ -242,3 +242,18 @@ def test_a_task_whose_max_steps_is_shorter_than_its_env_is_one_line(sources):
 
     with pytest.raises(RuntimeError, match="ran past 5 steps without ending: the task's max_steps"):
         engine.attempt(ShortPushT(), sources[0], 0, Perturbation(1, 0.08, 0.5))
+
+
+def test_live_replay_in_lockstep_equals_one_at_a_time(sources):
+    """Issue 49 #4: replay_live decides inside each lane (its re-anchoring reads only that lane's
+    observations), so PushT's lanes stepped together give engine.attempt's bytes, kept and lost alike,
+    from the attempts' own sources and from the nearest."""
+    how = Perturbation(1, 0.02, 0.2)
+    jobs = [(e, k) for e in sorted(sources) for k in range(25)]  # 100 attempts
+    for select, pool in (("own", None), ("nearest", sources)):
+        one = [engine.attempt(PUSHT, sources[e], k, how, mode="replay_live", pool=pool) for e, k in jobs]
+        together = lockstep.attempts_lockstep(
+            PUSHT, sources, jobs, how, mode="replay_live", select=select, lanes=7
+        )
+        assert 5 <= sum(r.kept for r in one) < len(jobs)  # both outcomes are compared
+        assert_same_results(one, together)

@@ -357,3 +357,84 @@ def test_the_check_command_tells_a_newcomer_what_is_wrong_before_a_long_run():
         "2 of 2 not reproduced; the first: rollout 0: path_out_of_reach (subtask 'push': "
     ), out
     assert "waypoint 0 of" in out and "beyond its reach" in out
+
+
+def test_transform_pose_moves_a_pose_as_transform_segment_moves_a_path():
+    """Issue 49 #4: a frame's pose re-expressed for its object moved (replay_live's expectation of where the
+    object should be) is the pose whose position transform_segment gives and whose yaw turns by the
+    object's turn; in SE(3) the same as the planar case; pose_gap reads back a known drift."""
+    from datagen.poses import pose_gap, transform_pose
+
+    src, new, pose = (0.2, -0.1, 0.7), (-0.3, 0.25, -2.4), (0.25, -0.05, 1.1)
+    got = transform_pose(pose, src, new)
+    (xy,), _ = transform_segment([pose[:2]], [[0.0, 0.0]], src, new)
+    np.testing.assert_allclose(got, [*xy, 1.1 - 2.4 - 0.7], atol=1e-12)
+    np.testing.assert_allclose(
+        transform_pose(planar_pose(*pose), planar_pose(*src), planar_pose(*new)),
+        planar_pose(*got),
+        atol=1e-12,
+    )
+    assert transform_pose(src, src, new) == pytest.approx(new)  # the object itself lands on its new pose
+    drift = (pose[0] + 0.003, pose[1] - 0.004, pose[2] + 0.05)
+    for a, b in ((pose, drift), (planar_pose(*pose), planar_pose(*drift))):
+        assert pose_gap(a, b) == pytest.approx((0.005, 0.05), abs=1e-12)
+
+
+def test_live_replay_re_expresses_the_rest_of_the_segment_once_the_block_drifts(env):
+    """Issue 49 #4, the decision: fed its source's own frames, a live replay commands the source's own
+    targets; a block that lies 1 mm from where the segment expects it (below PushT's follow_tol, 2 mm)
+    changes nothing; one 1 cm and 0.1 rad off makes the rest of the segment re-expressed from the pose now:
+    the next action tracks the source's waypoint moved from the source's block pose at that frame onto
+    the live one, with the source's velocity turned with it."""
+    from datagen.replay import Replay, plan_of
+
+    source, start = expert_source(env, 0)
+    run = Replay(PUSHT, source, plan_of(PUSHT, source), start, follow=PUSHT.follow_tol)
+    steps = run.steps(None)
+    next(steps)
+    r = 10
+    for t in range(r):
+        assert np.allclose(steps.send(source.states[t]), source.actions[t], atol=1e-6)
+    near = source.states[r].copy()
+    near[2] += 0.001
+    assert np.allclose(
+        steps.send(near),
+        PUSHT.target_to_action(near, {"pusher": source.states[r, :2]}, {"pusher": source.actions[r]}, None),
+        atol=1e-6,
+    )
+    assert run.reanchored == 0
+    was = pusht.block_pose(source.states[r + 1])
+    now = was + (0.01, 0.0, 0.1)
+    live = source.states[r + 1].copy()
+    live[2:6] = now[0], now[1], math.sin(now[2]), math.cos(now[2])
+    (wp,), (vel,) = transform_segment(
+        source.states[r + 1 : r + 2, :2], source.actions[r + 1 : r + 2], was, pusht.block_pose(live)
+    )
+    want = PUSHT.target_to_action(live, {"pusher": wp}, {"pusher": vel}, None)
+    open_loop = PUSHT.target_to_action(
+        live, {"pusher": source.states[r + 1, :2]}, {"pusher": source.actions[r + 1]}, None
+    )
+    got = steps.send(live)
+    assert (
+        run.reanchored == 1
+        and np.allclose(got, want, atol=1e-6)
+        and not np.allclose(got, open_loop, atol=1e-3)
+    )
+
+
+def test_live_replay_keeps_a_start_open_loop_replay_loses(env):
+    """Issue 49 #4: from the same perturbed start (source 0, 2 cm and 0.12 rad, attempt 2), open-loop replay
+    pushes the block off target; the replay that follows the block's live pose keeps it, and
+    the kept demo re-executes from its recorded start to its recorded frames and success."""
+    source, _ = expert_source(env, 0)
+    how = Perturbation(0, 0.02, 0.12)
+    lost = engine.attempt(PUSHT, source, 2, how, mode="replay", env=env)
+    got = engine.attempt(PUSHT, source, 2, how, mode="replay_live", env=env)
+    assert lost.reason == "finished_off_target" and got.kept, (lost.reason, got.reason)
+    ep = got.episode
+    np.testing.assert_allclose(ep["aug.start"][0], got.start, atol=1e-6)  # the provenance names its start
+    obs = env.set_start(*got.start)
+    for s, a in zip(ep["observation.state"], ep["action"]):
+        np.testing.assert_allclose(obs, s, atol=1e-6)
+        obs, _, done, info = env.step(a)
+    assert info["success"] and done

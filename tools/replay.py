@@ -30,7 +30,7 @@ from ch37.seeds import env_seed
 from datagen import ALOHA, PUSHT, Perturbation, engine
 from datagen.aloha import WHOLE, Aloha
 from datagen.demos import expert_episodes
-from datagen.gym_pusht import GYM_PUSHT
+from datagen.gym_pusht import GYM_PUSHT, ONTO_GOAL, GymPushT
 from datagen.pusher import PUSHER, Pusher
 from datagen.pusher import WHOLE as PUSHER_WHOLE
 from datagen.pusht import BY_CONTACT, BY_CONTACT_BLOCK, PushT
@@ -319,6 +319,9 @@ VARIANTS = {
         "subtasks": (PushT(BY_CONTACT), "own"),
         "subtasks_nearest": (PushT(BY_CONTACT), "nearest"),
         "subtasks_block_nearest": (PushT(BY_CONTACT_BLOCK), "nearest"),
+        "replay_live": (PUSHT, "own"),
+        "subtasks_live": (PushT(BY_CONTACT), "own"),
+        "subtasks_nearest_live": (PushT(BY_CONTACT), "nearest"),
     },
     "aloha": {
         "resolve": (ALOHA, "own"),
@@ -330,6 +333,10 @@ VARIANTS = {
         "resolve": (GYM_PUSHT, "own"),
         "replay": (GYM_PUSHT, "own"),
         "replay_nearest": (GYM_PUSHT, "nearest"),
+        "replay_live": (GYM_PUSHT, "own"),
+        "replay_nearest_live": (GYM_PUSHT, "nearest"),
+        "onto_goal": (GymPushT(ONTO_GOAL), "own"),
+        "onto_goal_live": (GymPushT(ONTO_GOAL), "own"),
     },
     "pusher": {  # Gymnasium's Pusher-v5 (issue 46): the engine's replay in SE(3)
         "resolve": (PUSHER, "own"),
@@ -356,7 +363,7 @@ def one(work: dict, sims: engine.Simulators, job) -> tuple[str, int]:
     pool = work[(task, seed)]
     t, select = VARIANTS[task][mode]
     how = Perturbation(seed, m * POS_SIGMA, m * YAW_SIGMA)
-    run = "resolve" if mode == "resolve" else "replay"
+    run = "resolve" if mode == "resolve" else "replay_live" if mode.endswith("_live") else "replay"
     r = engine.attempt(t, pool[e], k, how, mode=run, pool=pool if select == "nearest" else None, sims=sims)
     return ("kept", r.steps) if r.kept else (r.reason, 0)
 
@@ -409,6 +416,11 @@ def yield_main(argv: list[str]) -> int:
         subtasks_block_nearest PushT only: nearest, with the push relative to the block alone
         replay_nearest         gym-pusht only (LeRobot's PushT, --tasks gym_pusht): the one-segment replay
                                from the source nearest the new start
+        onto_goal              gym-pusht only: the one segment with its frame sliding from the block onto
+                               the goal over the push (GymPushT(ONTO_GOAL), as PushT's subtasks slide onto
+                               the target)
+        <mode>_live            PushT and gym-pusht (issue 49 #4): that mode's replay as --aug_mode replay_live
+                               runs it, re-anchored on the objects' live poses beyond the task's follow_tol
 
     Gymnasium's Pusher-v5 (--tasks pusher; issue 46: a 7-DoF arm, targets in SE(3)): its object's (x, y)
     moved by 0.08 m, kept where Pusher-v5's reset puts it; replay is one segment relative to the object,
