@@ -112,6 +112,30 @@ class Lane:
         self.__dict__.update(state)
 
 
+class _Frames:
+    """Each lane slot's recorded frames: observations (one more than actions: the obs after the last
+    step), actions, next.success, and next.reward/next.done where the task records its reward."""
+
+    def __init__(self, width: int, max_frames: int, obs_dim: int, act_dim: int, rewards: bool):
+        self.obs = np.zeros((width, max_frames + 1, obs_dim), np.float32)
+        self.act = np.zeros((width, max_frames, act_dim), np.float32)
+        self.succ = np.zeros((width, max_frames), bool)
+        self.rew = np.zeros((width, max_frames), np.float32) if rewards else None
+        self.done = np.zeros((width, max_frames), bool) if rewards else None
+
+    def episode(self, slot: int, n: int) -> dict:
+        """The slot's first n frames, as datagen.demos.rollout records an episode."""
+        ep = {
+            "observation.state": self.obs[slot, :n].copy(),
+            "action": self.act[slot, :n].copy(),
+            "next.success": self.succ[slot, :n, None].copy(),
+        }
+        if self.rew is not None:
+            ep["next.reward"] = self.rew[slot, :n, None].copy()
+            ep["next.done"] = self.done[slot, :n, None].copy()
+        return ep
+
+
 def run_lanes(
     jobs,
     *,
@@ -135,11 +159,7 @@ def run_lanes(
     todo = deque(range(len(jobs)))
     width = max(1, min(lanes, len(jobs), len(envs)))
     envs = envs[:width]
-    obs_buf = np.zeros((width, max_frames + 1, obs_dim), np.float32)  # +1: the obs after the last step
-    act_buf = np.zeros((width, max_frames, act_dim), np.float32)
-    succ_buf = np.zeros((width, max_frames), bool)
-    rew_buf = np.zeros((width, max_frames), np.float32) if reward_of is not None else None
-    done_buf = np.zeros((width, max_frames), bool) if reward_of is not None else None
+    f = _Frames(width, max_frames, obs_dim, act_dim, rewards=reward_of is not None)
     live: dict[int, tuple[int, Lane]] = {}  # slot -> (job index, lane)
     t = np.zeros(width, int)  # frames recorded per slot
 
@@ -151,21 +171,12 @@ def run_lanes(
                 results[i] = got
                 continue
             live[slot], t[slot] = (i, got), 0
-            obs_buf[slot, 0] = got.obs
+            f.obs[slot, 0] = got.obs
             return
 
     def end(slot: int) -> None:
         i, lane = live.pop(slot)
-        n = t[slot]
-        episode = {
-            "observation.state": obs_buf[slot, :n].copy(),
-            "action": act_buf[slot, :n].copy(),
-            "next.success": succ_buf[slot, :n, None].copy(),
-        }
-        if reward_of is not None:
-            episode["next.reward"] = rew_buf[slot, :n, None].copy()
-            episode["next.done"] = done_buf[slot, :n, None].copy()
-        results[i] = finish(lane, envs[slot], episode, obs_buf[slot, n])
+        results[i] = finish(lane, envs[slot], f.episode(slot, t[slot]), f.obs[slot, t[slot]])
         fill(slot)
 
     for slot in range(width):
@@ -173,10 +184,10 @@ def run_lanes(
     while live:
         slots = np.fromiter(live, int, len(live))
         at = t[slots]
-        obs = obs_buf[slots, at]  # (N, obs_dim): each live lane's current observation
+        obs = f.obs[slots, at]  # (N, obs_dim): each live lane's current observation
         ids = slots.tolist()
         actions, stop = decide([live[s][1] for s in ids], [envs[s] for s in ids], obs)
-        act_buf[slots, at] = actions  # a stopped lane's row lies past its frames: never read
+        f.act[slots, at] = actions  # a stopped lane's row lies past its frames: never read
         if stop is not None and stop.any():  # ended before this step, not stepped
             for slot in slots[stop].tolist():
                 end(slot)
@@ -184,11 +195,11 @@ def run_lanes(
             if not len(slots):
                 continue
         o, success, done = step([envs[s] for s in slots.tolist()], actions)
-        obs_buf[slots, at + 1] = o
-        succ_buf[slots, at] = success
+        f.obs[slots, at + 1] = o
+        f.succ[slots, at] = success
         if reward_of is not None:
-            rew_buf[slots, at] = [reward_of(envs[s]) for s in slots.tolist()]
-            done_buf[slots, at] = done
+            f.rew[slots, at] = [reward_of(envs[s]) for s in slots.tolist()]
+            f.done[slots, at] = done
         t[slots] = at + 1
         full = at + 1 >= max_frames
         if full.any() and not done[full].all():
