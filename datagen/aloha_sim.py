@@ -78,7 +78,9 @@ IK_ITERS = 8  # damped least squares steps per solve, from the last solution (it
 IK_DAMPING = 0.02  # m: the damped least squares' lambda
 ROT_WEIGHT = 0.2  # m per rad: an orientation error against a position error
 MAX_REWARD = 4  # TransferCubeTask.max_reward: its success
-BOX, LEFT_FINGER, RIGHT_FINGER, TABLE = (
+# the geoms get_reward reads: the cube, the left arm's and the right arm's "10_..._gripper_finger" (one
+# finger of each gripper: the rule names no other), the table
+CONTACT_GEOMS = (
     "red_box",
     "vx300s_left/10_left_gripper_finger",
     "vx300s_right/10_right_gripper_finger",
@@ -129,7 +131,7 @@ def reward_stage(m: mujoco.MjModel, d: mujoco.MjData) -> int:
     order, 1 the right fingers touch the cube, 2 and it is off the table, 3 the left fingers touch it, 4 and
     it is off the table (success)."""
     pairs = {(int(a), int(b)) for a, b in zip(d.contact.geom1[: d.ncon], d.contact.geom2[: d.ncon])}
-    box, left, right, table = (m.geom(n).id for n in (BOX, LEFT_FINGER, RIGHT_FINGER, TABLE))
+    box, left, right, table = (mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, n) for n in CONTACT_GEOMS)
     touch_left, touch_right, touch_table = (
         ((box, left) in pairs),
         ((box, right) in pairs),
@@ -150,7 +152,7 @@ def reward_stage(m: mujoco.MjModel, d: mujoco.MjData) -> int:
 def qpos14(d: mujoco.MjData) -> np.ndarray:
     """BimanualViperXTask.get_qpos: each arm's 6 joints (rad) and its normalized gripper, left first."""
     q = d.qpos
-    return np.r_[q[:6], normalize_gripper(q[6]), q[8:14], normalize_gripper(q[14])]
+    return np.concatenate([q[:6], [normalize_gripper(q[6])], q[8:14], [normalize_gripper(q[14])]])
 
 
 def _step(m: mujoco.MjModel, d: mujoco.MjData) -> None:
@@ -192,7 +194,7 @@ class TransferCubeEnv:
         self.action_space = gymnasium.spaces.Box(-np.inf, np.inf, (14,), np.float32)
 
     def observation(self) -> np.ndarray:
-        return np.r_[qpos14(self.data), self.data.qpos[16:23]].astype(np.float32)
+        return np.concatenate([qpos14(self.data), self.data.qpos[16:23]]).astype(np.float32)
 
     def reset(self, *, seed=None, options=None):
         cube = box_pose(seed) if not options or "reset_to_state" not in options else options["reset_to_state"]
@@ -235,6 +237,7 @@ def ik(
     jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
     lo, hi = m.jnt_range[JOINT_IDS[arm]].T
     err_q, vel = np.zeros(4), np.zeros(3)
+    damping = IK_DAMPING**2 * np.eye(6)
     for _ in range(iters):
         d.qpos[qadr] = q
         mujoco.mj_kinematics(m, d)
@@ -242,8 +245,8 @@ def ik(
         p, rot = gripper_pose(m, d, arm)
         mujoco.mju_mat2Quat(err_q, (np.asarray(rotation) @ rot.T).ravel())
         mujoco.mju_quat2Vel(vel, err_q, 1.0)
-        err = np.r_[np.asarray(position) - p, ROT_WEIGHT * vel]
+        err = np.concatenate([np.asarray(position) - p, ROT_WEIGHT * vel])
         mujoco.mj_jac(m, d, jacp, jacr, p, b)
-        jac = np.r_[jacp[:, dofs], ROT_WEIGHT * jacr[:, dofs]]
-        q = np.clip(q + jac.T @ np.linalg.solve(jac @ jac.T + IK_DAMPING**2 * np.eye(6), err), lo, hi)
+        jac = np.concatenate([jacp[:, dofs], ROT_WEIGHT * jacr[:, dofs]])
+        q = np.clip(q + jac.T @ np.linalg.solve(jac @ jac.T + damping, err), lo, hi)
     return q

@@ -17,6 +17,8 @@ data-engine task: two ViperX 300s arms in 3-D, the model files of the gym-aloha 
     expert     datagen.aloha_sim_expert.TransferCubeExpert (ACT's PickAndTransferPolicy's waypoints, through
                inverse kinematics), noise in m on the grasp points' targets
     frames     the cube, in SE(3)
+    extra      action.end_effector: the end-effector targets each frame's joint action encodes (per arm, the
+               grasp point (m) and the gripper's orientation quaternion), as ACT's scripted data drive them
     arms       left and right, each its grasp point (datagen.aloha_sim.gripper_pose) and orientation, read
                through the model's kinematics from the joints an observation (or an action) holds
 """
@@ -28,7 +30,7 @@ import numpy as np
 
 from datagen.aloha_sim import CUBE_RANGE, FPS, gripper_pose, ik, model
 from datagen.aloha_sim_expert import STEPS, TransferCubeExpert
-from datagen.poses import rotation_of
+from datagen.poses import quat_of, rotation_of
 from datagen.task import EnvSpec, GymnasiumEnv, Perturbation, Subtask, Task, register
 
 __all__ = ["ALOHA_TRANSFER_CUBE", "AlohaTransferCube", "MOTORS", "SPEC", "START_NAMES"]
@@ -56,6 +58,9 @@ CUBE = slice(14, 21)  # the cube's pose in an observation
 JOINTS = (slice(0, 6), slice(7, 13))  # each arm's joints in an observation or an action
 GRIP = (6, 13)
 ARMS = ("left", "right")
+# the end-effector targets' column: per arm, left first, the grasp point (m) and the gripper's orientation
+EE_KEY = "action.end_effector"
+EE_NAMES = tuple(f"{side}_{n}" for side in ARMS for n in ("x", "y", "z", "qw", "qx", "qy", "qz"))
 TARGET_IK_ITERS = 20  # a replayed step's IK from the observed joints (the expert's runs from its last solve)
 
 
@@ -83,6 +88,9 @@ class AlohaTransferCube(Task):
     arms = {"left": JOINTS[0], "right": JOINTS[1]}  # the joints that place each grasp point (arm_pose)
     subtasks = (Subtask("whole", ("object", "object")),)
     expert_class = TransferCubeExpert
+    frame_features = {  # the end-effector targets each frame's joint action encodes (action_to_target)
+        EE_KEY: {"dtype": "float32", "shape": (len(EE_NAMES),), "names": list(EE_NAMES)}
+    }
 
     def make_env(self, share=None):
         from datagen.aloha_sim import TransferCubeEnv
@@ -123,6 +131,11 @@ class AlohaTransferCube(Task):
             )
             for i, name in enumerate(ARMS)
         }
+
+    def frame_columns(self, states, actions) -> dict[str, np.ndarray]:
+        targets = self.action_to_target(states, actions)
+        per_arm = [np.concatenate([t[0], [quat_of(r) for r in t[3]]], axis=1) for t in targets.values()]
+        return {EE_KEY: np.concatenate(per_arm, axis=1).astype(np.float32)}
 
     def target_to_action(self, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
         m = model()

@@ -89,16 +89,22 @@ def test_the_expert_solves_held_out_starts():
 
 def test_gen_demos_writes_a_set_whose_episodes_revalidate_in_the_joint_model(tmp_path):
     """gen_demos.py --task aloha_transfer_cube writes a LeRobot v3 set as lerobot/aloha_sim_* record it
-    (14 joint numbers in state and action, 50 fps) with the cube's pose as environment state; every
+    (14 joint numbers in state and action, 50 fps) with the cube's pose as environment state and the
+    end-effector targets as action.end_effector; every
     episode's recorded joint actions, replayed from its recorded start in a fresh joint-controlled env,
     reach gym-aloha's success again."""
     out = tmp_path / "set"
     r = run_script(ROOT / "gen_demos.py", "--task", "aloha_transfer_cube", "--episodes", "2", "--out", out)
     assert "expert successes 2/2" in r.stdout, r.stdout + r.stderr
     keys = ("observation.state", "observation.environment_state", "action", "episode_index", "next.reward")
-    frames = load_arrays(out, keys=keys)
+    frames = load_arrays(out, keys=keys + ("action.end_effector",))
     assert frames["observation.state"].shape[1] == 14 and frames["action"].shape[1] == 14
     assert frames["observation.environment_state"].shape[1] == 7
+    # the end-effector targets beside the joint actions: the grasp points the actions put the grippers at
+    ee = TASK.frame_columns(None, frames["action"])["action.end_effector"]
+    np.testing.assert_allclose(frames["action.end_effector"], ee, atol=1e-6)
+    right = frames["action.end_effector"][:, 7:10]  # the right grasp point: down to the cube and up
+    assert np.ptp(right[:, 2]) > 0.1 and right[:, 2].min() < 0.06
     for ep in (0, 1):
         rows = frames["episode_index"] == ep
         env = TASK.make_env()
