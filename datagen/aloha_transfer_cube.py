@@ -16,7 +16,9 @@ data-engine task: two ViperX 300s arms in 3-D, the model files of the gym-aloha 
                the cube does not touch the table), which ends the episode
     expert     datagen.aloha_sim_expert.TransferCubeExpert (ACT's PickAndTransferPolicy's waypoints, through
                inverse kinematics), noise in m on the grasp points' targets
-    frames     the cube, in SE(3)
+    frames     the cube, in SE(3), and the world (the meeting point in the air is fixed, as in ACT's script)
+    subtasks   pick (the right arm relative to the cube, the left to the world; it ends when the cube is
+               lifted: gym-aloha's stage 2) and handover (both arms relative to the world)
     extra      action.end_effector: the end-effector targets each frame's joint action encodes (per arm, the
                grasp point (m) and the gripper's orientation quaternion), as ACT's scripted data drive them
     arms       left and right, each its grasp point (datagen.aloha_sim.gripper_pose) and orientation, read
@@ -58,10 +60,16 @@ CUBE = slice(14, 21)  # the cube's pose in an observation
 JOINTS = (slice(0, 6), slice(7, 13))  # each arm's joints in an observation or an action
 GRIP = (6, 13)
 ARMS = ("left", "right")
+LIFTED = 2  # TransferCubeTask.get_reward's stage: the right fingers touch the cube, which is off the table
 # the end-effector targets' column: per arm, left first, the grasp point (m) and the gripper's orientation
 EE_KEY = "action.end_effector"
 EE_NAMES = tuple(f"{side}_{n}" for side in ARMS for n in ("x", "y", "z", "qw", "qx", "qy", "qz"))
 TARGET_IK_ITERS = 20  # a replayed step's IK from the observed joints (the expert's runs from its last solve)
+SUBTASKS = (  # the engine's: per arm (left, right), the frame its motion is relative to
+    Subtask("pick", ("world", "object"), ends="lifted"),  # the right arm grasps and lifts the cube
+    Subtask("handover", ("world", "world")),  # both meet at a fixed point in the air, as ACT's script does
+)
+WHOLE = (Subtask("whole", ("object", "object")),)  # MimicGen's move without subtasks, for contrast
 
 
 def _observe(obs) -> np.ndarray:
@@ -86,11 +94,13 @@ class AlohaTransferCube(Task):
     packages = ("gym-aloha", "mujoco")  # its model files and the physics
     records_reward = True  # gym-aloha's reward stages, as lerobot's sets of its env carry next.reward
     arms = {"left": JOINTS[0], "right": JOINTS[1]}  # the joints that place each grasp point (arm_pose)
-    subtasks = (Subtask("whole", ("object", "object")),)
     expert_class = TransferCubeExpert
     frame_features = {  # the end-effector targets each frame's joint action encodes (action_to_target)
         EE_KEY: {"dtype": "float32", "shape": (len(EE_NAMES),), "names": list(EE_NAMES)}
     }
+
+    def __init__(self, subtasks: tuple[Subtask, ...] = SUBTASKS):
+        self.subtasks = subtasks
 
     def make_env(self, share=None):
         from datagen.aloha_sim import TransferCubeEnv
@@ -113,6 +123,14 @@ class AlohaTransferCube(Task):
         out = np.eye(4)
         out[:3, :3], out[:3, 3] = rotation_of(state[CUBE][3:]), state[CUBE][:3]
         return out
+
+    def frame_pose(self, frame: str, state) -> np.ndarray:
+        return self.object_pose(state) if frame == "object" else np.eye(4)
+
+    def signals(self, obs, env) -> dict[str, bool]:
+        return {
+            "lifted": env.reward >= LIFTED
+        }  # gym-aloha's stage 2: the right fingers hold it off the table
 
     def arm_pose(self, arm: str, obs, env):
         scratch = mujoco.MjData(model())

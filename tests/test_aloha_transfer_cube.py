@@ -10,9 +10,10 @@ import pytest
 from conftest import ROOT, run_script
 
 from ch37.seeds import env_seed
-from datagen import known_tasks
+from datagen import Perturbation, engine, known_tasks
 from datagen.aloha_sim import CUBE_RANGE, box_pose
 from datagen.aloha_sim_expert import TransferCubeExpert
+from datagen.source_check import read_source
 from lerobot_v3 import load_arrays
 
 pytestmark = pytest.mark.skipif(
@@ -21,6 +22,15 @@ pytestmark = pytest.mark.skipif(
     "re-install .venv from the lock)",
 )
 TASK = known_tasks()["aloha_transfer_cube"]
+
+
+@pytest.fixture(scope="module")
+def demo_set(tmp_path_factory):
+    """Two expert demos, made by the command a user runs."""
+    out = tmp_path_factory.mktemp("aloha_transfer_cube") / "set"
+    r = run_script(ROOT / "gen_demos.py", "--task", "aloha_transfer_cube", "--episodes", "2", "--out", out)
+    assert "expert successes 2/2" in r.stdout, r.stdout + r.stderr
+    return out
 
 
 def gym_aloha_reward(m: mujoco.MjModel, d: mujoco.MjData) -> int:
@@ -87,15 +97,13 @@ def test_the_expert_solves_held_out_starts():
         assert success, (seed, max(rewards))
 
 
-def test_gen_demos_writes_a_set_whose_episodes_revalidate_in_the_joint_model(tmp_path):
+def test_gen_demos_writes_a_set_whose_episodes_revalidate_in_the_joint_model(demo_set):
     """gen_demos.py --task aloha_transfer_cube writes a LeRobot v3 set as lerobot/aloha_sim_* record it
     (14 joint numbers in state and action, 50 fps) with the cube's pose as environment state and the
     end-effector targets as action.end_effector; every
     episode's recorded joint actions, replayed from its recorded start in a fresh joint-controlled env,
     reach gym-aloha's success again."""
-    out = tmp_path / "set"
-    r = run_script(ROOT / "gen_demos.py", "--task", "aloha_transfer_cube", "--episodes", "2", "--out", out)
-    assert "expert successes 2/2" in r.stdout, r.stdout + r.stderr
+    out = demo_set
     keys = ("observation.state", "observation.environment_state", "action", "episode_index", "next.reward")
     frames = load_arrays(out, keys=keys + ("action.end_effector",))
     assert frames["observation.state"].shape[1] == 14 and frames["action"].shape[1] == 14
@@ -114,3 +122,26 @@ def test_gen_demos_writes_a_set_whose_episodes_revalidate_in_the_joint_model(tmp
             *_, done, info = env.step(action)
         assert done and info["success"], f"episode {ep} does not re-validate from its start"
         assert frames["next.reward"][rows][-1] == 4
+
+
+def test_replay_hands_over_where_the_source_did(demo_set):
+    """Issue 50 #4, MimicGen's move by subtasks: the pick is replayed relative to the moved cube, the
+    hand-over relative to the world (ACT's meeting point is fixed), so a kept replay of a cube moved by
+    centimetres grasps it where it now lies and still meets where the source met (one segment relative
+    to the cube would carry the meeting point along with the cube)."""
+    source = engine.sources(read_source(TASK, demo_set))[0]
+    ee = lambda actions: TASK.frame_columns(None, actions)["action.end_effector"]  # noqa: E731
+    src_ee = ee(source.actions)
+    for k in range(4):
+        out = engine.attempt(TASK, source, k, Perturbation(0, 0.05, 0.0), mode="replay")
+        shift = np.linalg.norm(np.subtract(out.start[:2], TASK.start_of(source.states[0])[:2]))
+        if out.kept and shift > 0.02:
+            break
+    else:
+        pytest.fail("no kept replay of a cube moved by more than 2 cm in 4 attempts")
+    new_ee = ee(out.episode["action"])
+    lowest = lambda e: e[np.argmin(e[:, 9]), 7:9]  # noqa: E731  the right grasp point's (x, y) at the grasp
+    np.testing.assert_allclose(
+        lowest(new_ee) - lowest(src_ee), np.subtract(out.start[:2], source.states[0][14:16]), atol=0.01
+    )
+    np.testing.assert_allclose(new_ee[-1, 7:10], src_ee[-1, 7:10], atol=0.01)  # the right hand at the meeting
