@@ -48,11 +48,16 @@ __all__ = [
     "DT",
     "FPS",
     "START_ARM_POSE",
+    "InsertionEnv",
+    "PEG_RANGE",
+    "SOCKET_RANGE",
     "TransferCubeEnv",
     "assets",
     "box_pose",
     "normalize_gripper",
     "gripper_pose",
+    "insertion_pose",
+    "insertion_stage",
     "ik",
     "reward_stage",
     "unnormalize_gripper",
@@ -67,6 +72,9 @@ START_ARM_POSE = np.array(  # gym_aloha.constants: 6 joints (rad) and the two fi
 GRIPPER_OPEN, GRIPPER_CLOSE = 0.05800, 0.01844  # m: PUPPET_GRIPPER_POSITION_OPEN / _CLOSE (left finger)
 # gym_aloha.utils.sample_box_pose: (low, high) of the cube's x, y, z (m)
 CUBE_RANGE = ((0.0, 0.2), (0.4, 0.6), (0.05, 0.05))
+# gym_aloha.utils.sample_insertion_pose: the peg's and the socket's (low, high) of x, y, z (m)
+PEG_RANGE = ((0.1, 0.2), (0.4, 0.6), (0.05, 0.05))
+SOCKET_RANGE = ((-0.2, -0.1), (0.4, 0.6), (0.05, 0.05))
 GRIPPERS = ("vx300s_left/gripper_link", "vx300s_right/gripper_link")
 QPOS = (slice(0, 6), slice(8, 14))  # each arm's 6 joints in qpos (its two finger slides follow)
 DOFS = (slice(0, 6), slice(8, 14))
@@ -101,9 +109,10 @@ def assets() -> Path:
 
 
 @functools.cache  # one compiled model of each per process: read-only, shared by every env of it
-def model() -> mujoco.MjModel:
-    """The joint-controlled transfer-cube model (16 position servos: 6 joints and 2 fingers per arm)."""
-    return mujoco.MjModel.from_xml_path(str(assets() / "bimanual_viperx_transfer_cube.xml"))
+def model(scene: str = "transfer_cube") -> mujoco.MjModel:
+    """The joint-controlled model of `scene` ("transfer_cube", "insertion"): 16 position servos (6 joints
+    and 2 fingers per arm), then the objects' free joints."""
+    return mujoco.MjModel.from_xml_path(str(assets() / f"bimanual_viperx_{scene}.xml"))
 
 
 def normalize_gripper(x):
@@ -149,6 +158,45 @@ def reward_stage(m: mujoco.MjModel, d: mujoco.MjData) -> int:
     return reward
 
 
+def insertion_pose(seed) -> np.ndarray:
+    """The peg's and the socket's starts (7 each, the peg first) that gym-aloha's reset(seed=seed) draws for
+    insertion (sample_insertion_pose: the peg uniform on x [0.1, 0.2], the socket on x [-0.2, -0.1], both on
+    y [0.4, 0.6] m, z 0.05 m, upright, from one RandomState(seed)); a seed past 32 bits as box_pose."""
+    if seed is not None and seed >= 2**32:
+        seed = [(seed >> s) & 0xFFFFFFFF for s in range(0, seed.bit_length(), 32)]
+    rng = np.random.RandomState(seed)
+    up = [1.0, 0.0, 0.0, 0.0]
+    peg = rng.uniform(*np.array(PEG_RANGE).T)
+    socket = rng.uniform(*np.array(SOCKET_RANGE).T)
+    return np.concatenate([peg, up, socket, up])
+
+
+def insertion_stage(m: mujoco.MjModel, d: mujoco.MjData) -> int:
+    """InsertionTask.get_reward (gym_aloha/tasks/sim.py), from the contacts' (geom1, geom2) pairs in that
+    order: 1 the left fingers touch the socket and the right the peg, 2 and neither touches the table, 3
+    the peg touches the socket off the table, 4 the peg touches the pin (success)."""
+    name = functools.partial(mujoco.mj_id2name, m, mujoco.mjtObj.mjOBJ_GEOM)
+    pairs = {
+        (name(int(a)), name(int(b))) for a, b in zip(d.contact.geom1[: d.ncon], d.contact.geom2[: d.ncon])
+    }
+    sockets = [f"socket-{i}" for i in range(1, 5)]
+    touch_right = ("red_peg", "vx300s_right/10_right_gripper_finger") in pairs
+    touch_left = any((s, "vx300s_left/10_left_gripper_finger") in pairs for s in sockets)
+    peg_table = ("red_peg", "table") in pairs
+    socket_table = any((s, "table") in pairs for s in sockets)
+    peg_socket = any(("red_peg", s) in pairs for s in sockets)
+    reward = 0
+    if touch_left and touch_right:  # touch both
+        reward = 1
+    if touch_left and touch_right and not peg_table and not socket_table:  # grasp both
+        reward = 2
+    if peg_socket and not peg_table and not socket_table:  # peg and socket touching
+        reward = 3
+    if ("red_peg", "pin") in pairs:  # successful insertion
+        reward = 4
+    return reward
+
+
 def qpos14(d: mujoco.MjData) -> np.ndarray:
     """BimanualViperXTask.get_qpos: each arm's 6 joints (rad) and its normalized gripper, left first."""
     q = d.qpos
@@ -162,44 +210,47 @@ def _step(m: mujoco.MjModel, d: mujoco.MjData) -> None:
         mujoco.mj_step1(m, d)
 
 
-def _reset(m: mujoco.MjModel, d: mujoco.MjData, cube) -> None:
-    """physics.reset_context's part of initialize_episode: mj_resetData, the arms at START_ARM_POSE, the cube
-    at `cube` (7); the caller sets the controls, then mj_forward."""
+def _reset(m: mujoco.MjModel, d: mujoco.MjData, objects) -> None:
+    """physics.reset_context's part of initialize_episode: mj_resetData, the arms at START_ARM_POSE, the
+    objects at `objects` (7 numbers each); the caller sets the controls, then mj_forward."""
     mujoco.mj_resetData(m, d)
     d.qpos[:16] = START_ARM_POSE
-    d.qpos[16:23] = cube
+    d.qpos[16 : 16 + len(objects)] = objects
 
 
 class TransferCubeEnv:
     """gym_aloha's AlohaTransferCube-v0 (tasks/sim.py's TransferCubeTask) on mujoco directly, with its
     state instead of its pixels, on Gymnasium's API (reset, step's five values, the spaces; gymnasium is
     imported when one is made, not when the engine's registry imports this module).
-    observation (21,) float32: the 14 of qpos14, then the cube's pose (x, y, z m; qw, qx, qy, qz)
+    observation float32: the 14 of qpos14, then the objects' poses (x, y, z m; qw, qx, qy, qz each)
     action (14,): per arm, left first, 6 joint targets (rad) and a normalized gripper target
     info["is_success"] at reward 4, which ends the episode (terminated); truncated after max_steps.
-    reset(seed) places the cube as gym-aloha's reset(seed=seed) does (box_pose);
-    reset(options={"reset_to_state": cube pose (7)}) places it there."""
+    reset(seed) places the objects as gym-aloha's reset(seed=seed) does (draw);
+    reset(options={"reset_to_state": the objects' poses}) places them there."""
 
     metadata = {"render_modes": [], "render_fps": FPS}
     render_mode = None  # it draws no frames (gen_demos.py --video is refused in one line)
+    scene, objects = "transfer_cube", 7  # the model, and the numbers of its objects' poses
+    draw, stage = staticmethod(box_pose), staticmethod(reward_stage)
 
     def __init__(self, max_steps: int, share: TransferCubeEnv | None = None):
         import gymnasium
 
-        self.model = model() if share is None else share.model
+        self.model = model(self.scene) if share is None else share.model
         self.data = mujoco.MjData(self.model)
         self.max_steps = max_steps
         self.t = 0
-        self.observation_space = gymnasium.spaces.Box(-np.inf, np.inf, (21,), np.float32)
+        self.observation_space = gymnasium.spaces.Box(-np.inf, np.inf, (14 + self.objects,), np.float32)
         self.action_space = gymnasium.spaces.Box(-np.inf, np.inf, (14,), np.float32)
 
     def observation(self) -> np.ndarray:
-        return np.concatenate([qpos14(self.data), self.data.qpos[16:23]]).astype(np.float32)
+        return np.concatenate([qpos14(self.data), self.data.qpos[16 : 16 + self.objects]]).astype(np.float32)
 
     def reset(self, *, seed=None, options=None):
-        cube = box_pose(seed) if not options or "reset_to_state" not in options else options["reset_to_state"]
+        placed = options and "reset_to_state" in options
+        objects = options["reset_to_state"] if placed else self.draw(seed)
         m, d = self.model, self.data
-        _reset(m, d, np.asarray(cube, np.float64))
+        _reset(m, d, np.asarray(objects, np.float64))
         d.ctrl[:] = START_ARM_POSE
         mujoco.mj_forward(m, d)
         self.t = 0
@@ -211,9 +262,17 @@ class TransferCubeEnv:
         self.data.ctrl[:] = np.r_[a[:6], gl, -gl, a[7:13], gr, -gr]
         _step(self.model, self.data)
         self.t += 1
-        reward = reward_stage(self.model, self.data)
+        reward = self.stage(self.model, self.data)
         success = reward == MAX_REWARD
         return self.observation(), float(reward), success, self.t >= self.max_steps, {"is_success": success}
+
+
+class InsertionEnv(TransferCubeEnv):
+    """gym_aloha's AlohaInsertion-v0 (InsertionTask) alike: the objects are the peg and the socket (7
+    each, the peg first); success is the peg touching the socket's pin."""
+
+    scene, objects = "insertion", 14
+    draw, stage = staticmethod(insertion_pose), staticmethod(insertion_stage)
 
 
 def gripper_pose(m: mujoco.MjModel, d: mujoco.MjData, arm: int) -> tuple[np.ndarray, np.ndarray]:

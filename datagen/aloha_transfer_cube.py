@@ -95,6 +95,7 @@ class AlohaTransferCube(Task):
     records_reward = True  # gym-aloha's reward stages, as lerobot's sets of its env carry next.reward
     arms = {"left": JOINTS[0], "right": JOINTS[1]}  # the joints that place each grasp point (arm_pose)
     expert_class = TransferCubeExpert
+    scene, objects = "transfer_cube", CUBE  # gym-aloha's model (aloha_sim.model); the objects' obs columns
     frame_features = {  # the end-effector targets each frame's joint action encodes (action_to_target)
         EE_KEY: {"dtype": "float32", "shape": (len(EE_NAMES),), "names": list(EE_NAMES)}
     }
@@ -109,7 +110,7 @@ class AlohaTransferCube(Task):
         return GymnasiumEnv(env, _observe)
 
     def start_of(self, state) -> tuple:
-        return tuple(float(v) for v in state[CUBE])
+        return tuple(float(v) for v in state[self.objects])
 
     def perturb(self, first_state, rng, how: Perturbation):
         start = self.start_of(first_state)
@@ -133,11 +134,11 @@ class AlohaTransferCube(Task):
         }  # gym-aloha's stage 2: the right fingers hold it off the table
 
     def arm_pose(self, arm: str, obs, env):
-        scratch = mujoco.MjData(model())
+        scratch = mujoco.MjData(model(self.scene))
         return _poses(scratch, obs)[ARMS.index(arm)]
 
     def action_to_target(self, states, actions) -> dict:
-        scratch = mujoco.MjData(model())
+        scratch = mujoco.MjData(model(self.scene))
         poses = [_poses(scratch, a) for a in np.asarray(actions, np.float64)]
         a = np.asarray(actions, np.float64)
         return {
@@ -156,7 +157,7 @@ class AlohaTransferCube(Task):
         return {EE_KEY: np.concatenate(per_arm, axis=1).astype(np.float32)}
 
     def target_to_action(self, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
-        m = model()
+        m = model(self.scene)
         scratch = mujoco.MjData(m)
         o = np.asarray(obs, np.float64)
         scratch.qpos[0:6], scratch.qpos[8:14] = o[JOINTS[0]], o[JOINTS[1]]

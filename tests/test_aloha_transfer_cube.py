@@ -145,3 +145,70 @@ def test_replay_hands_over_where_the_source_did(demo_set):
         lowest(new_ee) - lowest(src_ee), np.subtract(out.start[:2], source.states[0][14:16]), atol=0.01
     )
     np.testing.assert_allclose(new_ee[-1, 7:10], src_ee[-1, 7:10], atol=0.01)  # the right hand at the meeting
+
+
+def gym_aloha_insertion_reward(m: mujoco.MjModel, d: mujoco.MjData) -> int:
+    """gym_aloha/tasks/sim.py's InsertionTask.get_reward, line for line: contact pairs by geom name."""
+    pairs = []
+    for i in range(d.ncon):
+        name_1 = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, d.contact[i].geom1)
+        name_2 = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, d.contact[i].geom2)
+        pairs.append((name_1, name_2))
+    sockets = ("socket-1", "socket-2", "socket-3", "socket-4")
+    touch_right_gripper = ("red_peg", "vx300s_right/10_right_gripper_finger") in pairs
+    touch_left_gripper = any((s, "vx300s_left/10_left_gripper_finger") in pairs for s in sockets)
+    peg_touch_table = ("red_peg", "table") in pairs
+    socket_touch_table = any((s, "table") in pairs for s in sockets)
+    peg_touch_socket = any(("red_peg", s) in pairs for s in sockets)
+    pin_touched = ("red_peg", "pin") in pairs
+    reward = 0
+    if touch_left_gripper and touch_right_gripper:
+        reward = 1
+    if touch_left_gripper and touch_right_gripper and (not peg_touch_table) and (not socket_touch_table):
+        reward = 2
+    if peg_touch_socket and (not peg_touch_table) and (not socket_touch_table):
+        reward = 3
+    if pin_touched:
+        reward = 4
+    return reward
+
+
+def test_insertion_starts_success_and_expert_are_gym_alohas():
+    """Insertion: reset(seed) draws the peg and the socket as gym-aloha's sample_insertion_pose(seed); at
+    every step of expert episodes on held-out seeds the env's reward is InsertionTask.get_reward's from the
+    same contacts, and the episode ends at the top stage (the peg touches the pin)."""
+    task = known_tasks()["aloha_insertion"]
+    rng = np.random.RandomState(3)
+    peg = rng.uniform([0.1, 0.4, 0.05], [0.2, 0.6, 0.05])
+    socket = rng.uniform([-0.2, 0.4, 0.05], [-0.1, 0.6, 0.05])
+    want = np.r_[peg, 1, 0, 0, 0, socket, 1, 0, 0, 0].astype(np.float32)
+    np.testing.assert_array_equal(task.make_env().reset(3)[14:28], want)
+    for seed in (5000, 5001):
+        env = task.make_env()
+        obs, expert, done, rewards, theirs = env.reset(seed), task.expert_class(seed=seed), False, [], []
+        while not done:
+            obs, reward, done, info = env.step(expert.act(obs))
+            rewards.append(reward)
+            theirs.append(gym_aloha_insertion_reward(env.env.model, env.env.data))
+        assert rewards == theirs and info["success"] and rewards[-1] == 4, (seed, max(rewards))
+
+
+def test_insertion_sets_revalidate_and_are_told_from_transfer_cube_sets(tmp_path):
+    """gen_demos.py --task aloha_insertion writes a set whose episodes re-validate in the joint model from
+    their recorded starts; both ALOHA tasks record robot_type "aloha", as the hub's sets do, and the
+    engine tells them apart by their environment state (the cube's 7 numbers, the peg's and socket's 14)."""
+    from datagen.source_check import task_of
+
+    out = tmp_path / "ins"
+    r = run_script(ROOT / "gen_demos.py", "--task", "aloha_insertion", "--episodes", "1", "--out", out)
+    assert "expert successes 1/1" in r.stdout, r.stdout + r.stderr
+    task = task_of(out)
+    assert task.name == "aloha_insertion"
+    frames = load_arrays(out, keys=("observation.state", "observation.environment_state", "action"))
+    env = task.make_env()
+    task.place(
+        env, task.start_of(np.r_[frames["observation.state"][0], frames["observation.environment_state"][0]])
+    )
+    for action in frames["action"]:
+        *_, done, info = env.step(action)
+    assert done and info["success"]
