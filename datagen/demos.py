@@ -149,9 +149,9 @@ def generate(
             summary["episodes"] += 1
             summary["frames"] += len(ep["action"])
             summary["successes"] += ep["success"]
-            yield ep
+            yield ep | emb.frame_columns(ep["observation.state"], ep["action"])
 
-    extra = REWARD_FEATURES if emb.records_reward else None
+    extra = (REWARD_FEATURES if emb.records_reward else {}) | emb.frame_features
     feats = features(m.state_names, m.action_names, extra, video=video, env_state_names=m.env_state_names)
     stamp = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=video)
     how = dict(repo_id=f"local/{emb.name}_demos", fps=m.fps, robot_type=m.robot_type, task=m.task)

@@ -232,8 +232,10 @@ def save(task: Task, root, kept: list[dict], *, repo_id: str, stamp: dict) -> No
     replace_own_dir(root)
     if kept:
         m = task.spec
-        extra = provenance(task) | (REWARD_FEATURES if task.records_reward else {})
+        extra = provenance(task) | (REWARD_FEATURES if task.records_reward else {}) | task.frame_features
         feats = features(m.state_names, m.action_names, extra, env_state_names=m.env_state_names)
+        if task.frame_features:
+            kept = [ep | task.frame_columns(ep["observation.state"], ep["action"]) for ep in kept]
         write_dataset(
             root,
             repo_id=repo_id,

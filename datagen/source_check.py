@@ -76,6 +76,9 @@ def task_of(src: Path) -> Task:
     robot = info.get("robot_type")
     if robot:  # a set that names its robot is that robot's (an SO-100 set is no PushT set)
         fits = [t for t in known_tasks().values() if t.spec.robot_type == robot]
+        if len(fits) > 1:  # one robot, several tasks (ALOHA's transfer-cube and insertion): by the objects
+            env = feats.get(ENV_STATE_KEY, {}).get("shape")
+            fits = [t for t in fits if env == [len(t.spec.env_state_names)]]
     else:  # a set someone else wrote without a robot_type (LeRobot's writer's default): by its widths
         fits = [t for t in known_tasks().values() if shapes == _widths(t)]
     if len(fits) == 1:

@@ -269,6 +269,9 @@ class Task(abc.ABC):
     # beside next.success, as the hub's sets of its env do (lerobot/pusht_keypoints); the env keeps its last
     # step's reward as env.reward (GymnasiumEnv does)
     records_reward: bool = False
+    # LeRobot features of per-frame columns its sets carry beyond state, action and success (the ALOHA
+    # transfer-cube's end-effector targets), each computed from an episode's frames by frame_columns
+    frame_features: dict[str, dict] = {}
 
     @property
     def title(self) -> str:
@@ -398,6 +401,11 @@ class Task(abc.ABC):
         ((3, 3); None for a planar task), with `grips[arm]` its gripper command: a velocity command for
         our two robots, a position target for a robot that takes one, torques through the robot's own
         controller for one driven by torques (datagen/pusher.py)."""
+
+    def frame_columns(self, states, actions) -> dict[str, np.ndarray]:
+        """frame_features' columns ((T, d) float32 each) of an episode's frames (states (T, obs_dim),
+        actions (T, act_dim)): written beside them in its demo sets and in the engine's; none by default."""
+        return {}
 
     # ---- what lockstep needs; each default runs the same bytes one attempt (or one env) at a time ----
     def batch_expert(self):

@@ -7,7 +7,9 @@
 #
 # Needs uv (`pip install uv`, any venv). The lock covers pyproject.toml's dependencies plus its dev, ray
 # and train extras, for Python 3.12 on every platform (--universal: markers, hashes of every wheel), from
-# PyPI (the CUDA torch build on Linux), less what tools/lock-excludes.txt names (opencv-python: one cv2).
+# PyPI (the CUDA torch build on Linux), less what tools/lock-excludes.txt names (opencv-python: one cv2;
+# dm-control: gym-aloha's env code, which we never run), with tools/lock-overrides.txt's requirements in
+# place of a locked package's own (gym-aloha's mujoco<3.9: its model files run on our mujoco 4).
 # uv keeps the pins of the lock it overwrites unless told to move them. A new lock changes what produced
 # the published numbers: re-run them (docs/instructors.md, "The versions behind the numbers").
 set -euo pipefail
@@ -20,4 +22,5 @@ fi
 "$UV" pip compile pyproject.toml --extra dev --extra ray --extra train \
     --python-version 3.12 --universal --generate-hashes \
     --custom-compile-command "bash tools/lock.sh" --excludes tools/lock-excludes.txt \
+    --overrides tools/lock-overrides.txt \
     -o requirements.lock "$@"
