@@ -33,13 +33,15 @@ def demo_set(tmp_path_factory):
     return out
 
 
+def contact_pairs(m: mujoco.MjModel, d: mujoco.MjData) -> list[tuple[str, str]]:
+    """Every contact's (geom 1, geom 2) by name, in contact order, as gym_aloha/tasks/sim.py lists them."""
+    name = lambda g: mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g)  # noqa: E731
+    return [(name(d.contact[i].geom1), name(d.contact[i].geom2)) for i in range(d.ncon)]
+
+
 def gym_aloha_reward(m: mujoco.MjModel, d: mujoco.MjData) -> int:
     """gym_aloha/tasks/sim.py's TransferCubeTask.get_reward, line for line: contact pairs by geom name."""
-    all_contact_pairs = []
-    for i in range(d.ncon):
-        name_1 = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, d.contact[i].geom1)
-        name_2 = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, d.contact[i].geom2)
-        all_contact_pairs.append((name_1, name_2))
+    all_contact_pairs = contact_pairs(m, d)
     touch_left_gripper = ("red_box", "vx300s_left/10_left_gripper_finger") in all_contact_pairs
     touch_right_gripper = ("red_box", "vx300s_right/10_right_gripper_finger") in all_contact_pairs
     touch_table = ("red_box", "table") in all_contact_pairs
@@ -149,11 +151,7 @@ def test_replay_hands_over_where_the_source_did(demo_set):
 
 def gym_aloha_insertion_reward(m: mujoco.MjModel, d: mujoco.MjData) -> int:
     """gym_aloha/tasks/sim.py's InsertionTask.get_reward, line for line: contact pairs by geom name."""
-    pairs = []
-    for i in range(d.ncon):
-        name_1 = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, d.contact[i].geom1)
-        name_2 = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, d.contact[i].geom2)
-        pairs.append((name_1, name_2))
+    pairs = contact_pairs(m, d)
     sockets = ("socket-1", "socket-2", "socket-3", "socket-4")
     touch_right_gripper = ("red_peg", "vx300s_right/10_right_gripper_finger") in pairs
     touch_left_gripper = any((s, "vx300s_left/10_left_gripper_finger") in pairs for s in sockets)

@@ -379,19 +379,34 @@ def test_lockstep_envs_raise_a_worker_error():
             envs.step([0, 1], np.array([[0.0, 0.0], [np.nan, 0.0]]))
 
 
-MKL_KEYS = r"""
+KERNEL_KEYS = r"""
 import json, os, sys
-import torch
+import numpy, torch
 from ch37 import cli, result_cache
 
 base = {"seed": 0, "epochs": 500, "smoke": False, "device": "cpu"}
-torch.ones(8, 8) @ torch.ones(8, 8)  # MKL's first use: it reads MKL_CBWR now, once for the process
+torch.ones(8, 8) @ torch.ones(8, 8)  # MKL reads MKL_CBWR at its first use (OpenBLAS: as numpy loads)
 got = [[result_cache.result_key(base), cli.other_draw("cpu")]]
-for value in sys.argv[1:]:  # a notebook's %env MKL_CBWR=... between two Run-alls
-    os.environ["MKL_CBWR"] = value
+for value in sys.argv[2:]:  # a notebook's %env VAR=... between two Run-alls
+    os.environ[sys.argv[1]] = value
     got.append([result_cache.result_key(base), cli.other_draw("cpu")])
 print(json.dumps(got))
 """
+
+
+def kernel_keys(var: str, first: str, *later: str) -> list:
+    """[result key, another-draw line] of a fresh process started with `var`=first (the rest of the
+    published kernel path as the setup region sets it), then after each later value set in-process."""
+    p = subprocess.run(
+        [sys.executable, "-c", KERNEL_KEYS, var, *later],
+        cwd=ROOT,
+        env=dict(os.environ, MKL_CBWR="COMPATIBLE", OPENBLAS_CORETYPE="Haswell") | {var: first},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert p.returncode == 0, p.stderr
+    return json.loads(p.stdout)
 
 
 @pytest.mark.skipif(
@@ -405,17 +420,7 @@ def test_the_cache_and_the_banner_name_the_mkl_branch_in_force():
     branch's, the same as a fresh process on it gives."""
 
     def keys(first, *later):
-        env = {k: v for k, v in os.environ.items() if k != "MKL_CBWR"}
-        p = subprocess.run(
-            [sys.executable, "-c", MKL_KEYS, *later],
-            cwd=ROOT,
-            env=dict(env, MKL_CBWR=first, OPENBLAS_CORETYPE="Haswell"),  # the published training kernels
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
-        assert p.returncode == 0, p.stderr
-        return json.loads(p.stdout)
+        return kernel_keys("MKL_CBWR", first, *later)
 
     (compatible,), (avx2,) = keys("COMPATIBLE"), keys("AVX2")
     assert compatible[0] != avx2[0] and compatible[1] is None and avx2[1]  # another branch, another draw
@@ -433,32 +438,9 @@ def test_the_cache_and_the_banner_name_the_openblas_kernels_in_force():
     setting OPENBLAS_CORETYPE after numpy loaded changes neither."""
 
     def keys(core, *later):
-        p = subprocess.run(
-            [sys.executable, "-c", BLAS_KEYS, *later],
-            cwd=ROOT,
-            env=dict(os.environ, MKL_CBWR="COMPATIBLE", OPENBLAS_CORETYPE=core),
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
-        assert p.returncode == 0, p.stderr
-        return json.loads(p.stdout)
+        return kernel_keys("OPENBLAS_CORETYPE", core, *later)
 
     (haswell,), (sandy,) = keys("Haswell"), keys("Sandybridge")
     assert haswell[1] is None and haswell[0] != sandy[0]
     assert "Sandybridge" in sandy[1]  # the banner's line names the kernels in force
     assert keys("Haswell", "Sandybridge") == [haswell, haswell]  # numpy's OpenBLAS still runs Haswell's
-
-
-BLAS_KEYS = r"""
-import json, os, sys
-import numpy
-from ch37 import cli, result_cache
-
-base = {"seed": 0, "epochs": 500, "smoke": False, "device": "cpu"}
-got = [[result_cache.result_key(base), cli.other_draw("cpu")]]
-for value in sys.argv[1:]:  # a notebook's %env OPENBLAS_CORETYPE=... between two Run-alls
-    os.environ["OPENBLAS_CORETYPE"] = value
-    got.append([result_cache.result_key(base), cli.other_draw("cpu")])
-print(json.dumps(got))
-"""
