@@ -31,31 +31,29 @@ import numpy as np
 import torch
 
 
-def openblas() -> tuple[ctypes.CDLL, str] | None:
-    """numpy's OpenBLAS, loaded in this process, and its symbols' suffix ("64_" for the wheels' 64-bit
-    build), or None where numpy has none (macOS's Accelerate, another BLAS, not Linux)."""
+def openblas(name: str):
+    """numpy's OpenBLAS call `name` (get_corename, set_num_threads) as a ctypes function, whichever prefix
+    and suffix the build gives its symbols (the wheels' 64-bit build: scipy_openblas_NAME64_), or None
+    where numpy has no OpenBLAS loaded in this process (macOS's Accelerate, another BLAS, not Linux)."""
     maps = Path("/proc/self/maps")
-    names = (
+    libs = (
         {m.group(0) for m in re.finditer(r"/\S*openblas\S*\.so\S*", maps.read_text())}
         if maps.exists()
         else ()
     )
-    for name in sorted(names):
-        lib = ctypes.CDLL(name)
-        for prefix, suffix in (("scipy_openblas_", "64_"), ("scipy_openblas_", ""), ("openblas_", "")):
-            if hasattr(lib, f"{prefix}get_corename{suffix}"):
-                return lib, (prefix, suffix)
+    for lib in map(ctypes.CDLL, sorted(libs)):
+        for symbol in (f"scipy_openblas_{name}64_", f"scipy_openblas_{name}", f"openblas_{name}"):
+            if hasattr(lib, symbol):
+                return getattr(lib, symbol)
     return None
 
 
 def blas_core() -> str:
     """The kernel set numpy's OpenBLAS runs in this process ("Haswell", "SkylakeX", ...), chosen once as
     it loads (OPENBLAS_CORETYPE, else this CPU); "" where numpy has no OpenBLAS."""
-    found = openblas()
-    if found is None:
+    get = openblas("get_corename")
+    if get is None:
         return ""
-    (lib, (prefix, suffix)) = found
-    get = getattr(lib, f"{prefix}get_corename{suffix}")
     get.restype = ctypes.c_char_p
     return get().decode()
 
@@ -63,11 +61,10 @@ def blas_core() -> str:
 def one_blas_thread() -> bool:
     """Hold numpy's OpenBLAS to one thread per product (its own threads would change the bits with their
     number); False where numpy has no OpenBLAS."""
-    found = openblas()
-    if found is None:
+    set_threads = openblas("set_num_threads")
+    if set_threads is None:
         return False
-    (lib, (prefix, suffix)) = found
-    getattr(lib, f"{prefix}set_num_threads{suffix}")(1)
+    set_threads(1)
     return True
 
 
