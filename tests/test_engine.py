@@ -312,6 +312,36 @@ def killed_after_its_first_shard(cmd: list, out: Path) -> subprocess.Popen:
     return proc
 
 
+def same_bytes_everywhere(flags: list, tmp_path: Path) -> Path:
+    """The engine's guarantees for one augment_demos.py run (`flags`, everything but --out and
+    --workers): the same bytes with --workers 1 and 2, on a private local Ray (--ray --workers 2), and
+    after a --workers 1 run killed (SIGKILL) once its first shard is on disk and finished by the same
+    command, which reuses what it finds. Returns the --workers 1 output, tmp_path/"w1"."""
+    ref = tmp_path / "w1"
+    augment(*flags, "--out", ref, "--workers", "1")
+    want = tree(ref)
+    augment(*flags, "--out", tmp_path / "w2", "--workers", "2")
+    assert tree(tmp_path / "w2") == want
+    augment(*flags, "--out", tmp_path / "ray", "--ray", "--workers", "2")
+    assert tree(tmp_path / "ray") == want
+    out = tmp_path / "killed"
+    cmd = [
+        sys.executable,
+        str(ROOT / "augment_demos.py"),
+        *map(str, flags),
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+    ]
+    proc = killed_after_its_first_shard(cmd, out)
+    assert proc.returncode == -signal.SIGKILL and not (out / "meta").exists()
+    augment(*cmd[2:])
+    assert tree(out) == want
+    assert json.loads((out / REPORT_NAME).read_text())["shards"]["reused"] >= 1
+    return ref
+
+
 def test_killed_run_is_finished_by_the_same_command(src, reference, tmp_path):
     out = tmp_path / "killed"
     cmd = [sys.executable, str(ROOT / "augment_demos.py"), "--src", str(src), "--out", str(out)]
@@ -681,8 +711,7 @@ def test_aloha_replay_nearest_same_bytes_for_workers_ray_and_resume(aloha_src, t
     datagen.engine.attempt makes them, provenance naming the source replayed, and the same bytes for
     --workers 1 and 2, a local Ray and a run killed after its first shard and finished."""
     flags = ["--src", aloha_src, "--mode", "replay", "--select", "nearest", *ALOHA_SETTINGS]
-    ref = tmp_path / "w1"
-    augment(*flags, "--out", ref, "--workers", "1")
+    ref = same_bytes_everywhere(flags, tmp_path)
     sources = engine.sources(load_arrays(aloha_src))
     how = Perturbation(0, 0.08, 0.5)
     jobs = [(e, k) for e in range(3) for k in range(2)]
@@ -700,18 +729,6 @@ def test_aloha_replay_nearest_same_bytes_for_workers_ray_and_resume(aloha_src, t
     rep = json.loads((ref / REPORT_NAME).read_text())
     assert set(rep["failures"]) == set(ALOHA.failures["replay"]) and rep["settings"]["select"] == "nearest"
     assert rep["kept"] + sum(rep["failures"].values()) == rep["attempts"] == 6
-    augment(*flags, "--out", tmp_path / "w2", "--workers", "2")
-    assert tree(tmp_path / "w2") == tree(ref)
-    augment(*flags, "--out", tmp_path / "ray", "--ray", "--workers", "2")
-    assert tree(tmp_path / "ray") == tree(ref)
-    out = tmp_path / "killed"
-    cmd = [sys.executable, str(ROOT / "augment_demos.py"), *map(str, flags)]
-    cmd += ["--out", str(out), "--workers", "1"]
-    proc = killed_after_its_first_shard(cmd, out)
-    assert proc.returncode == -signal.SIGKILL and not (out / "meta").exists()
-    augment(*cmd[2:])
-    assert tree(out) == tree(ref)
-    assert json.loads((out / REPORT_NAME).read_text())["shards"]["reused"] >= 1
 
 
 def test_aloha_resolve_is_a_lerobot_set_of_the_handoff(aloha_src, tmp_path):
