@@ -229,3 +229,24 @@ def test_the_engines_guarantees_hold_on_transfer_cube_replay(demo_set, tmp_path)
     report = json.loads((same_bytes_everywhere(flags, tmp_path) / "generation_report.json").read_text())
     assert report["attempts"] == 2 and report["shards"]["made_this_run"] == 2
     assert report["kept"] >= 1 and set(report["failures"]) <= set(TASK.failures[mode])
+
+
+def test_the_replay_yield_tool_takes_both_aloha_sim_tasks(tmp_path):
+    """Issue 50 #4: `python -m tools.replay yield --tasks aloha_transfer_cube aloha_insertion` (the table
+    in docs/replay.md) counts every attempt of every mode of both, at each --sim_sigma multiplier of
+    0.08 m. Before, --tasks refused both."""
+    import json
+
+    from tools import replay
+
+    tasks = ["aloha_transfer_cube", "aloha_insertion"]
+    argv = ["--tasks", *tasks, "--seeds", "1", "--sources", "1", "--attempts", "1", "--sim_sigma", "0.25"]
+    assert replay.yield_main([*argv, "--out", str(tmp_path)]) == 0
+    res = json.loads((tmp_path / "replay_yield.json").read_text())
+    rows = {(r["task"], r["mode"], r["multiplier"]): r for r in res["rows"]}
+    assert set(rows) == {(t, m, 0.25) for t in tasks for m in replay.VARIANTS[t]}
+    assert {"replay", "subtasks", "subtasks_nearest"} <= set(replay.VARIANTS["aloha_transfer_cube"])
+    for r in rows.values():
+        assert r["attempts"] == 1 and r["kept"] + sum(r["failures"].values()) == 1 and r["yaw_sigma"] is None
+    assert rows[("aloha_transfer_cube", "resolve", 0.25)]["kept"] == 1
+    assert res["command"].endswith("--sim_sigma 0.25 --tasks " + " ".join(tasks))

@@ -29,6 +29,9 @@ from ch37.parallel import map_jobs
 from ch37.seeds import env_seed
 from datagen import ALOHA, PUSHT, Perturbation, engine
 from datagen.aloha import WHOLE, Aloha
+from datagen.aloha_insertion import ALOHA_INSERTION
+from datagen.aloha_transfer_cube import ALOHA_TRANSFER_CUBE, AlohaTransferCube
+from datagen.aloha_transfer_cube import WHOLE as CUBE_WHOLE
 from datagen.demos import expert_episodes
 from datagen.gym_pusht import GYM_PUSHT, ONTO_GOAL, GymPushT
 from datagen.pusher import PUSHER, Pusher
@@ -344,8 +347,22 @@ VARIANTS = {
         "subtasks": (PUSHER, "own"),
         "subtasks_nearest": (PUSHER, "nearest"),
     },
+    "aloha_transfer_cube": {  # LeRobot's bimanual ALOHA sim (issue 50): gym-aloha's ViperX arms in 3-D
+        "resolve": (ALOHA_TRANSFER_CUBE, "own"),
+        "replay": (AlohaTransferCube(CUBE_WHOLE), "own"),
+        "subtasks": (ALOHA_TRANSFER_CUBE, "own"),
+        "subtasks_nearest": (ALOHA_TRANSFER_CUBE, "nearest"),
+    },
+    "aloha_insertion": {
+        "resolve": (ALOHA_INSERTION, "own"),
+        "subtasks": (ALOHA_INSERTION, "own"),
+        "subtasks_nearest": (ALOHA_INSERTION, "nearest"),
+    },
 }
-DEFAULT_TASKS = ["pusht", "aloha", "gym_pusht"]  # pusher on request (--tasks pusher)
+DEFAULT_TASKS = ["pusht", "aloha", "gym_pusht"]  # pusher and the ALOHA sim tasks on request (--tasks)
+# gym-aloha's starts lie in 0.1-0.2 m squares: these tasks run every mode at each --sim_sigma multiplier
+SIM_TASKS = ("aloha_transfer_cube", "aloha_insertion")
+NO_YAW = ("aloha", "pusher", *SIM_TASKS)  # their perturbation moves positions only
 
 
 def sources(sims: engine.Simulators, task: str, seed: int, n: int) -> dict:
@@ -382,7 +399,7 @@ def cell(
     per_seed = {s: got[i * n * attempts : (i + 1) * n * attempts].count("kept") for i, s in enumerate(seeds)}
     row = {"task": task, "mode": mode, "multiplier": m, "pos_sigma": m * POS_SIGMA}
     row |= {
-        "yaw_sigma": None if task in ("aloha", "pusher") else m * YAW_SIGMA,
+        "yaw_sigma": None if task in NO_YAW else m * YAW_SIGMA,
         "attempts": len(got),
         "kept": kept,
     }
@@ -427,6 +444,15 @@ def yield_main(argv: list[str]) -> int:
     subtasks the approach relative to the object and the push sliding onto the goal (the engine's).
     --pusher_sigma sweeps its perturbation as --aloha_sigma does ALOHA's.
 
+    LeRobot's bimanual ALOHA sim (--tasks aloha_transfer_cube aloha_insertion; issue 50: gym-aloha's
+    ViperX arms): the sources are gen_demos.py --task T --seed S's; the cube's (or the peg's and the
+    socket's) (x, y) moved, kept in gym-aloha's start ranges. Their starts lie in squares 0.1-0.2 m wide,
+    so every mode runs at each --sim_sigma multiplier (default 1, the chapter's 0.08 m) rather than at x1
+    plus a sweep. replay is one segment with both arms relative to the cube (transfer-cube only),
+    subtasks the engine's (transfer-cube: pick, the right arm relative to the cube, then hand-over
+    relative to the world; insertion: grasp, each arm relative to its part, then insert relative to the
+    world).
+
     --tasks picks the tasks (default: pusht, aloha and gym_pusht).
     """
     p = parser("replay yield", yield_main.__doc__)
@@ -436,20 +462,23 @@ def yield_main(argv: list[str]) -> int:
     arg("--attempts", type=int, default=10, help="attempts per source demo per seed and mode")
     arg("--aloha_sigma", type=float, nargs="*", default=[], help="ALOHA sweep: multipliers of 0.08 m")
     arg("--pusher_sigma", type=float, nargs="*", default=[], help="Pusher sweep: multipliers of 0.08 m")
+    sim_help = "ALOHA sim tasks: every mode at each multiplier of 0.08 m"
+    arg("--sim_sigma", type=float, nargs="+", default=[1.0], help=sim_help)
     arg("--tasks", nargs="+", choices=list(VARIANTS), default=DEFAULT_TASKS, help="the tasks")
     arg("--workers", type=int, default=1, help="processes for the attempts")
     arg("--out", type=Path, default=ROOT / "outputs/replay_yield", help="output folder")
     a = p.parse_args(argv)
     check(a, positive=["seeds", "sources", "attempts", "workers"])
-    if any(not (0 < m < 100) for m in a.aloha_sigma + a.pusher_sigma):
-        raise DataError("--aloha_sigma and --pusher_sigma multipliers must be in (0, 100)")
+    if any(not (0 < m < 100) for m in a.aloha_sigma + a.pusher_sigma + a.sim_sigma):
+        raise DataError("--aloha_sigma, --pusher_sigma and --sim_sigma multipliers must be in (0, 100)")
     check_results(a.out, KIND)  # before the work
     seeds, work, sims = list(range(a.seeds)), {}, engine.Simulators()  # this run's, passed to cell
     for task in a.tasks:
         for s in seeds:
             work[(task, s)] = sources(sims, task, s, a.sources)
     rows = []
-    todo = [(task, mode, 1.0) for task in a.tasks for mode in VARIANTS[task]]
+    each = {t: sorted(a.sim_sigma) if t in SIM_TASKS else [1.0] for t in a.tasks}
+    todo = [(task, mode, m) for task in a.tasks for m in each[task] for mode in VARIANTS[task]]
     for task, sweep in (("aloha", a.aloha_sigma), ("pusher", a.pusher_sigma)):
         if task in a.tasks:
             todo += [(task, mode, m) for m in sorted(sweep) if m != 1.0 for mode in SIGMA_MODES]
@@ -462,6 +491,7 @@ def yield_main(argv: list[str]) -> int:
     cmd = f"python -m tools.replay yield --seeds {a.seeds} --sources {a.sources} --attempts {a.attempts}"
     cmd += " --aloha_sigma " + " ".join(f"{m:g}" for m in a.aloha_sigma) if a.aloha_sigma else ""
     cmd += " --pusher_sigma " + " ".join(f"{m:g}" for m in a.pusher_sigma) if a.pusher_sigma else ""
+    cmd += " --sim_sigma " + " ".join(f"{m:g}" for m in a.sim_sigma) if a.sim_sigma != [1.0] else ""
     cmd += " --tasks " + " ".join(a.tasks) if a.tasks != DEFAULT_TASKS else ""
     res = {"kind": KIND, "command": cmd, "seeds": seeds, "rows": rows} | provenance(a.script)
     a.out.mkdir(parents=True, exist_ok=True)
