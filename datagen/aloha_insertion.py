@@ -13,8 +13,9 @@ datagen/aloha_transfer_cube.py has it (the columns, the arms, the end-effector t
                insertion planned from where the parts lie in the hands)
     frames     peg, socket, the world
     subtasks   grasp (the left arm relative to the socket, the right to the peg; it ends when both are
-               lifted 2 cm) and insert (both relative to the world: the
-               meeting point is fixed)
+               lifted 2 cm) and insert (both relative to the world: the meeting point is fixed), each
+               entered by a bridge at bridge_speed, faster than the source moves, so that a replay fits
+               ACT's 400 steps
 """
 
 from __future__ import annotations
@@ -66,6 +67,12 @@ class AlohaInsertion(AlohaTransferCube):
     expert_class = InsertionExpert
     scene, objects = "insertion", OBJECTS
     resimulate = False  # "held" shows in an observation
+    # m/s. A source takes 361 of ACT's 400 steps, and a replay adds two bridges, each about as long as the
+    # farther part moved (into the parts' frames for the grasp, back to the fixed meeting point for the
+    # insert); at the source's own top speed (0.10-0.12 m/s) the two cost 10 steps per cm and ran out of
+    # time beyond about 4 cm, at this speed 5 per cm (8 cm). They move the arms in the air, which the
+    # position servos track at this speed (docs/replay.md: the insertion's time limit)
+    bridge_speed = 0.2
 
     def __init__(self, subtasks: tuple[Subtask, ...] = SUBTASKS):
         self.subtasks = subtasks

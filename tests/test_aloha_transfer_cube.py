@@ -13,7 +13,9 @@ from ch37.seeds import env_seed
 from datagen import Perturbation, engine, known_tasks
 from datagen.aloha_sim import CUBE_RANGE, box_pose
 from datagen.aloha_sim_expert import TransferCubeExpert
+from datagen.demos import expert_episodes
 from datagen.source_check import read_source
+from datagen.task import Source
 from lerobot_v3 import load_arrays
 
 pytestmark = pytest.mark.skipif(
@@ -250,3 +252,18 @@ def test_the_replay_yield_tool_takes_both_aloha_sim_tasks(tmp_path):
         assert r["attempts"] == 1 and r["kept"] + sum(r["failures"].values()) == 1 and r["yaw_sigma"] is None
     assert rows[("aloha_transfer_cube", "resolve", 0.25)]["kept"] == 1
     assert res["command"].endswith("--sim_sigma 0.25 --tasks " + " ".join(tasks))
+
+
+def test_an_insertion_replay_of_parts_moved_by_centimetres_fits_acts_400_steps():
+    """Issue 50 #4: insertion replays mostly ran out of ACT's 400 steps. A source takes 361; the replay
+    adds two bridges (into the moved parts' frames for the grasp, back to the fixed meeting point for the
+    insert), each about as long as the farther part moved, and at the source's own top speed (0.10-0.12
+    m/s) the two cost 10 steps per cm: 52 for this attempt, whose peg and socket moved 4.1 and 5.3 cm. At
+    the task's bridge_speed the same attempt is kept, in the source's steps plus its bridges."""
+    task = known_tasks()["aloha_insertion"]
+    episode = next(expert_episodes(task, task.make_env(), 0, 1, noise=task.default_noise))
+    source = Source(0, episode["observation.state"], episode["action"])
+    out = engine.attempt(task, source, 0, Perturbation(0, 0.05, 0.0), mode="replay")
+    moved = np.subtract(out.start, task.start_of(source.states[0]))
+    assert min(np.linalg.norm(moved[0:2]), np.linalg.norm(moved[7:9])) > 0.04, moved
+    assert out.kept and len(source.actions) < out.steps < task.spec.max_steps, (out.reason, out.steps)
