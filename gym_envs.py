@@ -1,4 +1,5 @@
-"""PushT and the ALOHA handoff as Gymnasium environments; importing this module registers both.
+"""PushT and the ALOHA handoff as Gymnasium environments; importing this module registers both, and
+gym-aloha's transfer-cube and insertion on its ViperX model files (issue 50: AlohaSimGym, below).
 
     import gymnasium as gym
     import gym_envs  # noqa: F401  (registers the ids)
@@ -37,6 +38,19 @@ Observation bounds: PushT positions within the walls (|x|, |y| <= WALL_INNER = 0
 actions overshoot by up to 14 mm), grippers in [0, 1], cube and target within both reaches widened by
 GRASP_RADIUS (a held cube sits up to that far from its gripper) plus LIMIT_SLACK.
 Actions: Box(-1, 1), the range both simulators clip to.
+
+gym-aloha's own ids (gym_aloha/AlohaTransferCube-v0) need dm_control, which fails on our mujoco; these run
+its model files through mujoco directly (datagen.aloha_sim), the engine's env for aloha_transfer_cube and
+aloha_insertion, with state observations instead of pixels and no renderer:
+
+    env = gym.make("ch37/AlohaSimTransferCube-v0")    # or "ch37/AlohaSimInsertion-v0"
+    obs, info = env.reset(seed=0)     # the objects where gym-aloha's reset(seed=0) puts them
+    obs, info = env.reset(options={"reset_to_state": poses})   # the objects' poses (7 numbers each)
+
+obs float32: the 14 numbers of lerobot/aloha_sim_*'s observation.state, then the objects' poses (the
+cube's, or the peg's and the socket's); action float32[14] (per arm 6 joint targets, rad, and a
+normalized gripper); terminated at gym-aloha's top reward stage (info["is_success"]), truncated after
+ACT's 400 steps.
 """
 
 from __future__ import annotations
@@ -65,11 +79,19 @@ except (AttributeError, OSError) as e:
 
 import aloha_env  # noqa: E402
 import pusht_env  # noqa: E402
+from datagen.aloha_insertion import SPEC as INSERTION_SPEC  # noqa: E402
+from datagen.aloha_transfer_cube import SPEC as TRANSFER_CUBE_SPEC  # noqa: E402
 
 __all__ = ["PUSHT_ID", "ALOHA_ID", "PushTGym", "AlohaHandoffGym", "LIMIT_SLACK"]
+__all__ += ["ALOHA_SIM_IDS", "AlohaSimGym"]
 
 PUSHT_ID = "ch37/PushT-v0"
 ALOHA_ID = "ch37/AlohaHandoff-v0"
+# gym-aloha's tasks (datagen.aloha_sim's scenes) by id, with their task specs (fps, ACT's step limit)
+ALOHA_SIM_IDS = {
+    "ch37/AlohaSimTransferCube-v0": ("transfer_cube", TRANSFER_CUBE_SPEC),
+    "ch37/AlohaSimInsertion-v0": ("insertion", INSERTION_SPEC),
+}
 LIMIT_SLACK = aloha_env.LIMIT_SLACK  # m past a reach limit the observation space allows
 SEED_RANGE = 2**63  # reset() without a seed draws the simulator's seed in [0, SEED_RANGE)
 
@@ -163,10 +185,41 @@ class AlohaHandoffGym(_SimGym):
         self.action_space = spaces.Box(-1.0, 1.0, shape=(a.ACT_DIM,), dtype=np.float32)
 
 
+class AlohaSimGym(gym.Env):
+    """datagen.aloha_sim's TransferCubeEnv or InsertionEnv (`scene`) as a gymnasium.Env (see the module
+    docstring); reset() with no seed draws gym-aloha's seed from the env's np_random."""
+
+    metadata = {"render_modes": [], "render_fps": TRANSFER_CUBE_SPEC.fps}
+
+    def __init__(self, scene: str = "transfer_cube") -> None:
+        from datagen.aloha_sim import JOINT_IDS, InsertionEnv, TransferCubeEnv
+
+        spec = dict(ALOHA_SIM_IDS.values())[scene]
+        self.sim = {"transfer_cube": TransferCubeEnv, "insertion": InsertionEnv}[scene](spec.max_steps)
+        self.observation_space = self.sim.observation_space
+        # the action's bounds: per arm, left first, its joints' ranges (rad) and the normalized grip [0, 1]
+        r = self.sim.model.jnt_range
+        lo, hi = (np.concatenate([np.r_[r[j, i], float(i)] for j in JOINT_IDS]) for i in (0, 1))
+        self.action_space = spaces.Box(lo.astype(np.float32), hi.astype(np.float32), dtype=np.float32)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        if seed is None:
+            seed = int(self.np_random.integers(SEED_RANGE))
+        return self.sim.reset(seed=seed, options=options)
+
+    def step(self, action):
+        return self.sim.step(action)
+
+
 def _register() -> None:
     for env_id, cls, sim in ((PUSHT_ID, PushTGym, pusht_env), (ALOHA_ID, AlohaHandoffGym, aloha_env)):
         if env_id not in gym.registry:  # importing twice (or reloading) registers once
             gym.register(env_id, entry_point=cls, max_episode_steps=sim.MAX_STEPS, nondeterministic=False)
+    for env_id, (scene, spec) in ALOHA_SIM_IDS.items():
+        if env_id not in gym.registry:
+            kw = dict(max_episode_steps=spec.max_steps, nondeterministic=False, kwargs={"scene": scene})
+            gym.register(env_id, entry_point=AlohaSimGym, **kw)
 
 
 _register()

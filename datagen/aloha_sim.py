@@ -49,6 +49,7 @@ __all__ = [
     "FPS",
     "START_ARM_POSE",
     "InsertionEnv",
+    "JOINT_IDS",
     "PEG_RANGE",
     "SOCKET_RANGE",
     "TransferCubeEnv",
