@@ -272,3 +272,51 @@ def test_lerobot_lab_checkpoint_rollouts_leave_the_training_as_it_was(grown):
     checked = lerobot_lab.train(episodes, 4, 0, 1e-3, log_every=1, check=check, check_every=2)[3]
     assert [c["step"] for c in seen] == [2, 4] and all(c["successes"] in (0, 1) for c in seen)
     assert checked == plain and len(plain) == 4
+
+
+KEPT = (
+    ROOT / "docs" / "gym_pusht_lerobot"
+)  # lerobot-eval's own eval_info.json of docs/gym_pusht.md's LeRobot row
+
+
+def test_the_lerobot_row_is_counted_from_lerobot_evals_own_files(tmp_path):
+    """Issue 49 #1: `tools.lerobot table` counts each set's successes, its Wilson interval, the paired
+    per-seed differences and the max reward's start-by-start difference from the eval_info.json files
+    kept under docs/ (lerobot-eval's output, not ours), recounted here from the files; a seed missing a set
+    is left out, and a file that is no eval_info.json is one `error:` line naming it."""
+    from bc_recipe import wilson
+
+    def info(seed, k):  # lerobot-eval's per-episode metrics, read here without the tool
+        path = KEPT / f"seed{seed}" / f"eval_{k}" / "eval_info.json"
+        return json.loads(path.read_text())["per_task"][0]["metrics"]
+
+    run = tmp_path / "run"
+    shutil.copytree(KEPT, run)
+    shutil.copytree(run / "seed0", run / "seed9")  # a seed not finished: one set's evaluation missing
+    shutil.rmtree(run / "seed9" / "eval_fresh")
+    out = tmp_path / "t.json"
+    run_script("-m", "tools.lerobot", "table", run, "--json", out)
+    t = json.loads(out.read_text())
+    seeds = sorted(d.name[4:] for d in KEPT.glob("seed*"))
+    assert sorted(t["seeds"]) == seeds and len(seeds) == 3
+    rate = {}
+    for k in ("sources", "resolved", "fresh"):
+        wins = [info(s, k)["successes"] for s in seeds]
+        rate[k] = [sum(w) / len(w) for w in wins]
+        n = sum(map(len, wins))
+        assert t["pooled"][k]["successes"] == sum(map(sum, wins)) and t["pooled"][k]["episodes"] == n >= 150
+        assert t["pooled"][k]["ci95"] == pytest.approx(wilson(sum(map(sum, wins)) / n, n), abs=1e-4)
+    got = t["paired"]["resolved - sources"]
+    want = [a - b for a, b in zip(rate["resolved"], rate["sources"], strict=True)]
+    assert [got["success"][s] for s in seeds] == pytest.approx(want, abs=1e-4)
+    best = {k: [x for s in seeds for x in info(s, k)["max_rewards"]] for k in ("resolved", "sources")}
+    each = [a - b for a, b in zip(best["resolved"], best["sources"], strict=True)]
+    paired = got["max_reward_paired"]
+    assert paired["episodes"] == len(each) and paired["mean"] == pytest.approx(
+        sum(each) / len(each), abs=1e-4
+    )
+    (run / "seed1" / "eval_sources" / "eval_info.json").write_text('{"per_task": []}')
+    p = run_script("-m", "tools.lerobot", "table", run, check=False)
+    lines = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(lines) == 1 and lines[0].startswith("error:"), p.stderr
+    assert "seed1/eval_sources/eval_info.json" in lines[0]

@@ -2,6 +2,7 @@
 
     python -m tools.lerobot eval --policy DIR   a LeRobot checkpoint on the lesson's held-out PushT starts
     python -m tools.lerobot lab [FLAGS]         LeRobot's diffusion policy trained on the Scale Lab's points
+    python -m tools.lerobot table OUT           the LeRobot row of docs/gym_pusht.md (tools/lerobot_pusht.sh)
 
 `python -m tools.lerobot SUBCOMMAND --help` says what each one does and takes.
 
@@ -569,7 +570,122 @@ def lab_runs(a) -> int:
     return 0
 
 
-SUBCOMMANDS = {"eval": eval_main, "lab": lab_main}
+# --- table: the LeRobot row of docs/gym_pusht.md from lerobot-eval's own files ---------------------------
+PUSHT_SETS = ("sources", "resolved", "fresh")  # tools/lerobot_pusht.sh's training sets
+PUSHT_PAIRS = (("resolved", "sources"), ("fresh", "resolved"), ("fresh", "sources"))
+TABLE_KIND = "lerobot_pusht_table"
+
+
+def eval_info(path: Path) -> dict:
+    """lerobot-eval's eval_info.json -> successes, episodes, mean max reward (gym-pusht's coverage / 0.95)."""
+    try:
+        m = json.loads(path.read_text())["per_task"][0]["metrics"]
+        wins, best = [bool(x) for x in m["successes"]], [float(x) for x in m["max_rewards"]]
+    except (OSError, ValueError, KeyError, IndexError, TypeError) as e:
+        raise DataError(f"{path} is not lerobot-eval's eval_info.json ({type(e).__name__}: {e})") from e
+    return {
+        "successes": sum(wins),
+        "episodes": len(wins),
+        "max_reward": sum(best) / max(len(best), 1),
+        "best": best,
+    }
+
+
+def paired_mean(d: list[float]) -> dict:
+    """Mean of paired per-episode differences with its normal 95% interval (the same starts in both sets)."""
+    m = sum(d) / len(d)
+    sd = math.sqrt(sum((x - m) ** 2 for x in d) / max(len(d) - 1, 1))
+    half = 1.96 * sd / math.sqrt(len(d))
+    return {"mean": m, "ci95": [m - half, m + half], "episodes": len(d)}
+
+
+def final_loss(log: Path) -> float | None:
+    """The last `loss:` lerobot-train logged (a mean over its last --log_freq steps), or None."""
+    found = (
+        [w for w in log.read_text(errors="replace").split() if w.startswith("loss:")] if log.is_file() else []
+    )
+    return float(found[-1][5:]) if found else None
+
+
+def table_main(argv: list[str] | None = None) -> int:
+    """The LeRobot row of docs/gym_pusht.md (issue 49) from a `bash tools/lerobot_pusht.sh OUT` run:
+
+        python -m tools.lerobot table OUT [--json FILE]
+
+    Reads OUT/seed*/eval_SET/eval_info.json (lerobot-eval's own output) for SET in sources, resolved and
+    fresh, and prints per seed each set's successes and mean max reward (gym-pusht's reward: the goal's
+    coverage over 95%, at most 1; its maximum over the episode) and lerobot-train's last logged loss; the
+    pooled success with the lesson's 95% Wilson interval; the paired per-seed differences, and the max
+    reward's difference paired start by start (lerobot-eval draws the same starts from the same --seed)
+    over all seeds, with a normal 95% interval. --json writes the same as one JSON. Only seeds with all
+    three sets evaluated are counted.
+    """
+    p = parser("lerobot table", table_main.__doc__, script=False)
+    p.add_argument("out", type=Path, help="the folder tools/lerobot_pusht.sh wrote")
+    p.add_argument("--json", type=Path, help="also write the table here")
+    a = p.parse_args(argv)
+    seeds = sorted(int(d.name[4:]) for d in a.out.glob("seed*") if d.name[4:].isdigit())
+    rows = {}
+    for s in seeds:
+        d = a.out / f"seed{s}"
+        if all((d / f"eval_{k}" / "eval_info.json").is_file() for k in PUSHT_SETS):
+            rows[s] = {
+                k: eval_info(d / f"eval_{k}" / "eval_info.json") | {"loss": final_loss(d / f"train_{k}.log")}
+                for k in PUSHT_SETS
+            }
+    if not rows:
+        raise DataError(f"{a.out} holds no seed with all of {', '.join(PUSHT_SETS)} evaluated")
+    pooled = {}
+    for k in PUSHT_SETS:
+        wins, n = sum(r[k]["successes"] for r in rows.values()), sum(r[k]["episodes"] for r in rows.values())
+        best = sum(r[k]["max_reward"] for r in rows.values()) / len(rows)
+        pooled[k] = {
+            "successes": wins,
+            "episodes": n,
+            "success": wins / n,
+            "ci95": wilson(wins / n, n),
+            "max_reward": best,
+        }
+        lo, hi = pooled[k]["ci95"]
+        per = " / ".join(
+            f"{r[k]['successes']}/{r[k]['episodes']} ({r[k]['max_reward']:.3f}, loss {r[k]['loss']})"
+            for r in rows.values()
+        )
+        print(f"{k:9s} {per}  pooled {wins}/{n} = {wins / n:.3f} [{lo:.3f}, {hi:.3f}]  max reward {best:.3f}")
+    diffs = {}
+    for x, y in PUSHT_PAIRS:
+        rate = {s: {k: r[k]["successes"] / r[k]["episodes"] for k in (x, y)} for s, r in rows.items()}
+        each = [a - b for r in rows.values() for a, b in zip(r[x]["best"], r[y]["best"], strict=True)]
+        d = diffs[f"{x} - {y}"] = {
+            "success": {str(s): v[x] - v[y] for s, v in rate.items()},
+            "max_reward": {str(s): r[x]["max_reward"] - r[y]["max_reward"] for s, r in rows.items()},
+            "max_reward_paired": paired_mean(each),
+        }
+        pm, (lo, hi) = d["max_reward_paired"], d["max_reward_paired"]["ci95"]
+        print(
+            f"{x} - {y}: success",
+            " ".join(f"{v:+.2f}" for v in d["success"].values()),
+            "| max reward",
+            " ".join(f"{v:+.3f}" for v in d["max_reward"].values()),
+            f"| paired over {pm['episodes']} starts {pm['mean']:+.3f} [{lo:+.3f}, {hi:+.3f}]",
+        )
+    if a.json:
+        res = {
+            "kind": TABLE_KIND,
+            "seeds": {
+                str(s): {k: {n: v for n, v in e.items() if n != "best"} for k, e in r.items()}
+                for s, r in rows.items()
+            },
+            "pooled": pooled,
+            "paired": diffs,
+        }
+        check_own_result(a.json, TABLE_KIND)
+        write_result(a.json, res)
+        print(f"wrote {a.json}")
+    return 0
+
+
+SUBCOMMANDS = {"eval": eval_main, "lab": lab_main, "table": table_main}
 
 
 def main(argv: list[str]) -> int:
