@@ -267,3 +267,24 @@ def test_an_insertion_replay_of_parts_moved_by_centimetres_fits_acts_400_steps()
     moved = np.subtract(out.start, task.start_of(source.states[0]))
     assert min(np.linalg.norm(moved[0:2]), np.linalg.norm(moved[7:9])) > 0.04, moved
     assert out.kept and len(source.actions) < out.steps < task.spec.max_steps, (out.reason, out.steps)
+
+
+def test_value_study_trains_the_mlp_on_joints_and_cube_at_the_issues_sizes():
+    """Issue 50 #5: tools.replay value runs on transfer-cube: the issue's sizes (10 sources, 20 replayed per
+    source, 210 fresh, 50 held-out starts, fixed steps), the MLP reading the 14 joints and the cube's pose,
+    and one tiny seed of its arms (source, replayed, fresh) trained and rolled out."""
+    from tools import replay
+
+    c = replay.value_config("aloha_transfer_cube", smoke=False)
+    sizes = (c["source_episodes"], c["per_demo"], c["eval_episodes"], c["steps"])
+    assert sizes == (10, 20, 50, 5000), sizes
+    arms = replay.VALUE_TASKS["aloha_transfer_cube"]
+    assert arms == ("source", "replayed", "fresh") and TASK.spec.obs_dim == 14 + 7
+    tiny = dict(c, source_episodes=1, per_demo=1, eval_episodes=1, steps=3, hidden_dim=8, batch_size=16)
+    row = replay.value_seed(TASK, arms, 0, tiny, workers=1)
+    assert row["steps"] == 3 and row["replay"]["attempts"] >= 1, row
+    assert {a: row["arms"][a]["demos"] for a in arms} == {
+        "source": 1,
+        "replayed": 1 + row["replay"]["kept"],
+        "fresh": 2,
+    }

@@ -320,3 +320,95 @@ def test_the_lerobot_row_is_counted_from_lerobot_evals_own_files(tmp_path):
     lines = p.stderr.strip().splitlines()
     assert p.returncode == 2 and len(lines) == 1 and lines[0].startswith("error:"), p.stderr
     assert "seed1/eval_sources/eval_info.json" in lines[0]
+
+
+def tiny_act(widths: dict, folder: Path | None = None):
+    """LeRobot's ACT, untrained and tiny (dim_model 64, one encoder layer, chunks of 10), reading the
+    features `widths` names ({key: width}, action among them), saved with unit-statistics processors
+    to `folder` when given; returns the policy."""
+    import torch
+    from lerobot.configs.types import FeatureType, PolicyFeature
+    from lerobot.policies.act.configuration_act import ACTConfig
+    from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+
+    kinds = {"observation.state": FeatureType.STATE, "observation.environment_state": FeatureType.ENV}
+    feats = {k: PolicyFeature(kinds[k], (n,)) for k, n in widths.items() if k in kinds}
+    act = {"action": PolicyFeature(FeatureType.ACTION, (widths["action"],))}
+    cfg = ACTConfig(
+        input_features=feats,
+        output_features=act,
+        dim_model=64,
+        n_encoder_layers=1,
+        chunk_size=10,
+        n_action_steps=10,
+    )
+    cfg.device = "cpu"
+    policy = get_policy_class(cfg.type)(cfg)
+    if folder is not None:
+        policy.save_pretrained(folder)
+        unit = {"min": 0.0, "max": 1.0, "mean": 0.0, "std": 1.0}
+        stats = {k: {s: torch.full((n,), v) for s, v in unit.items()} for k, n in widths.items()}
+        for processor in make_pre_post_processors(cfg, dataset_stats=stats):
+            processor.save_pretrained(folder)
+    return policy
+
+
+def test_lerobot_eval_reads_a_tasks_state_and_environment_state_as_its_sets_hold_them(tmp_path):
+    """Issue 50 #5: tools.lerobot eval --task aloha_transfer_cube feeds an ACT that reads transfer-cube's
+    sets (observation.state: the 14 joints; observation.environment_state: the cube's pose) those columns
+    of the env's observation, and refuses one that reads PushT's widths in one line."""
+    import numpy as np
+
+    from datagen import known_tasks
+    from tools import lerobot as tool
+
+    spec = known_tasks()["aloha_transfer_cube"].spec
+    policy = tiny_act({"observation.state": 14, "observation.environment_state": 7, "action": 14})
+    obs = np.arange(21, dtype=np.float32)
+    batch = tool.observation_builder(policy, spec, "aloha_transfer_cube")(obs)
+    assert batch["observation.state"].tolist() == [list(range(14))]
+    assert batch["observation.environment_state"].tolist() == [list(range(14, 21))]
+    assert batch["task"] == [spec.task]
+    model = tmp_path / "pushts"
+    tiny_act({"observation.state": 10, "observation.environment_state": 8, "action": 2}, model)
+    p = run_script(
+        "-m",
+        "tools.lerobot",
+        "eval",
+        "--task",
+        "aloha_transfer_cube",
+        "--policy",
+        model,
+        "--episodes",
+        "1",
+        check=False,
+    )
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(err) == 1, p.stderr[-2000:]
+    assert "observation.state has shape (10,); aloha_transfer_cube's is (14,)" in err[0], err
+
+
+@pytest.mark.slow
+def test_lerobot_act_trained_on_a_transfer_cube_set_rolls_out_in_our_env(tmp_path):
+    """Issue 50 #5: lerobot-train's ACT (tiny, 2 steps) on a 2-episode aloha_transfer_cube set as
+    gen_demos.py writes it (observation.state + observation.environment_state, no images), rolled out
+    by tools.lerobot eval --task aloha_transfer_cube on 2 held-out starts, gym-aloha's success."""
+    from ch37.seeds import env_seed
+
+    data = tmp_path / "set"
+    run_script(
+        ROOT / "gen_demos.py", "--task", "aloha_transfer_cube", "--episodes", "2", "--out", data, "--quiet"
+    )
+    flags = ("--policy.dim_model=64", "--policy.n_encoder_layers=1", "--policy.chunk_size=10")
+    model = train(data, tmp_path / "train", "act", *flags, "--policy.n_action_steps=10")
+    cfg = json.loads((model / "config.json").read_text())
+    assert cfg["input_features"]["observation.environment_state"]["shape"] == [7]
+    assert cfg["input_features"]["observation.state"]["shape"] == [14]
+    out = tmp_path / "eval.json"
+    flags = ("--task", "aloha_transfer_cube", "--episodes", "2", "--device", "cpu", "--out", out)
+    p = run_script("-m", "tools.lerobot", "eval", "--policy", model, *flags)
+    assert "held-out aloha_transfer_cube starts" in p.stdout, p.stdout
+    r = json.loads(out.read_text())
+    assert (r["task"], r["policy_type"], r["episodes"]) == ("aloha_transfer_cube", "act", 2)
+    assert [e["seed"] for e in r["per_episode"]] == [env_seed(0, "eval", j) for j in range(2)]
+    assert all(1 <= e["steps"] <= 400 for e in r["per_episode"])

@@ -1,6 +1,7 @@
 """LeRobot's own policies on the chapter's data (docs/lerobot.md): one entry point, a subcommand per job.
 
     python -m tools.lerobot eval --policy DIR   a LeRobot checkpoint on the lesson's held-out PushT starts
+                                                (--task: in another task's env, e.g. aloha_transfer_cube)
     python -m tools.lerobot lab [FLAGS]         LeRobot's diffusion policy trained on the Scale Lab's points
     python -m tools.lerobot table OUT           the LeRobot row of docs/gym_pusht.md (tools/lerobot_pusht.sh)
 
@@ -33,8 +34,30 @@ from ch37.seeds import MAX_SEED, SEED_BLOCK, env_seed
 from lerobot_v3.dataset import ENV_STATE_KEY, columns
 from tools.common import parser, subcommands, write_result
 
-# --- eval: a LeRobot checkpoint in our PushT env, on the lesson's held-out starts -----------------------
+# --- eval: a LeRobot checkpoint in our PushT env (or a task's), on the lesson's held-out starts ---------
 EVAL_KIND = "lerobot_eval"  # marks the JSON as this tool's, so a re-run may replace it and nothing else
+PUSHT = "pusht"  # eval's default task: the lesson's own env, through Gymnasium (gym_envs)
+# --task's choices: tasks of the engine's registry (datagen.known_tasks) whose env gives the columns of
+# their sets, no images (tests/test_lerobot.py rolls each out)
+EVAL_TASKS = (PUSHT, "aloha", "aloha_transfer_cube", "aloha_insertion", "gym_pusht", "pusher")
+
+
+def task_env(task: str):
+    """(env, spec) of `task`, its env on the engine's protocol (reset(seed) -> obs, step(action) -> (obs,
+    reward, done, info with "success"); datagen.task.GymnasiumEnv): PushT's is gym_envs' ch37/PushT-v0,
+    whose reset(seed=s) is the lesson's start s and whose terminated is the lesson's success; any other
+    task's is its own make_env(), its success the task's (transfer-cube: gym-aloha's top reward stage)."""
+    from datagen import known_tasks
+    from datagen.task import GymnasiumEnv
+
+    spec = known_tasks()[task].spec
+    if task != PUSHT:
+        return known_tasks()[task].make_env(), spec
+    import gymnasium as gym
+
+    import gym_envs
+
+    return GymnasiumEnv(gym.make(gym_envs.PUSHT_ID), lambda o: np.asarray(o, np.float32), "success"), spec
 
 
 def load_policy(path: Path, device: str):
@@ -62,65 +85,79 @@ def load_policy(path: Path, device: str):
     return policy.eval(), pre, post
 
 
-def observation_builder(policy):
-    """obs float32 (10,) or (B, 10) -> the batch the policy reads: its input features of our state, (B, D)"""
-    ours = {
-        "observation.state": list(range(pusht_env.OBS_DIM)),
-        ENV_STATE_KEY: columns(pusht_env.STATE_NAMES, pusht_env.ENV_STATE_NAMES),
-    }
+def observation_builder(policy, spec=None, name: str = "PushT"):
+    """obs float32 (D,) or (B, D), the env's observation vector of the task `spec` (datagen.task.EnvSpec;
+    None: our PushT's, 10) -> the batch the policy reads: its input features of it, as the task's sets
+    record them (observation.state: the spec's state_names; observation.environment_state: its
+    env_state_names), (B, d) each"""
+    if spec is None:
+        ours = {
+            "observation.state": list(range(pusht_env.OBS_DIM)),
+            ENV_STATE_KEY: columns(pusht_env.STATE_NAMES, pusht_env.ENV_STATE_NAMES),
+        }
+        act_dim, text = pusht_env.ACT_DIM, pusht_env.TASK
+    else:
+        names = spec.obs_names or spec.state_names  # the observation vector's entries
+        ours = {"observation.state": columns(names, spec.state_names)}
+        if spec.env_state_names:
+            ours[ENV_STATE_KEY] = columns(names, spec.env_state_names)
+        act_dim, text = spec.act_dim, spec.task
     feats = policy.config.input_features
     for key, f in feats.items():
         if key not in ours:
-            raise DataError(f"the policy reads {key!r}; our PushT env gives {sorted(ours)} (no images)")
+            raise DataError(f"the policy reads {key!r}; our {name} env gives {sorted(ours)} (no images)")
         if tuple(f.shape) != (len(ours[key]),):
-            raise DataError(f"the policy's {key} has shape {tuple(f.shape)}; PushT's is ({len(ours[key])},)")
+            raise DataError(f"the policy's {key} has shape {tuple(f.shape)}; {name}'s is ({len(ours[key])},)")
     act = policy.config.output_features.get("action")
-    if act is None or tuple(act.shape) != (pusht_env.ACT_DIM,):
-        raise DataError(f"the policy's action has shape {act and tuple(act.shape)}; PushT's is (2,)")
+    if act is None or tuple(act.shape) != (act_dim,):
+        raise DataError(f"the policy's action has shape {act and tuple(act.shape)}; {name}'s is ({act_dim},)")
     device = policy.config.device
 
-    def build(obs):  # (10,) or (B, 10)
+    def build(obs):  # (D,) or (B, D)
         x = torch.as_tensor(np.atleast_2d(obs), dtype=torch.float32)
         batch = {key: x[:, ours[key]].to(device) for key in feats}
-        return batch | {"task": [pusht_env.TASK] * len(x)}
+        return batch | {"task": [text] * len(x)}
 
     return build
 
 
-def evaluate(policy, pre, post, seeds, name: str = "the policy") -> list[dict]:
-    """One episode per env seed through Gymnasium (gym_envs' ch37/PushT-v0, whose reset(seed=s) is the
-    lesson's start s): {"seed", "success", "steps"}, the lesson's success rule (terminated = success).
-    A non-finite action is the checkpoint's problem (`name` it), a DataError, never the env's ValueError."""
-    import gymnasium as gym
-
-    import gym_envs
-
-    env, build = gym.make(gym_envs.PUSHT_ID), observation_builder(policy)
+def evaluate(policy, pre, post, seeds, name: str = "the policy", task: str = PUSHT) -> list[dict]:
+    """One episode per env seed in `task`'s env (task_env: PushT's through Gymnasium, whose reset(seed=s)
+    is the lesson's start s): {"seed", "success", "steps"}, the task's success rule (PushT's: the
+    lesson's, terminated = success), the episode ending there or at the env's limit. A non-finite action
+    is the checkpoint's problem (`name` it), a DataError, never the env's ValueError."""
+    env, spec = task_env(task)
+    build = observation_builder(policy, None if task == PUSHT else spec, task)
     episodes = []
     with torch.inference_mode():
         for s in seeds:
             torch.manual_seed(s)  # diffusion's sampling noise: a pure function of the start
             policy.reset()  # empties the action queue and the observation history
-            (obs, _), terminated, truncated, steps = env.reset(seed=s), False, False, 0
-            while not (terminated or truncated):
+            obs, done, steps = env.reset(s), False, 0
+            while not done:
                 action = post(policy.select_action(pre(build(obs))))[0].cpu().numpy().astype(np.float32)
-                if not np.all(np.isfinite(action)):  # m/s
+                if not np.all(np.isfinite(action)):  # the task's units
                     raise DataError(
                         f"{name} gives a non-finite action {action} (start seed {s}, step {steps}): its "
                         "weights or normalization statistics hold NaN or inf; pass another checkpoint"
                     )
-                obs, _, terminated, truncated, _ = env.step(action)
+                obs, _, done, info = env.step(action)
                 steps += 1
-            episodes.append({"seed": s, "success": bool(terminated), "steps": steps})
-    env.close()
+            episodes.append({"seed": s, "success": bool(info["success"]), "steps": steps})
+    inner = getattr(env, "env", None)  # a Gymnasium env inside (PushT's, gym-pusht's) is closed
+    if hasattr(inner, "close"):
+        inner.close()
     return episodes
 
 
 @dataclass(frozen=True)
 class Args:
-    """A LeRobot policy checkpoint in our PushT env, on the lesson's held-out starts."""
+    """A LeRobot policy checkpoint in our PushT env (or a task's), on the lesson's held-out starts."""
 
     policy: Path = flag(None, "a pretrained_model folder from lerobot-train", type=Path, required=True)
+    task: str = flag(
+        PUSHT, "the env it rolls out in, and its success rule (default: our PushT)", choices=EVAL_TASKS
+    )
     seed: int = flag(
         0,
         "the lesson's --seed: which held-out starts",
@@ -142,9 +179,10 @@ class Args:
 
 def eval_main(argv: list[str] | None = None) -> int:
     """A LeRobot policy checkpoint in our PushT env, on the lesson's held-out starts, judged by the lesson's
-    rule.
+    rule; or, with --task, in that task's env, judged by its own rule.
 
         python -m tools.lerobot eval --policy OUT/checkpoints/last/pretrained_model --eval_episodes 50
+        python -m tools.lerobot eval --task aloha_transfer_cube --policy DIR --eval_episodes 50
 
     --policy is a `pretrained_model` folder that lerobot-train wrote (diffusion, ACT, ... trained on a set
     this project wrote: observation.state [10] and observation.environment_state [8], no images). Episode
@@ -154,24 +192,35 @@ def eval_main(argv: list[str] | None = None) -> int:
     reset and torch is seeded with that start's seed before each episode, so an episode's outcome does not
     depend on the ones before it. Prints the success rate with the lesson's 95% Wilson interval and writes
     it as JSON beside the policy folder (--out to choose): lerobot_eval_seed{S}_n{N}.json.
+
+    --task T (a task of the engine's registry: aloha, aloha_transfer_cube, aloha_insertion, gym_pusht,
+    pusher) rolls the policy out in T's own env (the task's make_env, as gen_demos.py --task T records
+    its sets) from reset(env_seed(seed, "eval", j)), and judges it by T's success, which ends the
+    episode; else it ends at T's limit (transfer-cube: gym-aloha's AlohaTransferCube-v0 starts and its
+    top reward stage, 400 steps, in datagen/aloha_sim.py: gym-aloha's own env code cannot run on mujoco
+    4). The policy must read what T's sets hold, no images: observation.state (transfer-cube: 14
+    joints) and, if it reads it, observation.environment_state (the cube's pose, 7); the JSON is
+    lerobot_eval_T_seed{S}_n{N}.json, with "task": T.
     """
     doc = inspect.cleandoc(eval_main.__doc__)
     a = config.parse(Args, argv, prog="python -m tools.lerobot eval", description=doc)
     if not a.policy.is_dir():
         raise DataError(f"--policy {a.policy} is not a folder")
-    out = a.out or a.policy.parent / f"{EVAL_KIND}_seed{a.seed}_n{a.eval_episodes}.json"
+    named = "" if a.task == PUSHT else f"_{a.task}"  # PushT's keeps the name it always had
+    out = a.out or a.policy.parent / f"{EVAL_KIND}{named}_seed{a.seed}_n{a.eval_episodes}.json"
     check_own_result(out, EVAL_KIND)  # ours from an earlier run may be replaced; anything else is the user's
 
     device = pick_device(a.device)
     policy, pre, post = load_policy(a.policy, device)
     seeds = [env_seed(a.seed, "eval", j) for j in range(a.eval_episodes)]
     t0 = time.perf_counter()
-    episodes = evaluate(policy, pre, post, seeds, name=f"--policy {a.policy}")
+    episodes = evaluate(policy, pre, post, seeds, name=f"--policy {a.policy}", task=a.task)
     k, n = sum(e["success"] for e in episodes), len(episodes)
     result = {
         "kind": EVAL_KIND,
         "policy": str(a.policy.resolve()),
         "policy_type": policy.config.type,
+        "task": a.task,
         "device": device,
         "seed": a.seed,
         "episodes": n,
@@ -182,8 +231,9 @@ def eval_main(argv: list[str] | None = None) -> int:
     }
     write_result(out, result)
     lo, hi = result["ci95"]
+    where = "PushT" if a.task == PUSHT else a.task
     print(
-        f"{policy.config.type} on {n} held-out PushT starts (seed {a.seed}): success {k / n:.2f} "
+        f"{policy.config.type} on {n} held-out {where} starts (seed {a.seed}): success {k / n:.2f} "
         f"[{lo:.2f}, {hi:.2f}] ({k}/{n}, {time.perf_counter() - t0:.0f} s on {device})"
     )
     print(f"wrote {out}")

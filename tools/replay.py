@@ -502,29 +502,49 @@ def yield_main(argv: list[str]) -> int:
 
 # --- value: what grown demos buy the chapter's BC recipe on ALOHA and gym-pusht -------------------------
 VALUE_ARMS = ("source", "replayed", "resolved", "fresh")
-VALUE_TASKS = {"aloha": VALUE_ARMS, "gym_pusht": ("source", "resolved", "fresh")}  # each task's arms
+VALUE_TASKS = {  # each task's arms
+    "aloha": VALUE_ARMS,
+    "gym_pusht": ("source", "resolved", "fresh"),
+    "aloha_transfer_cube": ("source", "replayed", "fresh"),
+}
+# A task's own sizes where the chapter's do not fit it. Transfer-cube's 400-frame episodes (about 295 kept)
+# make the chapter's step rule (500 epochs over the largest arm, about 63,000 frames) some 250,000 steps: a
+# fixed 5,000 steps for every arm instead, about 2.5 minutes for the three arms on 2 EPYC cores
+VALUE_SIZES = {
+    "aloha_transfer_cube": dict(source_episodes=10, per_demo=20, eval_episodes=50, steps=5000),
+}
+VALUE_SMOKE = dict(source_episodes=2, per_demo=2, eval_episodes=4)
 VALUE_DIFFS = (
     ("replayed", "source"),
     ("resolved", "source"),
     ("resolved", "replayed"),
     ("fresh", "resolved"),
 )
-VALUE_DIFFS += (("fresh", "replayed"),)
+VALUE_DIFFS += (("fresh", "replayed"), ("fresh", "source"))
 
 
-def value_config(smoke: bool) -> dict:
-    c = dict(DEFAULTS, eval_episodes=100, source_episodes=12, per_demo=8, tries=10)
+def value_config(task: str, smoke: bool) -> dict:
+    """The study's sizes for `task`: the chapter's (12 sources, 8 kept per source, 100 held-out starts,
+    steps from its epochs), a task's VALUE_SIZES over them; with `smoke` tiny ones (a fixed-step task
+    then trains 50 steps)."""
+    c = dict(DEFAULTS, eval_episodes=100, source_episodes=12, per_demo=8, tries=10, steps=None)
+    c |= VALUE_SIZES.get(task, {})
     if smoke:
-        c |= {k: SMOKE[k] for k in ("epochs", "hidden_dim", "batch_size")}
-        c |= dict(source_episodes=2, per_demo=2, eval_episodes=4)
+        c |= {k: SMOKE[k] for k in ("epochs", "hidden_dim", "batch_size")} | VALUE_SMOKE
+        c["steps"] = c["steps"] and 50
     return c
 
 
-def value_grow(task: Task, sources: dict, mode: str, seed: int, c: dict) -> tuple[list[dict], dict]:
+def value_grow(
+    task: Task, sources: dict, mode: str, seed: int, c: dict, workers: int = 1
+) -> tuple[list[dict], dict]:
     """The first per_demo kept attempts (k order) of each source demo in `mode` (datagen.grow: at most
-    tries x per_demo attempts each), and the counts."""
+    tries x per_demo attempts each, on `workers` processes: the same demos for any), and the counts."""
     how = Perturbation(seed, c["aug_pos_sigma"], c["aug_yaw_sigma"])  # ALOHA reads no yaw
-    kept, attempts, failures = datagen.grow(task, sources, c["per_demo"], how, mode=mode, cap=c["tries"])
+    cap = c["tries"]
+    kept, attempts, failures = datagen.grow(
+        task, sources, c["per_demo"], how, mode=mode, cap=cap, workers=workers
+    )
     seen = {reason: n for reason, n in failures.items() if n}
     return kept, {"attempts": attempts, "kept": len(kept), "failures": seen}
 
@@ -545,9 +565,9 @@ def value_seed(task: Task, arms: tuple, seed: int, c: dict, workers: int, device
     grown = {}
     for arm, mode in (("replayed", "replay"), ("resolved", "resolve")):
         if arm in arms:
-            grown[arm], row[mode] = value_grow(task, sources, mode, seed, c)
+            grown[arm], row[mode] = value_grow(task, sources, mode, seed, c, workers)
             data[arm] = stack(src_eps + grown[arm])
-    steps = math.ceil(c["epochs"] * max(len(data[a][0]) for a in arms) / c["batch_size"])
+    steps = c["steps"] or math.ceil(c["epochs"] * max(len(data[a][0]) for a in arms) / c["batch_size"])
     demos = {a: {"source": n_src, "fresh": n_all}.get(a) or n_src + len(grown[a]) for a in arms}
     row["steps"] = steps
     row["arms"] = train_and_evaluate({a: data[a] for a in arms}, demos, steps, seed, c, workers, task, device)
@@ -561,6 +581,8 @@ def value_main(argv: list[str]) -> int:
 
         python -m tools.replay value --task aloha --seeds 3      -> OUT/aloha_value.json (outputs/aloha_value)
         python -m tools.replay value --task gym_pusht --seeds 3  -> OUT/gym_pusht_value.json
+        python -m tools.replay value --task aloha_transfer_cube --seeds 3
+                                                                 -> OUT/aloha_transfer_cube_value.json
         python -m tools.replay value --smoke --seeds 1           seconds; numbers not meaningful
 
         source     the seed's 12 expert demos (env_seed(seed, "demo", i), i < 12, the task's noise-free
@@ -572,15 +594,22 @@ def value_main(argv: list[str]) -> int:
         fresh      108 expert demos (i < 108: the 12 sources and 96 more from fresh reset starts)
 
     The arms by task (--arms to choose): ALOHA all four; gym-pusht source, resolved and fresh (its replay
-    keeps none of 360 attempts at the chapter's perturbation: docs/replay.md). Perturbation: the chapter's
-    sigmas in the task's own units (ALOHA: 0.08 m on cube, target and both end-effectors; gym-pusht: the
-    task's px scale, datagen.gym_pusht). Steps: the chapter's epochs (500) passes over the largest arm's
-    frames at batch 128 (lr 1e-3 cosine, hidden 512). The MLP reads the task's observation vector (ALOHA's
-    10 numbers; gym-pusht's agent x, y and the block's 8 keypoints, as lerobot/pusht_keypoints records
-    them) and gives its action (ALOHA's 6 velocities; gym-pusht's position target, px). Each arm rolls out
-    on the seed's 100 held-out starts (env_seed(seed, "eval", j): the env's reset(seed)), judged by the
-    env's own success (gym-pusht's: 95% of the goal covered); the pooled rates carry Wilson 95% intervals,
-    the paired differences their per-seed values.
+    keeps none of 360 attempts at the chapter's perturbation: docs/replay.md); LeRobot's ALOHA
+    transfer-cube (gym-aloha's ViperX sim) source, replayed and fresh at its own sizes: 10 sources, 20
+    kept per source (10 + 200 replayed, 210 fresh), 50 held-out starts. Perturbation: the chapter's
+    sigmas in the task's own units (ALOHA: 0.08 m on cube, target and both end-effectors; transfer-cube:
+    0.08 m on the cube's x, y; gym-pusht: the task's px scale, datagen.gym_pusht). Steps: the chapter's
+    epochs (500) passes over the largest arm's frames at batch 128 (lr 1e-3 cosine, hidden 512), except
+    transfer-cube: a fixed 5,000 steps for every arm (VALUE_SIZES), sized to a 2-core CPU (about 2.5
+    minutes for its three arms; the chapter's rule would be some 250,000 steps over its 400-frame
+    episodes). The MLP reads the task's observation vector (ALOHA's 10 numbers; gym-pusht's agent x, y
+    and the block's 8 keypoints, as lerobot/pusht_keypoints records them; transfer-cube's 14 joints of
+    observation.state and the cube's pose of observation.environment_state, 21) and gives its action
+    (ALOHA's 6 velocities; gym-pusht's position target, px; transfer-cube's 14 joint and gripper
+    targets). Each arm rolls out on the seed's held-out starts (env_seed(seed, "eval", j): the env's
+    reset(seed)), judged by the env's own success (gym-pusht's: 95% of the goal covered; transfer-cube's:
+    gym-aloha's top reward stage); the pooled rates carry Wilson 95% intervals, the paired differences
+    their per-seed values.
     """
     p = parser("replay value", value_main.__doc__)
     arg = p.add_argument
@@ -594,7 +623,7 @@ def value_main(argv: list[str]) -> int:
     arg("--out", type=Path, help="default outputs/TASK_value (outputs/TASK_value-smoke with --smoke)")
     a = p.parse_args(argv)
     check(a, positive=["seeds", "workers"])
-    task, c = known_tasks()[a.task], value_config(a.smoke)
+    task, c = known_tasks()[a.task], value_config(a.task, a.smoke)
     arms = tuple(x for x in VALUE_ARMS if x in (a.arms or VALUE_TASKS[a.task]))
     name = f"{task.name}_value"  # the JSON's "kind" and name: a re-run replaces its own, never a user's
     out = a.out or ROOT / "outputs" / (f"{name}-smoke" if a.smoke else name)
