@@ -14,6 +14,7 @@ import datetime
 import hashlib
 import importlib.metadata
 import inspect
+import math
 import os
 import platform
 import re
@@ -62,6 +63,18 @@ def check_results(out: Path, *kinds: str, beside: dict | None = None) -> None:
         raise DataError(problem)
     for kind in kinds:
         check_own_result(out / f"{kind}.json", kind, beside=(beside or {}).get(kind, ()))
+
+
+T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262, 10: 2.228}
+
+
+def mean_ci(d: list[float]) -> tuple[float, float | None, list[float] | None]:
+    """Mean, sample std and 95% t-interval of the mean of `d` (std and interval None with one value)."""
+    n = len(d)
+    mean = sum(d) / n
+    std = math.sqrt(sum((x - mean) ** 2 for x in d) / (n - 1)) if n > 1 else None
+    half = None if std is None else T975.get(n - 1, 1.96) * std / math.sqrt(n)
+    return mean, std, None if half is None else [mean - half, mean + half]
 
 
 def write_result(path: Path, result: dict) -> Path:

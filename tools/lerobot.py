@@ -32,7 +32,7 @@ from ch37.ownership import check_out_path, check_own_result
 from ch37.parallel import map_jobs
 from ch37.seeds import MAX_SEED, SEED_BLOCK, env_seed
 from lerobot_v3.dataset import ENV_STATE_KEY, columns
-from tools.common import parser, subcommands, write_result
+from tools.common import mean_ci, parser, subcommands, write_result
 
 # --- eval: a LeRobot checkpoint in our PushT env (or a task's), on the lesson's held-out starts ---------
 EVAL_KIND = "lerobot_eval"  # marks the JSON as this tool's, so a re-run may replace it and nothing else
@@ -50,14 +50,19 @@ def task_env(task: str):
     from datagen import known_tasks
     from datagen.task import GymnasiumEnv
 
-    spec = known_tasks()[task].spec
+    t = known_tasks()[task]
     if task != PUSHT:
-        return known_tasks()[task].make_env(), spec
+        return t.make_env(), t.spec
     import gymnasium as gym
 
     import gym_envs
 
-    return GymnasiumEnv(gym.make(gym_envs.PUSHT_ID), lambda o: np.asarray(o, np.float32), "success"), spec
+    return GymnasiumEnv(gym.make(gym_envs.PUSHT_ID), lambda o: np.asarray(o, np.float32), "success"), t.spec
+
+
+def shown(task: str) -> str:
+    """The task's name in printed lines and refusals: our PushT's as the lesson says it."""
+    return "PushT" if task == PUSHT else task
 
 
 def load_policy(path: Path, device: str):
@@ -85,23 +90,16 @@ def load_policy(path: Path, device: str):
     return policy.eval(), pre, post
 
 
-def observation_builder(policy, spec=None, name: str = "PushT"):
+def observation_builder(policy, spec, name: str):
     """obs float32 (D,) or (B, D), the env's observation vector of the task `spec` (datagen.task.EnvSpec;
-    None: our PushT's, 10) -> the batch the policy reads: its input features of it, as the task's sets
-    record them (observation.state: the spec's state_names; observation.environment_state: its
-    env_state_names), (B, d) each"""
-    if spec is None:
-        ours = {
-            "observation.state": list(range(pusht_env.OBS_DIM)),
-            ENV_STATE_KEY: columns(pusht_env.STATE_NAMES, pusht_env.ENV_STATE_NAMES),
-        }
-        act_dim, text = pusht_env.ACT_DIM, pusht_env.TASK
-    else:
-        names = spec.obs_names or spec.state_names  # the observation vector's entries
-        ours = {"observation.state": columns(names, spec.state_names)}
-        if spec.env_state_names:
-            ours[ENV_STATE_KEY] = columns(names, spec.env_state_names)
-        act_dim, text = spec.act_dim, spec.task
+    our PushT's: 10) -> the batch the policy reads: its input features of it, as the task's sets record
+    them (observation.state: the spec's state_names; observation.environment_state: its env_state_names),
+    (B, d) each. `name` names the env in a refusal."""
+    names = spec.obs_names or spec.state_names  # the observation vector's entries
+    ours = {"observation.state": columns(names, spec.state_names)}
+    if spec.env_state_names:
+        ours[ENV_STATE_KEY] = columns(names, spec.env_state_names)
+    act_dim, text = spec.act_dim, spec.task
     feats = policy.config.input_features
     for key, f in feats.items():
         if key not in ours:
@@ -127,7 +125,7 @@ def evaluate(policy, pre, post, seeds, name: str = "the policy", task: str = PUS
     lesson's, terminated = success), the episode ending there or at the env's limit. A non-finite action
     is the checkpoint's problem (`name` it), a DataError, never the env's ValueError."""
     env, spec = task_env(task)
-    build = observation_builder(policy, None if task == PUSHT else spec, task)
+    build = observation_builder(policy, spec, shown(task))
     episodes = []
     with torch.inference_mode():
         for s in seeds:
@@ -231,9 +229,8 @@ def eval_main(argv: list[str] | None = None) -> int:
     }
     write_result(out, result)
     lo, hi = result["ci95"]
-    where = "PushT" if a.task == PUSHT else a.task
     print(
-        f"{policy.config.type} on {n} held-out {where} starts (seed {a.seed}): success {k / n:.2f} "
+        f"{policy.config.type} on {n} held-out {shown(a.task)} starts (seed {a.seed}): success {k / n:.2f} "
         f"[{lo:.2f}, {hi:.2f}] ({k}/{n}, {time.perf_counter() - t0:.0f} s on {device})"
     )
     print(f"wrote {out}")
@@ -393,7 +390,9 @@ def rollouts(policy, pre, post, seeds: list[int]) -> list[dict]:
     episode that has ended keeps its last observation and its env is not stepped again. The denoising
     noise is drawn for the whole batch, so an outcome depends on the batch it ran in (the seeds);
     `lerobot eval` runs one episode at a time instead, ~50x slower here."""
-    envs, build = [pusht_env.PushTEnv() for _ in seeds], observation_builder(policy)
+    from datagen.pusht import PUSHT as PUSHT_TASK  # its spec: the columns our PushT sets record
+
+    envs, build = [pusht_env.PushTEnv() for _ in seeds], observation_builder(policy, PUSHT_TASK.spec, "PushT")
     obs = np.stack([env.reset(s) for env, s in zip(envs, seeds, strict=True)])  # (B, 10)
     done, steps, success = np.zeros(len(seeds), bool), np.zeros(len(seeds), int), np.zeros(len(seeds), bool)
     torch.manual_seed(seeds[0])
@@ -641,14 +640,6 @@ def eval_info(path: Path) -> dict:
     }
 
 
-def paired_mean(d: list[float]) -> dict:
-    """Mean of paired per-episode differences with its normal 95% interval (the same starts in both sets)."""
-    m = sum(d) / len(d)
-    sd = math.sqrt(sum((x - m) ** 2 for x in d) / max(len(d) - 1, 1))
-    half = 1.96 * sd / math.sqrt(len(d))
-    return {"mean": m, "ci95": [m - half, m + half], "episodes": len(d)}
-
-
 def final_loss(log: Path) -> float | None:
     """The last `loss:` lerobot-train logged (a mean over its last --log_freq steps), or None."""
     found = (
@@ -667,8 +658,8 @@ def table_main(argv: list[str] | None = None) -> int:
     coverage over 95%, at most 1; its maximum over the episode) and lerobot-train's last logged loss; the
     pooled success with the lesson's 95% Wilson interval; the paired per-seed differences, and the max
     reward's difference paired start by start (lerobot-eval draws the same starts from the same --seed)
-    over all seeds, with a normal 95% interval. --json writes the same as one JSON. Only seeds with all
-    three sets evaluated are counted.
+    over all seeds, with its 95% t-interval (tools.common.mean_ci). --json writes the same as one JSON.
+    Only seeds with all three sets evaluated are counted.
     """
     p = parser("lerobot table", table_main.__doc__, script=False)
     p.add_argument("out", type=Path, help="the folder tools/lerobot_pusht.sh wrote")
@@ -709,9 +700,10 @@ def table_main(argv: list[str] | None = None) -> int:
         d = diffs[f"{x} - {y}"] = {
             "success": {str(s): v[x] - v[y] for s, v in rate.items()},
             "max_reward": {str(s): r[x]["max_reward"] - r[y]["max_reward"] for s, r in rows.items()},
-            "max_reward_paired": paired_mean(each),
+            "max_reward_paired": dict(zip(("mean", "std", "ci95"), mean_ci(each))) | {"episodes": len(each)},
         }
-        pm, (lo, hi) = d["max_reward_paired"], d["max_reward_paired"]["ci95"]
+        pm = d["max_reward_paired"]
+        lo, hi = pm["ci95"] or (math.nan, math.nan)  # one start: no interval
         print(
             f"{x} - {y}: success",
             " ".join(f"{v:+.2f}" for v in d["success"].values()),

@@ -541,9 +541,8 @@ def value_grow(
     """The first per_demo kept attempts (k order) of each source demo in `mode` (datagen.grow: at most
     tries x per_demo attempts each, on `workers` processes: the same demos for any), and the counts."""
     how = Perturbation(seed, c["aug_pos_sigma"], c["aug_yaw_sigma"])  # ALOHA reads no yaw
-    cap = c["tries"]
     kept, attempts, failures = datagen.grow(
-        task, sources, c["per_demo"], how, mode=mode, cap=cap, workers=workers
+        task, sources, c["per_demo"], how, mode=mode, cap=c["tries"], workers=workers
     )
     seen = {reason: n for reason, n in failures.items() if n}
     return kept, {"attempts": attempts, "kept": len(kept), "failures": seen}

@@ -13,7 +13,6 @@ Exit codes: 0 ok, 2 bad input (bad flags, a run that failed).
 from __future__ import annotations
 
 import json
-import math
 import shlex
 import shutil
 import subprocess
@@ -26,11 +25,10 @@ from ch37.config import check
 from ch37.errors import DataError
 from ch37.ownership import write_atomic
 from exercises.rules import ARMS, EFFECTS, PLATEAU_TOL, ex3_answer
-from tools.common import parser, provenance, rel
+from tools.common import mean_ci, parser, provenance, rel
 
 SWEEP_OWNED = {"--seed", "--out", "--rerun", "--no-rerun"}
 MEAN_KEYS = (*ARMS, *EFFECTS, "yield", "kept", "coverage_union")
-T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262, 10: 2.228}
 
 
 def _seed_demo_cache(root: Path, target: Path, seed: int) -> None:
@@ -81,14 +79,11 @@ def paired(rows: list[dict]) -> dict:
     out = {}
     for key in EFFECTS:
         d = [r[key] for r in rows]
-        n = len(d)
-        mean = sum(d) / n
-        std = math.sqrt(sum((x - mean) ** 2 for x in d) / (n - 1)) if n > 1 else None
-        half = None if std is None else T975.get(n - 1, 1.96) * std / math.sqrt(n)
-        out[key] = {"n": n, "wins": sum(x > 0 for x in d), "ties": sum(x == 0 for x in d)}
+        mean, std, ci = mean_ci(d)
+        out[key] = {"n": len(d), "wins": sum(x > 0 for x in d), "ties": sum(x == 0 for x in d)}
         out[key] |= {"losses": sum(x < 0 for x in d), "mean": round(mean, 6)}
         out[key]["std"] = None if std is None else round(std, 6)
-        out[key]["ci95"] = None if half is None else [round(mean - half, 6), round(mean + half, 6)]
+        out[key]["ci95"] = None if ci is None else [round(x, 6) for x in ci]
     return out
 
 
