@@ -3,7 +3,7 @@
     python -m tools.lerobot eval --policy DIR   a LeRobot checkpoint on the lesson's held-out PushT starts
                                                 (--task: in another task's env, e.g. aloha_transfer_cube)
     python -m tools.lerobot lab [FLAGS]         LeRobot's diffusion policy trained on the Scale Lab's points
-    python -m tools.lerobot table OUT           the LeRobot row of docs/gym_pusht.md (tools/lerobot_pusht.sh)
+    python -m tools.lerobot table OUT           a LeRobot row (tools/lerobot_row.sh TASK OUT)
 
 `python -m tools.lerobot SUBCOMMAND --help` says what each one does and takes.
 
@@ -121,9 +121,10 @@ def observation_builder(policy, spec, name: str):
 
 def evaluate(policy, pre, post, seeds, name: str = "the policy", task: str = PUSHT) -> list[dict]:
     """One episode per env seed in `task`'s env (task_env: PushT's through Gymnasium, whose reset(seed=s)
-    is the lesson's start s): {"seed", "success", "steps"}, the task's success rule (PushT's: the
-    lesson's, terminated = success), the episode ending there or at the env's limit. A non-finite action
-    is the checkpoint's problem (`name` it), a DataError, never the env's ValueError."""
+    is the lesson's start s): {"seed", "success", "steps", "max_reward"}, the task's success rule (PushT's:
+    the lesson's, terminated = success), the episode ending there or at the env's limit; max_reward is the
+    most the env's reward reached (transfer-cube: gym-aloha's stage, 0..4: how far a failure got). A
+    non-finite action is the checkpoint's problem (`name` it), a DataError, never the env's ValueError."""
     env, spec = task_env(task)
     build = observation_builder(policy, spec, shown(task))
     episodes = []
@@ -131,7 +132,7 @@ def evaluate(policy, pre, post, seeds, name: str = "the policy", task: str = PUS
         for s in seeds:
             torch.manual_seed(s)  # diffusion's sampling noise: a pure function of the start
             policy.reset()  # empties the action queue and the observation history
-            obs, done, steps = env.reset(s), False, 0
+            obs, done, steps, best = env.reset(s), False, 0, -math.inf
             while not done:
                 action = post(policy.select_action(pre(build(obs))))[0].cpu().numpy().astype(np.float32)
                 if not np.all(np.isfinite(action)):  # the task's units
@@ -139,9 +140,9 @@ def evaluate(policy, pre, post, seeds, name: str = "the policy", task: str = PUS
                         f"{name} gives a non-finite action {action} (start seed {s}, step {steps}): its "
                         "weights or normalization statistics hold NaN or inf; pass another checkpoint"
                     )
-                obs, _, done, info = env.step(action)
-                steps += 1
-            episodes.append({"seed": s, "success": bool(info["success"]), "steps": steps})
+                obs, reward, done, info = env.step(action)
+                steps, best = steps + 1, max(best, float(reward))
+            episodes.append({"seed": s, "success": bool(info["success"]), "steps": steps, "max_reward": best})
     inner = getattr(env, "env", None)  # a Gymnasium env inside (PushT's, gym-pusht's) is closed
     if hasattr(inner, "close"):
         inner.close()
@@ -620,18 +621,28 @@ def lab_runs(a) -> int:
 
 
 # --- table: the LeRobot row of docs/gym_pusht.md from lerobot-eval's own files ---------------------------
-PUSHT_SETS = ("sources", "resolved", "fresh")  # tools/lerobot_pusht.sh's training sets
-PUSHT_PAIRS = (("resolved", "sources"), ("fresh", "resolved"), ("fresh", "sources"))
+ROWS = {  # tools/lerobot_row.sh's three training sets by task, and the evaluation file each run leaves
+    "gym_pusht": (("sources", "resolved", "fresh"), "eval_info.json"),  # lerobot-eval's own
+    "aloha_transfer_cube": (("sources", "replayed", "fresh"), f"{EVAL_KIND}.json"),  # this tool's eval
+}
 TABLE_KIND = "lerobot_pusht_table"
 
 
 def eval_info(path: Path) -> dict:
-    """lerobot-eval's eval_info.json -> successes, episodes, mean max reward (gym-pusht's coverage / 0.95)."""
+    """A run's evaluation -> successes, episodes, mean max reward and each start's: lerobot-eval's
+    eval_info.json (gym-pusht's reward: its coverage / 0.95, at most 1) or this tool's eval JSON (the
+    task's reward; transfer-cube: gym-aloha's stage 0..4)."""
     try:
-        m = json.loads(path.read_text())["per_task"][0]["metrics"]
-        wins, best = [bool(x) for x in m["successes"]], [float(x) for x in m["max_rewards"]]
+        r = json.loads(path.read_text())
+        if path.name == "eval_info.json":
+            m = r["per_task"][0]["metrics"]
+            wins, best = [bool(x) for x in m["successes"]], [float(x) for x in m["max_rewards"]]
+        else:
+            wins = [bool(e["success"]) for e in r["per_episode"]]
+            best = [float(e["max_reward"]) for e in r["per_episode"]]
     except (OSError, ValueError, KeyError, IndexError, TypeError) as e:
-        raise DataError(f"{path} is not lerobot-eval's eval_info.json ({type(e).__name__}: {e})") from e
+        what = "lerobot-eval's eval_info.json" if path.name == "eval_info.json" else f"{EVAL_KIND}'s JSON"
+        raise DataError(f"{path} is not {what} ({type(e).__name__}: {e})") from e
     return {
         "successes": sum(wins),
         "episodes": len(wins),
@@ -649,35 +660,40 @@ def final_loss(log: Path) -> float | None:
 
 
 def table_main(argv: list[str] | None = None) -> int:
-    """The LeRobot row of docs/gym_pusht.md (issue 49) from a `bash tools/lerobot_pusht.sh OUT` run:
+    """A LeRobot row from a `bash tools/lerobot_row.sh TASK OUT` run (issue 49's in docs/gym_pusht.md,
+    issue 50's in docs/engine.md):
 
         python -m tools.lerobot table OUT [--json FILE]
 
-    Reads OUT/seed*/eval_SET/eval_info.json (lerobot-eval's own output) for SET in sources, resolved and
-    fresh, and prints per seed each set's successes and mean max reward (gym-pusht's reward: the goal's
-    coverage over 95%, at most 1; its maximum over the episode) and lerobot-train's last logged loss; the
-    pooled success with the lesson's 95% Wilson interval; the paired per-seed differences, and the max
-    reward's difference paired start by start (lerobot-eval draws the same starts from the same --seed)
-    over all seeds, with its 95% t-interval (tools.common.mean_ci). --json writes the same as one JSON.
-    Only seeds with all three sets evaluated are counted.
+    Reads each seed's evaluations, OUT/seed*/eval_SET/: gym-pusht's sets sources, resolved and fresh,
+    lerobot-eval's eval_info.json; transfer-cube's sources, replayed and fresh, tools.lerobot eval's JSON.
+    Prints per seed each set's successes and mean max reward (its maximum over the episode: gym-pusht's,
+    the goal's coverage over 95%, at most 1; transfer-cube's, gym-aloha's stage: 1 the right gripper
+    touches the cube, 2 lifts it, 3 both grippers touch it, 4 the left holds it alone) and lerobot-train's
+    last logged loss; the pooled success with the lesson's 95% Wilson interval; the paired per-seed
+    differences, and the max reward's difference paired start by start (each seed's three sets are
+    scored on the same starts) over all seeds, with its 95% t-interval (tools.common.mean_ci). --json
+    writes the same as one JSON. Only seeds with all three sets evaluated are counted.
     """
     p = parser("lerobot table", table_main.__doc__, script=False)
-    p.add_argument("out", type=Path, help="the folder tools/lerobot_pusht.sh wrote")
+    p.add_argument("out", type=Path, help="the folder tools/lerobot_row.sh wrote")
     p.add_argument("--json", type=Path, help="also write the table here")
     a = p.parse_args(argv)
     seeds = sorted(int(d.name[4:]) for d in a.out.glob("seed*") if d.name[4:].isdigit())
+    for task, (sets, file) in ROWS.items():
+        done = [s for s in seeds if all((a.out / f"seed{s}" / f"eval_{k}" / file).is_file() for k in sets)]
+        if done:
+            break
+    else:
+        raise DataError(f"{a.out} holds no seed with its three sets evaluated ({ROWS})")
     rows = {}
-    for s in seeds:
+    for s in done:
         d = a.out / f"seed{s}"
-        if all((d / f"eval_{k}" / "eval_info.json").is_file() for k in PUSHT_SETS):
-            rows[s] = {
-                k: eval_info(d / f"eval_{k}" / "eval_info.json") | {"loss": final_loss(d / f"train_{k}.log")}
-                for k in PUSHT_SETS
-            }
-    if not rows:
-        raise DataError(f"{a.out} holds no seed with all of {', '.join(PUSHT_SETS)} evaluated")
+        rows[s] = {
+            k: eval_info(d / f"eval_{k}" / file) | {"loss": final_loss(d / f"train_{k}.log")} for k in sets
+        }
     pooled = {}
-    for k in PUSHT_SETS:
+    for k in sets:
         wins, n = sum(r[k]["successes"] for r in rows.values()), sum(r[k]["episodes"] for r in rows.values())
         best = sum(r[k]["max_reward"] for r in rows.values()) / len(rows)
         pooled[k] = {
@@ -694,7 +710,8 @@ def table_main(argv: list[str] | None = None) -> int:
         )
         print(f"{k:9s} {per}  pooled {wins}/{n} = {wins / n:.3f} [{lo:.3f}, {hi:.3f}]  max reward {best:.3f}")
     diffs = {}
-    for x, y in PUSHT_PAIRS:
+    grown = sets[1]
+    for x, y in ((grown, "sources"), ("fresh", grown), ("fresh", "sources")):
         rate = {s: {k: r[k]["successes"] / r[k]["episodes"] for k in (x, y)} for s, r in rows.items()}
         each = [a - b for r in rows.values() for a, b in zip(r[x]["best"], r[y]["best"], strict=True)]
         d = diffs[f"{x} - {y}"] = {
@@ -714,6 +731,7 @@ def table_main(argv: list[str] | None = None) -> int:
     if a.json:
         res = {
             "kind": TABLE_KIND,
+            "task": task,
             "seeds": {
                 str(s): {k: {n: v for n, v in e.items() if n != "best"} for k, e in r.items()}
                 for s, r in rows.items()
