@@ -703,12 +703,21 @@ def table_main(argv: list[str] | None = None) -> int:
             "ci95": wilson(wins / n, n),
             "max_reward": best,
         }
+        every = [x for r in rows.values() for x in r[k]["best"]]
+        if all(x == int(x) for x in every):  # a staged reward (transfer-cube's): how many starts reached each
+            pooled[k]["reached"] = {
+                str(g): sum(x >= g for x in every) for g in range(1, int(max(every, default=0)) + 1)
+            }
         lo, hi = pooled[k]["ci95"]
         per = " / ".join(
             f"{r[k]['successes']}/{r[k]['episodes']} ({r[k]['max_reward']:.3f}, loss {r[k]['loss']})"
             for r in rows.values()
         )
-        print(f"{k:9s} {per}  pooled {wins}/{n} = {wins / n:.3f} [{lo:.3f}, {hi:.3f}]  max reward {best:.3f}")
+        reached = " ".join(f">={g}: {c}" for g, c in pooled[k].get("reached", {}).items())
+        print(
+            f"{k:9s} {per}  pooled {wins}/{n} = {wins / n:.3f} [{lo:.3f}, {hi:.3f}]  max reward {best:.3f}"
+            + (f"  stages reached {reached}" if reached else "")
+        )
     diffs = {}
     grown = sets[1]
     for x, y in ((grown, "sources"), ("fresh", grown), ("fresh", "sources")):
