@@ -274,52 +274,81 @@ def test_lerobot_lab_checkpoint_rollouts_leave_the_training_as_it_was(grown):
     assert checked == plain and len(plain) == 4
 
 
-KEPT = (
-    ROOT / "docs" / "gym_pusht_lerobot"
-)  # lerobot-eval's own eval_info.json of docs/gym_pusht.md's LeRobot row
+# the kept evaluations of each LeRobot row: (folder, its three sets, the file each run leaves, that file's
+# per-episode successes and max rewards, read here without the tool)
+ROWS = {
+    "gym_pusht": (  # lerobot-eval's own eval_info.json of docs/gym_pusht.md's row
+        ROOT / "docs" / "gym_pusht_lerobot",
+        ("sources", "resolved", "fresh"),
+        "eval_info.json",
+        lambda r: (r["per_task"][0]["metrics"]["successes"], r["per_task"][0]["metrics"]["max_rewards"]),
+    ),
+    "aloha_transfer_cube": (  # tools.lerobot eval's JSON of docs/engine.md's ACT row
+        ROOT / "docs" / "aloha_transfer_cube_act",
+        ("sources", "replayed", "fresh"),
+        "lerobot_eval.json",
+        lambda r: ([e["success"] for e in r["per_episode"]], [e["max_reward"] for e in r["per_episode"]]),
+    ),
+}
 
 
-def test_the_lerobot_row_is_counted_from_lerobot_evals_own_files(tmp_path):
-    """Issue 49 #1: `tools.lerobot table` counts each set's successes, its Wilson interval, the paired
-    per-seed differences and the max reward's start-by-start difference from the eval_info.json files
-    kept under docs/ (lerobot-eval's output, not ours), recounted here from the files; a seed missing a set
-    is left out, and a file that is no eval_info.json is one `error:` line naming it."""
+@pytest.mark.parametrize("task", ROWS)
+def test_the_lerobot_row_is_counted_from_its_evaluations_own_files(tmp_path, task):
+    """Issue 49 #1, issue 50 #5: `tools.lerobot table` counts each set's successes, its Wilson interval,
+    the paired per-seed differences and the max reward's start-by-start difference from the evaluations
+    kept under docs/ (lerobot-eval's eval_info.json on gym-pusht; tools.lerobot eval's JSON on
+    transfer-cube), recounted here from the files; a seed missing a set is left out, and a file that is
+    not its evaluation is one `error:` line naming it."""
     from bc_recipe import wilson
 
-    def info(seed, k):  # lerobot-eval's per-episode metrics, read here without the tool
-        path = KEPT / f"seed{seed}" / f"eval_{k}" / "eval_info.json"
-        return json.loads(path.read_text())["per_task"][0]["metrics"]
+    kept, sets, file, read = ROWS[task]
+    grown = sets[1]
+
+    def info(seed, k):  # (successes, max rewards) per episode
+        return read(json.loads((kept / f"seed{seed}" / f"eval_{k}" / file).read_text()))
 
     run = tmp_path / "run"
-    shutil.copytree(KEPT, run)
+    shutil.copytree(kept, run)
     shutil.copytree(run / "seed0", run / "seed9")  # a seed not finished: one set's evaluation missing
     shutil.rmtree(run / "seed9" / "eval_fresh")
     out = tmp_path / "t.json"
     run_script("-m", "tools.lerobot", "table", run, "--json", out)
     t = json.loads(out.read_text())
-    seeds = sorted(d.name[4:] for d in KEPT.glob("seed*"))
-    assert sorted(t["seeds"]) == seeds and len(seeds) == 3
+    seeds = sorted(d.name[4:] for d in kept.glob("seed*"))
+    assert t["task"] == task and sorted(t["seeds"]) == seeds and len(seeds) == 3
     rate = {}
-    for k in ("sources", "resolved", "fresh"):
-        wins = [info(s, k)["successes"] for s in seeds]
+    for k in sets:
+        wins = [info(s, k)[0] for s in seeds]
         rate[k] = [sum(w) / len(w) for w in wins]
         n = sum(map(len, wins))
         assert t["pooled"][k]["successes"] == sum(map(sum, wins)) and t["pooled"][k]["episodes"] == n >= 150
         assert t["pooled"][k]["ci95"] == pytest.approx(wilson(sum(map(sum, wins)) / n, n), abs=1e-4)
-    got = t["paired"]["resolved - sources"]
-    want = [a - b for a, b in zip(rate["resolved"], rate["sources"], strict=True)]
+    got = t["paired"][f"{grown} - sources"]
+    want = [a - b for a, b in zip(rate[grown], rate["sources"], strict=True)]
     assert [got["success"][s] for s in seeds] == pytest.approx(want, abs=1e-4)
-    best = {k: [x for s in seeds for x in info(s, k)["max_rewards"]] for k in ("resolved", "sources")}
-    each = [a - b for a, b in zip(best["resolved"], best["sources"], strict=True)]
+    best = {k: [x for s in seeds for x in info(s, k)[1]] for k in (grown, "sources")}
+    each = [a - b for a, b in zip(best[grown], best["sources"], strict=True)]
     paired = got["max_reward_paired"]
     assert paired["episodes"] == len(each) and paired["mean"] == pytest.approx(
         sum(each) / len(each), abs=1e-4
     )
-    (run / "seed1" / "eval_sources" / "eval_info.json").write_text('{"per_task": []}')
+    (run / "seed1" / "eval_sources" / file).write_text('{"per_task": []}')
     p = run_script("-m", "tools.lerobot", "table", run, check=False)
     lines = p.stderr.strip().splitlines()
     assert p.returncode == 2 and len(lines) == 1 and lines[0].startswith("error:"), p.stderr
-    assert "seed1/eval_sources/eval_info.json" in lines[0]
+    assert f"seed1/eval_sources/{file}" in lines[0]
+
+
+def test_the_lerobot_row_script_refuses_a_task_it_has_no_row_for(tmp_path):
+    """tools/lerobot_row.sh names its tasks: another task, or no OUT folder, is one `error:` line and exit
+    2, before anything is made."""
+    import subprocess
+
+    for args in (["pusht", str(tmp_path / "out")], ["aloha_transfer_cube"]):
+        p = subprocess.run(["bash", ROOT / "tools" / "lerobot_row.sh", *args], capture_output=True, text=True)
+        lines = p.stderr.strip().splitlines()
+        assert p.returncode == 2 and len(lines) == 1 and lines[0].startswith("error:"), p.stderr
+    assert not (tmp_path / "out").exists()
 
 
 def tiny_act(widths: dict, folder: Path | None = None):
