@@ -99,7 +99,7 @@ run() {  # train and evaluate one set: $1 seed, $2 set
             --eval_episodes "$episodes" --seed "$s" --device cpu --out "$eval.part/$result") > "$d/eval_$set.log" 2>&1
     fi || { echo "seed $s $set: the evaluation failed, see $d/eval_$set.log"; return 1; }
     mv "$eval.part" "$eval"
-    echo "seed $s $set: $(tail -n 3 "$d/eval_$set.log" | grep -oE "pc_success': [0-9.]*|success [0-9.]* \[[^]]*\]" | tail -n 1)"
+    echo "seed $s $set: $(grep -oE "'pc_success': [0-9.]*|success [0-9.]* \[[^]]*\]" "$d/eval_$set.log" | tail -n 1)"
 }
 
 for s in $(seq 0 $((seeds - 1))); do sets "$s" > "$out/sets_seed$s.log" 2>&1; done
