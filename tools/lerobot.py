@@ -620,12 +620,12 @@ def lab_runs(a) -> int:
     return 0
 
 
-# --- table: the LeRobot row of docs/gym_pusht.md from lerobot-eval's own files ---------------------------
+# --- table: a LeRobot row (docs/gym_pusht.md's, docs/engine.md's) from its evaluations' own files -------
 ROWS = {  # tools/lerobot_row.sh's three training sets by task, and the evaluation file each run leaves
     "gym_pusht": (("sources", "resolved", "fresh"), "eval_info.json"),  # lerobot-eval's own
     "aloha_transfer_cube": (("sources", "replayed", "fresh"), f"{EVAL_KIND}.json"),  # this tool's eval
 }
-TABLE_KIND = "lerobot_pusht_table"
+TABLE_KIND = "lerobot_pusht_table"  # both rows' tables: the name the first one was written with
 
 
 def eval_info(path: Path) -> dict:
@@ -685,7 +685,8 @@ def table_main(argv: list[str] | None = None) -> int:
         if done:
             break
     else:
-        raise DataError(f"{a.out} holds no seed with its three sets evaluated ({ROWS})")
+        wanted = "; ".join(f"{t}: eval_{{{','.join(k)}}}/{f}" for t, (k, f) in ROWS.items())
+        raise DataError(f"{a.out} holds no seed with its three sets evaluated ({wanted})")
     rows = {}
     for s in done:
         d = a.out / f"seed{s}"
