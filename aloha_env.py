@@ -155,11 +155,13 @@ ROBOT_TYPE = "aloha_planar_bimanual"
 TASK = "Pick the cube with the right arm, hand it to the left arm, and place it on the target."
 
 _ARMS = ("right", "left")
-_STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # everything mj_step reads: what a copy or a pickle carries
+SIM_STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # everything mj_step reads: what a copy or a pickle carries
 
 
 class AlohaCubeEnv:
     """Bimanual planar cube handoff. See the module docstring for the full contract."""
+
+    max_steps = MAX_STEPS  # control steps an episode lasts at most (read by python -m datagen.check)
 
     def __init__(self, model: mujoco.MjModel | None = None) -> None:
         """model: another AlohaCubeEnv's compiled aloha.xml to share, else aloha.xml is loaded. MuJoCo
@@ -361,8 +363,8 @@ class AlohaCubeEnv:
         checkpoint envs): the model, this env's simulator state (mjSTATE_INTEGRATION: everything mj_step
         reads) and its episode state. Not the MjData, its named views or the renderer: __setstate__
         makes them anew, so the copy steps as the env would, bit for bit."""
-        state = np.empty(mujoco.mj_stateSize(self.model, _STATE))
-        mujoco.mj_getState(self.model, self.data, state, _STATE)
+        state = np.empty(mujoco.mj_stateSize(self.model, SIM_STATE))
+        mujoco.mj_getState(self.model, self.data, state, SIM_STATE)
         keep = ("_target", "_holding", "_offset", "_steps", "_in_tol", "_success")
         return {"model": self.model, "state": state, **{k: getattr(self, k) for k in keep}}
 
@@ -370,7 +372,7 @@ class AlohaCubeEnv:
         """A new env on the saved model, put in the saved state."""
         saved = dict(saved)
         self.__init__(saved.pop("model"))
-        mujoco.mj_setState(self.model, self.data, saved.pop("state"), _STATE)
+        mujoco.mj_setState(self.model, self.data, saved.pop("state"), SIM_STATE)
         for k, v in copy.deepcopy(saved).items():
             setattr(self, k, v)
         self._target_site.pos[:2] = self._target

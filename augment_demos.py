@@ -3,9 +3,10 @@ every source demo, re-solved or replayed, kept on success.
 
     python augment_demos.py --src my_pusht --attempts_per_demo 100 --out big [--workers N | --ray [ADDRESS]]
 
---src is any LeRobot v3 set of a task the engine knows (datagen.known_tasks()), the task read from the set's
-robot_type (or its widths): PushT (observation.state float32[10], action float32[2], laid out as in
-pusht_env.py; gen_demos_pusht.py), the ALOHA handoff (float32[10], float32[6], aloha_env.py;
+--src is any LeRobot v3 set of a task the engine knows (datagen.known_tasks()), grown as the task the set
+names (meta/engine_task.json, in every set this project writes), or as --task NAME; a set written elsewhere
+is matched by its robot_type (or its widths): PushT (observation.state float32[10], action float32[2],
+laid out as in pusht_env.py; gen_demos_pusht.py), the ALOHA handoff (float32[10], float32[6], aloha_env.py;
 gen_demos_aloha.py) or LeRobot's gym-pusht (observation.state float32[2] and
 observation.environment_state float32[16] as lerobot/pusht_keypoints records them, action float32[2];
 gen_demos.py --task gym_pusht), one made by those commands or your own. It is only read. --out becomes a
@@ -49,6 +50,12 @@ class Args(config.Perturbation, config.Mode, config.Ray):
         at_most=SEED_BLOCK,  # an attempt index stays in one seed block, like an episode's
         aliases=("per_demo",),
     )
+    task: str = flag(
+        None,
+        "the engine task --src is grown as (default: the task the set names in meta/engine_task.json, as "
+        "every set this project writes does; a set written elsewhere: the one task its robot_type and widths "
+        "fit)",
+    )
     out: Path = flag(None, "output folder: new, or a run of this command to finish", type=Path, required=True)
     seed: int = flag(0, ">= 0; seeds draw disjoint perturbations", bound=NON_NEGATIVE, at_most=MAX_SEED)
     select: str = flag(
@@ -90,7 +97,7 @@ def main(argv=None) -> int:
     from datagen.report import REPORT_NAME
     from datagen.run import run
 
-    r = run(a.src, a.out, settings(a), workers=a.workers, ray=a.ray, quiet=a.quiet)
+    r = run(a.src, a.out, settings(a), task=a.task, workers=a.workers, ray=a.ray, quiet=a.quiet)
     made, reused = r.get("kept_this_run", r["kept"]), r["shards"]["reused"]
     rate = f" in {r['seconds']:.1f} s ({r['demos_per_s']:.1f} demos/s)"
     if reused:  # a resumed run: what it made now (and its rate) apart from what an earlier run made

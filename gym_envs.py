@@ -40,7 +40,8 @@ GRASP_RADIUS (a held cube sits up to that far from its gripper) plus LIMIT_SLACK
 Actions: Box(-1, 1), the range both simulators clip to.
 
 gym-aloha's own ids (gym_aloha/AlohaTransferCube-v0) need dm_control, which fails on our mujoco; these run
-its model files through mujoco directly (datagen.aloha_sim), the engine's env for aloha_transfer_cube and
+its model files through mujoco directly (datagen.tasks.aloha_sim), the engine's env for aloha_transfer_cube
+and
 aloha_insertion, with state observations instead of pixels and no renderer:
 
     env = gym.make("ch37/AlohaSimTransferCube-v0")    # or "ch37/AlohaSimInsertion-v0"
@@ -79,15 +80,15 @@ except (AttributeError, OSError) as e:
 
 import aloha_env  # noqa: E402
 import pusht_env  # noqa: E402
-from datagen.aloha_insertion import SPEC as INSERTION_SPEC  # noqa: E402
-from datagen.aloha_transfer_cube import SPEC as TRANSFER_CUBE_SPEC  # noqa: E402
+from datagen.tasks.aloha_insertion import SPEC as INSERTION_SPEC  # noqa: E402
+from datagen.tasks.aloha_transfer_cube import SPEC as TRANSFER_CUBE_SPEC  # noqa: E402
 
 __all__ = ["PUSHT_ID", "ALOHA_ID", "PushTGym", "AlohaHandoffGym", "LIMIT_SLACK"]
 __all__ += ["ALOHA_SIM_IDS", "AlohaSimGym"]
 
 PUSHT_ID = "ch37/PushT-v0"
 ALOHA_ID = "ch37/AlohaHandoff-v0"
-# gym-aloha's tasks (datagen.aloha_sim's scenes) by id, with their task specs (fps, ACT's step limit)
+# gym-aloha's tasks (datagen.tasks.aloha_sim's scenes) by id, with their task specs (fps, ACT's step limit)
 ALOHA_SIM_IDS = {
     "ch37/AlohaSimTransferCube-v0": ("transfer_cube", TRANSFER_CUBE_SPEC),
     "ch37/AlohaSimInsertion-v0": ("insertion", INSERTION_SPEC),
@@ -186,13 +187,13 @@ class AlohaHandoffGym(_SimGym):
 
 
 class AlohaSimGym(gym.Env):
-    """datagen.aloha_sim's TransferCubeEnv or InsertionEnv (`scene`) as a gymnasium.Env (see the module
+    """datagen.tasks.aloha_sim's TransferCubeEnv or InsertionEnv (`scene`) as a gymnasium.Env (see the module
     docstring); reset() with no seed draws gym-aloha's seed from the env's np_random."""
 
     metadata = {"render_modes": [], "render_fps": TRANSFER_CUBE_SPEC.fps}
 
     def __init__(self, scene: str = "transfer_cube") -> None:
-        from datagen.aloha_sim import JOINT_IDS, InsertionEnv, TransferCubeEnv
+        from datagen.tasks.aloha_sim import JOINT_IDS, InsertionEnv, TransferCubeEnv
 
         spec = dict(ALOHA_SIM_IDS.values())[scene]
         self.sim = {"transfer_cube": TransferCubeEnv, "insertion": InsertionEnv}[scene](spec.max_steps)

@@ -144,7 +144,7 @@ def pusher_clear(
     return t_signed_distance(pusher_x, pusher_y, block_x, block_y, block_yaw) >= PUSHER_RADIUS + clearance
 
 
-_STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # everything mj_step reads: what a copy or a pickle carries
+SIM_STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # everything mj_step reads: what a copy or a pickle carries
 
 
 def _check(model: mujoco.MjModel) -> None:
@@ -170,6 +170,8 @@ def _check(model: mujoco.MjModel) -> None:
 
 class PushTEnv:
     """The PushT task. ``reset(seed)`` or ``set_start(...)``, then ``step(action)`` at 10 Hz."""
+
+    max_steps = MAX_STEPS  # control steps an episode lasts at most (read by python -m datagen.check)
 
     def __init__(self, model: mujoco.MjModel | None = None) -> None:
         """model: another PushTEnv's compiled pusht.xml to share (MuJoCo only reads a model while it
@@ -297,11 +299,11 @@ class PushTEnv:
 
     # ----- copy and pickle (Gymnasium's vector envs and RL libraries copy, pickle and checkpoint envs) -----
     def __getstate__(self) -> dict:
-        """What copy.deepcopy and pickle carry: this env's simulator state (_STATE) and its episode
+        """What copy.deepcopy and pickle carry: this env's simulator state (SIM_STATE) and its episode
         counters. Not the MjData, its named views or the renderers: __setstate__ makes them anew, so the
         copy steps as the env would, bit for bit."""
-        state = np.empty(mujoco.mj_stateSize(self.model, _STATE))
-        mujoco.mj_getState(self.model, self.data, state, _STATE)
+        state = np.empty(mujoco.mj_stateSize(self.model, SIM_STATE))
+        mujoco.mj_getState(self.model, self.data, state, SIM_STATE)
         counters = {k: getattr(self, k) for k in ("_steps", "_hold", "_success", "_obs")}
         return {"state": state, **counters}
 
@@ -309,7 +311,7 @@ class PushTEnv:
         """A new env (pusht.xml loaded: the env never changes its model) put in the saved state."""
         saved = dict(saved)
         self.__init__()
-        mujoco.mj_setState(self.model, self.data, saved.pop("state"), _STATE)
+        mujoco.mj_setState(self.model, self.data, saved.pop("state"), SIM_STATE)
         mujoco.mj_forward(self.model, self.data)  # derived quantities (render) from the loaded state
         for k, v in saved.items():
             setattr(self, k, v.copy() if isinstance(v, np.ndarray) else v)

@@ -241,7 +241,7 @@ bar = progress(None, total=wanted, desc=f"augment ({args.aug_mode})", quiet=args
 #   keep      the demo, with its provenance, only if the env reports success (else the reason)
 perturb = datagen.Perturbation(seed=args.seed, pos_sigma=args.aug_pos_sigma, yaw_sigma=args.aug_yaw_sigma)
 kept, attempts, failures = datagen.grow(
-    datagen.PUSHT,  # the task: PushT's env, expert and replay (datagen/pusht.py)
+    datagen.PUSHT,  # the task: PushT's env, expert and replay (datagen/tasks/pusht.py)
     sources,
     args.aug_per_demo,
     perturb,  # m, m, rad

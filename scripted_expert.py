@@ -1,5 +1,5 @@
 """Scripted experts for the two chapter embodiments (PushT and the ALOHA cube handoff). (gym-pusht's, for
-LeRobot's own PushT, lives beside its task: datagen/gym_pusht_expert.py.)
+LeRobot's own PushT, lives beside its task: datagen/tasks/gym_pusht_expert.py.)
 
 Each expert is a policy object with ``reset()`` and ``act(obs) -> float32 action``. Optional
 Gaussian action noise is drawn from a generator seeded by the caller, so a noisy demo is
@@ -32,19 +32,19 @@ import numpy as np
 #      and let it rest, so the 5-step success hold is met.
 import pusht_env as _pt
 
-_PT_R = _pt.PUSHER_RADIUS  # m
-_PT_K = _pt.BLOCK_SLIDE_DAMPING / _pt.BLOCK_YAW_DAMPING  # 1/m^2: (N s/m) / (N m s/rad)
-_PT_YAW_LEN = 0.12  # m per rad: how a yaw error weighs against a position error
-_PT_STANDOFF = 0.012  # m: gap between pusher edge and block at the pre-contact point
-_PT_CLEAR = 0.022  # m: edge clearance kept while orbiting the block
-_PT_TRAVEL_COST = 2.0  # score per m of pusher travel to reach a candidate
-_PT_V_PUSH = (0.10, 0.80)  # m/s, min and max pushing speed (fast far out, slows near the goal)
-_PT_PUSH_GAIN = 8.0  # 1/s: pushing speed per unit of remaining (scaled) twist error (m)
-_PT_V_MOVE = (0.10, 0.80)  # m/s, min and max repositioning (and orbiting) speed
-_PT_MOVE_GAIN = 10.0  # 1/s: repositioning speed per m of distance to the pre-contact point
-_PT_GOAL_POS = 0.010  # m: inside this and _PT_GOAL_YAW the expert backs off
-_PT_GOAL_YAW = 0.06  # rad
-_PT_ORBIT_CENTER = np.array([0.0, -0.03])  # m, block frame: a point near the T's middle
+PT_R = _pt.PUSHER_RADIUS  # m
+PT_K = _pt.BLOCK_SLIDE_DAMPING / _pt.BLOCK_YAW_DAMPING  # 1/m^2: (N s/m) / (N m s/rad)
+PT_YAW_LEN = 0.12  # m per rad: how a yaw error weighs against a position error
+PT_STANDOFF = 0.012  # m: gap between pusher edge and block at the pre-contact point
+PT_CLEAR = 0.022  # m: edge clearance kept while orbiting the block
+PT_TRAVEL_COST = 2.0  # score per m of pusher travel to reach a candidate
+PT_V_PUSH = (0.10, 0.80)  # m/s, min and max pushing speed (fast far out, slows near the goal)
+PT_PUSH_GAIN = 8.0  # 1/s: pushing speed per unit of remaining (scaled) twist error (m)
+PT_V_MOVE = (0.10, 0.80)  # m/s, min and max repositioning (and orbiting) speed
+PT_MOVE_GAIN = 10.0  # 1/s: repositioning speed per m of distance to the pre-contact point
+PT_GOAL_POS = 0.010  # m: inside this and PT_GOAL_YAW the expert backs off
+PT_GOAL_YAW = 0.06  # rad
+PT_ORBIT_CENTER = np.array([0.0, -0.03])  # m, block frame: a point near the T's middle
 
 
 def _pt_candidates() -> tuple[np.ndarray, np.ndarray]:
@@ -52,7 +52,7 @@ def _pt_candidates() -> tuple[np.ndarray, np.ndarray]:
     bx, by = _pt.BAR_HALF
     sx = _pt.STEM_HALF[0]
     sy0 = _pt.STEM_CENTER_Y - _pt.STEM_HALF[1]  # stem bottom y (-0.105)
-    r = _PT_R
+    r = PT_R
     pts, nrm = [], []
 
     def face(points, n):
@@ -95,10 +95,10 @@ class PushTExpert:
         p, n = _pt_candidates()
         self._p, self._n = p, n
         self._t = np.stack([-n[:, 1], n[:, 0]], axis=1)  # tangent to each push direction
-        self._contact = p - n * _PT_R  # pusher centre when touching (m)
-        self._pre = p - n * (_PT_R + _PT_STANDOFF)  # pusher centre behind the contact (m)
+        self._contact = p - n * PT_R  # pusher centre when touching (m)
+        self._pre = p - n * (PT_R + PT_STANDOFF)  # pusher centre behind the contact (m)
         tau = p[:, 0] * n[:, 1] - p[:, 1] * n[:, 0]  # torque arm (m) of a unit push
-        u = np.concatenate([n, (_PT_YAW_LEN * _PT_K * tau)[:, None]], axis=1)
+        u = np.concatenate([n, (PT_YAW_LEN * PT_K * tau)[:, None]], axis=1)
         self._u = u / np.linalg.norm(u, axis=1, keepdims=True)  # predicted twist directions
         self._seg = np.linspace(0.0, 1.0, 9)[1:-1]  # interior sample fractions of a path segment
 
@@ -122,25 +122,25 @@ class PushTExpert:
         p = rot.T @ (pw - bw)  # pusher in the block frame (m)
         err = math.hypot(e[0], e[1])
 
-        if err < _PT_GOAL_POS and abs(eyaw) < _PT_GOAL_YAW:
+        if err < PT_GOAL_POS and abs(eyaw) < PT_GOAL_YAW:
             # At the goal: back away from the block at 0.1 m/s until the pusher's edge is 3 cm
             # clear, then stand still, so the block rests untouched through the success hold.
-            if float(_pt.t_sdf(p)) > _PT_R + 0.03:
+            if float(_pt.t_sdf(p)) > PT_R + 0.03:
                 return np.zeros(2)
             return rot @ (0.1 * self._grad(p))
 
         # 1-2. Score every candidate push against the desired twist.
-        want = np.array([e[0], e[1], _PT_YAW_LEN * eyaw])
+        want = np.array([e[0], e[1], PT_YAW_LEN * eyaw])
         want /= np.linalg.norm(want)
         align = self._u @ want
         pre_w = bw + self._pre @ rot.T
-        reach = np.all(np.abs(pre_w) < _pt.WALL_INNER - _PT_R - 0.005, axis=1)
+        reach = np.all(np.abs(pre_w) < _pt.WALL_INNER - PT_R - 0.005, axis=1)
         # Travel: distance to the segment from pre-contact point to contact (the push funnel),
         # so a pusher already pushing at a candidate pays nothing to keep pushing there.
         rel = p - self._contact
-        along = np.clip(np.einsum("kj,kj->k", rel, self._n), -_PT_STANDOFF, 0.0)
+        along = np.clip(np.einsum("kj,kj->k", rel, self._n), -PT_STANDOFF, 0.0)
         travel = np.linalg.norm(rel - along[:, None] * self._n, axis=1)
-        score = np.where(reach, align - _PT_TRAVEL_COST * travel, -np.inf)
+        score = np.where(reach, align - PT_TRAVEL_COST * travel, -np.inf)
         k = int(np.argmax(score))
         n, t, c0, g = self._n[k], self._t[k], self._contact[k], self._pre[k]
 
@@ -149,31 +149,31 @@ class PushTExpert:
         # line at 5 (m/s)/m of sideways error.
         rel = p - c0
         along, lat = float(rel @ n), float(rel @ t)
-        if abs(lat) < 0.006 and -(_PT_STANDOFF + 0.008) < along < 0.01:
-            twist_err = math.hypot(err, _PT_YAW_LEN * eyaw)  # m
-            speed = min(max(_PT_PUSH_GAIN * twist_err, _PT_V_PUSH[0]), _PT_V_PUSH[1])
+        if abs(lat) < 0.006 and -(PT_STANDOFF + 0.008) < along < 0.01:
+            twist_err = math.hypot(err, PT_YAW_LEN * eyaw)  # m
+            speed = min(max(PT_PUSH_GAIN * twist_err, PT_V_PUSH[0]), PT_V_PUSH[1])
             v = speed * n - 5.0 * lat * t
             return rot @ v
         # 3b. Path to the pre-contact point clear of the T: go straight there.
         dg = g - p
         dist = float(np.linalg.norm(dg))
-        speed = min(max(_PT_MOVE_GAIN * dist, _PT_V_MOVE[0]), _PT_V_MOVE[1])
+        speed = min(max(PT_MOVE_GAIN * dist, PT_V_MOVE[0]), PT_V_MOVE[1])
         path = p + self._seg[:, None] * dg
         # Clear = the path never comes closer to the T than the pusher is now (or than R + 2 mm).
-        floor = min(_PT_R + 0.002, float(_pt.t_sdf(p)) - 0.001)
+        floor = min(PT_R + 0.002, float(_pt.t_sdf(p)) - 0.001)
         if np.all(_pt.t_sdf(path) > floor):
             return rot @ (speed * dg / max(dist, 1e-9))
         # 3c. Otherwise orbit the T at a safe clearance, the shorter way round.
         grad = self._grad(p)
         tang = np.array([-grad[1], grad[0]])  # counter-clockwise around the T
-        a_p = math.atan2(*(p - _PT_ORBIT_CENTER)[::-1])
-        a_g = math.atan2(*(g - _PT_ORBIT_CENTER)[::-1])
+        a_p = math.atan2(*(p - PT_ORBIT_CENTER)[::-1])
+        a_g = math.atan2(*(g - PT_ORBIT_CENTER)[::-1])
         if _pt.wrap_angle(a_g - a_p) < 0.0:
             tang = -tang
-        gap = float(_pt.t_sdf(p)) - _PT_R  # m between pusher edge and block
-        radial = min(max(20.0 * (_PT_CLEAR - gap), -1.0), 1.0)  # saturates at 5 cm off the orbit
+        gap = float(_pt.t_sdf(p)) - PT_R  # m between pusher edge and block
+        radial = min(max(20.0 * (PT_CLEAR - gap), -1.0), 1.0)  # saturates at 5 cm off the orbit
         v = tang + radial * grad
-        return rot @ (_PT_V_MOVE[1] * v / max(np.linalg.norm(v), 1e-9))
+        return rot @ (PT_V_MOVE[1] * v / max(np.linalg.norm(v), 1e-9))
 
     @staticmethod
     def _grad(p: np.ndarray) -> np.ndarray:

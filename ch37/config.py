@@ -32,7 +32,7 @@ FINITE = "finite"  # a finite number >= 0, not -0.0: "--NAME must be a finite no
 FINITE_POSITIVE = "finite_positive"  # a finite number > 0: "--NAME must be a finite positive number, got V"
 BOUNDS = (POSITIVE, NON_NEGATIVE, FINITE, FINITE_POSITIVE)
 # The largest --aug_pos_sigma (m) and --aug_yaw_sigma (rad): a kept start lies 0.08..0.26 m from the target
-# (datagen.pusht.R_LO, R_HI), so a 10 m std almost never lands one, and a yaw wraps every 6.3 rad;
+# (datagen.tasks.pusht.R_LO, R_HI), so a 10 m std almost never lands one, and a yaw wraps every 6.3 rad;
 # beyond that a value can only waste attempts, and 1e308 overflows the angle to inf (math domain error).
 SIGMA_MAX = 10.0
 MODES = ("resolve", "replay", "replay_live")  # datagen.Task.modes (not imported here: --help stays instant)
@@ -263,14 +263,17 @@ class Perturbation:
 
     aug_pos_sigma: float = flag(
         0.08,
-        f"m; std of block and pusher xy moves (ALOHA: every object's) (<= {SIGMA_MAX:g})",
+        "m; std of the position moves a task's perturb draws for a start (PushT: block and pusher xy; "
+        "ALOHA: cube, target and both arms; the 3-D tasks: their objects' xy; gym-pusht: at 1 px a mm) "
+        f"(<= {SIGMA_MAX:g})",
         bound=FINITE,
         at_most=SIGMA_MAX,
         aliases=("pos_sigma",),
     )
     aug_yaw_sigma: float = flag(
         0.5,
-        f"rad; std of block yaw moves (<= {SIGMA_MAX:g})",
+        "rad; std of the yaw moves of a start's objects (PushT's and gym-pusht's block; a task whose "
+        f"objects do not turn ignores it) (<= {SIGMA_MAX:g})",
         bound=FINITE,
         at_most=SIGMA_MAX,
         aliases=("yaw_sigma",),

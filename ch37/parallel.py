@@ -249,7 +249,7 @@ def _env_serve(envs, seeds, cmd, arg):
 def step_envs(envs, actions):
     """envs[i] stepped with actions[i] for every i: (obs (N, obs_dim), success (N,) bool, done (N,)
     bool). In one call where the envs' class steps a batch (a step_many, the same bits: the engine's
-    datagen.fast_pusht.SharedPushTEnv), else env.step per env (step_each). LockstepEnvs steps through
+    datagen.tasks.fast_pusht.SharedPushTEnv), else env.step per env (step_each). LockstepEnvs steps through
     it; the data engine's lanes step through their task's step_batch (datagen.task.Task)."""
     many = getattr(type(envs[0]), "step_many", None)
     if many is not None:

@@ -9,11 +9,9 @@ check      python -m datagen.check TASK: a task's contract, starts, expert, rang
 demos      expert demo sets of a task: rollout (the demo generators' loop), write_dataset (a
            stamped set), generate, ensure_demos (the chapter's private demo cache),
            check_given (a set you name, checked and never modified), video_problem (whether --video can)
-pusht      PUSHT: PushT described as a task (the only module here that imports pusht_env and its expert)
-aloha      ALOHA: the ALOHA cube handoff described as a task (the only module here that imports aloha_env)
-gym_pusht  LeRobot's own PushT (gym-pusht) as a task; its expert beside it (gym_pusht_expert)
-pusher     Gymnasium's 7-DoF Pusher-v5 as a task, in SE(3); its controller and expert beside it
-           (pusher_expert)
+tasks/     one module per task with its expert (datagen/tasks/__init__.py lists them): our PushT (PUSHT)
+           and ALOHA handoff (ALOHA), LeRobot's gym-pusht, Gymnasium's Pusher-v5, gym-aloha's
+           transfer-cube and insertion
 engine     one attempt in either mode, keep_first, grow, run_attempts, save: task-agnostic
 replay     the one replay for every task (MimicGen's generation loop): cut a source at its subtask
            signals, re-express each segment in the new object frames, bridge, execute, keep on success
@@ -28,12 +26,11 @@ run        a run on disk (augment_demos.py): run() says the order of its steps, 
   report         the generation report, summed from the shard stamps
 
 A task registers itself when its module is imported (datagen.task.register); known_tasks() imports every
-module of the package and returns them by name, so a new task is one module here, listed nowhere else.
+module of datagen/tasks and returns them by name, so a new task is one module there, listed nowhere else.
 A module that fails to import (half written, or a copy still naming its original's task) is one warning
 line naming it, its tasks unavailable and the others known.
 """
 
-from datagen.aloha import ALOHA
 from datagen.demos import check_given, check_gl, ensure_demos, generate, rollout, video_problem, write_dataset
 from datagen.engine import (
     ATTEMPTS_PER_KEPT,
@@ -48,7 +45,6 @@ from datagen.engine import (
     save,
     sources,
 )
-from datagen.pusht import PUSHT
 from datagen.task import (
     EnvSpec,
     Outcome,
@@ -59,6 +55,8 @@ from datagen.task import (
     known_tasks,
     register,
 )
+from datagen.tasks.aloha import ALOHA
+from datagen.tasks.pusht import PUSHT
 
 __all__ = [
     "ALOHA",

@@ -29,9 +29,19 @@ __all__ = ["checks"]
 
 
 def env_limit(env) -> int | None:
-    """The episode limit an env sets itself (a Gymnasium env's spec), None where it sets none."""
-    spec = getattr(getattr(env, "env", None), "spec", None)
-    return getattr(spec, "max_episode_steps", None)
+    """The episode limit an env declares itself, None where it declares none: a Gymnasium env's spec, a
+    TimeLimit wrapper anywhere in its chain, or a step-limit attribute of the env itself (an env that stops
+    at its own limit outside Gymnasium's spec: max_episode_steps, max_steps, MAX_STEPS)."""
+    inner = getattr(env, "env", env)  # GymnasiumEnv's Gymnasium env, or our own env
+    limit = getattr(getattr(inner, "spec", None), "max_episode_steps", None)
+    layer = inner
+    while limit is None and layer is not None:
+        limit = getattr(layer, "_max_episode_steps", None)  # a TimeLimit wrapper's
+        layer = getattr(layer, "env", None)
+    base = getattr(inner, "unwrapped", inner)
+    for name in ("max_episode_steps", "max_steps", "MAX_STEPS"):
+        limit = limit if limit is not None else getattr(base, name, None)
+    return int(limit) if isinstance(limit, int | np.integer) and limit > 0 else None
 
 
 def round_trip(task: Task, obs) -> tuple[float, str]:
@@ -49,7 +59,7 @@ def checks(task: Task, episodes: int, seed: int, tol: float):
     env = task.make_env()
     limit = env_limit(env)
     bad = limit is not None and limit != task.max_steps
-    fine = f"max_steps {task.max_steps}" + (", as the env's own" if limit else " (the env sets none)")
+    fine = f"max_steps {task.max_steps}" + (", as the env's own" if limit else " (the env declares none)")
     yield "episode limit", bad and f"max_steps {task.max_steps} but the env stops at {limit}", fine
     obs = [env.reset(seed=seed + i) for i in range(episodes)]  # a source's first frame is such a start
     worst = max((round_trip(task, o) for o in obs), key=lambda g: g[0])

@@ -22,6 +22,7 @@ from ch37.errors import DataError
 from ch37.ownership import (
     MADE_BY,
     changed_files,
+    dump_json,
     holds_data,
     is_ours,
     publish_dir,
@@ -42,10 +43,22 @@ from lerobot_v3 import (
     write_set,
 )
 
+# The engine task that made a set, in the set's own meta/ folder: LeRobot's readers never open it and its
+# writers never rewrite it (info.json keeps only the keys LeRobot knows), so a set copied, moved or
+# pushed to the hub still says which task it is a set of (datagen.source_check.task_of reads it): two tasks
+# of one robot with the same widths, or a user's variant of ours, each grow their own sets.
+TASK_FILE = "meta/engine_task.json"
+
+
+def name_task(root: Path, name: str) -> None:
+    """Record in the set at `root` that the engine task `name` made it (TASK_FILE)."""
+    (Path(root) / TASK_FILE).write_text(dump_json({"task": name}))
+
 
 def write_dataset(
     out: Path,
     *,
+    task_name: str,
     repo_id: str,
     fps: int,
     robot_type: str,
@@ -55,12 +68,13 @@ def write_dataset(
     stamp: dict,
     **how,
 ) -> None:
-    """Write `episodes` as a LeRobot v3 set (lerobot_v3.write_set) to the new folder `out`, whole or not
-    at all, under our stamp listing every file with its sha256 (ch37.ownership.publish_dir). `how`:
-    write_set's other options (per_frame)."""
+    """Write `episodes` as a LeRobot v3 set (lerobot_v3.write_set) of the engine task `task_name` (named in
+    the set: TASK_FILE) to the new folder `out`, whole or not at all, under our stamp listing every file
+    with its sha256 (ch37.ownership.publish_dir). `how`: write_set's other options (per_frame)."""
     how |= dict(repo_id=repo_id, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes)
     with publish_dir(out, stamp) as tmp:
         write_set(tmp, **how)
+        name_task(tmp, task_name)
 
 
 REWARD_FEATURES = {  # what a task with records_reward adds to its sets, as lerobot/pusht_keypoints has them
@@ -158,7 +172,7 @@ def generate(
     how["obs_names"] = emb.obs_names  # the frames' observations: the set's state (and env state) columns
     # the AV1 encoder (video only) prints its banner unless SVT_LOG says errors only; a value of yours is kept
     with environment(SVT_LOG=os.environ.get("SVT_LOG", "1")):
-        write_dataset(out, feats=feats, episodes=episodes_iter(), stamp=stamp, **how)
+        write_dataset(out, task_name=emb.name, feats=feats, episodes=episodes_iter(), stamp=stamp, **how)
     return summary
 
 

@@ -238,6 +238,7 @@ def save(task: Task, root, kept: list[dict], *, repo_id: str, stamp: dict) -> No
             kept = [ep | task.frame_columns(ep["observation.state"], ep["action"]) for ep in kept]
         write_dataset(
             root,
+            task_name=task.name,
             repo_id=repo_id,
             fps=m.fps,
             robot_type=m.robot_type,

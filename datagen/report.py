@@ -65,6 +65,7 @@ def describe(src: Path, out: Path, config: dict, *, ray: str | None, episodes: i
     if ray is not None:
         vers["ray"] = version("ray")
     return {
+        "task": config["task"],  # the engine task the source was grown as (datagen.source_check.task_of)
         "source": {"path": str(src.resolve()), **config["source"]},
         "settings": {k: config[k] for k in STORED_SETTINGS},
         "command": " ".join(shlex.quote(x) for x in [Path(sys.executable).name, *sys.argv]),

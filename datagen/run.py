@@ -55,12 +55,14 @@ def engine_version(task: Task) -> str:
     return code_digest((sys.modules[__name__], sys.modules[type(task).__module__]))
 
 
-def run(src: Path, out: Path, settings: dict, *, workers: int, ray: str | None = None, quiet=False) -> dict:
-    """Grow `out` from the set `src` (of the task it is a set of: task_of) with `settings` (SETTINGS) on
+def run(
+    src: Path, out: Path, settings: dict, *, task: str | None = None, workers: int, ray=None, quiet=False
+) -> dict:
+    """Grow `out` from the set `src` (of the task it names, or `task`: task_of) with `settings` (SETTINGS) on
     `workers` local processes or on Ray (ch37.parallel.map_jobs): a run cut off earlier is finished, its
     whole shards kept; a complete run is left as it is. A second run on `out` waits for the first.
     Returns the generation report."""
-    task = task_of(src)
+    task = task_of(src, task)
     t0 = time.perf_counter()
     claim = resume.claim(out, src)  # before reading the source: a folder not ours is refused at once
     arrays, note = successful_only(read_source(task, src), src)

@@ -32,8 +32,9 @@ from collections import Counter
 from pathlib import Path
 
 from ch37.errors import DataError
-from ch37.ownership import MADE_BY, STAMP_NAME, digests, dump_json, write_atomic
+from ch37.ownership import MADE_BY, STAMP_NAME, digests, dump_json, read_json, write_atomic
 from datagen import engine, lockstep
+from datagen.demos import TASK_FILE, name_task
 from datagen.plan import run_key, versions
 from datagen.task import Perturbation, known_tasks
 from lerobot_v3.merge import merge_sets
@@ -189,6 +190,7 @@ def merge(out: Path, n_shards: int, run_stamp: dict) -> int:
             shutil.rmtree(stale)
     episodes = merge_sets(roots, tmp) if roots else 0
     if roots:
+        name_task(tmp, read_json(roots[0] / TASK_FILE)["task"])  # the task the shards name (engine.save)
         listing = digests(tmp)
         run_stamp["merged"] = {rel: d for rel, d in listing.items() if rel.split("/")[0] in ("data", "meta")}
         write_atomic(out / STAMP_NAME, dump_json(run_stamp))

@@ -13,6 +13,7 @@ import numpy as np
 from ch37.errors import DataError
 from ch37.ownership import read_json
 from ch37.seeds import SEED_BLOCK
+from datagen.demos import TASK_FILE
 from datagen.task import Task, known_tasks
 from lerobot_v3.dataset import (
     ENV_STATE_KEY,
@@ -59,38 +60,61 @@ def _widths(task: Task) -> tuple[list, list]:
     return [len(task.spec.state_names)], [task.spec.act_dim]
 
 
-def task_of(src: Path) -> Task:
-    """The task whose sets `src` is (of datagen.task.known_tasks()), read from its meta/info.json: the task
-    whose env's ROBOT_TYPE the set records, or, for a set without one, the one task whose state and
-    action widths it has. DataError (one line) for a set that fits no task. A
-    folder without a readable info.json is left to read_source's checks (as PushT's, the engine's first
-    task), which name what is wrong with it; one readable but not of LeRobot's form (a list where an
-    object belongs) is named here, before any task's widths are blamed."""
+def task_of(src: Path, name: str | None = None) -> Task:
+    """The task whose set `src` is (of datagen.task.known_tasks()): `name` where the user chose one
+    (--task), else the task the set names (datagen.demos.TASK_FILE: every set this project writes), else,
+    for a set written elsewhere, the one task whose env's ROBOT_TYPE the set records (or, without one, whose
+    state and action widths it has). DataError (one line) for an unknown name, a set that fits no task, or
+    one that fits several (naming them: --task chooses). A folder without a readable info.json is left to
+    read_source's checks (as PushT's, the engine's first task), which name what is wrong with it; one
+    readable but not of LeRobot's form (a list where an object belongs) is named here, before any task's
+    widths are blamed."""
+    known = known_tasks()
+    if name is not None:
+        if name not in known:
+            raise DataError(f"--task {name!r} is no task of the engine; it knows {', '.join(known)}")
+        return known[name]
+    named = read_json(Path(src) / TASK_FILE)
+    if named is not None:
+        if not isinstance(named, dict) or not isinstance(named.get("task"), str):
+            raise DataError(f'--src {src}: {TASK_FILE} holds no task name ({{"task": NAME}}); pass --task')
+        if named["task"] not in known:
+            raise DataError(
+                f"--src {src} is a set of the task {named['task']!r} ({TASK_FILE}), which the engine does "
+                f"not know here (it knows {', '.join(known)}): add its module to datagen/tasks/, or --task"
+            )
+        return known[named["task"]]
     info = read_json(Path(src) / "meta" / "info.json")
     if info is None:
-        return known_tasks()["pusht"]
+        return known["pusht"]
     if problem := info_problem(src):
         raise DataError(f"--src {problem}")
     feats = info["features"]  # an object of objects (info_problem)
     shapes = tuple(feats.get(k, {}).get("shape") for k in ("observation.state", "action"))
     robot = info.get("robot_type")
     if robot:  # a set that names its robot is that robot's (an SO-100 set is no PushT set)
-        fits = [t for t in known_tasks().values() if t.spec.robot_type == robot]
+        fits = [t for t in known.values() if t.spec.robot_type == robot]
         if len(fits) > 1:  # one robot, several tasks (ALOHA's transfer-cube and insertion): by the objects
             env = feats.get(ENV_STATE_KEY, {}).get("shape")
             fits = [t for t in fits if env == [len(t.spec.env_state_names)]]
     else:  # a set someone else wrote without a robot_type (LeRobot's writer's default): by its widths
-        fits = [t for t in known_tasks().values() if shapes == _widths(t)]
+        fits = [t for t in known.values() if shapes == _widths(t)]
     if len(fits) == 1:
         return fits[0]
-    known = "; ".join(
+    if len(fits) > 1:
+        raise DataError(
+            f"--src {src} names no engine task ({TASK_FILE}) and fits {len(fits)} of them "
+            f"(robot_type {robot!r}, observation.state {shapes[0]}, action {shapes[1]}): "
+            f"{', '.join(t.name for t in fits)}; choose one with --task NAME"
+        )
+    described = "; ".join(
         f"{t.title}: robot_type '{t.spec.robot_type}', observation.state {_widths(t)[0]}, "
         f"action {_widths(t)[1]} (make one with {t.generator})"
-        for t in known_tasks().values()
+        for t in known.values()
     )
     raise DataError(
         f"--src {src} fits no task of the engine (robot_type {robot!r}, observation.state {shapes[0]}, "
-        f"action {shapes[1]}); it grows {known}"
+        f"action {shapes[1]}); it grows {described}"
     )
 
 

@@ -2,8 +2,9 @@
 
 The engine (datagen.engine: one attempt in either mode; datagen.replay: the one replay; datagen.lockstep;
 datagen.run: a run, its shards, resume, report and merge) knows no task. Everything about one task lives in
-one module named for it (datagen/pusht.py, datagen/aloha.py), and only that module (and the engine's
-bit-identical fast copies, datagen/fast_*.py) imports its env and its expert. A task is an instance of a
+one module named for it (datagen/tasks/pusht.py, datagen/tasks/aloha.py), and only that module (and the
+engine's
+bit-identical fast copies, datagen/tasks/fast_*.py) imports its env and its expert. A task is an instance of a
 Task subclass that its module registers as it is imported (TASK = register(MyTask())): known_tasks()
 finds it, no list names it, and the digests that guard resumed shards and cached demo sets read its
 code from what the run imported.
@@ -400,7 +401,7 @@ class Task(abc.ABC):
         `waypoints[arm]` ((d,)) moving at `velocities[arm]` ((d,) or None), turned to `orientations[arm]`
         ((3, 3); None for a planar task), with `grips[arm]` its gripper command: a velocity command for
         our two robots, a position target for a robot that takes one, torques through the robot's own
-        controller for one driven by torques (datagen/pusher.py)."""
+        controller for one driven by torques (datagen/tasks/pusher.py)."""
 
     def frame_columns(self, states, actions) -> dict[str, np.ndarray]:
         """frame_features' columns ((T, d) float32 each) of an episode's frames (states (T, obs_dim),
@@ -447,9 +448,10 @@ _REGISTERED: dict[str, Task] = {}
 
 
 def _file_of(module: str) -> str:
-    """How a message names a module of this package: datagen/pusht.py."""
-    f = Path(sys.modules[module].__file__)
-    return f"{f.parent.name}/{f.name}"
+    """How a message names a module: its path from the project's root (datagen/tasks/pusht.py) where it
+    lies there, else its file's name."""
+    f, root = Path(sys.modules[module].__file__).resolve(), Path(__file__).resolve().parent.parent
+    return f.relative_to(root).as_posix() if f.is_relative_to(root) else f.name
 
 
 def contract_problem(task: Task) -> str | None:
@@ -488,20 +490,21 @@ def register(task: Task) -> Task:
 
 @functools.cache  # once per process (a forked worker inherits it): a module that failed is not re-run
 def _import_modules() -> dict[str, str]:
-    """Import every module of this package, so that each task module registers its task; {file: why} for
+    """Import every module of datagen/tasks, so that each task module registers its task; {file: why} for
     each that fails to import, and one warning line for each on stderr. A module that raises as it is
     imported (one half written, or a copy of another task's module that still bears its name) makes its
     own tasks unavailable, not the others."""
     failed = {}
-    for m in pkgutil.iter_modules([str(Path(__file__).parent)]):
-        name = f"{__package__}.{m.name}"
+    folder = Path(__file__).parent / "tasks"  # datagen/tasks: one module per task, with its expert
+    for m in pkgutil.iter_modules([str(folder)]):
+        name = f"{__package__}.tasks.{m.name}"
         try:
             importlib.import_module(name)
         except Exception as e:  # whatever a module raises, the others' tasks stay known
-            file = str(Path(__file__).parent / f"{m.name}.py")
+            file = str(folder / f"{m.name}.py")
             lines = [f.lineno for f in traceback.extract_tb(e.__traceback__) if f.filename == file]
             line = getattr(e, "lineno", None) if isinstance(e, SyntaxError) else lines[-1] if lines else None
-            where = f"{__package__}/{m.name}.py" + (f" (line {line})" if line else "")
+            where = f"{__package__}/tasks/{m.name}.py" + (f" (line {line})" if line else "")
             failed[where] = f"{type(e).__name__}: {' '.join(str(e).split())}"
             print(f"warning: {where} was not loaded, its tasks unavailable: {failed[where]}", file=sys.stderr)
     return failed
@@ -509,7 +512,7 @@ def _import_modules() -> dict[str, str]:
 
 def known_tasks() -> dict[str, Task]:
     """{name: task} of every task the engine knows, by name. Every module of this package is imported
-    first, so a task module found here registers itself: a new task is one module in datagen/, listed
+    first, so a task module found here registers itself: a new task is one module in datagen/tasks/, listed
     nowhere else. A module that fails to import is one warning line, its tasks left out."""
     _import_modules()
     return dict(sorted(_REGISTERED.items()))

@@ -11,11 +11,11 @@ from conftest import ROOT, run_script
 
 from ch37.seeds import env_seed
 from datagen import Perturbation, engine, known_tasks
-from datagen.aloha_sim import CUBE_RANGE, box_pose
-from datagen.aloha_sim_expert import TransferCubeExpert
 from datagen.demos import expert_episodes
 from datagen.source_check import read_source
 from datagen.task import Source
+from datagen.tasks.aloha_sim import CUBE_RANGE, box_pose
+from datagen.tasks.aloha_sim_expert import TransferCubeExpert
 from lerobot_v3 import load_arrays
 
 pytestmark = pytest.mark.skipif(

@@ -5,8 +5,8 @@ import pytest
 
 import aloha_env
 import pusht_env
-from datagen.fast_experts import PushTBatch
-from datagen.fast_pusht import SharedPushTEnv, step_many
+from datagen.tasks.fast_experts import PushTBatch
+from datagen.tasks.fast_pusht import SharedPushTEnv, step_many
 from scripted_expert import AlohaExpert, PushTExpert
 
 SPECS = [
@@ -87,7 +87,8 @@ def test_pusht_set_start_places_state_with_fresh_counters():
 
 
 def test_pusht_step_many_on_a_shared_mjdata_is_step_bit_for_bit():
-    """datagen.fast_pusht's step_many (lockstep's batched step) over SharedPushTEnvs sharing one MjData =
+    """datagen.tasks.fast_pusht's step_many (lockstep's batched step) over SharedPushTEnvs sharing one
+    MjData =
     PushTEnv.step per env, each in
     its own: the same obs, success and done bits, clipped actions and the success latch included, and
     the same poses read between steps; a non-finite action is refused as step refuses it."""

@@ -187,13 +187,14 @@ def test_a_copy_or_a_pickle_mid_episode_steps_as_the_env_bit_for_bit(env_id, mod
 
 
 def test_a_copy_of_a_pusht_env_that_shares_an_mjdata_is_a_standalone_env():
-    """A lockstep lane (datagen.fast_pusht.SharedPushTEnv made with share=) borrows another's MjData; its
+    """A lockstep lane (datagen.tasks.fast_pusht.SharedPushTEnv made with share=) borrows another's MjData;
+    its
     copy carries its own state only, in an MjData of its own, and steps as it does while the env it
     shared with steps too."""
     import copy
     import pickle
 
-    from datagen.fast_pusht import SharedPushTEnv
+    from datagen.tasks.fast_pusht import SharedPushTEnv
 
     owner = SharedPushTEnv()
     owner.reset(1)
@@ -233,7 +234,7 @@ def test_gym_alohas_two_tasks_through_gymnasium_make():
     through make is the engine's env's (the same obs bytes and rewards at every step) and ends terminated
     at gym-aloha's success."""
     from datagen import known_tasks
-    from datagen.aloha_sim_expert import TransferCubeExpert
+    from datagen.tasks.aloha_sim_expert import TransferCubeExpert
 
     for env_id in gym_envs.ALOHA_SIM_IDS:
         with warnings.catch_warnings():

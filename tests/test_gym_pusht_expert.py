@@ -1,4 +1,5 @@
-"""GymPushTExpert on gym-pusht, LeRobot's own PushT (datagen/gym_pusht_expert.py): the block pose it reads
+"""GymPushTExpert on gym-pusht, LeRobot's own PushT (datagen/tasks/gym_pusht_expert.py): the block pose it
+reads
 back from the keypoints is gym-pusht's, and it solves seeded starts by gym-pusht's own success criterion.
 The full count: python -m tools.bench gym_pusht --episodes 50 --seed 0."""
 
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from datagen.gym_pusht_expert import GymPushTExpert, block_pose_from_keypoints
+from datagen.tasks.gym_pusht_expert import GymPushTExpert, block_pose_from_keypoints
 
 
 @pytest.fixture(scope="module")
@@ -102,9 +103,9 @@ def test_actions_are_position_targets_and_noise_is_seeded(env):
 
 
 def test_the_expert_reads_the_observation_alone():
-    """datagen/gym_pusht_expert.py is pure numpy on the observation: it imports no gym-pusht, pymunk or
+    """datagen/tasks/gym_pusht_expert.py is pure numpy on the observation: it imports no gym-pusht, pymunk or
     gymnasium."""
-    tree = ast.parse((ROOT / "datagen" / "gym_pusht_expert.py").read_text())
+    tree = ast.parse((ROOT / "datagen" / "tasks" / "gym_pusht_expert.py").read_text())
     names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     names |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
     assert not {m.split(".")[0] for m in names} & {"gym_pusht", "pymunk", "gymnasium", "pygame"}

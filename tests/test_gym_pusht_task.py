@@ -131,7 +131,7 @@ def test_making_the_env_prints_no_pygame_notice():
     """Issue 48 #11: gymnasium.make imports gym-pusht's env module, and with it pygame, whose
     "pkg_resources is deprecated" notice was printed on every run (once per worker): the env module is
     imported inside the import that silences it. A fresh process: this one may have imported pygame."""
-    code = "from datagen.gym_pusht import GYM_PUSHT\nGYM_PUSHT.make_env().reset(0)\nprint('made')"
+    code = "from datagen.tasks.gym_pusht import GYM_PUSHT\nGYM_PUSHT.make_env().reset(0)\nprint('made')"
     r = run_script("-c", code)
     assert r.stdout.strip() == "made" and r.stderr.strip() == "", r.stderr
 
@@ -196,7 +196,7 @@ def test_keypoints_that_are_no_rigid_t_are_refused_naming_the_episode_and_frame(
 def test_gym_pusht_s_own_keypoints_fit_the_t_well_inside_the_tolerance(source):
     """The tolerance is far above what gym-pusht's own float32 keypoints are off (their fit residual) and
     far below what the cases above are off."""
-    from datagen.gym_pusht import KEYPOINT_TOL, keypoint_residual
+    from datagen.tasks.gym_pusht import KEYPOINT_TOL, keypoint_residual
 
     d = load_arrays(source, keys=(ENV_STATE_KEY,))
     assert keypoint_residual(d[ENV_STATE_KEY]).max() < KEYPOINT_TOL / 100

@@ -1,5 +1,6 @@
 """Lockstep attempts and batched experts give today's one-at-a-time bytes: every decision of
-datagen.fast_experts' PushTBatch and AlohaBatch equals the expert's act bit for bit along real episodes, and
+datagen.tasks.fast_experts' PushTBatch and AlohaBatch equals the expert's act bit for bit along real
+episodes, and
 datagen.lockstep.attempts_lockstep returns exactly what datagen.engine.attempt returns, for both modes
 on PushT and for ALOHA's re-solve."""
 
@@ -11,8 +12,8 @@ import gen_demos_aloha
 import gen_demos_pusht
 import pusht_env
 from datagen import ALOHA, PUSHT, Outcome, Perturbation, engine, lockstep, rollout
-from datagen.fast_experts import AlohaBatch, PushTBatch
 from datagen.task import Task
+from datagen.tasks.fast_experts import AlohaBatch, PushTBatch
 from lerobot_v3.dataset import load_arrays
 from scripted_expert import AlohaExpert, PushTExpert
 

@@ -10,8 +10,8 @@ from conftest import ROOT, run_script
 
 from datagen import Perturbation, engine, known_tasks
 from datagen.poses import quat_of
-from datagen.pusher_expert import PusherExpert, controller, hand_rotation, model, yaw_quat
 from datagen.source_check import read_source
+from datagen.tasks.pusher_expert import PusherExpert, controller, hand_rotation, model, yaw_quat
 
 TASK = known_tasks()["pusher"]
 

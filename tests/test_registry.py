@@ -2,6 +2,7 @@
 (datagen.run.engine_version) and cached demo sets (datagen.demos.generator_version) are read from
 the modules a task imports (ch37.code_files), so no list of files can forget a task's code."""
 
+import json
 import sys
 import types
 from pathlib import Path
@@ -18,7 +19,7 @@ from datagen.task import EnvSpec, known_tasks, register
 def test_every_task_module_registers_itself_and_no_list_names_them():
     """Our tasks are known by their names, each from its own module of datagen/; a user's task module
     registered beside them is allowed (test_the_suite_passes_with_a_users_task_registered)."""
-    from datagen.gym_pusht import GYM_PUSHT
+    from datagen.tasks.gym_pusht import GYM_PUSHT
 
     known = known_tasks()
     assert {n: known[n] for n in ("aloha", "gym_pusht", "pusht")} == {
@@ -74,14 +75,15 @@ def test_an_edit_to_any_step_of_a_run_changes_the_run_digest(monkeypatch, step):
 
 
 def _copy_with(tmp_path: Path, name: str, text: str) -> Path:
-    """A copy of the project's code with one more module datagen/NAME (the repository is never written)."""
+    """A copy of the project's code with one more module datagen/tasks/NAME (the repository is never
+    written)."""
     import shutil
 
     root = Path(__file__).resolve().parent.parent
     skip = shutil.ignore_patterns(".git", ".venv", "outputs", "__pycache__", ".*_cache", "tests", "docs")
     copy = tmp_path / "project"
     shutil.copytree(root, copy, ignore=skip)
-    (copy / "datagen" / name).write_text(text)
+    (copy / "datagen" / "tasks" / name).write_text(text)
     return copy
 
 
@@ -90,14 +92,18 @@ def _run(copy: Path, *argv):
 
 
 def test_a_copied_task_module_is_one_warning_naming_both_modules_and_every_command_works(tmp_path):
-    """Issue 48 #7: copying datagen/pusht.py to datagen/my_task.py (a newcomer's first step of adding a
+    """Issue 48 #7: copying datagen/tasks/pusht.py to datagen/my_task.py (a newcomer's first step of adding a
     task) stopped every engine command with "ValueError: two tasks named 'pusht': PushT and PushT",
     naming no file. Now one warning line names both modules; the commands go on with the tasks known."""
-    copy = _copy_with(tmp_path, "my_task.py", (Path(datagen.__file__).parent / "pusht.py").read_text())
+    copy = _copy_with(
+        tmp_path, "my_task.py", (Path(datagen.__file__).parent / "tasks" / "pusht.py").read_text()
+    )
     r = _run(copy, "gen_demos.py", "--task", "pusht", "--episodes", "1", "--quiet", "--out", tmp_path / "s")
     err = r.stderr.strip().splitlines()
     assert r.returncode == 0 and len(err) == 1 and err[0].startswith("warning: "), r.stderr
-    assert "datagen/my_task.py" in err[0] and "datagen/pusht.py" in err[0] and "'pusht'" in err[0], err
+    assert (
+        "datagen/tasks/my_task.py" in err[0] and "datagen/tasks/pusht.py" in err[0] and "'pusht'" in err[0]
+    ), err
     args = ["--src", tmp_path / "s", "--out", tmp_path / "grown", "--per_demo", "1", "--workers", "1"]
     r = _run(copy, "augment_demos.py", *args, "--quiet")
     assert r.returncode == 0 and r.stderr.strip().splitlines() == err, r.stderr
@@ -111,7 +117,7 @@ def test_a_task_module_that_fails_to_import_makes_only_its_own_task_unavailable(
     r = _run(copy, "gen_demos.py", "--task", "pusht", "--episodes", "1", "--quiet", "--out", tmp_path / "s")
     err = r.stderr.strip().splitlines()
     assert r.returncode == 0 and len(err) == 1 and err[0].startswith("warning: "), r.stderr
-    assert "datagen/half_done.py" in err[0] and "RuntimeError: not finished yet" in err[0], err
+    assert "datagen/tasks/half_done.py" in err[0] and "RuntimeError: not finished yet" in err[0], err
     args = ["--src", tmp_path / "s", "--out", tmp_path / "grown", "--per_demo", "1", "--workers", "1"]
     r = _run(copy, "augment_demos.py", *args, "--quiet")
     assert r.returncode == 0 and r.stderr.strip().splitlines() == err, r.stderr
@@ -126,8 +132,8 @@ def test_the_contract_is_small_and_a_task_that_breaks_it_is_refused_in_one_line(
     has six methods); a class missing a required method cannot be made, one missing a required attribute
     or giving a subtask no frame for one of its arms is refused at registration, each in one line that
     names what is missing."""
-    from datagen.pusht import PushT
     from datagen.task import Subtask, Task
+    from datagen.tasks.pusht import PushT
 
     required = set(Task.__abstractmethods__) | set(Task.REQUIRED_ATTRIBUTES)
     assert len(required) <= 10, sorted(required)
@@ -171,7 +177,7 @@ def test_the_contract_is_small_and_a_task_that_breaks_it_is_refused_in_one_line(
 
 USER_TASK = """\"\"\"A user's task: PushT with a tighter reach, beside ours (no list names it).\"\"\"
 
-from datagen.pusht import PushT
+from datagen.tasks.pusht import PushT
 from datagen.task import register
 
 
@@ -201,3 +207,52 @@ def test_the_suite_passes_with_a_users_task_registered(tmp_path):
         "-m", "pytest", "-q", "-p", "no:cacheprovider", *tests, "-k", skip, cwd=copy, check=False, timeout=600
     )
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-2000:]
+
+
+def test_sets_name_their_task_so_a_users_variant_and_ours_each_grow_their_own(tmp_path):
+    """Issue 58 #1: the task of a set was guessed from its robot_type and widths, so with a user's variant
+    of PushT registered (same robot, same widths) every PushT set "fit no task of the engine". Now every
+    set the project writes names its task (meta/engine_task.json), and augment_demos.py grows it as that
+    task: ours as PushT, the variant's as the variant (two tasks of one robot with equal widths). A set
+    written elsewhere that fits both is one error line naming them, and --task chooses."""
+    import shutil
+
+    from datagen.demos import TASK_FILE
+    from datagen.report import REPORT_NAME
+
+    copy = _copy_with(tmp_path, "my_pusht.py", USER_TASK)
+    grown = {}
+    for name in ("pusht", "my_pusht"):
+        src, out = tmp_path / f"src_{name}", tmp_path / f"grown_{name}"
+        r = _run(copy, "gen_demos.py", "--task", name, "--episodes", "1", "--quiet", "--out", src)
+        assert r.returncode == 0, r.stderr
+        assert json.loads((src / TASK_FILE).read_text()) == {"task": name}
+        r = _run(copy, "augment_demos.py", "--src", src, "--out", out, "--per_demo", "1", "--workers", "1")
+        assert r.returncode == 0, r.stdout + r.stderr
+        grown[name] = json.loads((out / REPORT_NAME).read_text())
+        assert json.loads((out / TASK_FILE).read_text()) == {"task": name}  # the grown set names it too
+    assert {name: report["task"] for name, report in grown.items()} == {n: n for n in grown}
+
+    elsewhere = tmp_path / "elsewhere"  # the same frames as a set written by another program
+    shutil.copytree(tmp_path / "src_pusht", elsewhere)
+    for extra in (TASK_FILE, "scale_data_stamp.json"):
+        (elsewhere / extra).unlink()
+    r = _run(copy, "augment_demos.py", "--src", elsewhere, "--out", tmp_path / "g1", "--per_demo", "1")
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), r.stderr
+    assert "my_pusht, pusht" in lines[0] and "--task" in lines[0], lines
+    args = [
+        "--src",
+        elsewhere,
+        "--out",
+        tmp_path / "g2",
+        "--per_demo",
+        "1",
+        "--workers",
+        "1",
+        "--task",
+        "pusht",
+    ]
+    assert _run(copy, "augment_demos.py", *args).returncode == 0
+    r = _run(copy, "augment_demos.py", *args[:3], tmp_path / "g3", "--task", "nope")
+    assert r.returncode == 2 and "--task 'nope' is no task of the engine" in r.stderr, r.stderr

@@ -331,8 +331,8 @@ def test_the_check_command_tells_a_newcomer_what_is_wrong_before_a_long_run():
     from conftest import ROOT, run_script
 
     from datagen.check import checks
-    from datagen.gym_pusht import GymPushT
-    from datagen.pusht import PushT
+    from datagen.tasks.gym_pusht import GymPushT
+    from datagen.tasks.pusht import PushT
 
     r = run_script("-m", "datagen.check", "aloha", "--episodes", "2", cwd=ROOT, check=False)
     lines = r.stdout.strip().splitlines()

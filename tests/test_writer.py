@@ -18,7 +18,7 @@ import pytest
 import gen_demos_aloha
 import gen_demos_pusht
 from datagen import PUSHT, engine, write_dataset
-from datagen.pusht import START_NAMES
+from datagen.tasks.pusht import START_NAMES
 from lerobot_v3 import dataset as lerobot_io
 
 PROVENANCE = engine.provenance(PUSHT)

@@ -297,9 +297,6 @@ TABLE = {  # printed column: row key
 }
 KIND, COSTS = "bench_engine", "bench_engine_costs"  # each JSON's "kind" and name: a re-run replaces its own
 EXECUTORS = ("local", "ray", "ray2")  # ray2: two Ray nodes on this machine, joined by address
-# the tasks it measures: its in-process costs read a set's observation.state as the task's whole state, which
-# PushT's and ALOHA's sets are (pusher's and gym_pusht's keep part of it in observation.environment_state)
-MEASURED = ("aloha", "pusht")
 FLOOR_REPEATS = 3  # a run's floor is the least of 3: bursts of load on this machine slow one by up to 1.7x
 
 
@@ -458,9 +455,10 @@ def per_demo_costs(
     task's mode has lanes; else the same one at a time), the physics floor of the kept frames, and the
     engine's write of the kept set; `repeats` rounds, alternated, medians."""
     from datagen import Perturbation, engine, lockstep
-    from lerobot_v3.dataset import load_arrays
+    from datagen.source_check import read_source, successful_only
 
-    sources = engine.sources(load_arrays(src))
+    # the run's own read of a source (augment_demos.py): the task's whole observation, environment state too
+    sources = engine.sources(successful_only(read_source(task, src), src)[0])
     jobs = [(e, k) for e in sorted(sources) for k in range(attempts_per_demo)]
     how = Perturbation(seed=seed, pos_sigma=DEFAULTS["aug_pos_sigma"], yaw_sigma=DEFAULTS["aug_yaw_sigma"])
     sims = engine.Simulators()  # the envs (and plans) both sides reuse, made once
@@ -555,8 +553,11 @@ def engine_args(argv: list[str]):
     """engine's flags, checked; its --out refused before anything is made under it."""
     p = parser("bench engine", engine_main.__doc__)
     arg = p.add_argument
-    arg("--task", choices=MEASURED, default="pusht", help="the task grown (its generator's set)")
-    arg("--mode", choices=("resolve", "replay"), default="resolve", help="augment_demos.py's --mode")
+    from datagen import known_tasks
+
+    arg("--task", choices=list(known_tasks()), default="pusht", help="the task grown (its generator's set)")
+    modes = ("resolve", "replay", "replay_live")
+    arg("--mode", choices=modes, default="resolve", help="augment_demos.py's --mode")
     arg("--sizes", type=int, nargs="+", default=[1000, 10000, 100000], help="demos per run")
     arg("--executors", nargs="+", choices=EXECUTORS, default=list(EXECUTORS))
     arg("--workers", type=int, default=os.cpu_count() or 1, help="processes / Ray CPUs")
@@ -660,7 +661,8 @@ def engine_main(argv: list[str]) -> int:
     costs only its physics. First, in this process, the same split for the first --cost_attempts_per_demo
     attempts of every source episode: one attempt at a time (datagen.engine.attempt), in lockstep
     (datagen.lockstep.attempts_lockstep), the floor, and the write of the kept set (datagen.engine.save),
-    each run --cost_repeats times alternated, medians. PushT and ALOHA only (MEASURED).
+    each run --cost_repeats times alternated, medians. Any task of the engine (--task; its set made by
+    gen_demos.py --task), in any mode.
     Writes OUT/bench_engine.json (default outputs/bench_engine; bench_engine_costs.json with
     --costs_only); the runs' own folders are removed. Asserts nothing: the figures are for
     docs/engine.md.
@@ -797,7 +799,7 @@ def gym_pusht_episode(env, expert, seed: int) -> dict:
 
 def gym_pusht_main(argv: list[str]) -> int:
     """How good is the scripted expert on LeRobot's own PushT? GymPushTExpert
-    (datagen/gym_pusht_expert.py) on gym-pusht (LeRobot's `pusht` extra), judged by gym-pusht's own
+    (datagen/tasks/gym_pusht_expert.py) on gym-pusht (LeRobot's `pusht` extra), judged by gym-pusht's own
     success (info["is_success"]: more than 95% of the goal T covered). Prints figures; writes nothing.
 
         python -m tools.bench gym_pusht                          # 50 seeded starts, seeds 0..49
@@ -817,7 +819,7 @@ def gym_pusht_main(argv: list[str]) -> int:
     check(a, positive=["episodes"], non_negative=["seed"], finite=["noise"])
     import gymnasium
 
-    from datagen.gym_pusht_expert import GymPushTExpert
+    from datagen.tasks.gym_pusht_expert import GymPushTExpert
 
     with warnings.catch_warnings():  # pygame (gym-pusht draws with it): pkg_resources is deprecated
         warnings.simplefilter("ignore", UserWarning)

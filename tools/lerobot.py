@@ -196,7 +196,7 @@ def eval_main(argv: list[str] | None = None) -> int:
     pusher) rolls the policy out in T's own env (the task's make_env, as gen_demos.py --task T records
     its sets) from reset(env_seed(seed, "eval", j)), and judges it by T's success, which ends the
     episode; else it ends at T's limit (transfer-cube: gym-aloha's AlohaTransferCube-v0 starts and its
-    top reward stage, 400 steps, in datagen/aloha_sim.py: gym-aloha's own env code cannot run on mujoco
+    top reward stage, 400 steps, in datagen/tasks/aloha_sim.py: gym-aloha's own env code cannot run on mujoco
     4). The policy must read what T's sets hold, no images: observation.state (transfer-cube: 14
     joints) and, if it reads it, observation.environment_state (the cube's pose, 7); the JSON is
     lerobot_eval_T_seed{S}_n{N}.json, with "task": T.
@@ -391,7 +391,7 @@ def rollouts(policy, pre, post, seeds: list[int]) -> list[dict]:
     episode that has ended keeps its last observation and its env is not stepped again. The denoising
     noise is drawn for the whole batch, so an outcome depends on the batch it ran in (the seeds);
     `lerobot eval` runs one episode at a time instead, ~50x slower here."""
-    from datagen.pusht import PUSHT as PUSHT_TASK  # its spec: the columns our PushT sets record
+    from datagen.tasks.pusht import PUSHT as PUSHT_TASK  # its spec: the columns our PushT sets record
 
     envs, build = [pusht_env.PushTEnv() for _ in seeds], observation_builder(policy, PUSHT_TASK.spec, "PushT")
     obs = np.stack([env.reset(s) for env, s in zip(envs, seeds, strict=True)])  # (B, 10)

@@ -28,16 +28,16 @@ from ch37.errors import DataError
 from ch37.parallel import map_jobs
 from ch37.seeds import env_seed
 from datagen import ALOHA, PUSHT, Perturbation, engine
-from datagen.aloha import WHOLE, Aloha
-from datagen.aloha_insertion import ALOHA_INSERTION
-from datagen.aloha_transfer_cube import ALOHA_TRANSFER_CUBE, AlohaTransferCube
-from datagen.aloha_transfer_cube import WHOLE as CUBE_WHOLE
 from datagen.demos import expert_episodes
-from datagen.gym_pusht import GYM_PUSHT, ONTO_GOAL, GymPushT
-from datagen.pusher import PUSHER, Pusher
-from datagen.pusher import WHOLE as PUSHER_WHOLE
-from datagen.pusht import BY_CONTACT, BY_CONTACT_BLOCK, PushT
 from datagen.task import Source, Task, known_tasks
+from datagen.tasks.aloha import WHOLE, Aloha
+from datagen.tasks.aloha_insertion import ALOHA_INSERTION
+from datagen.tasks.aloha_transfer_cube import ALOHA_TRANSFER_CUBE, AlohaTransferCube
+from datagen.tasks.aloha_transfer_cube import WHOLE as CUBE_WHOLE
+from datagen.tasks.gym_pusht import GYM_PUSHT, ONTO_GOAL, GymPushT
+from datagen.tasks.pusher import PUSHER, Pusher
+from datagen.tasks.pusher import WHOLE as PUSHER_WHOLE
+from datagen.tasks.pusht import BY_CONTACT, BY_CONTACT_BLOCK, PushT
 from lerobot_v3.dataset import load_arrays
 from tools.common import check_results, parser, provenance, rel, subcommands, write_result
 
@@ -597,7 +597,7 @@ def value_main(argv: list[str]) -> int:
     transfer-cube (gym-aloha's ViperX sim) source, replayed and fresh at its own sizes: 10 sources, 20
     kept per source (10 + 200 replayed, 210 fresh), 50 held-out starts. Perturbation: the chapter's
     sigmas in the task's own units (ALOHA: 0.08 m on cube, target and both end-effectors; transfer-cube:
-    0.08 m on the cube's x, y; gym-pusht: the task's px scale, datagen.gym_pusht). Steps: the chapter's
+    0.08 m on the cube's x, y; gym-pusht: the task's px scale, datagen.tasks.gym_pusht). Steps: the chapter's
     epochs (500) passes over the largest arm's frames at batch 128 (lr 1e-3 cosine, hidden 512), except
     transfer-cube: a fixed 5,000 steps for every arm (VALUE_SIZES), sized to a 2-core CPU (about 2.5
     minutes for its three arms; the chapter's rule would be some 250,000 steps over its 400-frame

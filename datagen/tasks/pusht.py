@@ -29,9 +29,9 @@ import math
 import numpy as np
 
 import pusht_env
-from datagen.fast_experts import PushTBatch
-from datagen.fast_pusht import SharedPushTEnv, step_many
 from datagen.task import EnvSpec, Perturbation, Subtask, Task, register
+from datagen.tasks.fast_experts import PushTBatch
+from datagen.tasks.fast_pusht import SharedPushTEnv, step_many
 from scripted_expert import PushTExpert
 
 __all__ = [

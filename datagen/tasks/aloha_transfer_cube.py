@@ -1,8 +1,9 @@
 """LeRobot's ALOHA transfer-cube (gym-aloha's AlohaTransferCube-v0, ACT's sim_transfer_cube) as a
 data-engine task: two ViperX 300s arms in 3-D, the model files of the gym-aloha wheel on our mujoco
-(datagen/aloha_sim.py, which says what of gym-aloha's code it re-states).
+(datagen/tasks/aloha_sim.py, which says what of gym-aloha's code it re-states).
 
-    env        datagen.aloha_sim.TransferCubeEnv (joint-controlled, 50 fps) through datagen.task.GymnasiumEnv;
+    env        datagen.tasks.aloha_sim.TransferCubeEnv (joint-controlled, 50 fps) through
+               datagen.task.GymnasiumEnv;
                its observation: the 14 numbers of observation.state, then the cube's pose (7)
     columns    what lerobot/aloha_sim_transfer_cube_* record: observation.state and action = per arm, left
                first, 6 joint angles (rad) and a normalized gripper (0 closed, 1 open: the fingers'
@@ -14,15 +15,15 @@ data-engine task: two ViperX 300s arms in 3-D, the model files of the gym-aloha 
                gym-aloha's range; it stays upright (gym-aloha never turns it)
     success    gym-aloha's: TransferCubeTask.get_reward's top stage (the left fingers touch the cube and
                the cube does not touch the table), which ends the episode
-    expert     datagen.aloha_sim_expert.TransferCubeExpert (ACT's PickAndTransferPolicy's waypoints, through
-               inverse kinematics), noise in m on the grasp points' targets
+    expert     datagen.tasks.aloha_sim_expert.TransferCubeExpert (ACT's PickAndTransferPolicy's waypoints,
+               through inverse kinematics), noise in m on the grasp points' targets
     frames     the cube, in SE(3), and the world (the meeting point in the air is fixed, as in ACT's script)
     subtasks   pick (the right arm relative to the cube, the left to the world; it ends when the cube is
                lifted 2 cm) and handover (both arms relative to the world)
     extra      action.end_effector: the end-effector targets each frame's joint action encodes (per arm, the
                grasp point (m) and the gripper's orientation quaternion), as ACT's scripted data drive them
-    arms       left and right, each its grasp point (datagen.aloha_sim.gripper_pose) and orientation, read
-               through the model's kinematics from the joints an observation (or an action) holds
+    arms       left and right, each its grasp point (datagen.tasks.aloha_sim.gripper_pose) and orientation,
+               read through the model's kinematics from the joints an observation (or an action) holds
 """
 
 from __future__ import annotations
@@ -30,10 +31,10 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from datagen.aloha_sim import CUBE_RANGE, FPS, gripper_pose, ik, model
-from datagen.aloha_sim_expert import STEPS, TransferCubeExpert
 from datagen.poses import quat_of, rotation_of
 from datagen.task import EnvSpec, GymnasiumEnv, Perturbation, Subtask, Task, register
+from datagen.tasks.aloha_sim import CUBE_RANGE, FPS, gripper_pose, ik, model
+from datagen.tasks.aloha_sim_expert import STEPS, TransferCubeExpert
 
 __all__ = ["ALOHA_TRANSFER_CUBE", "AlohaTransferCube", "MOTORS", "SPEC", "START_NAMES"]
 
@@ -108,7 +109,7 @@ class AlohaTransferCube(Task):
         self.subtasks = subtasks
 
     def make_env(self, share=None):
-        from datagen.aloha_sim import TransferCubeEnv
+        from datagen.tasks.aloha_sim import TransferCubeEnv
 
         env = TransferCubeEnv(MAX_STEPS, share=None if share is None else share.env)
         return GymnasiumEnv(env, _observe)

@@ -1,4 +1,4 @@
-"""Pusher-v5's robot controller, its pose-controlled env and its scripted expert (datagen/pusher.py's).
+"""Pusher-v5's robot controller, its pose-controlled env and its scripted expert (datagen/tasks/pusher.py's).
 
 Pusher-v5 (gymnasium 1.4.0, assets/pusher_v5.xml): a 7-DoF arm whose hand (body tips_arm, the wrist
 centre) is a U of capsules (radius 0.02 m) in its frame: a cross bar along y in [-0.1, 0.1] and two

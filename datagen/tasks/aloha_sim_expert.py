@@ -1,13 +1,13 @@
-"""The scripted transfer-cube expert (datagen/aloha_transfer_cube.py's), in end-effector space as ACT's
+"""The scripted transfer-cube expert (datagen/tasks/aloha_transfer_cube.py's), in end-effector space as ACT's
 PickAndTransferPolicy is: per arm, waypoints (time step, grasp-point position, gripper orientation,
 gripper command 0 closed .. 1 open) relative to the cube and to a meeting point in the air, interpolated
 (position linearly, orientation by slerp); the right arm grasps the cube from above, tilted, and carries
 it to the meeting point; the left arm comes in from the side, closes across it, and the right lets go.
 
 Each step's waypoint becomes the joint action the lerobot/aloha_sim_* sets record (6 joint targets and a
-normalized gripper per arm) by inverse kinematics on the joint-controlled model (datagen.aloha_sim.ik,
+normalized gripper per arm) by inverse kinematics on the joint-controlled model (datagen.tasks.aloha_sim.ik,
 from the last step's solution): ACT drove the same waypoints through the end-effector model's mocap welds
-and replayed the joints they gave, which on mujoco 4 track too loosely to grasp (datagen/aloha_sim.py).
+and replayed the joints they gave, which on mujoco 4 track too loosely to grasp (datagen/tasks/aloha_sim.py).
 The plan is made from the first observation (the cube's pose); the left arm's approach is planned again
 when the right arm reaches the meeting point, relative to the cube as it then lies in the right hand.
 """
@@ -17,8 +17,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from datagen.aloha_sim import START_ARM_POSE, gripper_pose, ik, model
 from datagen.poses import slerp
+from datagen.tasks.aloha_sim import START_ARM_POSE, gripper_pose, ik, model
 
 __all__ = ["InsertionExpert", "TransferCubeExpert", "align", "handover", "insertion_plan", "plan"]
 
@@ -195,7 +195,8 @@ def align(waypoints, peg, socket, left_at, right_at) -> tuple[list, list]:
 
 
 class InsertionExpert(TransferCubeExpert):
-    """The insertion expert (datagen/aloha_insertion.py's): act(obs) as TransferCubeExpert's, for the peg
+    """The insertion expert (datagen/tasks/aloha_insertion.py's): act(obs) as TransferCubeExpert's, for the
+    peg
     and the socket the observation shows (obs[14:21], obs[21:28]); at ALIGN the insertion is planned from
     where the two parts then lie in the hands."""
 

@@ -15,7 +15,7 @@ ours. The only engine module that imports gym_pusht (at the first env made, not 
                angle yaw_sigma rad, around a source's first frame; the block stays on the table
                (BLOCK_BOX), the agent inside its spawn box and clear of the T; up to TRIES draws.
                A start is rounded to float32 so that aug.start re-runs it exactly
-    expert     datagen.gym_pusht_expert.GymPushTExpert (position targets through gym-pusht's PD)
+    expert     datagen.tasks.gym_pusht_expert.GymPushTExpert (position targets through gym-pusht's PD)
     frames     block (its pose recovered from the keypoints: gym_pusht_expert.block_pose_from_keypoints, so
                a set that records only keypoints works), goal (fixed)
     subtasks   one: the whole push relative to the block, entered by a bridge from where the agent is
@@ -33,8 +33,8 @@ import warnings
 
 import numpy as np
 
-from datagen.gym_pusht_expert import GymPushTExpert, block_pose_from_keypoints, keypoint_residual
 from datagen.task import EnvSpec, GymnasiumEnv, Perturbation, Subtask, Task, register
+from datagen.tasks.gym_pusht_expert import GymPushTExpert, block_pose_from_keypoints, keypoint_residual
 from lerobot_v3 import ENV_STATE_KEY, IMAGE_SIZE
 
 __all__ = [

@@ -34,8 +34,8 @@ import math
 import numpy as np
 
 import aloha_env
-from datagen.fast_experts import AlohaBatch
 from datagen.task import EnvSpec, Perturbation, Subtask, Task, register
+from datagen.tasks.fast_experts import AlohaBatch
 from scripted_expert import AlohaExpert
 
 __all__ = [

@@ -1,4 +1,5 @@
-"""The scripted expert of gym-pusht (LeRobot's own PushT), beside its task module (datagen/gym_pusht.py):
+"""The scripted expert of gym-pusht (LeRobot's own PushT), beside its task module
+(datagen/tasks/gym_pusht.py):
 GymPushTExpert, and block_pose_from_keypoints / keypoint_residual, which read the block's pose back from
 the 8 keypoints LeRobot's sets record. The chapter's own experts are in scripted_expert.py."""
 

@@ -8,7 +8,7 @@ nobody here wrote, described on the engine's SE(3) contract. The only engine mod
                wrist centre, the frame of the hand's U), the object and the goal
     action     the hand's pose target (ACTION_NAMES): position (m) and orientation quaternion (w, x, y,
                z), world frame. PoseControl turns it into Pusher-v5's own action, 7 joint torques (N.m),
-               with the robot's controller (datagen.pusher_expert.controller: damped least squares on
+               with the robot's controller (datagen.tasks.pusher_expert.controller: damped least squares on
                the model's Jacobian, computed-torque joint PD), as MimicGen's robots take pose targets
                through their operational-space controller
     success    Pusher-v5 has none: the object's centre within GOAL_TOL m of the goal's in xy; the
@@ -18,7 +18,7 @@ nobody here wrote, described on the engine's SE(3) contract. The only engine mod
     perturb    the object's (x, y) gets Gaussian noise of pos_sigma m, re-drawn (up to TRIES) until it
                lies where Pusher-v5's reset puts it (OBJECT_BOX from the goal, more than MIN_GAP m off
                it); the arm's state and the goal are kept
-    expert     datagen.pusher_expert.PusherExpert (hover, descend, push with the hand's U), noise in m
+    expert     datagen.tasks.pusher_expert.PusherExpert (hover, descend, push with the hand's U), noise in m
                on the target position
     frames     object (its position; a cylinder on two slides: it never turns) and goal, in SE(3)
     subtasks   approach (relative to the object, ends when the object sits in the hand's U: "held")
@@ -36,8 +36,8 @@ import mujoco
 import numpy as np
 
 from datagen.poses import quat_of, rotation_of
-from datagen.pusher_expert import PoseControl, PusherExpert, hand_rotation, held, model
 from datagen.task import EnvSpec, GymnasiumEnv, Perturbation, Subtask, Task, register
+from datagen.tasks.pusher_expert import PoseControl, PusherExpert, hand_rotation, held, model
 
 __all__ = ["PUSHER", "Pusher", "START_NAMES", "SUBTASKS", "SPEC", "WHOLE"]
 

@@ -21,7 +21,7 @@ A step is dm_control's (control.Environment with its legacy step): the controls 
 mj_step2 then mj_step1, so that the contacts a reward reads are those of the state after the step.
 
     assets()                 the wheel's assets folder, found without importing gym_aloha
-    TransferCubeEnv          the joint-controlled Gymnasium env (datagen/aloha_transfer_cube.py's)
+    TransferCubeEnv          the joint-controlled Gymnasium env (datagen/tasks/aloha_transfer_cube.py's)
     reward_stage(m, d)       get_reward of TransferCubeTask, 0..4
     gripper_pose, ik         a gripper's grasp point and orientation from the joints, and back (the
                              expert's way from end-effector waypoints to joint targets)

@@ -21,7 +21,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from pusht_env import _STATE, ACT_DIM, ACTION_LIMIT, MAX_STEPS, OBS_DIM, PushTEnv
+from pusht_env import ACT_DIM, ACTION_LIMIT, MAX_STEPS, OBS_DIM, SIM_STATE, PushTEnv
 
 __all__ = ["SharedPushTEnv", "step_many"]
 
@@ -34,7 +34,7 @@ class _Seat:
 
 class SharedPushTEnv(PushTEnv):
     """A PushTEnv that can share its compiled model and its MjData with other envs, each keeping its own
-    state (_STATE) while another uses the simulator. Read a shared env's state through its accessors:
+    state (SIM_STATE) while another uses the simulator. Read a shared env's state through its accessors:
     env.data holds whichever env's state was loaded last."""
 
     def __init__(self, share: SharedPushTEnv | None = None) -> None:
@@ -43,10 +43,10 @@ class SharedPushTEnv(PushTEnv):
             super().__init__()
         else:  # a model already checked, an MjData already made
             self._seat, self.model = share._seat, share.model
-            self._state = np.zeros(mujoco.mj_stateSize(share.model, _STATE))
+            self._state = np.zeros(mujoco.mj_stateSize(share.model, SIM_STATE))
             self._attach(share.data)
         if self._state is None:
-            self._state = np.zeros(mujoco.mj_stateSize(self.model, _STATE))  # this env's, while parked
+            self._state = np.zeros(mujoco.mj_stateSize(self.model, SIM_STATE))  # this env's, while parked
 
     def _claim(self) -> bool:
         """Load this env's state into the MjData it shares if another env used it last (that env's
@@ -56,8 +56,8 @@ class SharedPushTEnv(PushTEnv):
         if seat.owner is self:
             return False
         if seat.owner is not None:
-            mujoco.mj_getState(self.model, self.data, seat.owner._state, _STATE)
-            mujoco.mj_setState(self.model, self.data, self._state, _STATE)
+            mujoco.mj_getState(self.model, self.data, seat.owner._state, SIM_STATE)
+            mujoco.mj_setState(self.model, self.data, self._state, SIM_STATE)
         seat.owner = self
         return True
 

@@ -1,15 +1,16 @@
 """LeRobot's ALOHA insertion (gym-aloha's AlohaInsertion-v0, ACT's sim_insertion) as a data-engine task: the
 left arm grasps the socket, the right the peg, and they meet in the air until the peg touches the socket's
-pin. gym-aloha's model files on our mujoco (datagen/aloha_sim.py); everything but its objects as
-datagen/aloha_transfer_cube.py has it (the columns, the arms, the end-effector targets, the IK).
+pin. gym-aloha's model files on our mujoco (datagen/tasks/aloha_sim.py); everything but its objects as
+datagen/tasks/aloha_transfer_cube.py has it (the columns, the arms, the end-effector targets, the IK).
 
-    env        datagen.aloha_sim.InsertionEnv; its observation: the 14 of observation.state, then the
+    env        datagen.tasks.aloha_sim.InsertionEnv; its observation: the 14 of observation.state, then the
                peg's pose (7) and the socket's (7)
     start      the peg's and the socket's poses (START_NAMES), drawn as gym-aloha's reset(seed=seed) does
     perturb    the peg's and the socket's (x, y) get Gaussian noise of pos_sigma m each, re-drawn (up to
                TRIES) until inside gym-aloha's ranges; both stay upright
     success    gym-aloha's: InsertionTask.get_reward's top stage (the peg touches the pin)
-    expert     datagen.aloha_sim_expert.InsertionExpert (ACT's InsertionPolicy's waypoints through IK, the
+    expert     datagen.tasks.aloha_sim_expert.InsertionExpert (ACT's InsertionPolicy's waypoints through
+               IK, the
                insertion planned from where the parts lie in the hands)
     frames     peg, socket, the world
     subtasks   grasp (the left arm relative to the socket, the right to the peg; it ends when both are
@@ -22,11 +23,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from datagen.aloha_sim import PEG_RANGE, SOCKET_RANGE
-from datagen.aloha_sim_expert import InsertionExpert
-from datagen.aloha_transfer_cube import MAX_STEPS, MOTORS, TRIES, AlohaTransferCube
 from datagen.poses import rotation_of
 from datagen.task import EnvSpec, GymnasiumEnv, Perturbation, Subtask, register
+from datagen.tasks.aloha_sim import PEG_RANGE, SOCKET_RANGE
+from datagen.tasks.aloha_sim_expert import InsertionExpert
+from datagen.tasks.aloha_transfer_cube import MAX_STEPS, MOTORS, TRIES, AlohaTransferCube
 
 __all__ = ["ALOHA_INSERTION", "AlohaInsertion", "SPEC", "START_NAMES"]
 
@@ -78,7 +79,7 @@ class AlohaInsertion(AlohaTransferCube):
         self.subtasks = subtasks
 
     def make_env(self, share=None):
-        from datagen.aloha_sim import InsertionEnv
+        from datagen.tasks.aloha_sim import InsertionEnv
 
         env = InsertionEnv(MAX_STEPS, share=None if share is None else share.env)
         return GymnasiumEnv(env, lambda obs: np.asarray(obs, np.float32))

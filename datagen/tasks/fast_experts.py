@@ -22,18 +22,18 @@ import numpy as np
 
 import pusht_env as _pt
 from scripted_expert import (
-    _PT_CLEAR,
-    _PT_GOAL_POS,
-    _PT_GOAL_YAW,
-    _PT_MOVE_GAIN,
-    _PT_ORBIT_CENTER,
-    _PT_PUSH_GAIN,
-    _PT_R,
-    _PT_STANDOFF,
-    _PT_TRAVEL_COST,
-    _PT_V_MOVE,
-    _PT_V_PUSH,
-    _PT_YAW_LEN,
+    PT_CLEAR,
+    PT_GOAL_POS,
+    PT_GOAL_YAW,
+    PT_MOVE_GAIN,
+    PT_ORBIT_CENTER,
+    PT_PUSH_GAIN,
+    PT_R,
+    PT_STANDOFF,
+    PT_TRAVEL_COST,
+    PT_V_MOVE,
+    PT_V_PUSH,
+    PT_YAW_LEN,
     AlohaExpert,
     PushTExpert,
 )
@@ -100,7 +100,7 @@ class PushTBatch:
         self._cand = np.concatenate([self._n, self._t, self._contact, self._pre], axis=1)  # (K, 8)
         self._n_xy = np.ascontiguousarray(self._n.T)[:, None, :]
         self._contact_xy = np.ascontiguousarray(self._contact.T)[:, None, :]
-        self._push_lo = np.array([-(_PT_STANDOFF + 0.008), -0.006])
+        self._push_lo = np.array([-(PT_STANDOFF + 0.008), -0.006])
         self._push_hi = np.array([0.01, 0.006])
         self._ep_cols = np.array([6, 7, 0, 1])
         h = 1e-5
@@ -110,7 +110,7 @@ class PushTBatch:
         # The block's farthest |x| or |y| from every wall at which all pre-contact points are still
         # reachable: WALL_INNER - R - 5 mm less the farthest pre-contact point, less 1e-9 m for the
         # roundings of pre @ rot.T + bw (each well under 1e-15 m here).
-        self._reach_free = _pt.WALL_INNER - _PT_R - 0.005 - float(np.hypot(*self._pre.T).max()) - 1e-9
+        self._reach_free = _pt.WALL_INNER - PT_R - 0.005 - float(np.hypot(*self._pre.T).max()) - 1e-9
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """PushTExpert.act for N observations at once: obs (N, 10) -> float32 (N, 2), row i bit for bit
@@ -141,35 +141,35 @@ class PushTBatch:
     def _choose(self, o: np.ndarray, rot: np.ndarray, want: np.ndarray, p: np.ndarray) -> np.ndarray:
         """The expert's steps 1-2 over rows: the chosen candidate's n, t, contact and pre (N, 8), equal to
         self._n[k], self._t[k], self._contact[k], self._pre[k] for k = argmax(score) (reach, align,
-        travel); want is the desired twist [e, _PT_YAW_LEN * eyaw], normalised here."""
+        travel); want is the desired twist [e, PT_YAW_LEN * eyaw], normalised here."""
         want /= np.maximum(_norm(want), 1e-300)[:, None]  # the max only keeps a goal env's 0/0 away
         align = np.matmul(self._u, want[:, :, None])[:, :, 0]  # (N, K): gemv per row, as self._u @ want
         rel = p.T[:, :, None] - self._contact_xy  # (2, N, K): x and y of p - contact
         rn = rel * self._n_xy
-        along = np.maximum(rn[0] + rn[1], -_PT_STANDOFF)  # the einsum, then np.clip (rule 3)
+        along = np.maximum(rn[0] + rn[1], -PT_STANDOFF)  # the einsum, then np.clip (rule 3)
         np.minimum(along, 0.0, out=along)
         rel -= along * self._n_xy
         rel *= rel
         travel = np.sqrt(rel[0] + rel[1])  # np.linalg.norm(..., axis=1) (rule 3)
-        score = align - _PT_TRAVEL_COST * travel
+        score = align - PT_TRAVEL_COST * travel
         # Reach: pre_w = bw + pre @ rot.T (a gemm per env) within the walls. |pre_w| <= |bw| + |pre|
         # up to a few roundings, so while every block is far enough from the walls every candidate is
         # reachable whatever the gemm's last bits (rule 4); else compute it as the scalar path does.
         bx, by = o[:, 2:4].T.tolist()
         if max(max(bx), -min(bx), max(by), -min(by)) >= self._reach_free:
             pre_w = o[:, None, 2:4] + np.matmul(self._pre, rot.transpose(0, 2, 1))  # (N, K, 2): gemm per env
-            bound = np.abs(pre_w) < _pt.WALL_INNER - _PT_R - 0.005
+            bound = np.abs(pre_w) < _pt.WALL_INNER - PT_R - 0.005
             score = np.where(bound[:, :, 0] & bound[:, :, 1], score, -np.inf)
         return self._cand[score.argmax(axis=1)]
 
     def _push(self, p: np.ndarray, c0: np.ndarray, nt: np.ndarray, twist_err: np.ndarray):
         """The expert's step 3a over rows: (push, v_push), push (N,) equal to its test `abs(lat) < 0.006
-        and -(_PT_STANDOFF + 0.008) < along < 0.01` and v_push (N, 2) to its `speed * n - 5.0 * lat * t`
+        and -(PT_STANDOFF + 0.008) < along < 0.01` and v_push (N, 2) to its `speed * n - 5.0 * lat * t`
         (block frame), for nt the chosen (n, t) (N, 2, 2) and c0 the contact (N, 2)."""
         rel = p - c0
         along_lat = np.matmul(nt[:, :, None, :], rel[:, None, :, None])[:, :, 0, 0]  # rel @ n, rel @ t: dots
         push = (self._push_lo < along_lat) & (along_lat < self._push_hi)  # |lat| < 6 mm, along in range
-        speed = np.minimum(np.maximum(_PT_PUSH_GAIN * twist_err, _PT_V_PUSH[0]), _PT_V_PUSH[1])
+        speed = np.minimum(np.maximum(PT_PUSH_GAIN * twist_err, PT_V_PUSH[0]), PT_V_PUSH[1])
         return push[:, 0] & push[:, 1], speed[:, None] * nt[:, 0] - (5.0 * along_lat[:, 1:2]) * nt[:, 1]
 
     @staticmethod
@@ -177,7 +177,7 @@ class PushTBatch:
         """The expert's step 3b's velocity over rows (N, 2), equal to its `speed * dg / max(dist, 1e-9)`
         (block frame) for dg = g - p."""
         dist = np.sqrt(_dot(dg, dg))  # np.linalg.norm of a vector: sqrt of its dot with itself
-        speed = np.minimum(np.maximum(_PT_MOVE_GAIN * dist, _PT_V_MOVE[0]), _PT_V_MOVE[1])
+        speed = np.minimum(np.maximum(PT_MOVE_GAIN * dist, PT_V_MOVE[0]), PT_V_MOVE[1])
         return speed[:, None] * dg / np.maximum(dist, 1e-9)[:, None]
 
     def _field(self, p: np.ndarray, dg: np.ndarray) -> np.ndarray:
@@ -204,21 +204,21 @@ class PushTBatch:
         return grad
 
     def _orbit(self, p: np.ndarray, g: np.ndarray, grad: np.ndarray, sdf_p: np.ndarray, orbit: np.ndarray):
-        """The expert's step 3c over rows (N, 2), equal to its `_PT_V_MOVE[1] * v / max(norm(v), 1e-9)`
+        """The expert's step 3c over rows (N, 2), equal to its `PT_V_MOVE[1] * v / max(norm(v), 1e-9)`
         (block frame): around the T at a safe clearance, counter-clockwise unless the way to g is
         shorter clockwise; the atan2s only for the rows in orbit (indices), the ones that use it."""
         tang = grad[:, ::-1] * self._ccw  # (-g1, g0)
         if orbit.size:
             (px, py), (gx, gy) = (
-                (p[orbit] - _PT_ORBIT_CENTER).T.tolist(),
-                (g[orbit] - _PT_ORBIT_CENTER).T.tolist(),
+                (p[orbit] - PT_ORBIT_CENTER).T.tolist(),
+                (g[orbit] - PT_ORBIT_CENTER).T.tolist(),
             )
             turn = np.array(list(map(math.atan2, gy, gx))) - np.array(list(map(math.atan2, py, px)))
             cw = orbit[(turn + math.pi) % (2.0 * math.pi) - math.pi < 0.0]  # wrap_angle (rule 3) < 0
             tang[cw] *= -1.0
-        radial = np.minimum(np.maximum(20.0 * (_PT_CLEAR - (sdf_p - _PT_R)), -1.0), 1.0)
+        radial = np.minimum(np.maximum(20.0 * (PT_CLEAR - (sdf_p - PT_R)), -1.0), 1.0)
         v = tang + radial[:, None] * grad
-        return _PT_V_MOVE[1] * v / np.maximum(_norm(v), 1e-9)[:, None]
+        return PT_V_MOVE[1] * v / np.maximum(_norm(v), 1e-9)[:, None]
 
     def _clean_batch(self, o: np.ndarray) -> np.ndarray:
         """PushTExpert._clean_action over rows, every term computed as the scalar path computes it. The
@@ -246,9 +246,9 @@ class PushTBatch:
             return np.zeros((0, 2))
         rot, e, p, eyaw = self._block_frame(o)
         err = np.array(list(map(math.hypot, *e.T.tolist())))
-        yaw_err = _PT_YAW_LEN * eyaw  # m
+        yaw_err = PT_YAW_LEN * eyaw  # m
         twist_err = np.array(list(map(math.hypot, err.tolist(), yaw_err.tolist())))
-        goal = (err < _PT_GOAL_POS) & (np.abs(eyaw) < _PT_GOAL_YAW)
+        goal = (err < PT_GOAL_POS) & (np.abs(eyaw) < PT_GOAL_YAW)
         cand = self._choose(o, rot, np.concatenate([e, yaw_err[:, None]], axis=1), p)
         nt, g = cand[:, 0:4].reshape(len(o), 2, 2), cand[:, 6:8]
         push, v_push = self._push(p, cand[:, 4:6], nt, twist_err)  # 3a
@@ -256,7 +256,7 @@ class PushTBatch:
         v_straight = self._straight(dg)  # 3b
         sdf = self._field(p, dg)
         sdf_p = sdf[:, 0]
-        floor = np.minimum(_PT_R + 0.002, sdf_p - 0.001)
+        floor = np.minimum(PT_R + 0.002, sdf_p - 0.001)
         straight = np.minimum.reduce(sdf[:, 5:], axis=1) > floor  # np.all(t_sdf(path) > floor)
         grad = self._grad(sdf)
         v_orbit = self._orbit(p, g, grad, sdf_p, (~(push | straight | goal)).nonzero()[0])  # 3c
@@ -266,7 +266,7 @@ class PushTBatch:
             move[goal] = 0.1 * grad[goal]
         out = _mv(rot, move)
         if any_goal:
-            out[goal & (sdf_p > _PT_R + 0.03)] = 0.0
+            out[goal & (sdf_p > PT_R + 0.03)] = 0.0
         return out
 
 
