@@ -718,7 +718,11 @@ def table_main(argv: list[str] | None = None) -> int:
     last logged loss; the pooled success with the lesson's 95% Wilson interval; the paired per-seed
     differences, and the max reward's difference paired start by start (each seed's three sets are
     scored on the same starts) over all seeds, with its 95% t-interval (tools.common.mean_ci). --json
-    writes the same as one JSON. Only seeds with all three sets evaluated are counted.
+    writes the same as one JSON. Only seeds with all three sets evaluated are counted. Every file is
+    checked before a line is printed: an evaluation with no episode, a success that is not true or
+    false, a max reward that is not a finite number, counts that disagree with its episodes, a set scored
+    on other starts than its seed's other sets, or a train log whose last `loss:` has no number, is one
+    `error:` line naming the file (exit 2), never a silent recount.
     """
     p = parser("lerobot table", table_main.__doc__, script=False)
     p.add_argument("out", type=Path, help="the folder tools/lerobot_row.sh wrote")
