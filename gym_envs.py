@@ -40,13 +40,17 @@ GRASP_RADIUS (a held cube sits up to that far from its gripper) plus LIMIT_SLACK
 Actions: Box(-1, 1), the range both simulators clip to.
 
 gym-aloha's own ids (gym_aloha/AlohaTransferCube-v0) need dm_control, which fails on our mujoco; these run
-its model files through mujoco directly (datagen.tasks.aloha_sim), the engine's env for aloha_transfer_cube
-and
-aloha_insertion, with state observations instead of pixels and no renderer:
+its model files through mujoco directly (datagen.tasks.aloha_sim), the engine's env for
+aloha_transfer_cube and aloha_insertion, with state observations instead of pixels; render_mode="rgb_array"
+renders gym-aloha's render() frame (its "top" camera, 640 x 480 or visualization_width x
+visualization_height, the same GL backend as above):
 
     env = gym.make("ch37/AlohaSimTransferCube-v0")    # or "ch37/AlohaSimInsertion-v0"
     obs, info = env.reset(seed=0)     # the objects where gym-aloha's reset(seed=0) puts them
     obs, info = env.reset(options={"reset_to_state": poses})   # the objects' poses (7 numbers each)
+
+A scene, render_mode, reset_to_state (not 7 finite numbers per object, or an all-zero quaternion) or action
+(not 14 finite numbers) it cannot take is a ValueError saying what it takes, as PushT's.
 
 obs float32: the 14 numbers of lerobot/aloha_sim_*'s observation.state, then the objects' poses (the
 cube's, or the peg's and the socket's); action float32[14] (per arm 6 joint targets, rad, and a
@@ -74,7 +78,7 @@ def _no_gl(what: str, e: BaseException) -> str:
 
 
 try:  # MUJOCO_GL=osmesa without libOSMesa fails inside PyOpenGL as mujoco is imported, not at render()
-    import mujoco  # noqa: F401
+    import mujoco
 except (AttributeError, OSError) as e:
     raise gym.error.DependencyNotInstalled(_no_gl("importing mujoco", e)) from None
 
@@ -188,15 +192,43 @@ class AlohaHandoffGym(_SimGym):
 
 class AlohaSimGym(gym.Env):
     """datagen.tasks.aloha_sim's TransferCubeEnv or InsertionEnv (`scene`) as a gymnasium.Env (see the module
-    docstring); reset() with no seed draws gym-aloha's seed from the env's np_random."""
+    docstring); reset() with no seed draws gym-aloha's seed from the env's np_random. render_mode
+    "rgb_array" renders as gym-aloha's render() does: its "top" camera, visualization_width x
+    visualization_height (640 x 480, the models' offscreen buffer, at most), uint8."""
 
-    metadata = {"render_modes": [], "render_fps": TRANSFER_CUBE_SPEC.fps}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": TRANSFER_CUBE_SPEC.fps}
+    camera = "top"  # gym-aloha's render() camera
 
-    def __init__(self, scene: str = "transfer_cube") -> None:
+    def __init__(
+        self,
+        scene: str = "transfer_cube",
+        render_mode: str | None = None,
+        visualization_width: int = 640,
+        visualization_height: int = 480,
+    ) -> None:
         from datagen.tasks.aloha_sim import JOINT_IDS, InsertionEnv, TransferCubeEnv
 
+        envs = {"transfer_cube": TransferCubeEnv, "insertion": InsertionEnv}
+        if scene not in envs:  # a bare KeyError before
+            raise ValueError(f"scene must be one of {sorted(envs)}, got {scene!r}")
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         spec = dict(ALOHA_SIM_IDS.values())[scene]
-        self.sim = {"transfer_cube": TransferCubeEnv, "insertion": InsertionEnv}[scene](spec.max_steps)
+        self.sim = envs[scene](spec.max_steps)
+        buf = self.sim.model.vis.global_
+        size = (visualization_width, visualization_height)
+        if (
+            not all(isinstance(v, (int, np.integer)) and v > 0 for v in size)
+            or size[0] > buf.offwidth
+            or size[1] > buf.offheight
+        ):
+            # MuJoCo's renderer would refuse it only at the first render()
+            raise ValueError(
+                "visualization_width x visualization_height must be whole numbers from 1 up to at most "
+                f"{buf.offwidth} x {buf.offheight} (the models' offscreen buffer), got {size[0]!r} x "
+                f"{size[1]!r}"
+            )
+        self.render_mode, self.size, self.renderer = render_mode, size, None
         self.observation_space = self.sim.observation_space
         # the action's bounds: per arm, left first, its joints' ranges (rad) and the normalized grip [0, 1]
         r = self.sim.model.jnt_range
@@ -211,6 +243,22 @@ class AlohaSimGym(gym.Env):
 
     def step(self, action):
         return self.sim.step(action)
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None  # Gymnasium's contract for render_mode=None
+        try:
+            if self.renderer is None:  # made at the first frame: a GL context only where one is drawn
+                self.renderer = mujoco.Renderer(self.sim.model, height=self.size[1], width=self.size[0])
+            self.renderer.update_scene(self.sim.data, camera=self.camera)
+            return self.renderer.render().copy()
+        except Exception as e:  # MuJoCo raises its own kinds (or AttributeError) when no GL context exists
+            raise gym.error.DependencyNotInstalled(_no_gl("render()", e)) from e
+
+    def close(self) -> None:
+        if self.renderer is not None:
+            self.renderer.close()
+            self.renderer = None
 
 
 def _register() -> None:

@@ -257,3 +257,66 @@ def test_gym_alohas_two_tasks_through_gymnasium_make():
         want, want_reward, *_ = ref.step(action)
         assert obs.tobytes() == want.tobytes() and reward == want_reward
     assert terminated and not truncated and info["is_success"]
+
+
+@pytest.mark.skipif(importlib.util.find_spec("gym_aloha") is None, reason="gym-aloha (its model files)")
+def test_gym_alohas_envs_refuse_what_they_cannot_take_as_pusht_does(tmp_path, monkeypatch):
+    """Issue 62 #9: gymnasium.make("ch37/AlohaSimTransferCube-v0", ...) answered scene="bogus" with a bare
+    KeyError, Gymnasium's render_mode="rgb_array" with a TypeError, reset_to_state with 3 of the cube's 7
+    pose numbers (7 of insertion's 14) by placing what it got, a NaN pose with NaN observations, and a 3-wide
+    action with a bare IndexError. Each is a ValueError saying what it takes, as ch37/PushT-v0's, and a NaN
+    action is refused as there, nothing written in the current folder."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ValueError, match="scene must be one of .*'insertion'.*'transfer_cube'.*got 'bogus'"):
+        gym.make("ch37/AlohaSimTransferCube-v0", scene="bogus")
+    with pytest.raises(ValueError, match="render_mode must be None or 'rgb_array', got 'bogus'"):
+        gym.make("ch37/AlohaSimTransferCube-v0", render_mode="bogus")
+    for env_id, n in (("ch37/AlohaSimTransferCube-v0", 7), ("ch37/AlohaSimInsertion-v0", 14)):
+        env = gym.make(env_id)
+        obs, _ = env.reset(seed=0)
+        good = obs[14:].astype(np.float64)
+        for bad in (good[:3], good[:7] if n == 14 else np.r_[good, 0.0], [good], "cube", None):
+            with pytest.raises(ValueError, match=f"reset_to_state'\\] takes {n} finite numbers"):
+                env.reset(options={"reset_to_state": bad})
+        for value in (np.nan, np.inf):
+            bad = good.copy()
+            bad[1] = value
+            with pytest.raises(ValueError, match=f"takes {n} finite numbers"):
+                env.reset(options={"reset_to_state": bad})
+        bad = good.copy()
+        bad[3:7] = 0.0  # a quaternion of no rotation at all: MuJoCo would quietly stand the object upright
+        with pytest.raises(ValueError, match="quaternion"):
+            env.reset(options={"reset_to_state": bad})
+        placed, _ = env.reset(options={"reset_to_state": good})  # what it takes still places it
+        assert np.all(np.isfinite(placed)) and np.allclose(placed[14:], good, atol=1e-6)
+        for bad in (np.zeros(3), np.zeros((2, 14)), np.full(14, np.nan), np.r_[np.inf, np.zeros(13)]):
+            with pytest.raises(ValueError, match="action takes 14 finite numbers|non-finite action"):
+                env.step(bad)
+        assert env.step(np.zeros(14))[0].shape == obs.shape  # and a good one still steps
+        env.close()
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(not gl_works(), reason="no OpenGL backend (MUJOCO_GL=egl or osmesa)")
+@pytest.mark.skipif(importlib.util.find_spec("gym_aloha") is None, reason="gym-aloha (its model files)")
+def test_gym_alohas_envs_render_rgb_array_from_the_top_camera():
+    """Issue 62 #9: render_mode="rgb_array", as Gymnasium's envs take it (and gym-aloha's, 640 x 480 from
+    its "top" camera by default, visualization_width/_height to choose): render() is that frame, uint8;
+    render_mode=None renders nothing; a size past the models' offscreen buffer is a ValueError up front."""
+    env = gym.make(
+        "ch37/AlohaSimTransferCube-v0",
+        render_mode="rgb_array",
+        visualization_width=160,
+        visualization_height=120,
+    )
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.shape == (120, 160, 3) and frame.dtype == np.uint8 and frame.std() > 0
+    env.step(env.unwrapped.sim.observation()[:14])
+    assert env.render().shape == (120, 160, 3)
+    env.close()
+    plain = gym.make("ch37/AlohaSimInsertion-v0")
+    plain.reset(seed=0)
+    assert plain.render() is None
+    with pytest.raises(ValueError, match="at most 640 x 480"):
+        gym.make("ch37/AlohaSimInsertion-v0", render_mode="rgb_array", visualization_width=1280)

@@ -1253,6 +1253,30 @@ def test_a_tools_figure_is_replaced_only_beside_its_own_result(tmp_path):
     ownership.check_own_result(tmp_path / "replay_sigma.json", "replay_sigma", beside=[png])
 
 
+def test_the_gpu_check_refuses_a_bad_argument_before_it_starts(tmp_path):
+    """Issue 62 #10: tools/gpu_check.sh --bogus, --run with no command and a --wheels word it has no list
+    for started the check (a pip install into /tmp/site, a log in $OUT) or ran nothing with pip's lines;
+    each is one `error:` line, exit 2, with nothing written and no GPU asked for. --help prints the usage
+    and exits 0, also without writing."""
+    out = tmp_path / "out"
+    env = {**os.environ, "OUT": str(out), "PATH": "/usr/bin:/bin"}  # no python3 from the venv either
+    script = ROOT / "tools" / "gpu_check.sh"
+    for args, needle in (
+        (["--bogus"], "'--bogus'"),
+        (["--run"], "--run needs a command"),
+        (["--wheels", "all"], "'all'"),
+        (["--wheels", "value", "again"], "--wheels takes one word"),
+        ([""], "unknown argument ''"),
+    ):
+        p = subprocess.run(["bash", script, *args], capture_output=True, text=True, env=env, timeout=60)
+        err = p.stderr.strip().splitlines()
+        assert p.returncode == 2 and len(err) == 1 and err[0].startswith("error:"), (args, p.stderr)
+        assert needle in err[0] and p.stdout == "" and not out.exists(), (args, p.stderr)
+    p = subprocess.run(["bash", script, "--help"], capture_output=True, text=True, env=env, timeout=60)
+    assert p.returncode == 0 and p.stdout.startswith("usage: bash tools/gpu_check.sh"), p.stdout + p.stderr
+    assert "--run CMD" in p.stdout and p.stderr == "" and not out.exists()
+
+
 @pytest.mark.parametrize("task", ["pusher", "gym_pusht"])
 def test_bench_engine_refuses_a_task_it_cannot_measure_in_one_line(tmp_path, task):
     """Issue 51 #2: `python -m tools.bench engine --task pusher` (or gym_pusht) made a source set, then

@@ -3,6 +3,7 @@ generated or grown), and a checkpoint it writes is rolled out in our PushT env b
 Training runs only under -m slow."""
 
 import json
+import math
 import shutil
 import sys
 from pathlib import Path
@@ -339,6 +340,105 @@ def test_the_lerobot_row_is_counted_from_its_evaluations_own_files(tmp_path, tas
     assert f"seed1/eval_sources/{file}" in lines[0]
 
 
+def fake_row(root: Path, task: str, n: int = 4, seeds=(0, 1)) -> dict:
+    """A small run folder shaped like ROWS[task]'s kept one: each seed's three sets scored on the same `n`
+    starts (set j wins its first j + 1), its train logs ending in a `loss:`; returns {set: file of seed 0}."""
+    _, sets, file, _ = ROWS[task]
+    first = {}
+    for s in seeds:
+        for j, k in enumerate(sets):
+            wins, best = [e <= j for e in range(n)], [float(e <= j) * 4 for e in range(n)]
+            if file == "eval_info.json":
+                metrics = {"max_rewards": [b / 4 for b in best], "successes": wins}
+                r = {"per_task": [{"task_group": "pusht", "task_id": 0, "metrics": metrics}]}
+            else:
+                eps = [
+                    {"seed": (3 * s + 2) * 10**6 + e, "success": w, "steps": 400, "max_reward": b}
+                    for e, (w, b) in enumerate(zip(wins, best, strict=True))
+                ]
+                r = {"kind": "lerobot_eval", "episodes": n, "successes": sum(wins), "per_episode": eps}
+            path = root / f"seed{s}" / f"eval_{k}" / file
+            path.parent.mkdir(parents=True)
+            path.write_text(json.dumps(r))
+            (root / f"seed{s}" / f"train_{k}.log").write_text("step:100 smpl:800 loss:0.512 grdn:1.2\n")
+            first.setdefault(k, path)
+    return first
+
+
+@pytest.mark.parametrize("task", ROWS)
+def test_the_lerobot_table_refuses_a_damaged_evaluation_in_one_line_naming_it(tmp_path, task, capsys):
+    """Issue 62 #8: an evaluation with no episodes, a max reward of NaN or Infinity (or a word), one set
+    scored on fewer starts than the others of its seed, a success that is the word "false" (once counted a
+    success: 6/150 read 7/150) and a train log cut after `loss:` were tracebacks or a silent recount: each
+    is one `error:` line naming the file, exit 2."""
+    _, sets, file, _ = ROWS[task]
+    run = tmp_path / "run"
+    ours = file != "eval_info.json"
+
+    def damage_reward(value):
+        def f(r):
+            if ours:
+                r["per_episode"][1]["max_reward"] = value
+            else:
+                r["per_task"][0]["metrics"]["max_rewards"][1] = value
+
+        return f
+
+    def false_word(r):
+        if ours:
+            r["per_episode"][2]["success"] = "false"
+        else:
+            r["per_task"][0]["metrics"]["successes"][2] = "false"
+
+    def fewer(r):
+        if ours:
+            del r["per_episode"][2:]
+            r["episodes"], r["successes"] = 2, sum(e["success"] for e in r["per_episode"])
+        else:
+            for k in ("max_rewards", "successes"):
+                del r["per_task"][0]["metrics"][k][2:]
+
+    def empty(r):
+        if ours:
+            r["per_episode"], r["episodes"], r["successes"] = [], 0, 0
+        else:
+            r["per_task"][0]["metrics"].update(max_rewards=[], successes=[])
+
+    cases = {
+        "no episodes": (empty, "no episodes"),
+        "nan": (damage_reward(math.nan), "max reward"),
+        "inf": (damage_reward(math.inf), "max reward"),
+        "word": (damage_reward("4"), "max reward"),
+        '"false"': (false_word, "success"),
+        "10 of 50": (fewer, "starts"),
+    }
+    from ch37.errors import DataError
+    from tools import lerobot as tool
+
+    fake_row(tmp_path / "good", task)
+    assert tool.table_main([str(tmp_path / "good")]) == 0  # the fake row itself is read
+    assert "pooled" in capsys.readouterr().out
+    for name, (hurt, needle) in cases.items():  # in-process: each would be a subprocess importing torch
+        shutil.rmtree(run, ignore_errors=True)
+        path = fake_row(run, task)[sets[1]]
+        r = json.loads(path.read_text())
+        hurt(r)
+        path.write_text(json.dumps(r))
+        with pytest.raises(DataError) as e:
+            tool.table_main([str(run)])
+        assert f"seed0/eval_{sets[1]}/{file}" in str(e.value) and needle in str(e.value), (name, e.value)
+        assert "\n" not in str(e.value) and "pooled" not in capsys.readouterr().out, name
+    if task == "gym_pusht":  # the last case as a user meets it (once: a subprocess imports torch anew)
+        p = run_script("-m", "tools.lerobot", "table", run, check=False)
+        lines = p.stderr.strip().splitlines()
+        assert p.returncode == 2 and len(lines) == 1 and lines[0].startswith("error:"), p.stderr
+    shutil.rmtree(run)
+    fake_row(run, task)
+    (run / "seed1" / "train_fresh.log").write_text("step:100 smpl:800 loss:")  # cut as it was written
+    with pytest.raises(DataError, match="seed1/train_fresh.log.*loss:"):
+        tool.table_main([str(run)])
+
+
 def test_the_lerobot_row_script_refuses_a_task_it_has_no_row_for(tmp_path):
     """tools/lerobot_row.sh names its tasks: another task, or no OUT folder, is one `error:` line and exit
     2, before anything is made."""
@@ -349,6 +449,44 @@ def test_the_lerobot_row_script_refuses_a_task_it_has_no_row_for(tmp_path):
         lines = p.stderr.strip().splitlines()
         assert p.returncode == 2 and len(lines) == 1 and lines[0].startswith("error:"), p.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_the_lerobot_row_script_checks_every_argument_before_any_work(tmp_path):
+    """Issue 62 #7: SEEDS, STEPS, EPISODES and LANES are whole numbers from 1 up (SEEDS=0 once ran no seed
+    and pointed at a log it never wrote; STEPS=abc started generating sets), EPISODES at most one seed
+    block, OUT a folder, at most six arguments: each wrong one is one `error:` line naming it, exit 2,
+    before anything is made (OUT is not created)."""
+    import subprocess
+
+    out, file = tmp_path / "out", tmp_path / "a_file"
+    file.write_text("mine")
+    cases = {  # the arguments after TASK OUT -> the name the line must hold
+        ("0",): "SEEDS",
+        ("abc",): "SEEDS",
+        ("1", "abc"): "STEPS",
+        ("1", "-5"): "STEPS",
+        ("1", "10", "0"): "EPISODES",
+        ("1", "10", "1000001"): "EPISODES",
+        ("1", "10", "5", "1.5"): "LANES",
+        ("1", "10", "5", "1", "extra"): "extra",
+        ("1", "99999999999999999999"): "STEPS",
+    }
+    for rest, name in cases.items():
+        p = subprocess.run(
+            ["bash", ROOT / "tools" / "lerobot_row.sh", "aloha_transfer_cube", out, *rest],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        lines = p.stderr.strip().splitlines()
+        assert p.returncode == 2 and len(lines) == 1 and lines[0].startswith("error:"), (rest, p.stderr)
+        assert name in lines[0] and not out.exists(), (rest, p.stderr)
+    p = subprocess.run(
+        ["bash", ROOT / "tools" / "lerobot_row.sh", "gym_pusht", file], capture_output=True, text=True
+    )
+    lines = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(lines) == 1 and lines[0].startswith("error:"), p.stderr
+    assert str(file) in lines[0] and file.read_text() == "mine"
 
 
 def tiny_act(widths: dict, folder: Path | None = None):

@@ -19,6 +19,23 @@
 # image holds; mujoco-studio (the viewer, 13 MB) is left out: the lesson never draws through it.
 set -uo pipefail
 cd "$(dirname "$0")/.."
+usage="usage: bash tools/gpu_check.sh [--wheels [lesson|value] | --run CMD [ARG...] | --help]"
+
+# every argument is read before anything runs: a word it does not know once started the check (a pip
+# install, a log in \$OUT) on a machine that may have no GPU
+case "${1:-}" in
+-h | --help)
+    echo "$usage"
+    sed -n '2,/^set -uo/p' "$0" | sed '$d; s/^# \{0,1\}//'  # the header above: what each form does
+    exit 0
+    ;;
+--wheels)
+    case "${2:-lesson}" in lesson | value) ;; *) echo "error: --wheels takes lesson or value, not '$2'; $usage" >&2 && exit 2 ;; esac
+    [ $# -le 2 ] || { echo "error: --wheels takes one word (lesson or value), not '${*:2}'; $usage" >&2 && exit 2; }
+    ;;
+--run) [ $# -ge 2 ] || { echo "error: --run needs a command to run; $usage" >&2 && exit 2; } ;;
+*) [ $# -eq 0 ] || { echo "error: unknown argument '$1'; $usage" >&2 && exit 2; } ;;
+esac
 
 if [ "${1:-}" = "--wheels" ]; then
     py=.venv/bin/python
@@ -30,7 +47,6 @@ if [ "${1:-}" = "--wheels" ]; then
     case "${2:-lesson}" in
         lesson) names="$common av datasets diffusers draccus lerobot mergedeep multiprocess pytz tzdata" ;;
         value) names="$common gym-pusht pymunk pygame shapely" ;;
-        *) echo "--wheels lesson|value"; exit 2 ;;
     esac
     for name in $names; do
         pin=$(grep -io "^$name==[^ ;]*" requirements.lock) || { echo "$name: not in requirements.lock"; exit 2; }

@@ -631,32 +631,77 @@ TABLE_KIND = "lerobot_pusht_table"  # both rows' tables: the name the first one 
 def eval_info(path: Path) -> dict:
     """A run's evaluation -> successes, episodes, mean max reward and each start's: lerobot-eval's
     eval_info.json (gym-pusht's reward: its coverage / 0.95, at most 1) or this tool's eval JSON (the
-    task's reward; transfer-cube: gym-aloha's stage 0..4)."""
+    task's reward; transfer-cube: gym-aloha's stage 0..4), and the starts' env seeds where the file names
+    them (this tool's), else None. A file that is not one, or one whose episodes a count would misread (no
+    episode, a success that is not true or false, a max reward that is not a finite number, a count that
+    disagrees with its episodes), is a DataError naming it: the table never recounts it silently."""
+    what = "lerobot-eval's eval_info.json" if path.name == "eval_info.json" else f"{EVAL_KIND}'s JSON"
     try:
         r = json.loads(path.read_text())
         if path.name == "eval_info.json":
             m = r["per_task"][0]["metrics"]
-            wins, best = [bool(x) for x in m["successes"]], [float(x) for x in m["max_rewards"]]
+            wins, best, starts = list(m["successes"]), list(m["max_rewards"]), None
+            if len(wins) != len(best):
+                raise ValueError(f"{len(wins)} successes against {len(best)} max rewards")
         else:
-            wins = [bool(e["success"]) for e in r["per_episode"]]
-            best = [float(e["max_reward"]) for e in r["per_episode"]]
+            wins = [e["success"] for e in r["per_episode"]]
+            best = [e["max_reward"] for e in r["per_episode"]]
+            starts = [e["seed"] for e in r["per_episode"]]
     except (OSError, ValueError, KeyError, IndexError, TypeError) as e:
-        what = "lerobot-eval's eval_info.json" if path.name == "eval_info.json" else f"{EVAL_KIND}'s JSON"
         raise DataError(f"{path} is not {what} ({type(e).__name__}: {e})") from e
+    if not wins:
+        raise DataError(f"{path} holds no episodes: it scores no start (rerun its evaluation)")
+    for j, (w, b) in enumerate(zip(wins, best, strict=True)):
+        if type(w) is not bool:  # bool("false") is True: a word would count as a success
+            raise DataError(f"{path}: episode {j}'s success is {w!r}, not true or false")
+        if type(b) not in (int, float) or not math.isfinite(b):
+            raise DataError(f"{path}: episode {j}'s max reward is {b!r}, not a finite number")
+    stated = {k: r[k] for k in ("episodes", "successes") if path.name != "eval_info.json" and k in r}
+    counted = {"episodes": len(wins), "successes": sum(wins)}
+    if any(stated[k] != counted[k] for k in stated):
+        raise DataError(f"{path} states {stated} but its per_episode holds {counted}")
     return {
         "successes": sum(wins),
         "episodes": len(wins),
-        "max_reward": sum(best) / max(len(best), 1),
-        "best": best,
+        "max_reward": sum(best) / len(best),
+        "best": [float(b) for b in best],
+        "starts": starts,
     }
 
 
+def same_starts(evals: dict[str, dict], paths: dict[str, Path]) -> None:
+    """A seed's three sets are scored on the same starts (the table pairs them start by start): a set
+    scored on other starts, or on a different number of them, is a DataError naming its file (the one
+    the other two disagree with; the first set's against the second where all three differ)."""
+    key = {k: e["starts"] or e["episodes"] for k, e in evals.items()}  # the seeds where the file names them
+    ks = list(evals)
+    common = next((key[k] for k in ks if sum(key[k] == key[j] for j in ks) > 1), key[ks[0]])
+    for k in ks:
+        if key[k] != common:
+            ref = next(j for j in ks if key[j] == common)
+            n, m = evals[k]["episodes"], evals[ref]["episodes"]
+            raise DataError(
+                f"{paths[k]} scores {n} starts, {paths[ref].parent.name}'s {m}"
+                + (" (other seeds)" if n == m else "")
+                + ": a seed's sets are scored on the same starts; remove that eval_ folder and run "
+                "tools/lerobot_row.sh again"
+            )
+
+
 def final_loss(log: Path) -> float | None:
-    """The last `loss:` lerobot-train logged (a mean over its last --log_freq steps), or None."""
+    """The last `loss:` lerobot-train logged (a mean over its last --log_freq steps), or None when the log
+    has none; a `loss:` without a number (a log cut as it was written) is a DataError naming the log."""
     found = (
         [w for w in log.read_text(errors="replace").split() if w.startswith("loss:")] if log.is_file() else []
     )
-    return float(found[-1][5:]) if found else None
+    if not found:
+        return None
+    try:
+        return float(found[-1][5:])
+    except ValueError:
+        raise DataError(
+            f"{log}: its last `loss:` reads {found[-1]!r}, not a number (a log cut short?)"
+        ) from None
 
 
 def table_main(argv: list[str] | None = None) -> int:
@@ -673,7 +718,11 @@ def table_main(argv: list[str] | None = None) -> int:
     last logged loss; the pooled success with the lesson's 95% Wilson interval; the paired per-seed
     differences, and the max reward's difference paired start by start (each seed's three sets are
     scored on the same starts) over all seeds, with its 95% t-interval (tools.common.mean_ci). --json
-    writes the same as one JSON. Only seeds with all three sets evaluated are counted.
+    writes the same as one JSON. Only seeds with all three sets evaluated are counted. Every file is
+    checked before a line is printed: an evaluation with no episode, a success that is not true or
+    false, a max reward that is not a finite number, counts that disagree with its episodes, a set scored
+    on other starts than its seed's other sets, or a train log whose last `loss:` has no number, is one
+    `error:` line naming the file (exit 2), never a silent recount.
     """
     p = parser("lerobot table", table_main.__doc__, script=False)
     p.add_argument("out", type=Path, help="the folder tools/lerobot_row.sh wrote")
@@ -688,11 +737,11 @@ def table_main(argv: list[str] | None = None) -> int:
         wanted = "; ".join(f"{t}: eval_{{{','.join(k)}}}/{f}" for t, (k, f) in ROWS.items())
         raise DataError(f"{a.out} holds no seed with its three sets evaluated ({wanted})")
     rows = {}
-    for s in done:
+    for s in done:  # every file read and checked before a line is printed
         d = a.out / f"seed{s}"
-        rows[s] = {
-            k: eval_info(d / f"eval_{k}" / file) | {"loss": final_loss(d / f"train_{k}.log")} for k in sets
-        }
+        paths = {k: d / f"eval_{k}" / file for k in sets}
+        rows[s] = {k: eval_info(paths[k]) | {"loss": final_loss(d / f"train_{k}.log")} for k in sets}
+        same_starts(rows[s], paths)
     pooled = {}
     for k in sets:
         wins, n = sum(r[k]["successes"] for r in rows.values()), sum(r[k]["episodes"] for r in rows.values())
@@ -743,7 +792,7 @@ def table_main(argv: list[str] | None = None) -> int:
             "kind": TABLE_KIND,
             "task": task,
             "seeds": {
-                str(s): {k: {n: v for n, v in e.items() if n != "best"} for k, e in r.items()}
+                str(s): {k: {n: v for n, v in e.items() if n not in ("best", "starts")} for k, e in r.items()}
                 for s, r in rows.items()
             },
             "pooled": pooled,

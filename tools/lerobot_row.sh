@@ -36,7 +36,17 @@ aloha_transfer_cube) src=10 fresh=210 per=20 mode=replay grown=replayed ;;
 *) echo "error: TASK must be gym_pusht or aloha_transfer_cube, not '${task}'; $usage" >&2 && exit 2 ;;
 esac
 [ -n "$out" ] || { echo "error: no OUT folder; $usage" >&2 && exit 2; }
+[ ! -e "$out" ] || [ -d "$out" ] || { echo "error: OUT $out is not a folder; $usage" >&2 && exit 2; }
+[ $# -le 6 ] || { echo "error: too many arguments (from '${7}' on); $usage" >&2 && exit 2; }
 seeds=${3:-3} steps=${4:-1000} episodes=${5:-50} lanes=${6:-2}
+# every number checked before any work: a bad one once ran no seed (SEEDS=0) or generated sets first and
+# failed in lerobot-train (STEPS=abc); nine digits keep bash's arithmetic far from overflow
+for arg in "SEEDS=$seeds" "STEPS=$steps" "EPISODES=$episodes" "LANES=$lanes"; do
+    [[ ${arg#*=} =~ ^[1-9][0-9]{0,8}$ ]] ||
+        { echo "error: ${arg%%=*} must be a whole number from 1 up, not '${arg#*=}'; $usage" >&2 && exit 2; }
+done
+# each seed's evaluation starts are one block of ch37.seeds (tools.lerobot eval's own --eval_episodes bound)
+[ "$episodes" -le 1000000 ] || { echo "error: EPISODES must be at most 1000000, not $episodes; $usage" >&2 && exit 2; }
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 bin="$root/.venv/bin"
 export HF_HUB_OFFLINE=1 HF_DATASETS_OFFLINE=1  # a file missing from a set is an error, never a download

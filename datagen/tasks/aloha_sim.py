@@ -247,9 +247,26 @@ class TransferCubeEnv:
     def observation(self) -> np.ndarray:
         return np.concatenate([qpos14(self.data), self.data.qpos[16 : 16 + self.objects]]).astype(np.float32)
 
+    def poses(self, state) -> np.ndarray:
+        """reset_to_state's numbers as the objects' poses, (objects,) float64; anything else is a ValueError
+        saying what it takes (MuJoCo would place a short or NaN pose as it came, and stand an object with
+        an all-zero quaternion upright)."""
+        what = "the cube's" if self.objects == 7 else "the peg's, then the socket's"
+        takes = f"options['reset_to_state'] takes {self.objects} finite numbers, {what} pose"
+        takes += " (x, y, z m; qw, qx, qy, qz)"
+        try:
+            x = np.asarray(state, np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"{takes}; got {state!r}") from None
+        if x.shape != (self.objects,) or not np.all(np.isfinite(x)):
+            raise ValueError(f"{takes}; got {x.tolist() if x.size <= 2 * self.objects else x.shape}")
+        if np.any(np.linalg.norm(x.reshape(-1, 7)[:, 3:], axis=1) < 1e-6):
+            raise ValueError(f"{takes}; a quaternion of {x.tolist()} is all zeros: it is no orientation")
+        return x
+
     def reset(self, *, seed=None, options=None):
         placed = options and "reset_to_state" in options
-        objects = options["reset_to_state"] if placed else self.draw(seed)
+        objects = self.poses(options["reset_to_state"]) if placed else self.draw(seed)
         m, d = self.model, self.data
         _reset(m, d, np.asarray(objects, np.float64))
         d.ctrl[:] = START_ARM_POSE
@@ -259,6 +276,13 @@ class TransferCubeEnv:
 
     def step(self, action):
         a = np.asarray(action, np.float64)
+        if a.shape != (14,):  # a 3-wide one was an IndexError deep in here
+            raise ValueError(
+                f"action takes 14 finite numbers (per arm, left first, 6 joint targets rad and a gripper, "
+                f"0 closed, 1 open); got shape {a.shape}"
+            )
+        if not np.all(np.isfinite(a)):  # MuJoCo would zero the controls, warn and write MUJOCO_LOG.TXT
+            raise ValueError(f"non-finite action {a}")
         gl, gr = unnormalize_gripper(a[6]), unnormalize_gripper(a[13])  # BimanualViperXTask.before_step
         self.data.ctrl[:] = np.r_[a[:6], gl, -gl, a[7:13], gr, -gr]
         _step(self.model, self.data)
