@@ -1,0 +1,260 @@
+"""Issue 61: every number the README and docs/ publish, recounted from the file it came from: meta.yaml
+(the lesson's sweeps, written by `python -m tools.meta`) or results/ (results/README.md names each file's
+command, commit, host and kernel path). Each claim is rebuilt here from its file, formatted as the page
+prints it, and looked up in the page: a page figure edited by hand, a kept result that changed, or a
+scale_data.py region changed without its run re-made fails a test here. Pure reading, no run: seconds."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+import yaml
+
+from bc_recipe import wilson
+from tools.common import META, SCRIPT, mean_ci, region_hashes, t975
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "results"
+
+
+def text(page: str) -> str:
+    """A page with its line breaks and runs of spaces folded, so a claim may wrap anywhere."""
+    return " ".join((ROOT / page).read_text(encoding="utf-8").split())
+
+
+def has(page: str, *claims: str) -> None:
+    body = text(page)
+    missing = [c for c in claims if " ".join(c.split()) not in body]
+    assert not missing, f"{page} no longer states what its kept file says: {missing}"
+
+
+def meta() -> dict:
+    return yaml.safe_load(META.read_text(encoding="utf-8"))
+
+
+def kept(name: str) -> dict:
+    path = RESULTS / name
+    return yaml.safe_load(path.read_text()) if path.suffix == ".yaml" else json.loads(path.read_text())
+
+
+def rate(k: int, n: int, d: int = 3) -> str:
+    """k/n = rate [Wilson 95%], as the pages print a pooled success."""
+    lo, hi = wilson(k / n, n)
+    return f"{k}/{n} = {k / n:.{d}f} [{lo:.{d}f}, {hi:.{d}f}]"
+
+
+def pooled_rate(p: dict) -> str:
+    return rate(p["successes"], p["episodes"])
+
+
+def ci(c: list[float], d: int = 3) -> str:
+    return f"[{c[0]:+.{d}f}, {c[1]:+.{d}f}]"
+
+
+def thousands(n: int) -> str:
+    return f"{n:,}"
+
+
+# --- the published run's provenance ------------------------------------------------------------------
+
+
+def test_the_published_run_was_made_by_the_code_of_every_region():
+    """Issue 61 #3: `python -m tools.regions --write` refreshes meta.yaml's region_hashes without a run, so
+    the hashes the sweeps themselves recorded (each reference_run block's provenance) are compared with the
+    code: a region changed since the published numbers were made fails here until the sweeps are re-run
+    (python -m tools.sweep --seeds 5, --aug 0 4 8, then python -m tools.meta)."""
+    now, m = region_hashes(SCRIPT), meta()
+    for block in ("seeds", "aug_curve"):
+        prov = m["reference_run"][block]["provenance"]
+        drift = [r for r in now if prov["script_region_hashes"].get(r) != now[r]]
+        assert not drift, (
+            f"scale_data.py region(s) {drift} differ from the ones meta.yaml's reference_run.{block} ran "
+            f"({prov['command']} at {prov['git']['commit'][:7]}): re-run it and python -m tools.meta"
+        )
+        assert not prov["git"]["dirty"], f"reference_run.{block} ran on a dirty tree"
+    assert m["region_hashes"] == now
+
+
+# --- README.md: "What the lesson measured" against meta.yaml ------------------------------------------
+
+
+def test_the_readme_table_is_meta_yamls_reference_run():
+    run = meta()["reference_run"]["seeds"]
+    rows = [
+        f"| {r['seed']} | {r['source_short']:.2f} | {r['augmented_short']:.2f} | {r['source_full']:.2f} | "
+        f"{r['augmented_full']:.2f} | {r['data_full']:+.2f} | {r['kept']}/{r['attempts']} | "
+        f"{r['coverage_source']} -> {r['coverage_union']} |"
+        for r in run["rows"]
+    ]
+    m = run["mean"]
+    rows.append(
+        f"| mean | {m['source_short']:.3f} | {m['augmented_short']:.3f} | {m['source_full']:.3f} | "
+        f"{m['augmented_full']:.3f} | {m['data_full']:+.3f} | {m['yield']:.2f} | {m['coverage_union']} |"
+    )
+    has("README.md", *rows)
+    assert [r["seed"] for r in run["rows"]] == list(range(5))
+    for r in run["rows"]:  # the row's own arithmetic, so a hand-edited meta.yaml is caught too
+        assert r["data_full"] == pytest.approx(r["augmented_full"] - r["source_full"], abs=1e-9)
+        assert r["augmented_full"] == r["successes"]["augmented_full"] / r["eval_episodes"]
+
+
+def test_the_readme_bullets_are_meta_yamls_paired_and_pooled_numbers():
+    run = meta()["reference_run"]["seeds"]
+    rows, paired, pooled = run["rows"], run["paired"], run["pooled"]
+    for k, p in paired.items():  # each paired interval recomputed from the rows: 95% t over seeds
+        d = [r[k] for r in rows]
+        mean, _, c = mean_ci(d)
+        assert p["mean"] == pytest.approx(mean, abs=1e-6) and p["ci95"] == pytest.approx(c, abs=1e-5), k
+        assert (p["wins"], p["ties"]) == (sum(x > 0 for x in d), sum(x == 0 for x in d))
+    for k, p in pooled.items():
+        assert p["successes"] == sum(r["successes"][k] for r in rows) and p["episodes"] == 50 * len(rows)
+        assert p["ci95"] == pytest.approx(wilson(p["successes"] / p["episodes"], p["episodes"]), abs=1e-5)
+    df, ds, cs, ca = (paired[k] for k in ("data_full", "data_short", "compute_source", "compute_augmented"))
+    steps = [r["steps"] for r in rows]
+    short, full = [s["short"] for s in steps], [s["full"] for s in steps]
+    assert rows[0]["steps"]["short"] == math.ceil(420 * 500 / 128)  # seed 0's 420 source frames, batch 128
+    effect = [r["data_full"] for r in rows]
+    has(
+        "README.md",
+        f"Success on {rows[0]['eval_episodes']} held-out starts per arm.",
+        f"{thousands(short[0])} gradient steps at seed 0 (its 420 frames), "
+        f"{thousands(min(short))} to {thousands(max(short))} by seed.",
+        f"({thousands(min(full))} to {thousands(max(full))} steps by seed)",
+        f"at the full budget on {df['wins']} of {df['n']} seeds: mean paired difference {df['mean']:+.3f}, "
+        f"95% interval over seeds {ci(df['ci95'])}",
+        f"{pooled['source_full']['episodes']} episodes per arm: "
+        + rate(pooled["source_full"]["successes"], pooled["source_full"]["episodes"])
+        + " without augmentation, "
+        + rate(pooled["augmented_full"]["successes"], pooled["augmented_full"]["episodes"])
+        + " with it (Wilson intervals)",
+        f"{ds['mean']:+.3f} {ci(ds['ci95'])} ({ds['wins']} of {ds['n']} seeds up, {ds['ties']} tied). "
+        f"With {thousands(min(short))} to {thousands(max(short))} steps",
+        f"moved source-only by {cs['mean']:+.3f} {ci(cs['ci95'])} and source+augmented by "
+        f"{ca['mean']:+.3f} {ci(ca['ci95'])} ({ca['wins']} of {ca['n']} seeds)",
+        f"({effect[0]:+.2f} against {df['mean']:+.3f}, from {min(effect):+.2f} to {max(effect):+.2f})",
+        f"coverage rises from about {round(sum(r['coverage_source'] for r in rows) / len(rows))} to "
+        f"{round(run['mean']['coverage_union'])} of 36",
+    )
+    assert all(r["kept"] == r["attempts"] == 96 for r in rows)
+    has("README.md", "Every seed kept 96 of 96 attempts (yield 1.00)")
+    # "with 50 starts one seed's interval is about +-0.1": the seeds' Wilson half-widths of the arm that moves
+    assert {
+        round((r["ci95"]["augmented_full"][1] - r["ci95"]["augmented_full"][0]) / 2, 1) for r in rows
+    } == {0.1}
+    has("README.md", "with 50 starts one seed's interval is about +-0.1")
+
+
+def test_the_readme_kernel_path_bullet_is_the_three_kept_sweeps():
+    paths = [meta()] + [kept(f"sweep_mkl_{p}.yaml") for p in ("compatible", "native")]
+    runs = [p["reference_run"]["seeds"] for p in paths]
+    effects = [[r["data_full"] for r in run["rows"]] for run in runs]
+    moved = max(max(e[s] for e in effects) - min(e[s] for e in effects) for s in range(5))
+    assert all(run["paired"]["data_full"]["wins"] == 5 for run in runs)
+    has(
+        "README.md",
+        f"the grown data also won on 5 of 5 seeds, {runs[1]['paired']['data_full']['mean']:+.3f} and "
+        f"{runs[2]['paired']['data_full']['mean']:+.3f}, while single seeds moved by up to {moved:.2f}",
+    )
+
+
+def test_the_readme_replay_lines_are_their_kept_files():
+    rep = meta()["replay"]["compare"]["modes"]["replay"]
+    aloha = kept("aloha_value.json")
+    pooled = aloha["pooled"]
+    assert all(r["replay"]["kept"] == r["replay"]["attempts"] == 96 for r in aloha["rows"])
+    pct = {k: round(100 * v["rate"]) for k, v in pooled.items()}
+    has(
+        "README.md",
+        f"which kept {rep['kept']} of {thousands(rep['attempts'])} attempts over the same five seeds",
+        f"keeps {100 * rep['kept'] / rep['attempts']:.1f}% of PushT attempts",
+        "every ALOHA attempt (96 of 96 a seed)",
+        f"from {pct['source']}% to {pct['replayed']}% of held-out "
+        f"starts where 96 re-solved ones reach {pct['resolved']}% "
+        f"({pooled['source']['successes']}, {pooled['replayed']['successes']} and "
+        f"{pooled['resolved']['successes']} of {pooled['source']['episodes']}: seeds 0..2, 100 starts each, "
+        f"on the CPU at {aloha['git']['commit'][:7]}",
+    )
+    assert [r["seed"] for r in aloha["rows"]] == [0, 1, 2] and aloha["config"]["eval_episodes"] == 100
+
+
+# --- the kept LeRobot rows: each table JSON recounted from the evaluations beside it ---------------------
+
+TABLES = (
+    "gym_pusht_lerobot",
+    "gym_pusht_lerobot_3000",
+    "aloha_transfer_cube_act",
+    "aloha_transfer_cube_act_10000",
+)
+
+
+@pytest.mark.parametrize("name", TABLES)
+def test_each_kept_lerobot_table_is_its_evaluations_recounted(tmp_path, name):
+    """The table JSON (what the pages quote) against `tools.lerobot table` run again on the kept
+    evaluations: a changed evaluation or a hand-edited table fails. The losses come from lerobot-train's
+    logs, which are not kept, so they are the one field not recounted."""
+    from tools import lerobot
+
+    out = tmp_path / "t.json"
+    assert lerobot.table_main([str(RESULTS / name), "--json", str(out)]) == 0
+    new, old = json.loads(out.read_text()), kept(f"{name}.json")
+    for r in [*new["seeds"].values(), *old["seeds"].values()]:
+        for e in r.values():
+            e.pop("loss")
+    assert new == old
+
+
+def steps_of(name: str) -> set[int]:
+    configs = (RESULTS / name).glob("seed*/train_*/train_config.json")
+    return {json.loads(p.read_text())["steps"] for p in configs}
+
+
+def test_the_readme_lerobot_lines_are_their_kept_files():
+    act, act10 = kept("aloha_transfer_cube_act.json"), kept("aloha_transfer_cube_act_10000.json")
+    p = act["pooled"]
+    assert steps_of("aloha_transfer_cube_act") == {5000}
+    assert steps_of("aloha_transfer_cube_act_10000") == {10000}
+    assert sorted(act["seeds"]) == ["0", "1", "2"] and list(act10["seeds"]) == ["0"]
+    s0 = act10["seeds"]["0"]
+    mlp, diff = kept("gym_pusht_value.json"), kept("gym_pusht_lerobot.json")
+    q = mlp["pooled"]
+    dp = diff["paired"]["resolved - sources"]["max_reward_paired"]
+    assert steps_of("gym_pusht_lerobot") == {1000} and steps_of("gym_pusht_lerobot_3000") == {3000}
+    assert all(v["successes"] == 0 and v["episodes"] == 150 for v in diff["pooled"].values())
+    has(
+        "README.md",
+        "for 5,000 steps (seeds 0..2, 50 held-out starts each)",
+        f"hands the cube over in [{pooled_rate(p['fresh'])} of held-out starts from 210 fresh expert demos, "
+        f"{pooled_rate(p['sources'])} from the 10 sources alone, and {pooled_rate(p['replayed'])} from the "
+        "sources plus "
+        "about 200 replayed",
+        "one seed (seed 0) at 10,000 steps turns the order over (replayed "
+        f"{s0['replayed']['successes']}/{s0['replayed']['episodes']}, fresh {s0['fresh']['successes']}/"
+        f"{s0['fresh']['episodes']}, sources {s0['sources']['successes']}/{s0['sources']['episodes']})",
+        f"from {q['source']['successes']}/{q['source']['episodes']} to "
+        f"{pooled_rate(q['resolved'])} in gym-pusht's own success (108 fresh "
+        f"expert demos: {pooled_rate(q['fresh'])}; seeds 0..2, 100 starts each",
+        f"numpy {mlp['packages']['numpy']} rather than the lock's",
+        "for 1,000 steps (seeds 0..2) and scored by `lerobot-eval`, solves none of 150 starts from any set",
+        f"by {dp['mean']:+.3f} {ci(dp['ci95'])} (95% t, paired over the {dp['episodes']} starts)",
+        "but on seed 0 at 3,000 steps that gap is gone",
+    )
+    assert mlp["config"]["eval_episodes"] == 100 and len(mlp["rows"]) == 3
+    assert "gpu" in mlp["platform"]["os"]  # the H100 host's image; its kernel path is CUDA's
+
+
+def test_the_readme_scale_lab_line_is_meta_yamls_scale_lab():
+    curves = meta()["scale_lab"]["curves"]
+    ns = sorted({int(n) for c in curves.values() for n in c})
+    words = {3: "three", 4: "four", 5: "five"}
+    has("README.md", f"{ns[0]} to {ns[-1]} demos, {words[len(curves)]} curves")
+
+
+def test_the_t_quantile_is_computed_as_named():
+    """Issue 61 #4: "95% t" is the t quantile at every dof (tools/common.py used 1.96 above 10 dof): the
+    printed tables' values, and the interval docs/engine.md quotes at 50 starts."""
+    table = [12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228]  # 1..10 dof, as printed
+    assert [t975(k) for k in range(1, 11)] == table
+    assert (t975(30), t975(49), t975(149), t975(10**6)) == (2.042, 2.010, 1.976, 1.960)
