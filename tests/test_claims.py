@@ -258,3 +258,89 @@ def test_the_t_quantile_is_computed_as_named():
     table = [12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228]  # 1..10 dof, as printed
     assert [t975(k) for k in range(1, 11)] == table
     assert (t975(30), t975(49), t975(149), t975(10**6)) == (2.042, 2.010, 1.976, 1.960)
+
+
+# --- docs/reproducibility.md --------------------------------------------------------------------------
+
+
+def ex3_verdict(curve: list[float]) -> str:
+    """meta.yaml's rules.ex3_answer: the last step s8 - s4 decides, +-0.04."""
+    step = curve[2] - curve[1]
+    return "climb" if step > 0.04 + 1e-9 else "fall" if step < -0.04 - 1e-9 else "plateau"
+
+
+def test_reproducibility_paths_table_is_the_three_kept_sweeps():
+    paths = [meta()] + [kept(f"sweep_mkl_{p}.yaml") for p in ("compatible", "native")]
+    runs = [p["reference_run"] for p in paths]
+    cells = {
+        arm: " | ".join(pooled_rate(r["seeds"]["pooled"][key]) for r in runs)
+        for arm, key in (
+            ("source, short", "source_short"),
+            ("source + augmented, short", "augmented_short"),
+            ("source, full", "source_full"),
+            ("source + augmented, full", "augmented_full"),
+        )
+    }
+    rows = [f"| {arm} | {c} |" for arm, c in cells.items()]
+    effect = [r["seeds"]["paired"]["data_full"] for r in runs]
+    rows.append(
+        "| data effect at the full budget, paired over seeds | "
+        + " | ".join(f"{e['mean']:+.3f} {ci(e['ci95'])}, up on {e['wins']} of {e['n']}" for e in effect)
+        + " |"
+    )
+    per_seed = [[x["data_full"] for x in r["seeds"]["rows"]] for r in runs]
+    rows.append("| per seed 0..4 | " + " | ".join(", ".join(f"{x:+.2f}" for x in s) for s in per_seed) + " |")
+    curves = [[x["augmented_full"] for x in r["aug_curve"]["rows"]] for r in runs]
+    assert all([x["aug_per_demo"] for x in r["aug_curve"]["rows"]] == [0, 4, 8] for r in runs)
+    full0 = {x["steps"]["full"] for r in runs for x in r["aug_curve"]["rows"]}
+    assert len(full0) == 1
+    rows.append(
+        "| exercise 3, seed 0 (`tools.sweep --aug 0 4 8`), source + augmented at "
+        f"{thousands(full0.pop())} steps | "
+        + " | ".join(f"{' -> '.join(f'{x:.2f}' for x in c)}, {ex3_verdict(c)}" for c in curves)
+        + " |"
+    )
+    native0 = runs[2]["seeds"]["rows"][0]
+    moved = max(max(s[k] for s in per_seed) - min(s[k] for s in per_seed) for k in range(5))
+    held, compat = runs[0]["seeds"], runs[1]["seeds"]
+    shift = [
+        held["rows"][0]["data_full"] - compat["rows"][0]["data_full"],
+        held["paired"]["data_full"]["mean"] - compat["paired"]["data_full"]["mean"],
+        held["pooled"]["source_full"]["success"] - compat["pooled"]["source_full"]["success"],
+        held["pooled"]["augmented_full"]["success"] - compat["pooled"]["augmented_full"]["success"],
+    ]
+    has(
+        "docs/reproducibility.md",
+        *rows,
+        f"up to {moved:.2f} between paths (seed 0: {per_seed[2][0]:+.2f}, {per_seed[1][0]:+.2f}, "
+        f"{per_seed[0][0]:+.2f})",
+        f"moved seed 0's effect by {shift[0]:+.2f}, the five-seed mean by {shift[1]:+.3f} and the pooled "
+        f"full-budget arms by {shift[2]:+.3f} (source) and {shift[3]:+.3f} (source + augmented)",
+        "(source short, augmented short, source full, augmented full: "
+        + " / ".join(
+            f"{native0[k]:.2f}" for k in ("source_short", "augmented_short", "source_full", "augmented_full")
+        )
+        + ", the MKL-native sweep's seed-0 row",
+        f"the MKL-native sweep's seed-0 row exactly (0.02 / 0.00 / 0.00 / 0.24, "
+        f"{thousands(native0['steps']['short'])} and {thousands(native0['steps']['full'])} steps)",
+    )
+    for r, commit in zip(runs, ("215d04a", "df6fd12", "7b23a45"), strict=True):
+        assert r["seeds"]["provenance"]["git"]["commit"].startswith(commit)
+        assert r["seeds"]["provenance"]["platform"]["cpu_model"] == "AMD EPYC"
+
+
+def wallclock(tier: str) -> dict:
+    import csv
+
+    with (ROOT / "wallclock.csv").open() as f:
+        return next(r for r in csv.DictReader(f) if r["tier"] == tier)
+
+
+def test_reproducibility_timings_are_wallclock_csvs():
+    amd, h100 = wallclock("cpu-2core-amd"), wallclock("h100")
+    has(
+        "docs/reproducibility.md",
+        f"took {amd['minutes']} min (wallclock.csv's cpu-2core-amd row, AMD EPYC, 2 cores, {amd['date']})",
+        f"timed the cold default run at {h100['minutes']} min (wallclock.csv's `h100` row, "
+        f"numpy {h100['numpy']})",
+    )
