@@ -344,3 +344,135 @@ def test_reproducibility_timings_are_wallclock_csvs():
         f"timed the cold default run at {h100['minutes']} min (wallclock.csv's `h100` row, "
         f"numpy {h100['numpy']})",
     )
+
+
+# --- docs/replay.md -----------------------------------------------------------------------------------
+
+
+def test_replay_side_by_side_is_meta_yamls_replay_compare():
+    m = meta()
+    c = m["replay"]["compare"]
+    modes, pooled, diffs = c["modes"], c["pooled"], c["differences"]
+    lesson = m["reference_run"]["seeds"]["rows"]
+    rows = [
+        f"| {r['seed']} | {r['replay_kept']} / {r['replay_attempts']} "
+        f"({r['replay_kept'] / r['replay_attempts']:.3f}) | {r['source']:.2f} | {r['replay']:.2f} | "
+        f"{r['resolve_matched']:.2f} | {r['resolve_all']:.2f} | {steps} | |"
+        for r, steps in zip(c["per_seed"], c["steps"], strict=True)
+    ]
+    cells = {k: v["coverage_cells_mean"] for k, v in modes.items()}
+    src_cov = sum(r["coverage_source"] for r in lesson) / len(lesson)
+    rows.append(
+        f"| pooled (250 episodes) | {modes['replay']['kept']} / {thousands(modes['replay']['attempts'])} "
+        f"({modes['replay']['yield']:.3f}) | "
+        + " | ".join(pooled_rate(pooled[k]) for k in ("source", "replay", "resolve_matched", "resolve_all"))
+        + f" | | {src_cov:.1f} / {cells['replay']} / {cells['resolve']} |"
+    )
+    assert sum(r["replay_kept"] for r in c["per_seed"]) == modes["replay"]["kept"]
+    assert sum(r["replay_attempts"] for r in c["per_seed"]) == modes["replay"]["attempts"]
+
+    def paired(key: str, ups: str) -> str:
+        d = diffs[key]["per_seed"]
+        mean, _, interval = mean_ci(d)
+        assert mean == pytest.approx(diffs[key]["mean"], abs=1e-9)
+        return f"{mean:+.3f}" + (" " if ups else ", 95% t-interval over seeds ") + ci(interval) + ups
+
+    f = modes["replay"]["failures"]
+    compat0 = kept("sweep_mkl_compatible.yaml")["reference_run"]["seeds"]["rows"][0]
+    sigma1 = {r["mode"]: r for r in m["replay"]["sigma"]["rows"] if r["multiplier"] == 1.0}
+    has(
+        "docs/replay.md",
+        *rows,
+        "beat replayed data on 5 of 5 seeds: " + paired("resolve_matched_vs_replay", ""),
+        f"(pooled {pooled['resolve_matched']['rate']:.3f} against {pooled['replay']['rate']:.3f})",
+        "Replayed demos added "
+        + paired("replay_vs_source", " over source alone (3 seeds up, 1 tied, 1 down)"),
+        "Re-solved ones at the same count added " + paired("resolve_matched_vs_source", " (4 up, 1 tied)"),
+        f"{100 * modes['replay']['yield']:.1f}% of replay attempts pass ({modes['replay']['kept']} of "
+        f"{thousands(modes['replay']['attempts'])}; "
+        f"{thousands(f['finished_off_target'])} finished off target, "
+        f"{thousands(f['path_out_of_reach'])} had a waypoint out of the pusher's reach, "
+        f"{thousands(f['approach_blocked'])} moved the block on the bridge). Re-solve kept "
+        f"{modes['resolve']['kept']} of {modes['resolve']['attempts']}.",
+        f"{cells['replay']} cells of 36 on average with replay against {cells['resolve']} with re-solve"
+        f" (source alone about {round(src_cov)})",
+        f"a median {100 * sigma1['replay']['kept_block_shift_m']['median']:.1f} cm from their source start, "
+        f"against {100 * sigma1['resolve']['kept_block_shift_m']['median']:.1f} cm for re-solve",
+        f"it scored {c['per_seed'][0]['resolve_all']:.2f} here and "
+        f"{compat0['augmented_full']:.2f} in the "
+        "chapter's sweep",
+    )
+    for k, p in pooled.items():
+        assert p["ci95"] == pytest.approx(wilson(p["successes"] / p["episodes"], p["episodes"]), abs=1e-4), k
+
+
+def test_replay_sigma_table_is_meta_yamls_replay_sigma():
+    rows = meta()["replay"]["sigma"]["rows"]
+    by = {(r["multiplier"], r["mode"]): r for r in rows}
+    lines = []
+    for x in sorted({r["multiplier"] for r in rows}):
+        s, p = by[(x, "resolve")], by[(x, "replay")]
+        fails = ", ".join(f"{k} {v}" for k, v in sorted(p["failures"].items()) if v)
+        lo, hi = p["ci95"]
+        lines.append(
+            f"| {x:g}x ({0.08 * x:g}, {0.5 * x:g}) | "
+            f"{s['kept']}/{s['attempts']} = {s['kept'] / s['attempts']:.3f} | "
+            f"{p['kept']}/{p['attempts']} = {p['kept'] / p['attempts']:.3f} [{lo:.3f}, {hi:.3f}] | {fails} | "
+            f"{p['kept_block_shift_m']['median']:.4f} (re-solve {s['kept_block_shift_m']['median']:.4f}) |"
+        )
+    failed = sum(r["failures"]["expert_failed"] for r in rows if r["mode"] == "resolve")
+    attempts = sum(r["attempts"] for r in rows if r["mode"] == "resolve")
+    has(
+        "docs/replay.md",
+        *lines,
+        f"{by[(0.1, 'replay')]['yield']:.2f} at a tenth of the chapter's perturbation, "
+        f"{by[(0.5, 'replay')]['yield']:.2f} at half, "
+        f"{by[(1.0, 'replay')]['yield']:.3f} at the chapter's own",
+        f"({failed} expert failure in {thousands(attempts)})",
+    )
+
+
+def test_replay_aloha_value_table_is_its_kept_json():
+    v = kept("aloha_value.json")
+    rows, pooled, d = v["rows"], v["pooled"], v["differences"]
+    n = v["config"]["eval_episodes"]
+    names = {
+        "source": "12 sources",
+        "replayed": "12 + 96 replayed (subtasks, own source)",
+        "resolved": "12 + 96 re-solved",
+        "fresh": "108 fresh expert demos",
+    }
+    lines = []
+    for k, name in names.items():
+        arms = [r["arms"][k] for r in rows]
+        assert sum(round(a["success"] * n) for a in arms) == pooled[k]["successes"]
+        lines.append(
+            f"| {name} | {' / '.join(thousands(a['frames']) for a in arms)} | "
+            f"{' / '.join(str(round(a['success'] * n)) for a in arms)} | {pooled_rate(pooled[k])} | "
+            f"{' / '.join(f'{a["final_loss"]:.4f}' for a in arms)} |"
+        )
+    for name, key in (
+        ("replayed - sources", "replayed_vs_source"),
+        ("re-solved - sources", "resolved_vs_source"),
+        ("re-solved - replayed", "resolved_vs_replayed"),
+        ("fresh - re-solved", "fresh_vs_resolved"),
+    ):
+        lines.append(
+            f"| {name} | "
+            + " | ".join(f"{x:+.2f}" for x in d[key]["per_seed"])
+            + f" | {d[key]['mean']:+.2f} |"
+        )
+    steps = [r["steps"] for r in rows]
+    pct = {k: round(100 * v["rate"]) for k, v in pooled.items()}
+    has(
+        "docs/replay.md",
+        *lines,
+        f"with the code at {v['git']['commit'][:7]}",
+        f"Each seed trained {thousands(min(steps))} to {thousands(max(steps))} steps per arm",
+        "The three seeds took "
+        + ", ".join(thousands(round(r["seconds"])) for r in rows[:-1])
+        + f" and {thousands(round(rows[-1]['seconds']))} s",
+        f"from {pct['source']}% to {pct['resolved']}%. 108 fresh expert demos reach {pct['fresh']}%",
+        f"reach {pct['replayed']}%: {d['replayed_vs_source']['mean']:+.2f} over the sources",
+    )
+    assert all(r["replay"]["kept"] == r["resolve"]["kept"] == r["replay"]["attempts"] == 96 for r in rows)
