@@ -476,3 +476,120 @@ def test_replay_aloha_value_table_is_its_kept_json():
         f"reach {pct['replayed']}%: {d['replayed_vs_source']['mean']:+.2f} over the sources",
     )
     assert all(r["replay"]["kept"] == r["resolve"]["kept"] == r["replay"]["attempts"] == 96 for r in rows)
+
+
+# --- docs/engine.md: what the generated demos buy on transfer-cube (issue 50) --------------------------
+
+
+def test_engine_transfer_cube_mlp_row_is_its_kept_json():
+    v = kept("aloha_transfer_cube_value.json")
+    rows, pooled, d = v["rows"], v["pooled"], v["differences"]
+    n = v["config"]["eval_episodes"]
+    lines = []
+    for k, name in (
+        ("source", "10 sources"),
+        ("replayed", "10 + 200 replayed (subtasks, own source)"),
+        ("fresh", "210 fresh expert demos"),
+    ):
+        arms = [r["arms"][k] for r in rows]
+        lines.append(
+            f"| {name} | {' / '.join(thousands(a['frames']) for a in arms)} | "
+            f"{' / '.join(str(round(a['success'] * n)) for a in arms)} | {pooled_rate(pooled[k])} | "
+            f"{' / '.join(f'{a["final_loss"]:.4f}' for a in arms)} |"
+        )
+    for name, key in (
+        ("fresh - replayed", "fresh_vs_replayed"),
+        ("fresh - source", "fresh_vs_source"),
+        ("replayed - source", "replayed_vs_source"),
+    ):
+        lines.append(
+            f"| {name} | "
+            + " | ".join(f"{x:+.2f}" for x in d[key]["per_seed"])
+            + f" | {d[key]['mean']:+.3f} |"
+        )
+    kept_, tried = [r["replay"]["kept"] for r in rows], [r["replay"]["attempts"] for r in rows]
+    off = {r["replay"]["failures"]["finished_off_target"] for r in rows if r["replay"]["failures"]}
+    assert len(off) == 1 and all(set(r["replay"]["failures"]) <= {"finished_off_target"} for r in rows)
+    frames = {k: [r["arms"][k]["frames"] for r in rows] for k in ("source", "fresh")}
+    assert {r["steps"] for r in rows} == {5000} and n == 50
+    assert round(5000 * 128 / frames["fresh"][0]) == 10 and round(5000 * 128 / frames["source"][0], -2) == 200
+    has(
+        "docs/engine.md",
+        *lines,
+        f"at {v['git']['commit'][:7]} (the tool as",
+        ", ".join(str(round(r["seconds"])) for r in rows[:-1])
+        + f" and {round(rows[-1]['seconds'])} s for the three",
+        f"Replay kept {kept_[0]} of {tried[0]}, {kept_[1]} of {tried[1]} and "
+        f"{kept_[2]} of {tried[2]} attempts "
+        f"({off.pop()} finished off target on seeds "
+        + " and ".join(str(r["seed"]) for r in rows if r["replay"]["failures"])
+        + ")",
+        f"({sum(kept_)} kept of {sum(tried)} attempts)",
+        f"against {thousands(frames['fresh'][0])})",
+        f"against the MLP's {pooled['source']['successes']}, {pooled['replayed']['successes']} and "
+        f"{pooled['fresh']['successes']} at 5,000 steps",
+    )
+
+
+def test_engine_act_rows_are_their_kept_tables():
+    t5, t10 = kept("aloha_transfer_cube_act.json"), kept("aloha_transfer_cube_act_10000.json")
+    seeds, p = t5["seeds"], t5["pooled"]
+    names = {
+        "sources": "10 sources",
+        "replayed": "10 + replayed (subtasks, own source)",
+        "fresh": "210 fresh expert demos",
+    }
+    lines = [
+        f"| {name} | {' / '.join(str(s[k]['successes']) for s in seeds.values())} | {pooled_rate(p[k])} | "
+        f"{' / '.join(str(p[k]['reached'][g]) for g in '124')} | "
+        f"{' / '.join(f'{s[k]["loss"]:.3f}' for s in seeds.values())} |"
+        for k, name in names.items()
+    ]
+    for pair in ("replayed - sources", "fresh - replayed", "fresh - sources"):
+        q = t5["paired"][pair]
+        m = q["max_reward_paired"]
+        lines.append(
+            f"| {pair} | "
+            + " | ".join(f"{x:+.2f}" for x in q["success"].values())
+            + f" | {m['mean']:+.2f} {ci(m['ci95'], 2)} |"
+        )
+    s0 = t10["seeds"]["0"]
+    pooled10 = t10["pooled"]
+    for k, name in (("sources", "10 sources"), ("replayed", "10 + replayed"), ("fresh", "210 fresh")):
+        e = s0[k]
+        lo, hi = wilson(e["successes"] / e["episodes"], e["episodes"])
+        lines.append(
+            f"| {name} | {seeds['0'][k]['successes']}/{seeds['0'][k]['episodes']} | "
+            f"{e['successes']}/{e['episodes']} = "
+            f"{e['successes'] / e['episodes']:.2f} [{lo:.2f}, {hi:.2f}] | "
+            f"{' / '.join(str(pooled10[k]['reached'][g]) for g in '124')} | {e['loss']:.3f} |"
+        )
+    rs = t10["paired"]["replayed - sources"]
+    fr = t10["paired"]["fresh - replayed"]
+    has(
+        "docs/engine.md",
+        *lines,
+        f"give {p['sources']['successes']}, {p['replayed']['successes']} and "
+        f"{p['fresh']['successes']} successes of 150",
+        f"({p['fresh']['success']:.3f} {ci(p['fresh']['ci95']).replace('+', '')} against "
+        f"{p['sources']['success']:.3f} {ci(p['sources']['ci95']).replace('+', '')})",
+        f"({p['replayed']['success']:.3f} against {p['sources']['success']:.3f}): below on seed 0 "
+        f"({seeds['0']['replayed']['successes']} against {seeds['0']['sources']['successes']})",
+        f"({p['replayed']['reached']['1']} starts against {p['sources']['reached']['1']}) "
+        "but lift it less often "
+        f"({p['replayed']['reached']['2']} against {p['sources']['reached']['2']}) and hand over less often "
+        f"({p['replayed']['reached']['4']} against {p['sources']['reached']['4']})",
+        f"(the fresh arm: {', '.join(str(s['fresh']['successes']) for s in list(seeds.values())[:-1])} and "
+        f"{seeds['2']['fresh']['successes']} of 50)",
+        f"replayed - sources is {rs['success']['0']:+.2f} in success and "
+        f"{rs['max_reward_paired']['mean']:+.2f} "
+        f"{ci(rs['max_reward_paired']['ci95'], 2)} (95% t) in the highest stage",
+        f"fresh - replayed is {fr['success']['0']:+.2f}",
+        f"({pooled10['replayed']['reached']['2']} lift, {pooled10['replayed']['reached']['4']} succeed)",
+        f"took the replayed arm from {seeds['0']['replayed']['successes']} to "
+        f"{s0['replayed']['successes']} of 50, "
+        f"the fresh arm stayed where it was ({seeds['0']['fresh']['successes']} and "
+        f"{s0['fresh']['successes']}), "
+        f"and the sources went from {seeds['0']['sources']['successes']} to {s0['sources']['successes']}",
+    )
+    assert all(p[k]["reached"]["3"] == p[k]["reached"]["4"] for k in names)  # "No episode stopped at stage 3"
