@@ -593,3 +593,129 @@ def test_engine_act_rows_are_their_kept_tables():
         f"and the sources went from {seeds['0']['sources']['successes']} to {s0['sources']['successes']}",
     )
     assert all(p[k]["reached"]["3"] == p[k]["reached"]["4"] for k in names)  # "No episode stopped at stage 3"
+
+
+# --- docs/gym_pusht.md --------------------------------------------------------------------------------
+
+
+def test_gym_pusht_mlp_table_is_its_kept_json():
+    v = kept("gym_pusht_value.json")
+    rows, pooled, d = v["rows"], v["pooled"], v["differences"]
+    n = v["config"]["eval_episodes"]
+    lines = []
+    for k, name, demos in (
+        ("source", "12 sources", 12),
+        ("resolved", "12 + 96 re-solved", 108),
+        ("fresh", "108 fresh expert demos", 108),
+    ):
+        arms = [r["arms"][k] for r in rows]
+        assert {a["demos"] for a in arms} == {demos}
+        loss = sorted({f"{a['final_loss']:.4f}" for a in arms})
+        lines.append(
+            f"| {name} | {demos} | {' / '.join(thousands(a['frames']) for a in arms)} | "
+            f"{' / '.join(str(round(a['success'] * n)) for a in arms)} | {pooled_rate(pooled[k])} | "
+            + (loss[0] if len(loss) == 1 else f"{loss[0]} to {loss[-1]}")
+            + " |"
+        )
+    steps = [r["steps"] for r in rows]
+    rs, fr = d["resolved_vs_source"]["per_seed"], d["fresh_vs_resolved"]["per_seed"]
+    has(
+        "docs/gym_pusht.md",
+        *lines,
+        f": {' / '.join(thousands(s) for s in steps)} steps)",
+        ", ".join(f"{r['seconds']:.1f}" for r in rows[:-1])
+        + f" and {rows[-1]['seconds']:.1f} s for the three seeds",
+        "re-solved - sources "
+        + ", ".join(f"{x:+.2f}" for x in rs)
+        + f" (up on {sum(x > 0 for x in rs)} of 3)",
+        "fresh - re-solved " + ", ".join(f"{x:+.2f}".replace("+0.00", "0.00") for x in fr),
+        f"re-solved {pooled['resolved']['rate']:.3f} against fresh {pooled['fresh']['rate']:.3f}",
+        f"ran {thousands(min(steps))} to {thousands(max(steps))} steps on CUDA",
+    )
+
+
+def best_mean(name: str, k: str) -> float:
+    """A set's mean max reward over all its seeds' starts, from lerobot-eval's own files (the table JSON
+    keeps it to 4 digits, which can round the page's third the other way)."""
+    best = [
+        float(x)
+        for f in sorted((RESULTS / name).glob(f"seed*/eval_{k}/eval_info.json"))
+        for x in json.loads(f.read_text())["per_task"][0]["metrics"]["max_rewards"]
+    ]
+    return sum(best) / len(best)
+
+
+def test_gym_pusht_diffusion_tables_are_their_kept_tables():
+    t1, t3 = kept("gym_pusht_lerobot.json"), kept("gym_pusht_lerobot_3000.json")
+    seeds, p = t1["seeds"], t1["pooled"]
+    lines = []
+    for k, name, demos in (
+        ("sources", "12 sources", 12),
+        ("resolved", "12 + 96 re-solved", 108),
+        ("fresh", "108 fresh expert demos", 108),
+    ):
+        loss = [s[k]["loss"] for s in seeds.values()]
+        lines.append(
+            f"| {name} | {demos} | {' / '.join(str(s[k]['successes']) for s in seeds.values())} of 50 | "
+            f"{pooled_rate(p[k])} | {' / '.join(f'{s[k]["max_reward"]:.3f}' for s in seeds.values())} | "
+            f"{best_mean('gym_pusht_lerobot', k):.3f} | {min(loss):.3f} to {max(loss):.3f} |"
+        )
+    for pair, tail in (
+        ("resolved - sources", "**, up on 3 of 3 seeds ("),
+        ("fresh - resolved", " ("),
+        ("fresh - sources", "."),
+    ):
+        m = t1["paired"][pair]["max_reward_paired"]
+        per = ", ".join(f"{x:+.3f}" for x in t1["paired"][pair]["max_reward"].values())
+        bold = "**" if pair == "resolved - sources" else ""
+        lines.append(
+            f"{pair.replace('resolved', 're-solved')}: {bold}{m['mean']:+.3f} {ci(m['ci95'])}{tail}"
+            + (per if tail.endswith("(") else "")
+        )
+    s3 = t3["seeds"]["0"]
+    for k, name in (("sources", "12 sources"), ("resolved", "12 + 96 re-solved"), ("fresh", "108 fresh")):
+        lines.append(
+            f"| {name} | {s3[k]['successes']}/{s3[k]['episodes']} | {seeds['0'][k]['max_reward']:.3f} | "
+            f"{s3[k]['max_reward']:.3f} | {s3[k]['loss']:.3f} |"
+        )
+    a, b = (t3["paired"][x]["max_reward_paired"] for x in ("resolved - sources", "fresh - sources"))
+    best = {k: best_mean("gym_pusht_lerobot", k) for k in p}
+    assert all(v["successes"] == 0 for v in p.values()) and all(s3[k]["successes"] == 0 for k in s3)
+    has(
+        "docs/gym_pusht.md",
+        *lines,
+        f"At 3,000 steps, re-solved - sources is {a['mean']:+.3f} {ci(a['ci95'])} and fresh - sources is "
+        f"{b['mean']:+.3f} {ci(b['ci95'])}",
+        f"{best['resolved']:.3f} against {best['sources']:.3f}, on every seed",
+        f"{best['resolved']:.3f} against {best['fresh']:.3f}, with an interval across zero",
+    )
+    assert all(x > 0 for x in t1["paired"]["resolved - sources"]["max_reward"].values())
+    lo, hi = t1["paired"]["fresh - resolved"]["max_reward_paired"]["ci95"]
+    assert lo < 0 < hi
+    assert steps_of("gym_pusht_lerobot") == {1000} and steps_of("gym_pusht_lerobot_3000") == {3000}
+
+
+def test_the_cross_references_to_other_value_tables_are_their_files():
+    """The pages quote each other's value tables: each quote recounted from the table's own file."""
+    lab = meta()["scale_lab"]["curves"]
+    aloha = kept("aloha_value.json")["pooled"]
+    mlp = kept("gym_pusht_value.json")["pooled"]
+    fresh, resolve = lab["fresh"][108], lab["resolve"][108]
+    has(
+        "docs/gym_pusht.md",
+        f"(the Scale Lab at N = 108: fresh {fresh['success']:.3f}, re-solved {resolve['success']:.3f})",
+        f"our ALOHA (fresh {aloha['fresh']['rate']:.3f}, re-solved {aloha['resolved']['rate']:.3f})",
+        f"re-solved {mlp['resolved']['rate']:.3f} and fresh {mlp['fresh']['rate']:.3f} in success",
+        f"(docs/replay.md: fresh {aloha['fresh']['rate']:.3f}, re-solved {aloha['resolved']['rate']:.3f})",
+        f"(fresh {fresh['success']:.3f}, re-solved {resolve['success']:.3f} at N = 108)",
+    )
+    replay = lab["replay"][108]
+    has(
+        "docs/engine.md",
+        f"(the Scale Lab at N = 108: fresh {fresh['success']:.3f}, re-solved {resolve['success']:.3f}, "
+        f"replayed {replay['success']:.3f} at {round(replay['demos'])} demos, "
+        f"sources {lab['fresh'][12]['success']:.3f};",
+        f"(fresh {aloha['fresh']['rate']:.3f}, re-solved {aloha['resolved']['rate']:.3f}, replayed "
+        f"{aloha['replayed']['rate']:.3f}, sources {aloha['source']['rate']:.3f};",
+        f"(re-solved {mlp['resolved']['rate']:.3f}, fresh {mlp['fresh']['rate']:.3f}, sources 0;",
+    )
