@@ -719,3 +719,83 @@ def test_the_cross_references_to_other_value_tables_are_their_files():
         f"{aloha['replayed']['rate']:.3f}, sources {aloha['source']['rate']:.3f};",
         f"(re-solved {mlp['resolved']['rate']:.3f}, fresh {mlp['fresh']['rate']:.3f}, sources 0;",
     )
+
+
+# --- docs/scale_lab.md --------------------------------------------------------------------------------
+
+
+def test_scale_lab_table_and_answers_are_meta_yamls_scale_lab():
+    lab = meta()["scale_lab"]
+    c, ns = lab["curves"], [12, 36, 108, 324, 972]
+
+    def cell(p: dict) -> str:
+        return f"{p['success']:.3f} [{p['ci95'][0]:.3f}, {p['ci95'][1]:.3f}]"
+
+    rows = [
+        "| fresh expert demos | " + " | ".join(cell(c["fresh"][n]) for n in ns) + " |",
+        "| 12 + re-solve | " + " | ".join(cell(c["resolve"][n]) for n in ns) + " |",
+        "| 12 + replay (demos kept, mean) | "
+        + " | ".join(f"{cell(c['replay'][n])} ({round(c['replay'][n]['demos'])})" for n in ns)
+        + " |",
+        "| 12 + re-solve, fixed budget | " + " | ".join(cell(c["resolve_fixed"][n]) for n in ns) + " |",
+        "| steps (seed 0, 1, 2) | "
+        + " | ".join(" / ".join(thousands(s) for s in c["fresh"][n]["steps"]) for n in ns)
+        + " |",
+    ]
+    # distinct runs: at N = 12 the three grown curves are the sources alone; at 108 the fixed budget is
+    # resolve's own
+    runs = {}
+    for name, curve in c.items():
+        for n, p in curve.items():
+            same = "sources" if n == 12 and name != "resolve_fixed" else name
+            same = "resolve" if (name, n) == ("resolve_fixed", 108) else same
+            for seed, steps in enumerate(p["steps"]):
+                runs[(same, n, seed)] = steps
+    gen = lab["generation"]["replay"]
+    has(
+        "docs/scale_lab.md",
+        *rows,
+        f"{len(runs)} distinct training runs, {thousands(sum(runs.values()))} gradient steps",
+        f"Wall time: {round(lab['wall_s'] / 60)} min ({thousands(lab['wall_s'])} s",
+        f"{lab['expert']['success']:.2f} [{lab['expert']['ci95'][0]:.3f}, {lab['expert']['ci95'][1]:.2f}]",
+        f"Replay kept {gen['kept']} of {thousands(gen['attempts'])} attempts ({100 * gen['yield']:.1f}%)",
+        "its points sit at " + ", ".join(str(round(c["replay"][n]["demos"])) for n in (108, 324)) + f" and "
+        f"{round(c['replay'][972]['demos'])} demos",
+    )
+    s = {k: {n: p["success"] for n, p in v.items()} for k, v in c.items()}
+    f = s["fresh"]
+
+    def matched(rate: float) -> float:  # the fresh N with this success, log-linear between measured points
+        for a, b in zip(ns, ns[1:]):
+            if f[a] <= rate <= f[b]:
+                return math.exp(math.log(a) + (rate - f[a]) / (f[b] - f[a]) * math.log(b / a))
+        raise AssertionError(rate)
+
+    worth = {n: matched(s["resolve"][n]) for n in (108, 324, 972)}
+    r324 = c["replay"][324]
+    rep = matched(r324["success"])
+    step0 = {n: thousands(c["resolve"][n]["steps"][0]) for n in ns}
+    has(
+        "docs/scale_lab.md",
+        f"up to 36 demos ({f[12]:.3f}, {f[36]:.3f})",
+        f"between 36 and 108 ({f[108]:.3f}), then climbs about {(f[972] - f[108]) / 2:+.2f} per tripling "
+        f"({f[324]:.3f} at 324, {f[972]:.3f} at 972)",
+        f"12 + 96 generated ({s['resolve'][108]:.3f}) matches about {round(worth[108])} fresh demos, "
+        "12 + 312 "
+        f"({s['resolve'][324]:.3f}) about {round(worth[324])}, 12 + 960 ({s['resolve'][972]:.3f}) about "
+        f"{round(worth[972])}",
+        f"about {(worth[108] - 12) / 96:.2f} of a fresh one at 108 demos, "
+        f"{(worth[324] - 12) / 312:.2f} at 324 "
+        f"and {(worth[972] - 12) / 960:.2f} at 972",
+        f"{round(r324['demos']) - 12} replayed ones ({r324['success']:.3f}) match about "
+        f"{round(rep)} fresh demos, about {(rep - 12) / (r324['demos'] - 12):.1f} each",
+        f"({' / '.join(thousands(x) for x in lab['fixed_steps'].values())} steps)",
+        f"({s['resolve_fixed'][324]:.3f} -> {s['resolve_fixed'][972]:.3f})",
+        f"({step0[324]} -> {step0[972]} steps at seed 0) "
+        f"climbs {s['resolve'][324]:.3f} -> {s['resolve'][972]:.3f}",
+        f"({thousands(lab['fixed_steps']['0'])} against {step0[36]} steps at 36)",
+        f"({s['resolve_fixed'][36]:.3f} against {s['resolve'][36]:.3f})",
+        f"stays {1 - f[972]:.2f} below the expert ({f[972]:.3f} against {lab['expert']['success']:.2f})",
+        f"climbs {f[972] - f[324]:+.2f} per tripling at its last point",
+        f"were worth {s['resolve'][972] - s['resolve_fixed'][972]:+.2f} to re-solved data",
+    )
