@@ -799,3 +799,21 @@ def test_scale_lab_table_and_answers_are_meta_yamls_scale_lab():
         f"climbs {f[972] - f[324]:+.2f} per tripling at its last point",
         f"were worth {s['resolve'][972] - s['resolve_fixed'][972]:+.2f} to re-solved data",
     )
+
+
+# --- docs/PERFORMANCE.md ------------------------------------------------------------------------------
+
+
+def test_performance_figures_are_wallclock_csv_and_meta_yaml():
+    amd, old, h100 = (wallclock(t) for t in ("cpu-2core-amd", "cpu-2core-vendor-unrecorded", "h100"))
+    seed0 = meta()["reference_run"]["seeds"]["rows"][0]["steps"]
+    has(
+        "docs/PERFORMANCE.md",
+        f"{amd['minutes']} min (AMD EPYC, 2 cores, {amd['date']}; wallclock.csv's cpu-2core-amd row)",
+        f"{old['minutes']} min (a 2-core host whose CPU vendor was not recorded, {old['date']}; "
+        "wallclock.csv's cpu-2core-vendor-unrecorded row)",
+        f"{h100['minutes']} min ({h100['date']}, numpy {h100['numpy']}; wallclock.csv's h100 row)",
+        f"{round(meta()['scale_lab']['wall_s'] / 60)} min under load (meta.yaml's `scale_lab.wall_s`)",
+        f"2 x {thousands(seed0['short'])} + 2 x {thousands(seed0['full'])} = "
+        f"{thousands(2 * seed0['short'] + 2 * seed0['full'])} arm-steps",
+    )
