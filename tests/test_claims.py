@@ -631,6 +631,13 @@ def test_gym_pusht_mlp_table_is_its_kept_json():
         "fresh - re-solved " + ", ".join(f"{x:+.2f}".replace("+0.00", "0.00") for x in fr),
         f"re-solved {pooled['resolved']['rate']:.3f} against fresh {pooled['fresh']['rate']:.3f}",
         f"ran {thousands(min(steps))} to {thousands(max(steps))} steps on CUDA",
+        "frame for frame ("
+        + " / ".join(thousands(r["arms"]["source"]["frames"]) for r in rows)
+        + " source frames, "
+        + " / ".join(thousands(r["arms"]["resolved"]["frames"]) for r in rows)
+        + " re-solved, "
+        + " / ".join(thousands(r["arms"]["fresh"]["frames"]) for r in rows)
+        + " fresh)",
     )
 
 
@@ -754,6 +761,7 @@ def test_scale_lab_table_and_answers_are_meta_yamls_scale_lab():
     gen = lab["generation"]["replay"]
     has(
         "docs/scale_lab.md",
+        f"Its yield is low (about {round(100 * gen['yield'])}% at the chapter's sigmas",
         *rows,
         f"{len(runs)} distinct training runs, {thousands(sum(runs.values()))} gradient steps",
         f"Wall time: {round(lab['wall_s'] / 60)} min ({thousands(lab['wall_s'])} s",
