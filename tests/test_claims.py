@@ -825,3 +825,13 @@ def test_performance_figures_are_wallclock_csv_and_meta_yaml():
         f"2 x {thousands(seed0['short'])} + 2 x {thousands(seed0['full'])} = "
         f"{thousands(2 * seed0['short'] + 2 * seed0['full'])} arm-steps",
     )
+
+
+def test_results_live_under_results_each_with_its_provenance():
+    """Issue 61 #1: docs/ keeps prose and pictures; every kept result is under results/, and
+    results/README.md's table names each one's command, commit, host and kernel path or device."""
+    assert not [p for p in (ROOT / "docs").rglob("*") if p.is_file() and p.suffix not in (".md", ".png")]
+    table = (RESULTS / "README.md").read_text()
+    top = {p.name + ("/" if p.is_dir() else "") for p in RESULTS.iterdir() if p.name != "README.md"}
+    missing = [name for name in top if f"| `{name}`" not in table and f"| `{name} " not in table]
+    assert not missing, f"results/README.md names no provenance for {missing}"
