@@ -279,13 +279,13 @@ def test_lerobot_lab_checkpoint_rollouts_leave_the_training_as_it_was(grown):
 # per-episode successes and max rewards, read here without the tool)
 ROWS = {
     "gym_pusht": (  # lerobot-eval's own eval_info.json of docs/gym_pusht.md's row
-        ROOT / "docs" / "gym_pusht_lerobot",
+        ROOT / "results" / "gym_pusht_lerobot",
         ("sources", "resolved", "fresh"),
         "eval_info.json",
         lambda r: (r["per_task"][0]["metrics"]["successes"], r["per_task"][0]["metrics"]["max_rewards"]),
     ),
     "aloha_transfer_cube": (  # tools.lerobot eval's JSON of docs/engine.md's ACT row
-        ROOT / "docs" / "aloha_transfer_cube_act",
+        ROOT / "results" / "aloha_transfer_cube_act",
         ("sources", "replayed", "fresh"),
         "lerobot_eval.json",
         lambda r: ([e["success"] for e in r["per_episode"]], [e["max_reward"] for e in r["per_episode"]]),
@@ -297,7 +297,7 @@ ROWS = {
 def test_the_lerobot_row_is_counted_from_its_evaluations_own_files(tmp_path, task):
     """Issue 49 #1, issue 50 #5: `tools.lerobot table` counts each set's successes, its Wilson interval,
     the paired per-seed differences and the max reward's start-by-start difference from the evaluations
-    kept under docs/ (lerobot-eval's eval_info.json on gym-pusht; tools.lerobot eval's JSON on
+    kept under results/ (lerobot-eval's eval_info.json on gym-pusht; tools.lerobot eval's JSON on
     transfer-cube), recounted here from the files; a seed missing a set is left out, and a file that is
     not its evaluation is one `error:` line naming it."""
     from bc_recipe import wilson

@@ -80,7 +80,9 @@ def _copy_with(tmp_path: Path, name: str, text: str) -> Path:
     import shutil
 
     root = Path(__file__).resolve().parent.parent
-    skip = shutil.ignore_patterns(".git", ".venv", "outputs", "__pycache__", ".*_cache", "tests", "docs")
+    skip = shutil.ignore_patterns(
+        ".git", ".venv", "outputs", "__pycache__", ".*_cache", "tests", "docs", "results"
+    )
     copy = tmp_path / "project"
     shutil.copytree(root, copy, ignore=skip)
     (copy / "datagen" / "tasks" / name).write_text(text)
