@@ -284,7 +284,7 @@ def replay_lanes(
     start_for=None,
     follow=None,
 ) -> dict:
-    """Mode "replay": the engine's one replay (datagen.replay.Replay.steps, a generator per lane) of
+    """Mode "replay": the engine's one replay (datagen.replay.Replay.act, one per lane) of
     the attempt's own source, or of the pool's nearest to its start (MimicGen's selection; pool None:
     its own). plans: the worker's cut sources (None: cut for this call). start_for(job): a given start
     instead of the drawn one. follow: (length, rad), mode "replay_live" (task.follow_tol): each lane
@@ -301,18 +301,11 @@ def replay_lanes(
         except ValueError:
             return Outcome("source_not_split", None, start, source.episode)
         run = replay.Replay(task, source, plan, start, follow)
-        obs = task.place(env, start)
-        gen = run.steps(env)
-        next(gen)
-        return Lane(job, obs, run=run, gen=gen)
+        return Lane(job, task.place(env, start), run=run)
 
     def decide(lanes, envs, obs):
-        actions, stop = [None] * len(lanes), np.zeros(len(lanes), bool)
-        for j, lane in enumerate(lanes):
-            try:
-                actions[j] = lane.gen.send(obs[j])
-            except StopIteration:
-                stop[j] = True
+        actions = [lane.run.act(o, env) for lane, env, o in zip(lanes, envs, obs)]
+        stop = np.array([a is None for a in actions], bool)
         if stop.all():  # nothing is stepped: the rows are never read
             return np.zeros((len(lanes), task.spec.act_dim), np.float32), stop
         blank = np.zeros_like(next(a for a in actions if a is not None))  # a stopped lane's row

@@ -2,7 +2,7 @@
 task only describing (datagen.task.Task: arms, subtasks, frames, signals, the action conversion).
 
     plan = cut(task, source)                # the source's subtasks: [Segment], by the task's signals
-    run = Replay(task, source, plan, start)  # one attempt: run.steps(env) its actions, run.outcome(...)
+    run = Replay(task, source, plan, start)  # one attempt: run.act(obs, env) its actions, run.outcome(...)
     e = nearest(task, pool, start)          # MimicGen's nearest source selection
 
 A source is cut into the task's subtasks at its signals: a subtask with `ends` stops at the first frame
@@ -34,9 +34,10 @@ REASONS that applies:
     finished_off_target   the plan ran to its end without success
     source_not_split      the source cannot be cut into the task's subtasks (cut raises ValueError)
 
-One attempt is a generator (Replay.steps) that receives each observation and yields each action; the
-engine's one attempt runner executes it (datagen.lockstep.replay_lanes), one attempt at a time or many
-in lanes, the same bytes; datagen.lockstep.replay_from replays a source from a given start.
+One attempt is a Replay whose act(obs, env) gives each action from each observation (None once its plan
+and hold are done); the engine's one attempt runner executes it (datagen.lockstep.replay_lanes), one
+attempt at a time or many in lanes, the same bytes; datagen.lockstep.replay_from replays a source from a
+given start.
 """
 
 from __future__ import annotations
@@ -150,6 +151,9 @@ class Replay:
         self.current = None  # the subtask under way
         self.beyond = None  # where the first waypoint beyond reach was found, in words
         self.bumped = None  # which bridge moved the object, in words
+        # where act() is: its phase ("new", "start" of a subtask, "bridge", "frames", "hold", "done"), and
+        # what each gripper and each arm's orientation was last told
+        self._phase, self._grips, self._turns = "new", None, None
 
     def segment(self, seg: Segment, now) -> dict:
         """{arm: (waypoints (T, d), velocities (T, d) or None, gripper commands (T,) or None, orientations
@@ -237,64 +241,99 @@ class Replay:
                 )
             self.out_of_reach |= not inside.all()
 
-    def steps(self, env):
-        """The attempt's actions: a generator primed with next(), then sent each observation (the first,
-        then the one after each step) and yielding the next action; it returns when the plan and the
-        hold are done. The runner stops sending when the episode ends. With self.follow, before each step
-        of a segment the object frames are read: once one has drifted beyond it from where the segment
-        expects it, the segment's remaining frames are re-expressed from the poses now (re-anchored)."""
-        task = self.task
-        fps = task.spec.fps
-        obs = yield
-        grips, turns = None, None  # what each gripper and each arm's orientation was last told
-        for seg in self.plan:
-            self.current = seg.subtask.name
-            segs = self.segment(seg, obs)
-            some = segs[next(iter(segs))]  # what every arm's segment holds: velocities? grips? orientations?
-            moving, gripping, turning = (some[i] is not None for i in (1, 2, 3))
-            self.check_reach(segs)
-            expect = self.expected(seg, obs) if self.follow is not None else None
-            if grips is None and gripping:
-                grips = {a: float(segs[a][2][0]) for a in task.arms}
-            if seg.subtask.bridge:
-                poses = {a: task.arm_pose(a, obs, env) for a in task.arms}
-                here = {a: p for a, (p, _) in poses.items()}
-                first = {a: segs[a][0][0] for a in task.arms}
-                facing = {a: r for a, (_, r) in poses.items()}
-                aims = {a: segs[a][3][0] for a in task.arms} if turning else None
-                n = self.bridge_steps(here, first, facing, aims, self.bridge_speed(segs))
-                self.bridging = task.object_pose(obs)
-                for i in range(n):  # linear interpolation (orientation: slerp), all arms in step
-                    wp = {a: here[a] + i / n * (first[a] - here[a]) for a in task.arms}
-                    vel = {a: (first[a] - here[a]) * fps / n for a in task.arms}
-                    if turning:
-                        turns = {a: self.turned(facing[a], aims[a], i / n) for a in task.arms}
-                    g = None if grips is None else dict(grips)
-                    obs = yield task.target_to_action(obs, wp, vel, g, turns)
-                    self.watch(obs, env)
-                self.end_bridge(obs)
-            at = 0  # the segment's frame its re-expressed waypoints start from (later once re-anchored)
-            for t in range(seg.stop - seg.start):
-                if expect is not None and self.drifted(expect, t - at, obs):
-                    rest = Segment(seg.subtask, seg.start + t, seg.stop)
-                    segs, expect, at = self.segment(rest, obs), self.expected(rest, obs), t
-                    self.reanchored += 1
-                    self.check_reach(segs)
-                i = t - at
-                if grips is not None:
-                    grips = {a: float(segs[a][2][i]) for a in task.arms}
-                if turning:
-                    turns = {a: segs[a][3][i] for a in task.arms}
-                wp = {a: segs[a][0][i] for a in task.arms}
-                vel = {a: segs[a][1][i] for a in task.arms} if moving else None
-                obs = yield task.target_to_action(obs, wp, vel, grips, turns)
-                self.watch(obs, env)
-        self.planned = True
-        for _ in range(task.hold_steps):  # hold still so a success hold can complete
-            here = {a: task.arm_pose(a, obs, env)[0] for a in task.arms}
-            still = {a: np.zeros(len(here[a])) for a in task.arms}
-            obs = yield task.target_to_action(obs, here, still, grips, turns)
+    def act(self, obs, env):
+        """The attempt's next action for the observation `obs` of `env` (the first, then the one after each
+        step), or None once the plan and the hold are done (the runner then ends the attempt; it stops
+        asking when the episode ends). Each call after the first records the signals `obs` shows (watch),
+        then the attempt moves on through its phases until it has an action: a subtask's start (its
+        segment re-expressed for the frames now), its bridge, its frames, then the hold. With
+        self.follow, before each frame of a segment the object frames are read: once one has drifted
+        beyond it from where the segment expects it, the segment's remaining frames are re-expressed
+        from the poses now (re-anchored)."""
+        if self._phase != "new":
             self.watch(obs, env)
+        else:
+            self._phase, self._next = "start", 0  # the plan's next subtask
+        while True:
+            if self._phase == "start":  # a subtask starts, or the plan is done
+                if self._next == len(self.plan):
+                    self.planned, self._phase, self._held = True, "hold", 0
+                else:
+                    self._start(self.plan[self._next], obs, env)
+                    self._next += 1
+            elif self._phase == "bridge":  # linear interpolation (orientation: slerp), all arms in step
+                if self._i < self._n:
+                    return self._bridge_action(obs)
+                self.end_bridge(obs)
+                self._phase, self._t, self._at = "frames", 0, 0
+            elif self._phase == "frames":
+                if self._t < self._seg.stop - self._seg.start:
+                    return self._frame_action(obs)
+                self._phase = "start"
+            elif self._phase == "hold":  # hold still so a success hold can complete
+                if self._held < self.task.hold_steps:
+                    self._held += 1
+                    here = {a: self.task.arm_pose(a, obs, env)[0] for a in self.task.arms}
+                    still = {a: np.zeros(len(here[a])) for a in self.task.arms}
+                    return self.task.target_to_action(obs, here, still, self._grips, self._turns)
+                self._phase = "done"
+            else:
+                return None
+
+    def _start(self, seg: Segment, obs, env) -> None:
+        """Subtask `seg` starts at the observation `obs`: its segment re-expressed for the frames now, its
+        reach checked, and its bridge planned (phase "bridge"; "frames" when it has none)."""
+        task = self.task
+        self.current, self._seg = seg.subtask.name, seg
+        self._segs = segs = self.segment(seg, obs)
+        some = segs[next(iter(segs))]  # what every arm's segment holds: velocities? grips? orientations?
+        self._moving, gripping, self._turning = (some[i] is not None for i in (1, 2, 3))
+        self.check_reach(segs)
+        self._expect = self.expected(seg, obs) if self.follow is not None else None
+        if self._grips is None and gripping:
+            self._grips = {a: float(segs[a][2][0]) for a in task.arms}
+        self._phase, self._t, self._at = "frames", 0, 0
+        if seg.subtask.bridge:
+            poses = {a: task.arm_pose(a, obs, env) for a in task.arms}
+            self._here = {a: p for a, (p, _) in poses.items()}
+            self._first = {a: segs[a][0][0] for a in task.arms}
+            self._facing = {a: r for a, (_, r) in poses.items()}
+            self._aims = {a: segs[a][3][0] for a in task.arms} if self._turning else None
+            speed = self.bridge_speed(segs)
+            self._n = self.bridge_steps(self._here, self._first, self._facing, self._aims, speed)
+            self._i, self._phase = 0, "bridge"
+            self.bridging = task.object_pose(obs)
+
+    def _bridge_action(self, obs) -> np.ndarray:
+        """Step i of n of the bridge: each arm a fraction i / n of the way to its first waypoint, at the
+        bridge's speed, each gripper holding its last command."""
+        task, i, n, here, first = self.task, self._i, self._n, self._here, self._first
+        self._i += 1
+        wp = {a: here[a] + i / n * (first[a] - here[a]) for a in task.arms}
+        vel = {a: (first[a] - here[a]) * task.spec.fps / n for a in task.arms}
+        if self._turning:
+            self._turns = {a: self.turned(self._facing[a], self._aims[a], i / n) for a in task.arms}
+        grips = None if self._grips is None else dict(self._grips)
+        return task.target_to_action(obs, wp, vel, grips, self._turns)
+
+    def _frame_action(self, obs) -> np.ndarray:
+        """Frame t of the segment: its re-expressed waypoint, velocity, gripper command and orientation
+        (re-anchored first when an object frame has drifted beyond follow)."""
+        task, seg, t = self.task, self._seg, self._t
+        self._t += 1
+        if self._expect is not None and self.drifted(self._expect, t - self._at, obs):
+            rest = Segment(seg.subtask, seg.start + t, seg.stop)
+            self._segs, self._expect, self._at = self.segment(rest, obs), self.expected(rest, obs), t
+            self.reanchored += 1
+            self.check_reach(self._segs)
+        segs, i = self._segs, t - self._at
+        if self._grips is not None:
+            self._grips = {a: float(segs[a][2][i]) for a in task.arms}
+        if self._turning:
+            self._turns = {a: segs[a][3][i] for a in task.arms}
+        wp = {a: segs[a][0][i] for a in task.arms}
+        vel = {a: segs[a][1][i] for a in task.arms} if self._moving else None
+        return task.target_to_action(obs, wp, vel, self._grips, self._turns)
 
     def bridge_steps(self, here: dict, first: dict, facing: dict, turns: dict | None, speed: float) -> int:
         """Steps of the bridge from the arms at `here` (positions, orientations `facing`) to their first

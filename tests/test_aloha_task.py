@@ -11,12 +11,12 @@ import aloha_env
 import pusht_env
 from ch37.seeds import env_seed
 from datagen import ALOHA, PUSHT, Perturbation, engine, rollout
-from datagen import aloha as at
-from datagen import pusht as pt
 from datagen import replay as rp
 from datagen import task as dt
 from datagen.lockstep import replay_from
 from datagen.poses import rotation
+from datagen.tasks import aloha as at
+from datagen.tasks import pusht as pt
 from scripted_expert import AlohaExpert, PushTExpert
 
 

@@ -21,8 +21,9 @@ import gen_demos_aloha
 import gen_demos_pusht
 import pusht_env
 from ch37.ownership import LOCK_NAME, MADE_BY, STAMP_NAME
-from datagen import ALOHA, PUSHT, Perturbation, engine, plan, pusht, shards
+from datagen import ALOHA, PUSHT, Perturbation, engine, plan, shards
 from datagen.report import REPORT_NAME
+from datagen.tasks import pusht
 from lerobot_v3.dataset import load_arrays, open_dataset
 
 PER_DEMO, SHARD = 4, 2  # 3 sources x 4 = 12 attempts in 6 shards: enough to kill one run mid-way
