@@ -1262,3 +1262,27 @@ def test_bench_engine_refuses_a_task_it_cannot_measure_in_one_line(tmp_path, tas
     err = p.stderr.strip().splitlines()
     assert p.returncode == 2 and len(err) == 1 and f"invalid choice: '{task}'" in err[0], p.stderr[-2000:]
     assert not (tmp_path / "o").exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# Issue 62: datagen.check's arguments (#3), --out through a link (#5), a relative --out (#6)
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["pusher", "--seed", "-1", "--episodes", "1"], "--seed must be >= 0, got -1"),
+        (["aloha_transfer_cube", "--seed", "-1", "--episodes", "1"], "--seed must be >= 0, got -1"),
+        (["pusht", "--tol", "nan", "--episodes", "1"], "--tol must be a finite non-negative number, got nan"),
+        (["pusht", "--tol", "-1", "--episodes", "1"], "--tol must be a finite non-negative number, got -1.0"),
+        (["pusht", "--episodes", "0"], "--episodes must be a positive integer, got 0"),
+    ],
+    ids=["seed-pusher", "seed-transfer-cube", "tol-nan", "tol-negative", "episodes-0"],
+)
+def test_the_check_commands_arguments_are_one_line_each(argv, needle):
+    """Issue 62 #3: `python -m datagen.check` took --seed -1 to a traceback (pusher, transfer-cube),
+    --tol nan as a round trip that can never fail and --tol -1 as one that always does: one `error:`
+    line each (ch37.config's bounds, as every command's flags), exit 2, before any env is made."""
+    p = run("-m", "datagen.check", *argv)
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(err) == 1 and err[0] == f"error: {needle}", p.stderr[-2000:]
+    assert p.stdout == "", p.stdout
