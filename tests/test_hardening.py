@@ -1286,3 +1286,29 @@ def test_the_check_commands_arguments_are_one_line_each(argv, needle):
     err = p.stderr.strip().splitlines()
     assert p.returncode == 2 and len(err) == 1 and err[0] == f"error: {needle}", p.stderr[-2000:]
     assert p.stdout == "", p.stdout
+
+
+def test_out_through_a_link_to_a_folder_is_written_there_and_a_dangling_link_is_refused(tmp_path):
+    """Issue 62 #5: gen_demos.py's --out given as a link to an empty folder was "Not a directory; a part
+    of the path is a file", where augment_demos.py writes through the same link: both write into the folder
+    it points to, the link left as it is. A link to nothing is refused by both in one line naming the
+    user's path (not an internal .ch37-partial-* one), nothing created."""
+    (tmp_path / "sets").mkdir()
+    (tmp_path / "set_link").symlink_to("sets")
+    p = run("gen_demos_pusht.py", "--quiet", "--episodes", "1", "--out", tmp_path / "set_link")
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert (tmp_path / "set_link").is_symlink() and (tmp_path / "sets" / "meta" / "info.json").is_file()
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no partial folder left
+
+    (tmp_path / "dangling").symlink_to("nowhere")
+    before = sorted(os.listdir(tmp_path))
+    for argv in (
+        ["gen_demos_pusht.py", "--quiet", "--episodes", "1"],
+        ["augment_demos.py", "--src", tmp_path / "set_link", "--per_demo", "1", "--quiet"],
+        [*SD, "--no-cache"],
+    ):
+        p = run(*argv, "--out", tmp_path / "dangling")
+        err = p.stderr.strip().splitlines()
+        assert p.returncode == 2 and len(err) == 1, (argv, p.stderr[-2000:])
+        assert f"--out {tmp_path / 'dangling'} is a link to nowhere, which does not exist" in err[0], err
+        assert sorted(os.listdir(tmp_path)) == before and not (tmp_path / "nowhere").exists()
