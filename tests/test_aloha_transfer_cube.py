@@ -342,3 +342,27 @@ def test_a_source_whose_cube_quaternions_are_zero_is_refused(demo_set, tmp_path)
     said = str(e.value)
     assert "episode 0, frame 0 (row 0)" in said and "cube_qw, cube_qx, cube_qy, cube_qz" in said, said
     assert "norm 0" in said and "this is not a ALOHA" in said, said
+
+
+def test_an_episode_the_simulation_blows_up_in_is_a_failure_and_nothing_lands_outside_out(tmp_path):
+    """Issue 62 #11: at --noise 1e9 MuJoCo found the sim unstable, reset it mid-episode and went on: the
+    frames were written as an episode, and MUJOCO_LOG.TXT was left in the caller's folder. Such an episode
+    ends where the sim blew up and counts as a failure (rollout's "unstable"), it is not written (a set of
+    none is one line, exit 2) and no file appears outside --out."""
+    from datagen.demos import rollout
+
+    env = TASK.make_env()
+    s = env_seed(0, "demo", 0)
+    ep = rollout(env, TransferCubeExpert(noise=1e9, seed=s), env.reset(s))
+    assert ep["unstable"] and not ep["success"] and len(ep["action"]) < TASK.max_steps, len(ep["action"])
+    ep = rollout(env, TransferCubeExpert(noise=0.0, seed=s), env.reset(s))  # the same env, fresh again
+    assert not ep["unstable"] and ep["success"]
+
+    caller = tmp_path / "caller"
+    caller.mkdir()
+    argv = ["--task", "aloha_transfer_cube", "--episodes", "1", "--noise", "1e9", "--out", tmp_path / "o"]
+    r = run_script(ROOT / "gen_demos.py", *argv, "--quiet", cwd=caller, check=False)
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "unstable" in err[0], r.stdout + r.stderr
+    assert "lower --noise" in err[0] and not (tmp_path / "o").exists(), err
+    assert list(caller.iterdir()) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["caller"]
