@@ -100,7 +100,12 @@ def _main(emb: Task | None, argv=None, tasks: dict | None = None) -> int:
         raise DataError(problem)
     s = generate(emb, a.out, episodes=a.episodes, seed=a.seed, noise=a.noise, video=a.video, quiet=a.quiet)
     wrote = f"wrote {s['episodes']} {emb.name} episodes, {s['frames']} frames to {a.out}"
-    print(f"{wrote} (expert successes {s['successes']}/{s['episodes']})")
+    lost = (
+        f"; {s['unstable']} more blew the simulation up (unstable) and were not written"
+        if s["unstable"]
+        else ""
+    )
+    print(f"{wrote} (expert successes {s['successes']}/{s['episodes']}{lost})")
     return 0
 
 

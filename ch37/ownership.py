@@ -212,6 +212,11 @@ def publish_dir(out: Path, stamp: dict):
     out = Path(out)
     if holds_data(out):
         raise DataError(f"{out} already holds data; pick another --out or remove it yourself")
+    if problem := dangling(out):
+        raise DataError(problem)
+    # a link to an empty folder is written through, as every --out is (claim's mkdir follows it): the set
+    # is built beside the folder it points to and renamed onto that folder, the link left as it is
+    out = out.resolve() if out.is_symlink() else out
     out.parent.mkdir(parents=True, exist_ok=True)
     sweep_leftovers(out.parent, out.name)  # a killed run's partial `out` only: the parent is not ours
     work = partial_dir(out)  # .NAME.ch37-partial-PID, our stamp inside; the folder is built in work/set
@@ -310,6 +315,18 @@ def check_own_result(path: Path, kind: str, flag: str = "--out", beside=()) -> N
             raise DataError(f"{other} exists and was not written by this tool; pass another {flag}")
 
 
+def dangling(path: Path, flag: str = "--out") -> str | None:
+    """One line when `path` is a link to nothing, else None. Nothing is made through such a link: the
+    folder it names may be a typo, or on a disk not mounted now."""
+    path = Path(path)
+    if path.is_symlink() and not path.exists():
+        return (
+            f"{flag} {path} is a link to {os.readlink(path)}, which does not exist; make that folder or "
+            f"pass another {flag}"
+        )
+    return None
+
+
 def check_out_path(path: Path, flag: str = "--out") -> str | None:
     """None if `path` can hold this program's output, else one line saying why not. Creates nothing:
     it writes and removes a probe file in `path`, or in its nearest existing parent folder; so a caller
@@ -322,6 +339,8 @@ def check_out_path(path: Path, flag: str = "--out") -> str | None:
     except UnicodeEncodeError:
         shown = os.fsencode(path).decode("utf-8", "backslashreplace")
         return f"{flag} {shown} is not a UTF-8 path (pyarrow cannot write it); pass a folder name in UTF-8"
+    if problem := dangling(path, flag):
+        return problem
     if path.exists() and not path.is_dir():
         return f"{flag} {path} is a file, not a folder; pass a folder path"
     where = path

@@ -8,18 +8,20 @@
     the replay       every solved rollout, replayed at zero perturbation (MimicGen's move with nothing
                      moved), succeeds again; a failure names the subtask and the waypoint
 
-One line per check, ok or what is wrong; exit 0 when all pass, 1 when one fails, 2 for an unknown task.
+One line per check, ok or what is wrong; exit 0 when all pass, 1 when one fails, 2 for an unknown task or a
+flag out of its bounds (one `error:` line).
 A task without an expert checks what it can (its start round-trip on resets).
 """
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
 
+from ch37 import config
 from ch37.errors import DataError, main
+from ch37.seeds import MAX_SEED
 from datagen.demos import rollout
 from datagen.lockstep import replay_from
 from datagen.source_check import state_range_problem
@@ -91,16 +93,17 @@ def checks(task: Task, episodes: int, seed: int, tol: float):
 
 def _main(argv) -> int:
     tasks = known_tasks()
-    p = argparse.ArgumentParser(prog="python -m datagen.check", description=__doc__.splitlines()[0])
+    p = config.parser(description=__doc__.splitlines()[0], prog="python -m datagen.check")
     p.add_argument("task", help="the task to check: " + ", ".join(tasks))
     p.add_argument("--episodes", type=int, default=5, help="resets (and expert rollouts) to check")
-    p.add_argument("--seed", type=int, default=0, help="the first reset seed")
+    p.add_argument("--seed", type=int, default=0, help=f"the first reset seed, 0 to {MAX_SEED}")
     p.add_argument("--tol", type=float, default=1e-3, help="round-trip slack, in the task's own units")
     a = p.parse_args(argv)
     if a.task not in tasks:
         raise DataError(f"unknown task {a.task!r}: pick one of {', '.join(tasks)}")
-    if a.episodes < 1:
-        raise DataError("--episodes must be at least 1")
+    # the bounds every command's flags have (ch37.config): a negative seed is no env's, and a --tol of
+    # nan passes every round trip and a negative one fails every one
+    config.check(a, positive=["episodes"], non_negative=["seed"], finite=["tol"], at_most={"seed": MAX_SEED})
     task = tasks[a.task]
     print(f"checking {task.name} ({task.title}), {a.episodes} starts from seed {a.seed}", flush=True)
     ok = True

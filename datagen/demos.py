@@ -90,11 +90,12 @@ def rollout(env, policy, obs, *, render: bool = False, rewards: bool = False) ->
     Returns arrays: observation.state (T, obs_dim) float32, action (T, act_dim) float32,
     next.success (T, 1) bool, with `rewards` next.reward (T, 1) float32 and next.done (T, 1) bool (the
     step's reward and whether it ended the episode: REWARD_FEATURES), and IMAGE_KEY (T, IMAGE_SIZE,
-    IMAGE_SIZE, 3) uint8 when render is set.
+    IMAGE_SIZE, 3) uint8 when render is set, and with an env whose step says whether the sim blew up
+    (info["unstable"]: the ALOHA sims, datagen.aloha_sim) unstable: whether it did (the episode ended there).
     """
     policy.reset()
     states, actions, succ, rews, dones, frames = [], [], [], [], [], []
-    done = False
+    done, unstable = False, None
     while not done:
         if render:
             frames.append(env.render(IMAGE_SIZE))
@@ -105,6 +106,8 @@ def rollout(env, policy, obs, *, render: bool = False, rewards: bool = False) ->
         succ.append(bool(info["success"]))
         rews.append(reward)
         dones.append(bool(done))
+        if "unstable" in info:
+            unstable = unstable or bool(info["unstable"])
     ep = {
         "observation.state": np.asarray(states, np.float32),
         "action": np.asarray(actions, np.float32),
@@ -116,6 +119,8 @@ def rollout(env, policy, obs, *, render: bool = False, rewards: bool = False) ->
         ep["next.done"] = np.asarray(dones, bool)[:, None]
     if render:
         ep[IMAGE_KEY] = np.asarray(frames, np.uint8)
+    if unstable is not None:
+        ep["unstable"] = unstable
     return ep
 
 
@@ -152,18 +157,27 @@ def generate(
     quiet: bool = False,
 ) -> dict:
     """Write a demo set of the task `emb` (datagen.task.Task: its env, expert_class, name) to `out` and
-    return its summary (episodes, frames, successes)."""
+    return its summary (episodes, frames, successes: of those written; unstable: the episodes in which the
+    simulation blew up, not written; DataError when that is every one)."""
     env = emb.make_env()
     m = emb.spec
-    summary = {"episodes": 0, "frames": 0, "successes": 0}
+    summary = {"episodes": 0, "frames": 0, "successes": 0, "unstable": 0}
 
     def episodes_iter():
         made = expert_episodes(emb, env, seed, episodes, noise=noise, render=video)
         for ep in progress(made, total=episodes, desc=f"{emb.name} demos", quiet=quiet):
+            if ep.get("unstable"):  # MuJoCo reset the sim mid-episode: a failure, and no episode to write
+                summary["unstable"] += 1
+                continue
             summary["episodes"] += 1
             summary["frames"] += len(ep["action"])
             summary["successes"] += ep["success"]
             yield ep | emb.frame_columns(ep["observation.state"], ep["action"])
+        if not summary["episodes"]:  # raised inside the writer: nothing is left of the set
+            raise DataError(
+                f"the simulation blew up (unstable) in all {episodes} {emb.name} episodes at noise "
+                f"{noise:g}, so none was written; lower --noise"
+            )
 
     extra = (REWARD_FEATURES if emb.records_reward else {}) | emb.frame_features
     feats = features(m.state_names, m.action_names, extra, video=video, env_state_names=m.env_state_names)

@@ -173,14 +173,14 @@ def read_source(task: Task, src: Path) -> dict:
         ) from None
     if len(arrays["action"]) == 0:
         raise DataError(f"--src {src} holds no frames")
-    if whole:  # the observation vector the task's env gives: state and environment state together
-        env_names = tuple(m.env_state_names)
-        if arrays[ENV_STATE_KEY].shape[1:] != (len(env_names),):
-            raise DataError(f"--src {src}: {ENV_STATE_KEY} is not [{len(env_names)}] wide")
-        arrays["observation.state"] = observation(arrays, task.obs_names, m.state_names, env_names)
-    problem = frames_problem(src, arrays)
+    env_names = tuple(m.env_state_names)
+    if whole and arrays[ENV_STATE_KEY].shape[1:] != (len(env_names),):
+        raise DataError(f"--src {src}: {ENV_STATE_KEY} is not [{len(env_names)}] wide")
+    problem = frames_problem(src, arrays)  # before the columns are joined: the line names the one at fault
     if problem:
         raise DataError(f"--src {problem}")
+    if whole:  # the observation vector the task's env gives: state and environment state together
+        arrays["observation.state"] = observation(arrays, task.obs_names, m.state_names, env_names)
     problem = state_range_problem(task, src, arrays["observation.state"], arrays["action"])
     if problem:
         raise DataError(problem)

@@ -762,8 +762,11 @@ def fps_problem(root: Path, fps: int) -> str | None:
 
 
 def frames_problem(root: Path, arrays: dict) -> str | None:
-    """None if every state and action in `arrays` (N, D) is finite, else where the first bad frame is."""
-    for key in ("observation.state", "action"):
+    """None if every state, environment state (where `arrays` holds one) and action (N, D) is finite,
+    else where the first bad frame is, in the column that holds it."""
+    for key in ("observation.state", ENV_STATE_KEY, "action"):
+        if key not in arrays:
+            continue
         bad = ~np.isfinite(arrays[key]).all(axis=tuple(range(1, arrays[key].ndim)))
         if bad.any():
             return (

@@ -288,3 +288,81 @@ def test_value_study_trains_the_mlp_on_joints_and_cube_at_the_issues_sizes():
         "replayed": 1 + row["replay"]["kept"],
         "fresh": 2,
     }
+
+
+def _edited(src, dst, edit):
+    """A copy of the set `src` at `dst` whose observation.environment_state is edit(array (N, 7)) in every
+    data file, schema and metadata kept: a user's damaged source."""
+    import shutil
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from lerobot_v3.dataset import ENV_STATE_KEY
+
+    shutil.copytree(src, dst)
+    for f in sorted((dst / "data").rglob("*.parquet")):
+        t = pq.read_table(f)
+        field = t.schema.field(ENV_STATE_KEY)
+        values = edit(np.array(t[ENV_STATE_KEY].to_pylist(), np.float32))
+        i = t.schema.get_field_index(ENV_STATE_KEY)
+        t = t.set_column(i, field, pa.array(values.tolist(), field.type))
+        pq.write_table(t, f)
+    return dst
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf")], ids=["nan", "inf"])
+def test_a_non_finite_cube_pose_is_refused_naming_its_column(demo_set, tmp_path, value):
+    """Issue 62 #4: a NaN or inf in a source's observation.environment_state (the cube's pose) was refused
+    with a line naming observation.state, the column that holds the joints: the line names the column
+    that holds the value, as the user finds it in the set."""
+    from ch37.errors import DataError
+
+    def damage(env):
+        env[3, 1] = value
+        return env
+
+    with pytest.raises(DataError) as e:
+        read_source(TASK, _edited(demo_set, tmp_path / "bad", damage))
+    assert "in observation.environment_state in 1 frames, the first at row 3" in str(e.value), e.value
+
+
+def test_a_source_whose_cube_quaternions_are_zero_is_refused(demo_set, tmp_path):
+    """Issue 62 #11: a source whose cube quaternions are all zero (no rotation at all) was grown as if
+    real; it is refused in one line naming the episode, the frame and the quaternion, as gym-pusht's
+    keypoints that no T can take are (Task.state_problem)."""
+    from ch37.errors import DataError
+
+    def zero(env):
+        env[:, 3:] = 0.0
+        return env
+
+    with pytest.raises(DataError) as e:
+        read_source(TASK, _edited(demo_set, tmp_path / "bad", zero))
+    said = str(e.value)
+    assert "episode 0, frame 0 (row 0)" in said and "cube_qw, cube_qx, cube_qy, cube_qz" in said, said
+    assert "norm 0" in said and "this is not a ALOHA" in said, said
+
+
+def test_an_episode_the_simulation_blows_up_in_is_a_failure_and_nothing_lands_outside_out(tmp_path):
+    """Issue 62 #11: at --noise 1e9 MuJoCo found the sim unstable, reset it mid-episode and went on: the
+    frames were written as an episode, and MUJOCO_LOG.TXT was left in the caller's folder. Such an episode
+    ends where the sim blew up and counts as a failure (rollout's "unstable"), it is not written (a set of
+    none is one line, exit 2) and no file appears outside --out."""
+    from datagen.demos import rollout
+
+    env = TASK.make_env()
+    s = env_seed(0, "demo", 0)
+    ep = rollout(env, TransferCubeExpert(noise=1e9, seed=s), env.reset(s))
+    assert ep["unstable"] and not ep["success"] and len(ep["action"]) < TASK.max_steps, len(ep["action"])
+    ep = rollout(env, TransferCubeExpert(noise=0.0, seed=s), env.reset(s))  # the same env, fresh again
+    assert not ep["unstable"] and ep["success"]
+
+    caller = tmp_path / "caller"
+    caller.mkdir()
+    argv = ["--task", "aloha_transfer_cube", "--episodes", "1", "--noise", "1e9", "--out", tmp_path / "o"]
+    r = run_script(ROOT / "gen_demos.py", *argv, "--quiet", cwd=caller, check=False)
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "unstable" in err[0], r.stdout + r.stderr
+    assert "lower --noise" in err[0] and not (tmp_path / "o").exists(), err
+    assert list(caller.iterdir()) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["caller"]

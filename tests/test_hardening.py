@@ -1286,3 +1286,53 @@ def test_bench_engine_refuses_a_task_it_cannot_measure_in_one_line(tmp_path, tas
     err = p.stderr.strip().splitlines()
     assert p.returncode == 2 and len(err) == 1 and f"invalid choice: '{task}'" in err[0], p.stderr[-2000:]
     assert not (tmp_path / "o").exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# Issue 62: datagen.check's arguments (#3), --out through a link (#5), a relative --out (#6)
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["pusher", "--seed", "-1", "--episodes", "1"], "--seed must be >= 0, got -1"),
+        (["aloha_transfer_cube", "--seed", "-1", "--episodes", "1"], "--seed must be >= 0, got -1"),
+        (["pusht", "--tol", "nan", "--episodes", "1"], "--tol must be a finite non-negative number, got nan"),
+        (["pusht", "--tol", "-1", "--episodes", "1"], "--tol must be a finite non-negative number, got -1.0"),
+        (["pusht", "--episodes", "0"], "--episodes must be a positive integer, got 0"),
+    ],
+    ids=["seed-pusher", "seed-transfer-cube", "tol-nan", "tol-negative", "episodes-0"],
+)
+def test_the_check_commands_arguments_are_one_line_each(argv, needle):
+    """Issue 62 #3: `python -m datagen.check` took --seed -1 to a traceback (pusher, transfer-cube),
+    --tol nan as a round trip that can never fail and --tol -1 as one that always does: one `error:`
+    line each (ch37.config's bounds, as every command's flags), exit 2, before any env is made."""
+    p = run("-m", "datagen.check", *argv)
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(err) == 1 and err[0] == f"error: {needle}", p.stderr[-2000:]
+    assert p.stdout == "", p.stdout
+
+
+def test_out_through_a_link_to_a_folder_is_written_there_and_a_dangling_link_is_refused(tmp_path):
+    """Issue 62 #5: gen_demos.py's --out given as a link to an empty folder was "Not a directory; a part
+    of the path is a file", where augment_demos.py writes through the same link: both write into the folder
+    it points to, the link left as it is. A link to nothing is refused by both in one line naming the
+    user's path (not an internal .ch37-partial-* one), nothing created."""
+    (tmp_path / "sets").mkdir()
+    (tmp_path / "set_link").symlink_to("sets")
+    p = run("gen_demos_pusht.py", "--quiet", "--episodes", "1", "--out", tmp_path / "set_link")
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert (tmp_path / "set_link").is_symlink() and (tmp_path / "sets" / "meta" / "info.json").is_file()
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no partial folder left
+
+    (tmp_path / "dangling").symlink_to("nowhere")
+    before = sorted(os.listdir(tmp_path))
+    for argv in (
+        ["gen_demos_pusht.py", "--quiet", "--episodes", "1"],
+        ["augment_demos.py", "--src", tmp_path / "set_link", "--per_demo", "1", "--quiet"],
+        [*SD, "--no-cache"],
+    ):
+        p = run(*argv, "--out", tmp_path / "dangling")
+        err = p.stderr.strip().splitlines()
+        assert p.returncode == 2 and len(err) == 1, (argv, p.stderr[-2000:])
+        assert f"--out {tmp_path / 'dangling'} is a link to nowhere, which does not exist" in err[0], err
+        assert sorted(os.listdir(tmp_path)) == before and not (tmp_path / "nowhere").exists()

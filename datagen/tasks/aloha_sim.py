@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import functools
 import importlib.util
+import sys
 from pathlib import Path
 
 import mujoco
@@ -204,11 +205,35 @@ def qpos14(d: mujoco.MjData) -> np.ndarray:
     return np.concatenate([q[:6], [normalize_gripper(q[6])], q[8:14], [normalize_gripper(q[14])]])
 
 
-def _step(m: mujoco.MjModel, d: mujoco.MjData) -> None:
-    """One control step as dm_control's legacy Physics.step takes it, SUBSTEPS times."""
+# MuJoCo's warnings that a sim blew up (a NaN, inf or huge position, velocity or acceleration): MuJoCo
+# then resets the sim to the model's defaults and counts the warning in MjData.warning (until the next
+# mj_resetData: an episode's reset)
+UNSTABLE = (
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+    mujoco.mjtWarning.mjWARN_BADQACC,
+)
+
+
+def _warned(message: str) -> None:
+    """MuJoCo's warnings, in place of its own handler, which appends each to MUJOCO_LOG.TXT in the current
+    folder (a file outside any --out): an instability is the episode's end (step's "unstable", a failed
+    episode, gen_demos.py's count of them), said by the command; any other warning is shown as MuJoCo
+    shows it, on stderr."""
+    if "The simulation is unstable" not in message:
+        print(f"WARNING: {message}", file=sys.stderr)
+
+
+mujoco.set_mju_user_warning(_warned)
+
+
+def _step(m: mujoco.MjModel, d: mujoco.MjData) -> bool:
+    """One control step as dm_control's legacy Physics.step takes it, SUBSTEPS times; whether the sim blew
+    up since the episode's reset (MuJoCo then reset it, and what follows is no continuation)."""
     for _ in range(SUBSTEPS):
         mujoco.mj_step2(m, d)
         mujoco.mj_step1(m, d)
+    return any(d.warning[w].number for w in UNSTABLE)
 
 
 def _reset(m: mujoco.MjModel, d: mujoco.MjData, objects) -> None:
@@ -225,7 +250,8 @@ class TransferCubeEnv:
     imported when one is made, not when the engine's registry imports this module).
     observation float32: the 14 of qpos14, then the objects' poses (x, y, z m; qw, qx, qy, qz each)
     action (14,): per arm, left first, 6 joint targets (rad) and a normalized gripper target
-    info["is_success"] at reward 4, which ends the episode (terminated); truncated after max_steps.
+    info["is_success"] at reward 4, which ends the episode (terminated); truncated after max_steps;
+    info["unstable"] when MuJoCo found the sim blown up and reset it, which ends the episode unsolved.
     reset(seed) places the objects as gym-aloha's reset(seed=seed) does (draw);
     reset(options={"reset_to_state": the objects' poses}) places them there."""
 
@@ -285,11 +311,13 @@ class TransferCubeEnv:
             raise ValueError(f"non-finite action {a}")
         gl, gr = unnormalize_gripper(a[6]), unnormalize_gripper(a[13])  # BimanualViperXTask.before_step
         self.data.ctrl[:] = np.r_[a[:6], gl, -gl, a[7:13], gr, -gr]
-        _step(self.model, self.data)
+        unstable = _step(self.model, self.data)
         self.t += 1
-        reward = self.stage(self.model, self.data)
+        # a sim MuJoCo reset mid-episode ends the episode there, unsolved: its frames are no episode
+        reward = 0 if unstable else self.stage(self.model, self.data)
         success = reward == MAX_REWARD
-        return self.observation(), float(reward), success, self.t >= self.max_steps, {"is_success": success}
+        info = {"is_success": success, "unstable": unstable}
+        return self.observation(), float(reward), success or unstable, self.t >= self.max_steps, info
 
 
 class InsertionEnv(TransferCubeEnv):

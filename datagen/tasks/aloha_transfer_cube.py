@@ -68,6 +68,9 @@ REST_Z, LIFT = 0.02, 0.02
 # the end-effector targets' column: per arm, left first, the grasp point (m) and the gripper's orientation
 EE_KEY = "action.end_effector"
 EE_NAMES = tuple(f"{side}_{n}" for side in ARMS for n in ("x", "y", "z", "qw", "qx", "qy", "qz"))
+# A recorded quaternion's norm may differ from 1 by float32 rounding (~1e-7: MuJoCo normalises its free
+# joints' quaternions every step); one farther off (all zeros, a hand-edited pose) is no rotation at all
+QUAT_TOL = 1e-3
 TARGET_IK_ITERS = 20  # a replayed step's IK from the observed joints (the expert's runs from its last solve)
 SUBTASKS = (  # the engine's: per arm (left, right), the frame its motion is relative to
     Subtask("pick", ("world", "object"), ends="lifted"),  # the right arm grasps and lifts the cube
@@ -124,6 +127,23 @@ class AlohaTransferCube(Task):
             if all(lo <= v <= hi for v, (lo, hi) in zip(xy, CUBE_RANGE)):  # float32: aug.start re-runs it
                 return tuple(float(np.float32(v)) for v in xy) + start[2:]
         return None
+
+    def state_problem(self, states):
+        # each object's pose is 7 numbers, its quaternion the last 4: one that is no unit quaternion is no
+        # orientation (rotation_of would divide by its zero norm, or scale), and no env was ever in it
+        s = np.asarray(states, np.float64)[:, self.objects]
+        norms = np.linalg.norm(s.reshape(len(s), -1, 7)[:, :, 3:], axis=2)  # (frames, objects)
+        off = np.abs(norms - 1.0) > QUAT_TOL
+        bad = off.any(axis=1)
+        if not bad.any():
+            return None
+        row = int(np.argmax(bad))
+        k = int(np.argmax(off[row]))  # the object at fault
+        names = ", ".join(self.start_names[7 * k + 3 : 7 * k + 7])
+        return row, (
+            f"its quaternion ({names}) has norm {norms[row, k]:.3g}, not 1: no orientation "
+            f"({int(bad.sum())} of {len(bad)} frames)"
+        )
 
     def object_pose(self, state) -> np.ndarray:
         out = np.eye(4)
