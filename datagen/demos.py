@@ -91,7 +91,8 @@ def rollout(env, policy, obs, *, render: bool = False, rewards: bool = False) ->
     next.success (T, 1) bool, with `rewards` next.reward (T, 1) float32 and next.done (T, 1) bool (the
     step's reward and whether it ended the episode: REWARD_FEATURES), and IMAGE_KEY (T, IMAGE_SIZE,
     IMAGE_SIZE, 3) uint8 when render is set, and with an env whose step says whether the sim blew up
-    (info["unstable"]: the ALOHA sims, datagen.aloha_sim) unstable: whether it did (the episode ended there).
+    (info["unstable"]: the ALOHA sims, datagen.tasks.aloha_sim) unstable: whether it did (the episode
+    ended there).
     """
     policy.reset()
     states, actions, succ, rews, dones, frames = [], [], [], [], [], []

@@ -224,9 +224,6 @@ def _warned(message: str) -> None:
         print(f"WARNING: {message}", file=sys.stderr)
 
 
-mujoco.set_mju_user_warning(_warned)
-
-
 def _step(m: mujoco.MjModel, d: mujoco.MjData) -> bool:
     """One control step as dm_control's legacy Physics.step takes it, SUBSTEPS times; whether the sim blew
     up since the episode's reset (MuJoCo then reset it, and what follows is no continuation)."""
@@ -263,6 +260,7 @@ class TransferCubeEnv:
     def __init__(self, max_steps: int, share: TransferCubeEnv | None = None):
         import gymnasium
 
+        mujoco.set_mju_user_warning(_warned)  # when a sim is made, not at import: its warnings are ours
         self.model = model(self.scene) if share is None else share.model
         self.data = mujoco.MjData(self.model)
         self.max_steps = max_steps
