@@ -135,3 +135,33 @@ def test_the_poster_strip_reads_the_kept_measurement():
     for robot in ("pusht", "aloha"):
         q = r["pooled"]["shared_id"][robot]
         assert f"<b>{q['rate']:.2f}</b> [{q['ci95'][0]:.2f}, {q['ci95'][1]:.2f}]" in strip
+
+
+def test_the_pile_is_the_wrangle_regions_padding_mask_and_id():
+    """tools.embodiment's pile against ex2's specification of the wrangle step (exercises/checks.py's
+    expected_mix): each robot standardized with its own statistics, PushT's actions in columns 0..1 and
+    zeros after, the mask 1 on real dimensions only, the one-hot id of the embodiment (PushT 0, ALOHA 1)."""
+    from exercises.checks import expected_mix
+    from tools import embodiment as emb
+
+    rng = np.random.default_rng(0)
+    demos = {
+        "pusht": {"observation.state": rng.normal(size=(7, 10)), "action": rng.normal(size=(7, 2))},
+        "aloha": {"observation.state": rng.normal(size=(5, 10)), "action": rng.normal(size=(5, 6))},
+    }
+    demos["pusht"]["observation.state"][:, 6:] = 0.3  # PushT's constant target pose: centred, not / 0
+    stats = {
+        r: {"state": emb.stats_of(d["observation.state"]), "action": emb.stats_of(d["action"])}
+        for r, d in demos.items()
+    }
+    data = emb.arm_data(demos, stats)
+    z = {r: emb.standardize(d["action"], stats[r]["action"]) for r, d in demos.items()}
+    actions, mask, ids = expected_mix(z["pusht"], z["aloha"])
+    for arm in ("shared", "shared_id"):
+        x, y, m = data[arm]
+        np.testing.assert_allclose(y, actions, rtol=1e-6)
+        assert np.array_equal(m, mask) and x.shape == (12, 12) and np.all(x[:7, 6:10] == 0)
+    assert (
+        np.array_equal(data["shared_id"][0][:, 10:], np.eye(2)[ids]) and not data["shared"][0][:, 10:].any()
+    )
+    assert np.array_equal(data["pusht_only"][2], mask[:7]) and np.array_equal(data["aloha_only"][2], mask[7:])
