@@ -22,9 +22,10 @@ from ch37.viz import DATA_COLOURS, DATA_LABEL, LAB_DEFAULT, LAB_STYLE
 
 HEX = {"tab:blue": "#1f77b4", "tab:orange": "#ff7f0e", "tab:green": "#2ca02c", "tab:red": "#d62728"}
 NAMES = {"pusht": "PushT", "aloha": "ALOHA"}  # embodiment names as the chapter writes them
-EMBODIMENT = (
-    ROOT / "results" / "embodiment.json"
-)  # objective 2, measured: python -m tools.embodiment's kept run
+# objective 2, measured: python -m tools.embodiment's kept run; the chapter poster's strip shows it, so
+# it is part of the result cache's key (READS, ch37.code_files): a new kept run is a new poster
+EMBODIMENT = ROOT / "results" / "embodiment.json"
+READS = (EMBODIMENT,)
 GROWN_BY = {"resolve": "re-solving", "replay": "replay"}
 DATA_VAR = {"source": "var(--src)", "augmented": "var(--aug)"}  # the arms' colours, set in CSS
 BUDGET_ORDER = ("short", "full")

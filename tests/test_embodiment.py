@@ -124,9 +124,10 @@ def test_the_readme_gives_the_kept_numbers_recounted_from_their_rows():
 
 
 def test_the_poster_strip_reads_the_kept_measurement():
-    from ch37 import poster
+    from ch37 import code_files, poster
 
     assert poster.kept_embodiment(KEPT.with_name("absent.json")) is None  # no kept run: the strip as before
+    assert "results/embodiment.json" in code_files()  # a new kept run is a new poster, not a cache replay
     r = poster.kept_embodiment()
     assert r is not None and r == json.loads(KEPT.read_text())
     cross = {"padded_action_dim": 6, "embodiments": [], "state_index_2_means": {}, "padded_dim_max_grad": 0.0}
