@@ -69,11 +69,22 @@ def init_weights(
 
 
 def train(
-    datasets, steps: int, init: dict, *, batch_size: int, lr: float, seed: int, device="cpu", quiet=True
+    datasets,
+    steps: int,
+    init: dict,
+    *,
+    batch_size: int,
+    lr: float,
+    seed: int,
+    device="cpu",
+    quiet=True,
+    masks=None,
 ):
     """One BCPolicy per (states, actions) in `datasets`, trained side by side for exactly `steps`
     steps of `batch_size` rows from the weights `init`, every arm with the same batch-order seed.
-    Returns the policies and each one's final MSE on its own (normalized) data."""
+    Returns the policies and each one's final MSE on its own (normalized) data. `masks`, one (N, act_dim)
+    array of 1s (real) and 0s (padding) per dataset, makes the loss and the fit the wrangle region's
+    masked MSE: a padded action dimension adds nothing to the loss, hence no gradient."""
     device = torch.device(device)
     (hidden, obs_dim), act_dim = init["0.weight"].shape, init["4.weight"].shape[0]  # the init's shapes
     pols = [BCPolicy(x, y, mlp(hidden, obs_dim, act_dim)).to(device) for x, y in datasets]
@@ -81,6 +92,8 @@ def train(
         (p.norm_s(torch.as_tensor(x, device=device)), p.norm_a(torch.as_tensor(y, device=device)))
         for p, (x, y) in zip(pols, datasets)
     ]
+    if masks is not None:
+        masks = [torch.as_tensor(m, dtype=torch.float32, device=device) for m in masks]
     orders = [BatchOrder(len(x), batch_size, seed) for x, _ in tensors]  # same seed for every arm
     model = MLPStack([init] * len(pols)).to(device)  # arm e = slice e of every weight (ch37.ensemble)
     threads = torch.get_num_threads()
@@ -93,7 +106,11 @@ def train(
         idx = [o.next() for o in orders]
         xb = torch.stack([x[i] for (x, _), i in zip(tensors, idx)])  # (arms, B, 10)
         yb = torch.stack([y[i] for (_, y), i in zip(tensors, idx)])  # (arms, B, 2)
-        loss = ((model(xb) - yb) ** 2).mean(dim=(1, 2)).sum()  # each arm's MSE; the sum keeps them apart
+        if masks is None:
+            loss = ((model(xb) - yb) ** 2).mean(dim=(1, 2)).sum()  # each arm's MSE; the sum keeps them apart
+        else:  # each arm's masked MSE: squared errors on real dimensions over their count
+            mb = torch.stack([m[i] for m, i in zip(masks, idx)])
+            loss = (((model(xb) - yb) ** 2 * mb).sum(dim=(1, 2)) / mb.sum(dim=(1, 2)).clamp(min=1)).sum()
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -103,7 +120,12 @@ def train(
     torch.set_num_threads(threads)
     with torch.no_grad():  # fit on each arm's whole training set, a digit-level fingerprint of the run
         nets = [model.load_into(p.net, e) for e, p in enumerate(pols)]
-        fits = [torch.nn.functional.mse_loss(net(x), y).item() for net, (x, y) in zip(nets, tensors)]
+        if masks is None:
+            fits = [torch.nn.functional.mse_loss(net(x), y).item() for net, (x, y) in zip(nets, tensors)]
+        else:  # the masked MSE the arms trained on
+            fits = [
+                (((n(x) - y) ** 2 * m).sum() / m.sum()).item() for n, (x, y), m in zip(nets, tensors, masks)
+            ]
     return [p.eval() for p in pols], fits
 
 

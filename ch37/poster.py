@@ -16,11 +16,16 @@ import json
 import math
 from pathlib import Path
 
+from ch37 import ROOT
 from ch37.ownership import dump_json, round_floats, write_atomic
 from ch37.viz import DATA_COLOURS, DATA_LABEL, LAB_DEFAULT, LAB_STYLE
 
 HEX = {"tab:blue": "#1f77b4", "tab:orange": "#ff7f0e", "tab:green": "#2ca02c", "tab:red": "#d62728"}
 NAMES = {"pusht": "PushT", "aloha": "ALOHA"}  # embodiment names as the chapter writes them
+# objective 2, measured: python -m tools.embodiment's kept run; the chapter poster's strip shows it, so
+# it is part of the result cache's key (READS, ch37.code_files): a new kept run is a new poster
+EMBODIMENT = ROOT / "results" / "embodiment.json"
+READS = (EMBODIMENT,)
 GROWN_BY = {"resolve": "re-solving", "replay": "replay"}
 DATA_VAR = {"source": "var(--src)", "augmented": "var(--aug)"}  # the arms' colours, set in CSS
 BUDGET_ORDER = ("short", "full")
@@ -230,6 +235,42 @@ def _bars_svg(metrics: dict) -> str:
     return _svg("bars", w, h, title, "; ".join(desc) + ".", body)
 
 
+def kept_embodiment(path: Path = EMBODIMENT) -> dict | None:
+    """tools.embodiment's kept result (a full run, not a smoke one), or None where there is none."""
+    try:
+        result = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    ok = (
+        isinstance(result, dict)
+        and result.get("kind") == "embodiment"
+        and " --smoke" not in result["command"]
+    )
+    return result if ok else None
+
+
+def measured_embodiment(result: dict) -> str:
+    """Objective 2's numbers as one caption sentence (HTML), read from tools.embodiment's result: each
+    arm's success pooled over seeds, per robot, with its Wilson 95% interval."""
+    p = result["pooled"]
+
+    def rate(arm: str, robot: str) -> str:
+        q = p[arm][robot]
+        return f"<b>{q['rate']:.2f}</b> [{q['ci95'][0]:.2f}, {q['ci95'][1]:.2f}]"
+
+    per_robot = "; ".join(
+        f"{NAMES[robot]}: its own policy {rate(own, robot)}, shared {rate('shared', robot)}, shared with "
+        f"the id {rate('shared_id', robot)}, that policy told the other robot's id "
+        f"{rate('shared_id_swapped', robot)}"
+        for robot, own in (("pusht", "pusht_only"), ("aloha", "aloha_only"))
+    )
+    n, seeds = p["shared"]["pusht"]["episodes"], len(result["rows"])
+    return (
+        f"Measured (<code>{_e(result['command'])}</code>, {seeds} seeds, {n} held-out starts per robot and "
+        f"policy, success with 95% intervals): {per_robot}."
+    )
+
+
 def _strip(cross: dict) -> str:
     """Each robot's action, padded to the widest: real dimensions named, padding hatched."""
     pad, rows, said = cross["padded_action_dim"], [], []
@@ -251,7 +292,9 @@ def _strip(cross: dict) -> str:
         f'<div class="strip">{"".join(rows)}</div>\n'
         f"<figcaption>Largest gradient on PushT's padded dimensions under the masked loss: "
         f"<b>{cross['padded_dim_max_grad']:.1f}</b>. State index 2 is {' and '.join(said)}: a shared network "
-        "carries structure across robots, not the meaning of a raw state number.</figcaption>\n</figure>"
+        "carries structure across robots, not the meaning of a raw state number."
+        + (f" {measured_embodiment(kept)}" if (kept := kept_embodiment()) else "")
+        + "</figcaption>\n</figure>"
     )
 
 
@@ -302,10 +345,12 @@ batch order: the data is the only difference. Intervals are Wilson 95% over {n_e
 </figure>
 </div>
 {_strip(_as_written(cross))}"""
+    kept = ", and objective 2's line from <code>results/embodiment.json</code>" if kept_embodiment() else ""
     note = (
         f"Run: {run}, device {_e(cfg.get('device'))}. Drawn from this run's <code>metrics.json</code> and "
         "<code>cross_embodiment.json</code>"
-        + (", beside <code>meta.yaml</code>'s five-seed reference" if reference else " only")
+        + (", beside <code>meta.yaml</code>'s five-seed reference" if reference else "")
+        + (kept or ("" if reference else " only"))
         + "; the page holds no date (metrics.json has none), so the same flags write the same bytes."
     )
     rates = f"source {rate['source_full']:.2f} -> source+aug {rate['augmented_full']:.2f}"

@@ -8,6 +8,7 @@
     python -m tools.notebook [--check]           scale_data.ipynb from the regions
     python -m tools.lock                         .venv against requirements.lock (bash tools/lock.sh makes it)
     python -m tools.replay compare|yield|value   replay vs re-solve: what each buys BC, yield by task and mode
+    python -m tools.embodiment --seeds 3         objective 2: per-robot and shared policies on the padded pile
     python -m tools.bench lesson|engine|envs|gym_pusht|kernels|writer   how fast, and where the time goes
     python -m tools.lerobot eval|lab             LeRobot's own policies: a checkpoint on our starts, the lab
     (tools.common holds what they share: the parser and subcommands, regions, provenance, result files)
