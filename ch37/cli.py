@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ch37 import ROOT, config
 from ch37.errors import DataError
-from ch37.process import available_memory, max_workers
+from ch37.process import available_memory, has_avx2_fma, max_workers
 
 # wallclock.csv's tiers: a CPU's is named from the machine (cpu_tier: cpu-<cores>core-<vendor>, one row per
 # kind of machine measured); the fixed ones are Apple's GPU, then GPUs matched by a substring of the
@@ -275,6 +275,21 @@ def reference_words(ref: dict | None, seed: int, effect: float) -> str:
 PUBLISHED_BLAS_CORE = "Haswell"
 PUBLISHED_MKL_CBWR = "COMPATIBLE"
 PUBLISHED_PATH = f"x86-64 CPU, OPENBLAS_CORETYPE={PUBLISHED_BLAS_CORE}, MKL_CBWR={PUBLISHED_MKL_CBWR}"
+
+
+def kernel_path(environ=os.environ) -> dict[str, str]:
+    """The variables that put this process on the published kernel path, less those already set (a
+    value of yours is kept): scale_data.py's `os.environ.update(cli.kernel_path())`, before numpy and
+    torch load (both read them once). Kernels round differently, and torch's MKL picks its own by the
+    CPU's maker, so without them one seed would train another policy on another machine. OpenBLAS is
+    held to its Haswell kernels only where the CPU has AVX2 and FMA (they fault without); elsewhere its
+    own choice, another draw that the banner names (other_draw)."""
+    want = {"MKL_CBWR": PUBLISHED_MKL_CBWR}
+    if has_avx2_fma():
+        want["OPENBLAS_CORETYPE"] = PUBLISHED_BLAS_CORE
+    return {k: v for k, v in want.items() if k not in environ}
+
+
 # MKL's branch codes (mkl_cbwr.h) as MKL_CBWR spells them; 1 (MKL_CBWR_BRANCH_OFF) is MKL_CBWR unset
 MKL_BRANCHES = {1: "", 2: "AUTO", 3: "COMPATIBLE", 4: "SSE2", 6: "SSSE3", 7: "SSE4_1", 8: "SSE4_2", 9: "AVX"}
 MKL_BRANCHES |= {10: "AVX2", 11: "AVX512_MIC", 12: "AVX512", 13: "AVX512_MIC_E1", 14: "AVX512_E1"}
