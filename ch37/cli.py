@@ -254,15 +254,15 @@ def reference_words(ref: dict | None, seed: int, effect: float) -> str:
         f"mean {ref['mean'] * 100:+.1f} over seeds {seeds}, from {lo * 100:+.0f} to {hi * 100:+.0f}, "
         f"up on {ref['up']} of {ref['n']}"
     )
-    above = sum(e > effect + 1e-9 for e in effects.values())  # reference seeds with a larger effect
-    ties = sum(abs(e - effect) <= 1e-9 for e in effects.values())
-    if not above:
-        place = "the largest" if not ties else "tied with the largest"
-    elif above == len(effects):
-        place = "below every one"
-    else:
-        place = f"below {above} of them" + (f", tied with {ties}" if ties else "")
-    text += f"; this run's effect is {place}"
+    # placed among the other seeds: the reference's own run of this seed is not another draw to beat
+    others = {s: e for s, e in effects.items() if s != seed}
+    counts = (
+        (sum(e > effect + 1e-9 for e in others.values()), "below"),
+        (sum(abs(e - effect) <= 1e-9 for e in others.values()), "tied with"),
+        (sum(e < effect - 1e-9 for e in others.values()), "above"),
+    )
+    place = ", ".join(f"{word} {n}" for n, word in counts if n)
+    text += f"; among the other seeds ({', '.join(map(str, sorted(others)))}) this run's effect is {place}"
     if effects.get(seed) is not None and abs(effects[seed] - effect) > 1e-9:
         text += f" (the reference's own seed {seed} gave {effects[seed] * 100:+.0f})"
     return text
@@ -346,7 +346,8 @@ def banner(args: argparse.Namespace, reminder=None) -> None:
     import torch
 
     tier = device_tier(args.device)
-    head = f"ch3.7 Datasets at Scale | seed {args.seed} | device {args.device} ({tier})"
+    # the tier: the machine class wallclock.csv times the default run on (cpu-<cores>core-<vendor>, a GPU)
+    head = f"ch3.7 Datasets at Scale | seed {args.seed} | device {args.device} (wall-clock tier {tier})"
     print(f"{head} | torch {torch.__version__}")
     smoke = "smoke run: tiny configuration, seconds, numbers not meaningful"
     print(smoke if args.smoke else expected_wallclock(tier, config_hash(result_config(args))))
