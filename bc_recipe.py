@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 import pusht_env
-from ch37.ensemble import BatchOrder, MLPStack
+from ch37.ensemble import BatchOrder, side_by_side
 from ch37.parallel import LockstepEnvs, progress
 
 
@@ -95,36 +95,34 @@ def train(
     if masks is not None:
         masks = [torch.as_tensor(m, dtype=torch.float32, device=device) for m in masks]
     orders = [BatchOrder(len(x), batch_size, seed) for x, _ in tensors]  # same seed for every arm
-    model = MLPStack([init] * len(pols)).to(device)  # arm e = slice e of every weight (ch37.ensemble)
-    threads = torch.get_num_threads()
-    if model.on_numpy():  # its arms take the cores (ch37.ensemble); torch's ops here are too small to split
-        torch.set_num_threads(1)
-    opt = torch.optim.Adam(model.parameters(), lr=lr, fused=device.type in ("cpu", "cuda"))  # one kernel
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=steps)  # lr cosine-decayed to 0
     bar = progress(None, total=steps, desc="train", quiet=quiet)
-    for _ in range(steps):
-        idx = [o.next() for o in orders]
-        xb = torch.stack([x[i] for (x, _), i in zip(tensors, idx)])  # (arms, B, 10)
-        yb = torch.stack([y[i] for (_, y), i in zip(tensors, idx)])  # (arms, B, 2)
-        if masks is None:
-            loss = ((model(xb) - yb) ** 2).mean(dim=(1, 2)).sum()  # each arm's MSE; the sum keeps them apart
-        else:  # each arm's masked MSE: squared errors on real dimensions over their count
-            mb = torch.stack([m[i] for m, i in zip(masks, idx)])
-            loss = (((model(xb) - yb) ** 2 * mb).sum(dim=(1, 2)) / mb.sum(dim=(1, 2)).clamp(min=1)).sum()
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        sched.step()
-        bar.update()
+    # The arms as one network, side by side (ch37.ensemble): model(x) maps (arms, B, 10) -> (arms, B, 2),
+    # arm e with its own weights; on leaving the block each policy holds its arm's trained weights.
+    with side_by_side(init, [p.net for p in pols], device) as model:
+        opt = torch.optim.Adam(model.parameters(), lr=lr, fused=device.type in ("cpu", "cuda"))  # one kernel
+        sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=steps)  # lr cosine-decayed to 0
+        for _ in range(steps):
+            idx = [o.next() for o in orders]
+            xb = torch.stack([x[i] for (x, _), i in zip(tensors, idx)])  # (arms, B, 10)
+            yb = torch.stack([y[i] for (_, y), i in zip(tensors, idx)])  # (arms, B, 2)
+            if masks is None:  # each arm's MSE; the sum keeps them apart
+                loss = ((model(xb) - yb) ** 2).mean(dim=(1, 2)).sum()
+            else:  # each arm's masked MSE: squared errors on real dimensions over their count
+                mb = torch.stack([m[i] for m, i in zip(masks, idx)])
+                loss = (((model(xb) - yb) ** 2 * mb).sum(dim=(1, 2)) / mb.sum(dim=(1, 2)).clamp(min=1)).sum()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            bar.update()
     bar.close()
-    torch.set_num_threads(threads)
     with torch.no_grad():  # fit on each arm's whole training set, a digit-level fingerprint of the run
-        nets = [model.load_into(p.net, e) for e, p in enumerate(pols)]
         if masks is None:
-            fits = [torch.nn.functional.mse_loss(net(x), y).item() for net, (x, y) in zip(nets, tensors)]
+            fits = [torch.nn.functional.mse_loss(p.net(x), y).item() for p, (x, y) in zip(pols, tensors)]
         else:  # the masked MSE the arms trained on
             fits = [
-                (((n(x) - y) ** 2 * m).sum() / m.sum()).item() for n, (x, y), m in zip(nets, tensors, masks)
+                (((p.net(x) - y) ** 2 * m).sum() / m.sum()).item()
+                for p, (x, y), m in zip(pols, tensors, masks)
             ]
     return [p.eval() for p in pols], fits
 

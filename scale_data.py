@@ -21,43 +21,96 @@ Before the first run, write your prediction in exercises/ex1_predict_scale.py: t
 """
 
 # --- region: setup ---
-# Every knob is a flag, declared once as a field with its unit and why its default (CleanRL's Args):
-# the run's own below; the experiment's in ch37/config.py, shared with the Scale Lab, augment_demos.py
-# and the tools: Chapter (--source_episodes, --aug_per_demo, --aug_tries, --eval_episodes, --seed, the
-# recipe --epochs --batch_size --lr --hidden_dim, the perturbation --aug_pos_sigma --aug_yaw_sigma),
-# Mode (--aug_mode), Parallel (--workers). --help lists them all with their defaults; --smoke sets tiny
-# CPU defaults.
+# Imports, the kernel path, the flags (each with its unit and why its default, as CleanRL's Args), the
+# seeds and a banner. The data engine's --aug_mode and --aug_tries and the --workers count are the
+# engine's and the plumbing's, declared in ch37/config.py; --help lists every flag with its default.
+import math
 import os
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ch37.process import has_avx2_fma
+from ch37 import cli
 
-# One path through the matrix kernels on every x86-64 CPU, Intel or AMD. Kernels round differently, and
-# torch's MKL picks its own by the CPU's maker, so one seed would train another policy on another machine
-# (docs/reproducibility.md). The training's products run on numpy's OpenBLAS (ch37/ensemble.py), held to
-# its Haswell kernels (AVX2 + FMA: the same code on Intel and AMD); MKL's few (the rollouts' small ones)
-# to its COMPATIBLE branch. Set before numpy and torch load them; a value of yours is kept.
-os.environ.setdefault("MKL_CBWR", "COMPATIBLE")
-if has_avx2_fma():  # without them, OpenBLAS's own choice: another draw (the banner says so)
-    os.environ.setdefault("OPENBLAS_CORETYPE", "Haswell")
+# One path through the matrix kernels on every x86-64 CPU, Intel or AMD, so that one seed trains one
+# policy on any machine (docs/reproducibility.md); set before numpy and torch load (a value of yours is kept).
+os.environ.update(cli.kernel_path())
 
 import numpy as np
+import torch
 
-from ch37 import cli, errors, result_cache
-from ch37.config import NON_NEGATIVE, Chapter, Mode, Parallel, flag
+import bc_recipe as bc  # the network, the training loop and the rollout: open it
+import datagen  # the data engine: datagen.grow over a task, here datagen.PUSHT
+from ch37 import errors, poster, result_cache, viz  # plumbing and drawing, not the lesson
+from ch37.config import (
+    FINITE,
+    FINITE_POSITIVE,
+    NON_NEGATIVE,
+    POSITIVE,
+    SIGMA_MAX,
+    Mode,
+    Parallel,
+    Tries,
+    flag,
+)
+from ch37.ownership import dump_json, round_floats, write_atomic
+from ch37.parallel import progress
+from ch37.seeds import MAX_SEED, SEED_BLOCK, env_seed
 from exercises import ex1_reminder
+from gen_demos_aloha import ALOHA
+from gen_demos_pusht import PUSHT
+from lerobot_v3 import load_arrays
 
 errors.guard()  # a fixable problem: one line, exit 2; Ctrl-C: exit 130 (demo sets kept, training restarts)
 t_start = time.perf_counter()
 
 
 @dataclass(frozen=True)
-class Args(Chapter, Mode, Parallel):
+class Args(Mode, Tries, Parallel):
     """Chapter 3.7: Datasets at Scale (see the module docstring)."""
 
+    seed: int = flag(
+        0, ">= 0; seeds 0, 1, 2 draw disjoint demos and eval starts", bound=NON_NEGATIVE, at_most=MAX_SEED
+    )
+    source_episodes: int = flag(
+        12, "expert demos per robot; 12 is coverage-starved on purpose", bound=POSITIVE, at_most=SEED_BLOCK
+    )
+    aug_per_demo: int = flag(8, "generated demos kept per PushT source demo (0 = none)", bound=NON_NEGATIVE)
+    aug_pos_sigma: float = flag(
+        0.08,
+        f"m; std of block and pusher xy moves: about half the spawn annulus' width, so starts reach new "
+        f"cells (<= {SIGMA_MAX:g})",
+        bound=FINITE,
+        at_most=SIGMA_MAX,
+        aliases=("pos_sigma",),
+    )
+    aug_yaw_sigma: float = flag(
+        0.5,
+        f"rad; std of block yaw moves: about 29 degrees, new headings for the same push (<= {SIGMA_MAX:g})",
+        bound=FINITE,
+        at_most=SIGMA_MAX,
+        aliases=("yaw_sigma",),
+    )
+    epochs: int = flag(
+        500,
+        "passes over a data set that make a budget: short over the source set, full over source + "
+        "augmented (see measure)",
+        bound=POSITIVE,
+    )
+    batch_size: int = flag(128, "frames per gradient step", bound=POSITIVE)
+    lr: float = flag(1e-3, "Adam learning rate, cosine-decayed to 0", bound=FINITE_POSITIVE, at_most=1.0)
+    hidden_dim: int = flag(512, "width of both hidden layers of the BC MLP", bound=POSITIVE)
+    eval_episodes: int = flag(
+        50,
+        "held-out PushT starts per arm; 50: a success rate's 95% interval is about +-0.1 at this chapter's "
+        "rates (+-0.14 at worst, a rate of 0.5)",
+        bound=POSITIVE,
+        at_most=SEED_BLOCK,
+    )
+    full_steps: int = flag(
+        0, "steps of the full budget (0: --epochs passes over source+aug)", bound=NON_NEGATIVE
+    )
     out: Path = flag(
         None, "output folder (default outputs/ch3.7-scale-data, -smoke appended with --smoke)", type=Path
     )
@@ -67,29 +120,18 @@ class Args(Chapter, Mode, Parallel):
     aloha_data: Path = flag(
         None, "your own ALOHA LeRobot set, never modified (default: made under --out)", type=Path
     )
-    full_steps: int = flag(
-        0, "steps of the full budget (0: --epochs passes over source+aug)", bound=NON_NEGATIVE
-    )
     device: str = flag("auto", "auto | cpu | cuda | mps (auto: cuda > mps > cpu)")
     smoke: bool = flag(False, "tiny CPU defaults for tests and CI (seconds); explicit flags win")
     rerun: bool = flag(True, "write a Rerun .rrd recording")
     cache: bool = flag(True, "reuse an identical earlier run (same flags and code)")
 
 
-args = cli.parse(Args)  # every flag checked here: a bad one is one line and exit 2, before any heavy import
-import torch  # noqa: E402  (after the checks, so --help and flag errors are instant)
-
+args = cli.parse(Args)  # every flag checked here: a bad one is one line and exit 2, before any work
 args.device = cli.pick_device(args.device)
-# Every input is checked before anything is removed: your --pusht_data/--aloha_data first (the wrangle
-# region reuses the answer), then --out is usable and locked, nothing of yours in the way; only then
-# are our old results there cleared.
-from datagen import check_given  # noqa: E402
-from gen_demos_aloha import ALOHA  # noqa: E402
-from gen_demos_pusht import PUSHT  # noqa: E402
-
-for emb, given in ((PUSHT, args.pusht_data), (ALOHA, args.aloha_data)):
-    if given is not None:
-        check_given(emb, given, episodes=args.source_episodes, seed=args.seed, noise=emb.default_noise)
+# Your --pusht_data/--aloha_data are checked before anything is removed (the wrangle region reuses the
+# answer); then --out is claimed: usable, locked, nothing of yours in the way, our old results cleared.
+given = {PUSHT: args.pusht_data, ALOHA: args.aloha_data}  # None: a set made under --out
+datagen.check_given_sets(given, episodes=args.source_episodes, seed=args.seed)
 claim = cli.claim_out(args)
 device = torch.device(args.device)
 torch.manual_seed(args.seed)
@@ -108,17 +150,13 @@ if cache.replay():  # an identical earlier run (same flags, code and data): its 
 # The pile is what a cross-embodiment policy would train on; it is not what trains below. The
 # measure region trains a PushT-only BC policy that min-max scales its own data (bc_recipe.Policy),
 # so there are two normalizations: the pile standardizes per robot, the policy scales PushT alone.
-from ch37.ownership import dump_json, round_floats, write_atomic  # noqa: E402
-from datagen import ensure_demos  # noqa: E402
-from lerobot_v3 import load_arrays  # noqa: E402
-
 sets = {}
-for emb, given in ((PUSHT, args.pusht_data), (ALOHA, args.aloha_data)):
-    path = given or args.out / "demos" / f"{emb.name}_seed{args.seed}_ep{args.source_episodes}"
-    how = ensure_demos(
+for emb, yours in given.items():
+    path = yours or args.out / "demos" / f"{emb.name}_seed{args.seed}_ep{args.source_episodes}"
+    how = datagen.ensure_demos(
         emb,
         path,
-        user_given=given is not None,
+        user_given=yours is not None,
         episodes=args.source_episodes,
         seed=args.seed,
         noise=emb.default_noise,
@@ -226,9 +264,6 @@ cross_path = write_atomic(args.out / "cross_embodiment.json", dump_json(round_fl
 # replays the source path in the new block pose, and the success filter decides what is kept.
 # At the default settings the expert solves every perturbed start (yield 1.00), so the filter
 # rejects nothing here; under replay it rejects most attempts (docs/replay.md).
-import datagen  # noqa: E402  (the data engine: datagen.grow over a task, here datagen.PUSHT)
-from ch37.parallel import progress  # noqa: E402
-
 pusht = sets["pusht"]
 sources = datagen.sources(pusht)  # {episode: its frames}; re-solving reads only the first state
 wanted = len(sources) * args.aug_per_demo
@@ -252,9 +287,13 @@ kept, attempts, failures = datagen.grow(
 )
 bar.close()
 yield_ = len(kept) / attempts if attempts else 0.0
-print(
-    f"augment ({args.aug_mode}): {attempts} attempts, {len(kept)} kept of {wanted} wanted, yield {yield_:.2f}"
-)
+if not wanted:  # --aug_per_demo 0: nothing tried, so no yield to report; both data arms are the source set
+    print("augment: no augmentation (--aug_per_demo 0); source + augmented is the source set alone")
+else:
+    print(
+        f"augment ({args.aug_mode}): {attempts} attempts, {len(kept)} kept of {wanted} wanted, "
+        f"yield {yield_:.2f}"
+    )
 if attempts > len(kept):  # the success filter at work: what it threw away, and why
     why = ", ".join(f"{reason} {n}" for reason, n in failures.items() if n)
     print(f"  the success filter rejected {attempts - len(kept)} of {attempts} attempts: {why}")
@@ -281,11 +320,6 @@ aug = load_arrays(aug_path, keys=datagen.KEPT_KEYS) if kept else datagen.empty_k
 # The table shows each arm's final training loss beside its success because they can disagree:
 # a network can fit 12 demos almost exactly (a low loss) and still solve none of the held-out
 # starts. That is overfitting, and only the rollouts show it: read success, not loss.
-import math  # noqa: E402
-
-import bc_recipe as bc  # noqa: E402
-from ch37.seeds import env_seed  # noqa: E402
-
 data = {
     "source": (pusht["observation.state"], pusht["action"]),
     "augmented": (np.concatenate([pusht["observation.state"], aug["observation.state"]]),
@@ -299,16 +333,21 @@ eval_seeds = [env_seed(args.seed, "eval", j) for j in range(args.eval_episodes)]
 init = bc.init_weights(args.hidden_dim, args.seed)  # every arm of both budgets starts from these
 recipe = dict(batch_size=args.batch_size, lr=args.lr, seed=args.seed, device=device)
 arms = {}
+# With no augmented demo the two data arms are one (the same data, steps, init and batch order): it
+# trains and rolls out once, and both rows report it.
+trained = list(data.values()) if len(aug["action"]) else [data["source"]]
 for budget, steps in budgets.items():
     t0 = time.perf_counter()
     # both data arms of this budget, side by side: same steps, same init, same batch order
-    pols, fits = bc.train(list(data.values()), steps, init, quiet=args.smoke, **recipe)
-    for (name, (x, _)), pol, fit in zip(data.items(), pols, fits):
-        rate = bc.evaluate(pol, eval_seeds, workers=args.workers)
+    pols, fits = bc.train(trained, steps, init, quiet=args.smoke, **recipe)
+    rates = [bc.evaluate(pol, eval_seeds, workers=args.workers) for pol in pols]
+    for i, (name, (x, _)) in enumerate(data.items()):
+        fit, rate = fits[min(i, len(pols) - 1)], rates[min(i, len(pols) - 1)]
         arms[f"{name}_{budget}"] = {"data": name, "budget": budget, "frames": len(x), "steps": steps,
                                     "final_loss": round(fit, 6), "success": rate,
                                     "ci95": bc.wilson(rate, len(eval_seeds))}  # fmt: skip
-    print(f"budget {budget}: {steps} steps for each data arm ({time.perf_counter() - t0:.1f} s)")
+    each = "for each data arm" if len(pols) > 1 else "for the one data arm (no augmented data)"
+    print(f"budget {budget}: {steps} steps {each} ({time.perf_counter() - t0:.1f} s)")
 steps_named = " | ".join(f"{b} = {n} steps" for b, n in budgets.items())
 print(f"success (95% interval), training loss, on {len(eval_seeds)} held-out starts | {steps_named}")
 label = {"source": "source only", "augmented": "source + augmented"}  # the arm named "augmented" has both
@@ -357,8 +396,6 @@ metrics = {
 }  # fmt: skip
 metrics_path = write_atomic(args.out / "metrics.json", dump_json(round_floats(metrics, 6)), claim)
 written = [cross_path, metrics_path]
-from ch37 import poster, viz  # noqa: E402  (the drawing code: PNG, HTML poster, Rerun; not the lesson)
-
 written.append(viz.figure(args.out / "scale_data.png", src_starts, aug_starts, metrics, bc.ANNULUS, claim))
 ref = cli.five_seed_reference(metrics["config"])  # meta.yaml's sweep, None unless this configuration
 ref_words = "" if args.smoke else cli.reference_words(ref, args.seed, effects["data_full"])

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ch37 import ROOT, config
 from ch37.errors import DataError
-from ch37.process import available_memory, max_workers
+from ch37.process import available_memory, has_avx2_fma, max_workers
 
 # wallclock.csv's tiers: a CPU's is named from the machine (cpu_tier: cpu-<cores>core-<vendor>, one row per
 # kind of machine measured); the fixed ones are Apple's GPU, then GPUs matched by a substring of the
@@ -254,15 +254,15 @@ def reference_words(ref: dict | None, seed: int, effect: float) -> str:
         f"mean {ref['mean'] * 100:+.1f} over seeds {seeds}, from {lo * 100:+.0f} to {hi * 100:+.0f}, "
         f"up on {ref['up']} of {ref['n']}"
     )
-    above = sum(e > effect + 1e-9 for e in effects.values())  # reference seeds with a larger effect
-    ties = sum(abs(e - effect) <= 1e-9 for e in effects.values())
-    if not above:
-        place = "the largest" if not ties else "tied with the largest"
-    elif above == len(effects):
-        place = "below every one"
-    else:
-        place = f"below {above} of them" + (f", tied with {ties}" if ties else "")
-    text += f"; this run's effect is {place}"
+    # placed among the other seeds: the reference's own run of this seed is not another draw to beat
+    others = {s: e for s, e in effects.items() if s != seed}
+    counts = (
+        (sum(e > effect + 1e-9 for e in others.values()), "below"),
+        (sum(abs(e - effect) <= 1e-9 for e in others.values()), "tied with"),
+        (sum(e < effect - 1e-9 for e in others.values()), "above"),
+    )
+    place = ", ".join(f"{word} {n}" for n, word in counts if n)
+    text += f"; among the other seeds ({', '.join(map(str, sorted(others)))}) this run's effect is {place}"
     if effects.get(seed) is not None and abs(effects[seed] - effect) > 1e-9:
         text += f" (the reference's own seed {seed} gave {effects[seed] * 100:+.0f})"
     return text
@@ -275,6 +275,21 @@ def reference_words(ref: dict | None, seed: int, effect: float) -> str:
 PUBLISHED_BLAS_CORE = "Haswell"
 PUBLISHED_MKL_CBWR = "COMPATIBLE"
 PUBLISHED_PATH = f"x86-64 CPU, OPENBLAS_CORETYPE={PUBLISHED_BLAS_CORE}, MKL_CBWR={PUBLISHED_MKL_CBWR}"
+
+
+def kernel_path(environ=os.environ) -> dict[str, str]:
+    """The variables that put this process on the published kernel path, less those already set (a
+    value of yours is kept): scale_data.py's `os.environ.update(cli.kernel_path())`, before numpy and
+    torch load (both read them once). Kernels round differently, and torch's MKL picks its own by the
+    CPU's maker, so without them one seed would train another policy on another machine. OpenBLAS is
+    held to its Haswell kernels only where the CPU has AVX2 and FMA (they fault without); elsewhere its
+    own choice, another draw that the banner names (other_draw)."""
+    want = {"MKL_CBWR": PUBLISHED_MKL_CBWR}
+    if has_avx2_fma():
+        want["OPENBLAS_CORETYPE"] = PUBLISHED_BLAS_CORE
+    return {k: v for k, v in want.items() if k not in environ}
+
+
 # MKL's branch codes (mkl_cbwr.h) as MKL_CBWR spells them; 1 (MKL_CBWR_BRANCH_OFF) is MKL_CBWR unset
 MKL_BRANCHES = {1: "", 2: "AUTO", 3: "COMPATIBLE", 4: "SSE2", 6: "SSSE3", 7: "SSE4_1", 8: "SSE4_2", 9: "AVX"}
 MKL_BRANCHES |= {10: "AVX2", 11: "AVX512_MIC", 12: "AVX512", 13: "AVX512_MIC_E1", 14: "AVX512_E1"}
@@ -331,7 +346,8 @@ def banner(args: argparse.Namespace, reminder=None) -> None:
     import torch
 
     tier = device_tier(args.device)
-    head = f"ch3.7 Datasets at Scale | seed {args.seed} | device {args.device} ({tier})"
+    # the tier: the machine class wallclock.csv times the default run on (cpu-<cores>core-<vendor>, a GPU)
+    head = f"ch3.7 Datasets at Scale | seed {args.seed} | device {args.device} (wall-clock tier {tier})"
     print(f"{head} | torch {torch.__version__}")
     smoke = "smoke run: tiny configuration, seconds, numbers not meaningful"
     print(smoke if args.smoke else expected_wallclock(tier, config_hash(result_config(args))))

@@ -3,13 +3,14 @@
 A command's flags are one dataclass (CleanRL's `Args`), its fields made by flag(): default, help (unit
 and why), bound and old spellings in one place, so adding a flag touches one file. The knobs several
 commands share are groups declared here, and a command takes a group by inheriting it: Recipe (the BC
-training recipe), Perturbation and Mode (the data engine's perturbation and mode), Parallel and Ray
-(where the work runs). Chapter is the lesson's experiment (scale_data.py's Args adds the run's own
-flags) and CHAPTER its defaults, which the tools and exercises read. So the same knob has the same name,
-default and bound in the lesson, augment_demos.py and scale_lab.py (tests/test_flags.py). parse() builds
-the argparse parser from a dataclass (each group an argument group, --help showing every flag's default)
-and checks the bounds: every flag problem is one `error:` line and exit 2 (through ch37.errors), before
-any heavy import. Importing this module defines classes and does nothing else.
+training recipe), Perturbation, Mode and Tries (the data engine's perturbation, mode and attempts),
+Parallel and Ray (where the work runs). The lesson declares its own knobs in scale_data.py, where a
+reader meets them, and takes the engine's and the plumbing's from here; CHAPTER holds its defaults for
+the tools and exercises. So the same knob has the same name, default and bound in the lesson,
+augment_demos.py and scale_lab.py (tests/test_flags.py). parse() builds the argparse parser from a
+dataclass (each group an argument group, --help showing every flag's default) and checks the bounds:
+every flag problem is one `error:` line and exit 2 (through ch37.errors), before any work.
+Importing this module defines classes and does nothing else.
 """
 
 from __future__ import annotations
@@ -23,7 +24,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from ch37.errors import DataError
-from ch37.seeds import MAX_SEED, SEED_BLOCK
 
 # A flag's bound (flag(bound=...)), each with its one-line error (check() below):
 POSITIVE = "positive"  # an integer > 0: "--NAME must be a positive integer, got V"
@@ -303,8 +303,7 @@ class Parallel:
 
     workers: int = flag(
         None,
-        "worker processes (with --ray: a local Ray's CPUs); same results for any number "
-        "(default: cores, at most 8)",
+        "worker processes; same results for any number (default: cores, at most 8)",
         bound=POSITIVE,
         type=int,
     )
@@ -312,7 +311,7 @@ class Parallel:
 
 @dataclass(frozen=True)
 class Ray(Parallel):
-    """on Ray instead of local processes (the same results)"""
+    """on Ray instead of local processes (the same results); with --ray, --workers is a local Ray's CPUs"""
 
     ray: str = flag(
         None,
@@ -324,24 +323,26 @@ class Ray(Parallel):
 
 
 @dataclass(frozen=True)
-class Chapter(Perturbation, Recipe):
-    """the chapter's experiment (its defaults, CHAPTER, are the tools' and the exercises' too)"""
+class Tries:
+    """how long the data engine tries"""
 
-    source_episodes: int = flag(
-        12, "expert demos per robot; 12 is coverage-starved on purpose", bound=POSITIVE, at_most=SEED_BLOCK
-    )
-    aug_per_demo: int = flag(8, "generated demos kept per PushT source demo (0 = none)", bound=NON_NEGATIVE)
     aug_tries: int = flag(
         100,
         "attempts per wanted demo before a source demo gives up (replay's success filter rejects most)",
         bound=POSITIVE,
     )
-    eval_episodes: int = flag(
-        50, "held-out PushT starts per arm; 50: +-0.14 at worst", bound=POSITIVE, at_most=SEED_BLOCK
-    )
-    seed: int = flag(
-        0, ">= 0; seeds 0, 1, 2 draw disjoint demos and eval starts", bound=NON_NEGATIVE, at_most=MAX_SEED
-    )
+
+
+@dataclass(frozen=True)
+class Chapter(Tries, Perturbation, Recipe):
+    """The chapter's experiment as the tools and the exercises read it (CHAPTER). scale_data.py declares
+    these flags itself, each with its unit and why (the lesson's knobs are read where they are used);
+    tests/test_flags.py keeps its defaults and these equal."""
+
+    source_episodes: int = 12
+    aug_per_demo: int = 8
+    eval_episodes: int = 50
+    seed: int = 0
 
 
 CHAPTER = Chapter()

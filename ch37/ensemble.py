@@ -12,6 +12,9 @@ tests/test_ensemble.py checks that an arm trained in the stack ends with the wei
     pred = stack(x)                               # x (E, B, in) -> (E, B, out)
     stack.load_into(net, e)                       # arm e's trained weights back into a Sequential
 
+    with side_by_side(init, nets, device) as stack:   # what bc_recipe.train uses: all of the above
+        ...                                       # a training loop over stack(x); then each net is trained
+
 On the CPU the stack's matrix products run on numpy's OpenBLAS, one single-threaded sgemm per arm, the
 arms on threads of their own: the published numbers' kernel path (docs/reproducibility.md). torch's
 products go through MKL, whose kernels depend on the CPU's maker; OpenBLAS held to one kernel set
@@ -22,6 +25,7 @@ split a product by rows and columns, and a split moves which elements take its e
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import re
 from concurrent.futures import ThreadPoolExecutor
@@ -144,6 +148,25 @@ class MLPStack(torch.nn.Module):
             state[f"{n}.bias"] = b[e, 0].clone()
         net.load_state_dict(state)
         return net
+
+
+@contextlib.contextmanager
+def side_by_side(init: dict, nets: list[torch.nn.Sequential], device="cpu"):
+    """The arms `nets` (Sequentials shaped as the state dict `init`) as one MLPStack on `device`, every arm
+    starting from `init`, for one training loop: yields the stack; on leaving the block, each arm's
+    trained weights are in its net. While the stack's products run on numpy's OpenBLAS (the published
+    kernel path, its arms on threads of their own), torch's own ops, too small here to split, get one
+    thread; torch's thread count is put back on leaving, whatever happens."""
+    stack = MLPStack([init] * len(nets)).to(device)  # arm e = slice e of every weight
+    threads = torch.get_num_threads()
+    if stack.on_numpy():
+        torch.set_num_threads(1)
+    try:
+        yield stack
+    finally:
+        torch.set_num_threads(threads)
+    for e, net in enumerate(nets):
+        stack.load_into(net, e)
 
 
 class BatchOrder:

@@ -31,7 +31,16 @@ A module that fails to import (half written, or a copy still naming its original
 line naming it, its tasks unavailable and the others known.
 """
 
-from datagen.demos import check_given, check_gl, ensure_demos, generate, rollout, video_problem, write_dataset
+from datagen.demos import (
+    check_given,
+    check_given_sets,
+    check_gl,
+    ensure_demos,
+    generate,
+    rollout,
+    video_problem,
+    write_dataset,
+)
 from datagen.engine import (
     ATTEMPTS_PER_KEPT,
     KEPT_KEYS,
@@ -74,6 +83,7 @@ __all__ = [
     "check_gl",
     "empty_kept",
     "check_given",
+    "check_given_sets",
     "ensure_demos",
     "first_per_source",
     "generate",

@@ -261,6 +261,15 @@ def ensure_demos(
     return f"generated ({s['successes']}/{s['episodes']} expert successes{why})"
 
 
+def check_given_sets(given: dict, *, episodes: int, seed: int) -> None:
+    """Each set of {embodiment: path or None} that a user named (--pusht_data/--aloha_data; None: a set
+    made under --out) checked with check_given, at the embodiment's default noise: scale_data.py calls
+    this before it claims --out."""
+    for emb, path in given.items():
+        if path is not None:
+            check_given(emb, path, episodes=episodes, seed=seed, noise=emb.default_noise)
+
+
 _GIVEN: dict[tuple, str] = {}  # sets already checked in this process: the early check and the wrangle's
 
 

@@ -17,10 +17,12 @@ What to do
     2. Set WHY to one sentence (at least three words) saying why you expect that. Think about
        what 12 demos cover of the start space, and what the augmented demos add.
     3. Run the check. It validates your answer first, then runs
-           scale_data.py --seed 0 --no-rerun --out outputs/exercises/seed0_aug8
-       (a few minutes on a laptop CPU), checks the measured effect against the band recorded
-       in meta.yaml, and prints whether your prediction matched the measurement. A wrong
-       prediction does not fail the check; a missing one does.
+           scale_data.py --seed 0 --out outputs/exercises/seed0_aug8
+       the README's first command with its own --out: if you made that run, scale_data.py's result
+       cache replays it in seconds (same flags, same code); if not, it trains (a few minutes on a
+       laptop CPU). It checks the measured effect against the band recorded in meta.yaml, and prints
+       whether your prediction matched the measurement. A wrong prediction does not fail the
+       check; a missing one does.
     4. Afterwards, read the whole 2x2 the run prints (and metrics.json's "effects"): at the short
        budget (500 passes over the source set only) does the extra data still help? What does
        that say about data and compute?
@@ -29,7 +31,7 @@ How to check (from the repository root, after the README's set-up)
     .venv/bin/python -m pytest exercises/checks.py -k ex1
     (with .venv activated: python -m pytest exercises/checks.py -k ex1)
 
-Estimated time: 10 minutes (about 3 of them waiting for the run).
+Estimated time: 10 minutes (seconds of waiting after the README's run; a few minutes without it).
 """
 
 PREDICTION = ""  # "A", "B" or "C"

@@ -13,13 +13,13 @@ from conftest import ROOT, run_script
 import augment_demos
 import gen_demos
 import scale_lab
-from ch37 import config
+from ch37 import config, seeds
 from ch37.errors import DataError
 from tools import lerobot as lerobot_eval  # its Args: `python -m tools.lerobot eval`'s flags
 
 # the groups several commands take (Chapter is the lesson's experiment: another command's --seed or
 # --eval_episodes is its own knob, with its own default, and is checked by name below)
-GROUPS = (config.Recipe, config.Perturbation, config.Mode, config.Parallel, config.Ray)
+GROUPS = (config.Recipe, config.Perturbation, config.Mode, config.Tries, config.Parallel, config.Ray)
 NEEDS = {"augment_demos": ["--src", "s", "--out", "o"]}  # required flags, never opened by parse()
 COMMANDS = (augment_demos, scale_lab, gen_demos, lerobot_eval)  # scale_data.py is read, not imported
 # An old spelling that is another command's name for another knob, kept so documented commands work:
@@ -27,20 +27,30 @@ COMMANDS = (augment_demos, scale_lab, gen_demos, lerobot_eval)  # scale_data.py 
 TWO_KNOBS = {"episodes"}
 
 
+def _literal(node):
+    """A flag() argument as written in scale_data.py: a literal, or a name the lesson imports from
+    ch37.config or ch37.seeds (POSITIVE, SIGMA_MAX, MAX_SEED, ...)."""
+    if isinstance(node, ast.Name):
+        return getattr(config, node.id) if hasattr(config, node.id) else getattr(seeds, node.id)
+    if isinstance(node, ast.JoinedStr):  # an f-string help: its text does not matter here
+        return ast.unparse(node)
+    return ast.literal_eval(node)
+
+
 def lesson_fields() -> dict[str, dict]:
     """scale_data.py's own flags, read from its Args class (the lesson runs when imported, so it is read)
-    as {name: {"bound", "at_most", "aliases"}}, and the groups it inherits, by name."""
+    as {name: {"bound", "at_most", "aliases", "default"}}, and the groups it inherits, by name."""
     tree = ast.parse((ROOT / "scale_data.py").read_text(encoding="utf-8"))
     cls = next(n for n in ast.walk(tree) if isinstance(n, ast.ClassDef) and n.name == "Args")
     own = {}
     for st in cls.body:
         if isinstance(st, ast.AnnAssign) and isinstance(st.value, ast.Call) and st.value.func.id == "flag":
             kw = {k.arg: k.value for k in st.value.keywords}
-            bound = kw.get("bound")
             own[st.target.id] = {
-                "bound": getattr(config, bound.id) if bound is not None else None,
-                "at_most": ast.literal_eval(kw["at_most"]) if "at_most" in kw else None,
-                "aliases": ast.literal_eval(kw["aliases"]) if "aliases" in kw else (),
+                "bound": _literal(kw["bound"]) if "bound" in kw else None,
+                "at_most": _literal(kw["at_most"]) if "at_most" in kw else None,
+                "aliases": _literal(kw["aliases"]) if "aliases" in kw else (),
+                "default": _literal(st.value.args[0]),
             }
     bases = [getattr(config, b.id) for b in cls.bases]
     return own, bases
@@ -53,7 +63,8 @@ def meta(f: dataclasses.Field) -> dict:
 def commands() -> dict[str, dict[str, dict]]:
     """{command: {flag name: its bound, at_most and aliases}} for every command with an Args dataclass."""
     own, bases = lesson_fields()
-    lesson = {f.name: meta(f) for b in bases for f in config.fields(b)} | own
+    lesson = {f.name: meta(f) for b in bases for f in config.fields(b)}
+    lesson |= {name: {k: v for k, v in m.items() if k != "default"} for name, m in own.items()}
     out = {"scale_data": lesson}
     for mod in COMMANDS:
         out[mod.__name__] = {f.name: meta(f) for f in config.fields(mod.Args)}
@@ -102,10 +113,8 @@ def test_every_bounded_flag_of_the_lesson_is_enforced(tmp_path):
     named, nothing made; each bounded field of its Args and the groups it takes is tried once."""
     own, bases = lesson_fields()
     fields = {f.name: meta(f) for b in bases for f in config.fields(b)} | own
-    ints = {f.name for b in bases for f in config.fields(b) if isinstance(f.default, int)} | {
-        "full_steps",
-        "workers",
-    }
+    ints = {f.name for b in bases for f in config.fields(b) if isinstance(f.default, int)} | {"workers"}
+    ints |= {name for name, m in own.items() if type(m["default"]) is int}
     tried = 0
     for name, m in sorted(fields.items()):
         vals = out_of_bound(m, name in ints)
@@ -209,8 +218,12 @@ def test_a_shared_knob_has_one_name_default_and_bound_in_every_command():
                 assert issubclass(mod.Args, g) and f is gf, (
                     f"{mod.__name__} re-declares --{f.name} of {g.__name__}"
                 )
+    # the lesson declares its own knobs where a reader meets them (issue 60 #5), the shared ones as
+    # exact copies of their group's field: the same default, bound, range and old spellings
     own, _ = lesson_fields()
-    assert not set(own) & set(group_fields), "scale_data.py re-declares a shared knob"
+    for name in set(own) & set(group_fields):
+        f = group_fields[name][1]
+        assert own[name] == meta(f) | {"default": f.default}, f"scale_data.py: --{name} differs from config"
     every = commands()
     names = {n for fields in every.values() for n in fields}
     for name in names:
@@ -224,6 +237,18 @@ def test_a_shared_knob_has_one_name_default_and_bound_in_every_command():
         assert {c for c in every if knob in every[c]} == {"scale_data", "augment_demos", "scale_lab"}
     for knob in ("epochs", "batch_size", "lr", "hidden_dim"):
         assert {c for c in every if knob in every[c]} == {"scale_data", "scale_lab"}
+
+
+def test_the_lessons_flags_default_to_chapter():
+    """Issue 60 #5: scale_data.py declares the chapter's flags itself (unit and why beside the lesson);
+    CHAPTER, the defaults the tools and the exercises read, holds the same values, and the lesson takes
+    no flag from config but the engine's and the plumbing's."""
+    own, bases = lesson_fields()
+    assert {b.__name__ for b in bases} == {"Mode", "Tries", "Parallel"}
+    chapter = dataclasses.asdict(config.CHAPTER)
+    wrong = {n: (own[n]["default"], v) for n, v in chapter.items() if n in own and own[n]["default"] != v}
+    assert not wrong, f"scale_data.py's default differs from config.CHAPTER's (lesson, CHAPTER): {wrong}"
+    assert set(chapter) - set(own) == {"aug_tries"}  # the engine's, from config.Tries
 
 
 def test_per_demo_has_one_meaning():

@@ -99,10 +99,14 @@ def test_masked_loss_gives_padded_dims_exactly_zero_gradient(runs):
 
 def test_aug_zero_reproduces_source_arm_to_the_digit(runs, tmp_path):
     """--aug_per_demo 0: the two data rows of the 2x2 are the same data, so they must agree to the digit,
-    and the source row must equal the source row of the run with augmentation (same short budget)."""
+    and the source row must equal the source row of the run with augmentation (same short budget).
+    Issue 60 #3: that arm trains once, not twice, and the run says "no augmentation" instead of
+    "0 attempts, 0 kept of 0 wanted, yield 0.00"."""
     a = runs["a"][0]
     shutil.copytree(a / "demos", tmp_path / "demos")  # reuse the cached demo sets
-    smoke(tmp_path, "--aug_per_demo", "0")
+    said = smoke(tmp_path, "--aug_per_demo", "0").stdout
+    assert "no augmentation (--aug_per_demo 0)" in said and "yield" not in said, said
+    assert said.count("steps for the one data arm (no augmented data)") == 2, said  # short and full
     m0 = json.loads((tmp_path / "metrics.json").read_text())
     m2 = json.loads((a / "metrics.json").read_text())
     assert m0["kept"] == 0 and m0["augmented_frames"] == 0

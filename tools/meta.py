@@ -321,9 +321,9 @@ def main(argv: list[str]) -> int:
     meta = {k: old.get(k, v) for k, v in META_STATIC.items()} | old
     try:
         meta["reference_run"] = reference_run(seeds, aug)
-        meta["exercise_checks"] = derive_checks(seeds, aug)
         if lab is not None:
             meta["scale_lab"] = scale_lab_section(lab)
+        meta["exercise_checks"] = derive_checks(seeds, aug, meta.get("scale_lab"))  # ex3 reads the lab's
     except ValueError as e:
         raise DataError(str(e)) from None
     except (KeyError, TypeError, IndexError) as e:
