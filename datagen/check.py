@@ -15,11 +15,12 @@ A task without an expert checks what it can (its start round-trip on resets).
 
 from __future__ import annotations
 
+import argparse
+import math
 from pathlib import Path
 
 import numpy as np
 
-from ch37 import config
 from ch37.errors import DataError, main
 from ch37.seeds import MAX_SEED
 from datagen.demos import rollout
@@ -91,9 +92,14 @@ def checks(task: Task, episodes: int, seed: int, tol: float):
     yield "replay", lost, f"{len(solved)} of {len(solved)} rollouts reproduced at zero perturbation"
 
 
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line and exit 2, as every command's (ch37.errors.main)
+        raise DataError(f"{message} (see --help)")
+
+
 def _main(argv) -> int:
     tasks = known_tasks()
-    p = config.parser(description=__doc__.splitlines()[0], prog="python -m datagen.check")
+    p = _Parser(prog="python -m datagen.check", description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument("task", help="the task to check: " + ", ".join(tasks))
     p.add_argument("--episodes", type=int, default=5, help="resets (and expert rollouts) to check")
     p.add_argument("--seed", type=int, default=0, help=f"the first reset seed, 0 to {MAX_SEED}")
@@ -101,9 +107,16 @@ def _main(argv) -> int:
     a = p.parse_args(argv)
     if a.task not in tasks:
         raise DataError(f"unknown task {a.task!r}: pick one of {', '.join(tasks)}")
-    # the bounds every command's flags have (ch37.config): a negative seed is no env's, and a --tol of
-    # nan passes every round trip and a negative one fails every one
-    config.check(a, positive=["episodes"], non_negative=["seed"], finite=["tol"], at_most={"seed": MAX_SEED})
+    # the bounds every command's flags have (ch37.config.check's words; the engine imports no flag module):
+    # a negative seed is no env's, and a --tol of nan passes every round trip and a negative one fails all
+    if a.episodes < 1:
+        raise DataError(f"--episodes must be a positive integer, got {a.episodes}")
+    if a.seed < 0:
+        raise DataError(f"--seed must be >= 0, got {a.seed}")
+    if a.seed > MAX_SEED:
+        raise DataError(f"--seed must be at most {MAX_SEED}, got {a.seed}")
+    if not math.isfinite(a.tol) or math.copysign(1.0, a.tol) < 0:
+        raise DataError(f"--tol must be a finite non-negative number, got {a.tol}")
     task = tasks[a.task]
     print(f"checking {task.name} ({task.title}), {a.episodes} starts from seed {a.seed}", flush=True)
     ok = True
