@@ -101,10 +101,10 @@ def attempt(
     if env is None:
         env = sims.env(task) if sims is not None else task.make_env()
     plans = sims.plans if sims is not None else None
-    parts, _ = lockstep.mode_parts(
+    kind, _ = lockstep.mode_parts(
         task, {source.episode: source}, how, mode, pool=pool, plans=plans, lanes=False
     )
-    return lockstep.one_lane(task, env, [(source.episode, k)], parts)[0]
+    return lockstep.one_lane(task, env, [(source.episode, k)], kind)[0]
 
 
 def keep_first(episodes, per_source: int, run_jobs, *, reasons, cap: int = ATTEMPTS_PER_KEPT):

@@ -4,7 +4,7 @@ until the episode ends, keep it on success; the frames, the attempt's start and 
 recorded here and nowhere else.
 
     attempts_lockstep(task, sources, jobs, how, mode=, select=, lanes=) -> [Outcome per job]
-    one_lane(task, env, jobs, parts)    -> their Outcomes, one attempt at a time (datagen.engine.attempt)
+    one_lane(task, env, jobs, mode)     -> their Outcomes, one attempt at a time (datagen.engine.attempt)
     replay_from(task, env, start, source) -> a replay from a given start (datagen.check, the tests)
 
 attempts_lockstep returns exactly what [datagen.engine.attempt(task, sources[e], k, how, ...) for (e, k)
@@ -17,7 +17,7 @@ still gets its own simulator state, fully reset at its start (PushT's lanes keep
 shared MjData: fast_pusht.SharedPushTEnv), so its frames do not depend on what shares its batch, on the
 lane it runs in, or on when it was started.
 
-The runner (run_lanes) knows no task. A mode (mode_parts: resolve_lanes, replay_lanes) hands it
+The runner (run_lanes) knows no task. A Mode object (mode_parts: Resolve, Replaying) gives it
     envs                         the lanes' envs, each with step(action) -> (obs, reward, done,
                                     info["success"]); made by the caller (Simulators: sharing the first's
                                     model, and PushT's MjData) and reused between calls: begin resets an
@@ -57,11 +57,12 @@ __all__ = [
     "attempt_rng",
     "attempts_lockstep",
     "kept_or_not",
+    "Mode",
+    "Replaying",
+    "Resolve",
     "mode_parts",
     "one_lane",
     "replay_from",
-    "replay_lanes",
-    "resolve_lanes",
     "run_lanes",
     "start_of_job",
     "with_provenance",
@@ -138,11 +139,9 @@ class _Frames:
 
 def run_lanes(
     jobs,
+    mode: Mode,
     *,
     envs: list,
-    begin,
-    decide,
-    finish,
     max_frames: int,
     obs_dim: int,
     act_dim: int,
@@ -166,7 +165,7 @@ def run_lanes(
     def fill(slot: int) -> None:
         while todo:
             i = todo.popleft()
-            got = begin(jobs[i], envs[slot])
+            got = mode.begin(jobs[i], envs[slot])
             if not isinstance(got, Lane):
                 results[i] = got
                 continue
@@ -176,7 +175,7 @@ def run_lanes(
 
     def end(slot: int) -> None:
         i, lane = live.pop(slot)
-        results[i] = finish(lane, envs[slot], f.episode(slot, t[slot]), f.obs[slot, t[slot]])
+        results[i] = mode.finish(lane, envs[slot], f.episode(slot, t[slot]), f.obs[slot, t[slot]])
         fill(slot)
 
     for slot in range(width):
@@ -186,7 +185,7 @@ def run_lanes(
         at = t[slots]
         obs = f.obs[slots, at]  # (N, obs_dim): each live lane's current observation
         ids = slots.tolist()
-        actions, stop = decide([live[s][1] for s in ids], [envs[s] for s in ids], obs)
+        actions, stop = mode.decide([live[s][1] for s in ids], [envs[s] for s in ids], obs)
         f.act[slots, at] = actions  # a stopped lane's row lies past its frames: never read
         if stop is not None and stop.any():  # ended before this step, not stepped
             for slot in slots[stop].tolist():
@@ -246,93 +245,102 @@ def kept_or_not(lane: Lane, episode: dict, success: bool, reason: str) -> Outcom
     return Outcome(None, episode, lane.start, e, steps)
 
 
-def resolve_lanes(task: Task, sources: dict, how: Perturbation, act_batch=None, start_for=None) -> dict:
+class Mode:
+    """What the runner (run_lanes) asks of an attempt's kind: begin, decide, finish (the module docstring
+    says each). Resolve, Replaying and Rollout are the engine's; a test may write its own."""
+
+    def begin(self, job, env):
+        raise NotImplementedError
+
+    def decide(self, lanes, envs, obs):
+        raise NotImplementedError
+
+    def finish(self, lane, env, episode, last_obs):
+        raise NotImplementedError
+
+
+class Resolve(Mode):
     """Mode "resolve": the task's noise-free expert from each perturbed start, kept on success.
     act_batch (the task's batch_expert()) decides for all lanes in one call; without it each lane runs
     its own task.expert(), reset at its start (the same bits: the batch expert is the expert's act over
     a batch). start_for(job): a given start instead of the drawn one."""
-    start_for = start_for or (lambda job: start_of_job(task, sources, job, how))
 
-    def begin(job, env):
-        start = start_for(job)
+    def __init__(self, task: Task, sources: dict, how: Perturbation, act_batch=None, start_for=None):
+        self.task, self.act_batch = task, act_batch
+        self.start_for = start_for or (lambda job: start_of_job(task, sources, job, how))
+
+    def begin(self, job, env):
+        start = self.start_for(job)
         if start is None:
             return Outcome("no_valid_start", source_episode=job[0])
-        if act_batch is not None:
-            return Lane(job, task.place(env, start), start=start)
-        expert = task.expert()
-        lane = Lane(job, task.place(env, start), start=start, expert=expert)
+        if self.act_batch is not None:
+            return Lane(job, self.task.place(env, start), start=start)
+        expert = self.task.expert()
+        lane = Lane(job, self.task.place(env, start), start=start, expert=expert)
         expert.reset()
         return lane
 
-    def decide(lanes, envs, obs):
-        if act_batch is not None:
-            return act_batch(obs), None
+    def decide(self, lanes, envs, obs):
+        if self.act_batch is not None:
+            return self.act_batch(obs), None
         return np.stack([lane.expert.act(o) for lane, o in zip(lanes, obs)]), None
 
-    def finish(lane, env, episode, last_obs):
+    def finish(self, lane, env, episode, last_obs):
         return kept_or_not(lane, episode, bool(episode["next.success"][-1, 0]), "expert_failed")
 
-    return {"begin": begin, "decide": decide, "finish": finish}
 
+class Replaying(Mode):
+    """Mode "replay": the engine's one replay (datagen.replay.Replay.act, one per lane) of the attempt's
+    own source, or of the pool's nearest to its start (MimicGen's selection; pool None: its own). plans:
+    the worker's cut sources (None: cut for this call). start_for(job): a given start instead of the drawn
+    one. follow: (length, rad), mode "replay_live" (task.follow_tol): each lane re-anchors the rest of a
+    segment on the object's live pose once it drifts that far (None: open loop)."""
 
-def replay_lanes(
-    task: Task,
-    sources: dict,
-    how: Perturbation,
-    pool: dict | None,
-    plans: dict | None,
-    start_for=None,
-    follow=None,
-) -> dict:
-    """Mode "replay": the engine's one replay (datagen.replay.Replay.act, one per lane) of
-    the attempt's own source, or of the pool's nearest to its start (MimicGen's selection; pool None:
-    its own). plans: the worker's cut sources (None: cut for this call). start_for(job): a given start
-    instead of the drawn one. follow: (length, rad), mode "replay_live" (task.follow_tol): each lane
-    re-anchors the rest of a segment on the object's live pose once it drifts that far (None: open loop)."""
-    start_for = start_for or (lambda job: start_of_job(task, sources, job, how))
+    def __init__(self, task: Task, sources: dict, how, pool=None, plans=None, start_for=None, follow=None):
+        self.task, self.sources, self.pool, self.plans, self.follow = task, sources, pool, plans, follow
+        self.start_for = start_for or (lambda job: start_of_job(task, sources, job, how))
 
-    def begin(job, env):
-        start = start_for(job)
+    def begin(self, job, env):
+        task, pool = self.task, self.pool
+        start = self.start_for(job)
         if start is None:
             return Outcome("no_valid_start", source_episode=job[0])
-        source = pool[replay.nearest(task, pool, start)] if pool else sources[job[0]]
+        source = pool[replay.nearest(task, pool, start)] if pool else self.sources[job[0]]
         try:
-            plan = replay.plan_of(task, source, plans)
+            plan = replay.plan_of(task, source, self.plans)
         except ValueError:
             return Outcome("source_not_split", None, start, source.episode)
-        run = replay.Replay(task, source, plan, start, follow)
+        run = replay.Replay(task, source, plan, start, self.follow)
         return Lane(job, task.place(env, start), run=run)
 
-    def decide(lanes, envs, obs):
+    def decide(self, lanes, envs, obs):
         actions = [lane.run.act(o, env) for lane, env, o in zip(lanes, envs, obs)]
         stop = np.array([a is None for a in actions], bool)
         if stop.all():  # nothing is stepped: the rows are never read
-            return np.zeros((len(lanes), task.spec.act_dim), np.float32), stop
+            return np.zeros((len(lanes), self.task.spec.act_dim), np.float32), stop
         blank = np.zeros_like(next(a for a in actions if a is not None))  # a stopped lane's row
         return np.stack([blank if a is None else a for a in actions]), stop  # as made, their dtype too
 
-    def finish(lane, env, episode, last_obs):
+    def finish(self, lane, env, episode, last_obs):
         got = lane.run.outcome(env, last_obs, episode)
         kept = with_provenance(got.episode, got.source_episode, got.start) if got.kept else None
         return replace(got, episode=kept)
 
-    return {"begin": begin, "decide": decide, "finish": finish}
-
 
 def mode_parts(
     task: Task, sources: dict, how: Perturbation, mode: str, *, pool=None, plans=None, lanes: bool = True
-) -> tuple[dict, bool]:
-    """(the runner's parts for `mode`, whether its lanes can run together): resolve with the task's
+) -> tuple[Mode, bool]:
+    """(the Mode object for `mode`, whether its lanes can run together): resolve with the task's
     batch_expert, replay where the task steps its envs as one batch (its own step_batch). A replay
     decides lane by lane, so its lanes pay only where the envs step as one batch; stepped env by env
-    they cost more than one at a time. lanes False: parts for one lane (resolve: the plain expert, faster
+    they cost more than one at a time. lanes False: a Mode for one lane (resolve: the plain expert, faster
     on one row than the batch expert, which is then not made)."""
     if mode == "resolve":
         act_batch = task.batch_expert() if lanes else None
-        return resolve_lanes(task, sources, how, act_batch), act_batch is not None
+        return Resolve(task, sources, how, act_batch), act_batch is not None
     follow = task.follow_tol if mode == "replay_live" else None
-    parts = replay_lanes(task, sources, how, pool, plans, follow=follow)
-    return parts, type(task).step_batch is not Task.step_batch
+    kind = Replaying(task, sources, how, pool, plans, follow=follow)
+    return kind, type(task).step_batch is not Task.step_batch
 
 
 def _dims(task: Task) -> dict:
@@ -340,18 +348,18 @@ def _dims(task: Task) -> dict:
     return {"max_frames": task.max_steps, "obs_dim": m.obs_dim, "act_dim": m.act_dim, "reward_of": reward_of}
 
 
-def one_lane(task: Task, env, jobs, parts: dict) -> list:
+def one_lane(task: Task, env, jobs, mode: Mode) -> list:
     """[Outcome of job] for `jobs`, each attempt in turn through the runner in one lane on `env`, stepped
     by env.step."""
-    return run_lanes(jobs, envs=[env], step=step_each, lanes=1, **parts, **_dims(task))
+    return run_lanes(jobs, mode, envs=[env], step=step_each, lanes=1, **_dims(task))
 
 
 def replay_from(task: Task, env, start, source: Source, plans: dict | None = None) -> Outcome:
     """One replay of `source` from the given `start` (not a drawn one), in `env`: its Outcome, the
     frames executed with the provenance of a kept attempt (datagen.check's zero-perturbation replay,
     the tests). plans: a cache of cut sources (None: cut now)."""
-    parts = replay_lanes(task, {source.episode: source}, None, None, plans, start_for=lambda job: start)
-    return one_lane(task, env, [(source.episode, 0)], parts)[0]
+    kind = Replaying(task, {source.episode: source}, None, None, plans, start_for=lambda job: start)
+    return one_lane(task, env, [(source.episode, 0)], kind)[0]
 
 
 def attempts_lockstep(
@@ -371,9 +379,9 @@ def attempts_lockstep(
     sims = Simulators() if sims is None else sims
     jobs = list(jobs)
     pool = sources if select == "nearest" else None
-    parts, together = mode_parts(task, sources, how, mode, pool=pool, plans=sims.plans)
+    kind, together = mode_parts(task, sources, how, mode, pool=pool, plans=sims.plans)
     if not together:  # one lane, each attempt in turn on the worker's env
-        return one_lane(task, sims.env(task), jobs, parts)
+        return one_lane(task, sims.env(task), jobs, kind)
     width = max(1, min(lanes, len(jobs)))
     envs = sims.lanes(task, width)
-    return run_lanes(jobs, envs=envs, step=task.step_batch, lanes=width, **parts, **_dims(task))
+    return run_lanes(jobs, kind, envs=envs, step=task.step_batch, lanes=width, **_dims(task))

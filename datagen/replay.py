@@ -35,7 +35,7 @@ REASONS that applies:
     source_not_split      the source cannot be cut into the task's subtasks (cut raises ValueError)
 
 One attempt is a Replay whose act(obs, env) gives each action from each observation (None once its plan
-and hold are done); the engine's one attempt runner executes it (datagen.lockstep.replay_lanes), one
+and hold are done); the engine's one attempt runner executes it (datagen.lockstep.Replaying), one
 attempt at a time or many in lanes, the same bytes; datagen.lockstep.replay_from replays a source from a
 given start.
 """

@@ -83,7 +83,14 @@ def task_of(src: Path, name: str | None = None) -> Task:
                 f"--src {src} is a set of the task {named['task']!r} ({TASK_FILE}), which the engine does "
                 f"not know here (it knows {', '.join(known)}): add its module to datagen/tasks/, or --task"
             )
-        return known[named["task"]]
+        task = known[named["task"]]
+        robot = (read_json(Path(src) / "meta" / "info.json") or {}).get("robot_type")
+        if robot and robot != task.spec.robot_type:  # an edited set: its two records disagree
+            raise DataError(
+                f"--src {src} names the task {task.name!r} ({TASK_FILE}) but records robot_type {robot!r}, "
+                f"not {task.title}'s {task.spec.robot_type!r}: it is no set of that task"
+            )
+        return task
     info = read_json(Path(src) / "meta" / "info.json")
     if info is None:
         return known["pusht"]

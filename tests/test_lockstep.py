@@ -110,12 +110,21 @@ def test_the_runner_is_task_agnostic_aloha_episodes_equal_rollout():
     each episode from env.reset(seed) equals datagen.demos.rollout's, frame for frame and bit for bit."""
     expert = AlohaBatch()
     seeds = list(range(12))
+
+    class FromReset(lockstep.Mode):  # episodes from env.reset(seed), the batch expert deciding
+        def begin(self, seed, env):
+            return lockstep.Lane(seed, env.reset(seed))
+
+        def decide(self, lanes, envs, obs):
+            return expert.act_batch(obs), None
+
+        def finish(self, lane, env, episode, last):
+            return episode | {"success": bool(episode["next.success"][-1, 0])}
+
     got = lockstep.run_lanes(
         seeds,
+        FromReset(),
         envs=engine.Simulators().lanes(ALOHA, 5),
-        begin=lambda seed, env: lockstep.Lane(seed, env.reset(seed)),
-        decide=lambda lanes, envs, obs: (expert.act_batch(obs), None),
-        finish=lambda lane, env, episode, last: episode | {"success": bool(episode["next.success"][-1, 0])},
         max_frames=aloha_env.MAX_STEPS,
         obs_dim=aloha_env.OBS_DIM,
         act_dim=aloha_env.ACT_DIM,
@@ -130,7 +139,7 @@ def test_the_runner_is_task_agnostic_aloha_episodes_equal_rollout():
 @pytest.mark.parametrize("mode, select", [("resolve", "own"), ("replay", "own"), ("replay", "nearest")])
 def test_aloha_in_lockstep_equals_one_at_a_time(tmp_path, mode, select):
     """ALOHA's re-solve (the generic resolve lanes, AlohaBatch.act_batch deciding) and the engine's one
-    replay (datagen.lockstep.replay_lanes, subtask by subtask, from the attempt's own or the nearest source)
+    replay (datagen.lockstep.Replaying, subtask by subtask, from the attempt's own or the nearest source)
     through lockstep return exactly datagen.engine.attempt's results."""
     out = tmp_path / "aloha3"
     assert gen_demos_aloha.main(["--episodes", "3", "--seed", "0", "--out", str(out), "--quiet"]) == 0
@@ -143,11 +152,10 @@ def test_aloha_in_lockstep_equals_one_at_a_time(tmp_path, mode, select):
         together = lockstep.attempts_lockstep(ALOHA, srcs, jobs, how, lanes=8)
     else:  # attempts_lockstep replays ALOHA one at a time (no batch step): its lanes, run directly
         sims, m = engine.Simulators(), aloha_env
-        parts = lockstep.replay_lanes(ALOHA, srcs, how, pool, sims.plans)
         together = lockstep.run_lanes(
             jobs,
+            lockstep.Replaying(ALOHA, srcs, how, pool, sims.plans),
             envs=sims.lanes(ALOHA, 8),
-            **parts,
             max_frames=m.MAX_STEPS,
             obs_dim=m.OBS_DIM,
             act_dim=m.ACT_DIM,
@@ -217,11 +225,11 @@ def test_experts_without_a_batch_run_one_per_lane_and_equal_one_at_a_time(source
     jobs = [(e, k) for e in sorted(sources) for k in range(6)]  # 24 attempts
     one = [engine.attempt(task, sources[e], k, how) for e, k in jobs]
     assert sum(r.kept for r in one) >= 12
-    parts, together = lockstep.mode_parts(task, sources, how, "resolve")
+    kind, together = lockstep.mode_parts(task, sources, how, "resolve")
     assert not together  # attempts_lockstep runs such a task in one lane; the lanes still agree
     sims = engine.Simulators()
     lanes = lockstep.run_lanes(
-        jobs, envs=sims.lanes(task, 5), **parts, max_frames=task.max_steps, obs_dim=10, act_dim=2, lanes=5
+        jobs, kind, envs=sims.lanes(task, 5), max_frames=task.max_steps, obs_dim=10, act_dim=2, lanes=5
     )
     assert_same_results(one, lanes)
     env = task.make_env()
