@@ -103,7 +103,7 @@ class Args(Mode, Tries, Parallel):
     hidden_dim: int = flag(512, "width of both hidden layers of the BC MLP", bound=POSITIVE)
     eval_episodes: int = flag(
         50,
-        "held-out PushT starts per arm; 50: a success rate's 95% interval is about +-0.1 at this chapter's "
+        "held-out PushT starts per arm; 50: a success rate's 95%% interval is about +-0.1 at this chapter's "
         "rates (+-0.14 at worst, a rate of 0.5)",
         bound=POSITIVE,
         at_most=SEED_BLOCK,

@@ -409,6 +409,8 @@ def run_ex3(say=print) -> None:
     say(f"ex3: prediction {pred!r} recorded; measuring aug_per_demo {meta['aug_per_demo']}")
     seed, smoke = int(meta.get("seed", CHAPTER.seed)), smoke_mode()
     ks = sorted(map(int, meta["aug_per_demo"]))
+    if ks[0] != 0 or len(ks) < 3:  # the first point is read from a run's source-only arm: k = 0
+        raise ExerciseError(f"ex3: meta.yaml's aug_per_demo must be 0 and at least two more, got {ks}")
     # the largest k is the README's first command (replayed from the cache when it ran); the ones between
     # train at its full budget; k = 0 is its source-only arm at those same steps, so it is not trained again
     runs = {ks[-1]: run_chapter(seed, ks[-1], smoke, say)}

@@ -184,6 +184,21 @@ def test_help_shows_every_default():
     assert not missing, f"--help gives no default for {missing}"
 
 
+def test_help_readme_and_printed_lines_tell_one_story():
+    """Issue 60 #6: --workers' help named --ray, which scale_data.py refuses; the README offered
+    --aug_mode resolve|replay where the flag also takes replay_live; --eval_episodes said +-0.14 where the
+    README said about +-0.1. One story now."""
+    from ch37 import config
+
+    text = " ".join(run_script("scale_data.py", "--help").stdout.split())
+    workers = text[text.rindex("--workers WORKERS") :]  # its entry, after the usage line
+    assert "--ray" not in workers and "Ray" not in workers, workers
+    readme = (ROOT / "README.md").read_text()
+    assert f"`--aug_mode {'|'.join(config.MODES)}`" in readme
+    evals = text[text.rindex("--eval_episodes EVAL_EPISODES") :][:200]
+    assert "about +-0.1" in evals and "about +-0.1" in readme, evals
+
+
 def test_unavailable_device_is_refused(tmp_path):
     import torch
 
