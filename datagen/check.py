@@ -3,6 +3,7 @@
     the contract     the required members (datagen.task.contract_problem) and the episode limit: the
                      task's max_steps against its env's own (a Gymnasium env's TimeLimit)
     the start        place(start_of(obs)) puts a fresh env where obs was, on reset and mid-episode
+    perturb          the starts it draws have start_names' numbers, all finite, and place() takes them
     the expert       it solves the starts of --episodes resets (seeds --seed ..)
     the ranges       every state and action of those rollouts lies in state_ranges / action_ranges
     the replay       every solved rollout, replayed at zero perturbation (MimicGen's move with nothing
@@ -26,7 +27,7 @@ from ch37.seeds import MAX_SEED
 from datagen.demos import rollout
 from datagen.lockstep import replay_from
 from datagen.source_check import state_range_problem
-from datagen.task import Source, Task, contract_problem, known_tasks
+from datagen.task import Perturbation, Source, Task, contract_problem, known_tasks, owed
 
 __all__ = ["checks"]
 
@@ -56,6 +57,24 @@ def round_trip(task: Task, obs) -> tuple[float, str]:
     return float(gap[i]), task.obs_names[i]
 
 
+def perturb_problem(task: Task, obs: list, seed: int) -> tuple[str | None, str]:
+    """(problem or None, what was found) of perturb on the starts `obs` at the engine's default
+    perturbation (0.08 m, 0.5 rad): each start it draws has start_names' numbers, all finite, and place()
+    puts a fresh env there (an observation of obs_dim finite numbers)."""
+    how, env, drawn = Perturbation(seed, 0.08, 0.5), task.make_env(), 0
+    try:
+        for i, o in enumerate(obs):
+            start = task.perturb(o, np.random.default_rng([seed, i]), how)
+            if start is None:  # no valid draw: a reason an attempt may give ("no_valid_start")
+                continue
+            owed(task, "perturb", start, (len(task.start_names),))
+            owed(task, "place", task.place(env, start), (task.spec.obs_dim,))
+            drawn += 1
+    except DataError as e:
+        return str(e), ""
+    return None, f"{drawn} of {len(obs)} starts perturbed and placed"
+
+
 def checks(task: Task, episodes: int, seed: int, tol: float):
     """(name, problem or None, what was found) for each check, in order."""
     yield "contract", contract_problem(task), "the required members are there"
@@ -68,6 +87,7 @@ def checks(task: Task, episodes: int, seed: int, tol: float):
     worst = max((round_trip(task, o) for o in obs), key=lambda g: g[0])
     far = worst[0] > tol and f"place(start_of(obs)) is {worst[0]:.3g} off in {worst[1]} (over --tol {tol:g})"
     yield "start round-trip", far, f"within {worst[0]:.3g} on {len(obs)} starts"
+    yield "perturb", *perturb_problem(task, obs, seed)
     eps = []
     for i, first in enumerate(obs if task.expert_class is not None else ()):
         env.reset(seed=seed + i)

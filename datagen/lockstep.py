@@ -48,7 +48,7 @@ import numpy as np
 from ch37.parallel import step_each, step_envs
 from ch37.seeds import env_seed
 from datagen import replay
-from datagen.task import Outcome, Perturbation, Source, Task
+from datagen.task import Outcome, Perturbation, Source, Task, owed
 
 __all__ = [
     "LANES",
@@ -223,7 +223,8 @@ def start_of_job(task: Task, sources: dict, job, how: Perturbation):
     """The perturbed start of attempt (e, k): task.perturb of source e's first state with attempt (e, k)'s
     own generator (attempt_rng), or None when the task finds no valid start."""
     e, k = job
-    return task.perturb(sources[e].states[0], attempt_rng(how.seed, e, k), how)
+    start = task.perturb(sources[e].states[0], attempt_rng(how.seed, e, k), how)
+    return start if start is None else owed(task, "perturb", start, (len(task.start_names),))
 
 
 def with_provenance(ep: dict, source_episode: int, start) -> dict:
@@ -314,7 +315,12 @@ class Replaying(Mode):
         return Lane(job, task.place(env, start), run=run)
 
     def decide(self, lanes, envs, obs):
+        act_dim = (self.task.spec.act_dim,)
         actions = [lane.run.act(o, env) for lane, env, o in zip(lanes, envs, obs)]
+        # a user's conversion that returns a NaN or the wrong width: one line, not a traceback in the env
+        for a in actions:
+            if a is not None:
+                owed(self.task, "target_to_action", a, act_dim)
         stop = np.array([a is None for a in actions], bool)
         if stop.all():  # nothing is stepped: the rows are never read
             return np.zeros((len(lanes), self.task.spec.act_dim), np.float32), stop

@@ -49,7 +49,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from datagen.poses import interpolate, pose_gap, rotation_angle, slerp, transform_pose, transform_segment
-from datagen.task import Outcome, Source, Subtask, Task, ended
+from datagen.task import POSE_SHAPES, Outcome, Source, Subtask, Task, ended, owed
 
 __all__ = ["Replay", "Segment", "cut", "nearest", "plan_of", "signals"]
 
@@ -285,6 +285,10 @@ class Replay:
         reach checked, and its bridge planned (phase "bridge"; "frames" when it has none)."""
         task = self.task
         self.current, self._seg = seg.subtask.name, seg
+        # a user's task's poses, checked once a subtask: a NaN or the wrong shape is one line
+        owed(task, "object_pose", task.object_pose(obs), *POSE_SHAPES)
+        for frame in dict.fromkeys((*seg.subtask.frames, *(f for f in seg.subtask.onto or () if f))):
+            owed(task, f"frame_pose({frame!r})", task.frame_pose(frame, obs), *POSE_SHAPES)
         self._segs = segs = self.segment(seg, obs)
         some = segs[next(iter(segs))]  # what every arm's segment holds: velocities? grips? orientations?
         self._moving, gripping, self._turning = (some[i] is not None for i in (1, 2, 3))

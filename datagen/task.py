@@ -64,6 +64,7 @@ __all__ = [
     "ended",
     "known_tasks",
     "contract_problem",
+    "owed",
     "register",
 ]
 
@@ -441,6 +442,29 @@ class Task(abc.ABC):
     @property
     def modes(self) -> tuple[str, ...]:
         return tuple(self.failures)
+
+
+def owed(task: Task, member: str, value, *shapes: tuple[int, ...]):
+    """`value`, what the task's `member` returned, when it has one of `shapes` and only finite numbers;
+    else DataError, one line naming the member, the shape it gave and the one it owes: a user's task that
+    returns a NaN or the wrong shape is refused before anything is simulated or written from it."""
+    from ch37.errors import DataError
+
+    who = f"task {task.name!r}: {type(task).__name__}.{member}"
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise DataError(f"{who} returned {type(value).__name__} {value!r:.80}, not numbers") from None
+    if arr.shape not in shapes:
+        owes = " or ".join(str(s) for s in shapes)
+        raise DataError(f"{who} returned shape {arr.shape}; it owes {owes}")
+    if not np.isfinite(arr).all():
+        i = int(np.argmin(np.isfinite(arr).reshape(-1)))
+        raise DataError(f"{who} returned a non-finite number ({arr.reshape(-1)[i]} at flat index {i})")
+    return value
+
+
+POSE_SHAPES = ((3,), (4, 4))  # a planar (x, y, yaw) or an SE(3) matrix (datagen.poses)
 
 
 # ---- the tasks the engine knows: each registers itself when its module is imported ----

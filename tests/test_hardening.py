@@ -1336,3 +1336,78 @@ def test_out_through_a_link_to_a_folder_is_written_there_and_a_dangling_link_is_
         assert p.returncode == 2 and len(err) == 1, (argv, p.stderr[-2000:])
         assert f"--out {tmp_path / 'dangling'} is a link to nowhere, which does not exist" in err[0], err
         assert sorted(os.listdir(tmp_path)) == before and not (tmp_path / "nowhere").exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# Issue 62 #1, #2: a user's task whose member returns a NaN or the wrong shape
+# ---------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def pusht_source():
+    """One seed-0 PushT expert demo as a source (the engine's Source)."""
+    import pusht_env
+    from ch37.seeds import env_seed
+    from datagen import Source, rollout
+    from scripted_expert import PushTExpert
+
+    env = pusht_env.PushTEnv()
+    ep = rollout(env, PushTExpert(noise=0.0), env.reset(env_seed(0, "demo", 0)))
+    return Source(0, ep["observation.state"], ep["action"])
+
+
+def _nan_start(self, first, rng, how):
+    from datagen.tasks.pusht import PushT
+
+    return (float("nan"),) + tuple(PushT.perturb(self, first, rng, how))[1:]
+
+
+def _short_start(self, first, rng, how):
+    from datagen.tasks.pusht import PushT
+
+    return tuple(PushT.perturb(self, first, rng, how))[:3]
+
+
+BROKEN_MEMBERS = [  # (id, the member overridden, its code, the mode that calls it, the one line's words)
+    ("perturb-nan", "perturb", _nan_start, "resolve", "PushT.perturb returned a non-finite number (nan"),
+    ("perturb-short", "perturb", _short_start, "resolve", "PushT.perturb returned shape (3,); it owes (5,)"),
+    (
+        "object-pose-3x3",
+        "object_pose",
+        lambda self, state: np.eye(3),
+        "replay",
+        "object_pose returned shape (3, 3); it owes (3,) or (4, 4)",
+    ),
+    (
+        "action-3-wide",
+        "target_to_action",
+        lambda self, *a, **k: np.zeros(3, np.float32),
+        "replay",
+        "target_to_action returned shape (3,); it owes (2,)",
+    ),
+]
+
+
+@pytest.mark.parametrize(
+    "member, code, mode, needle", [b[1:] for b in BROKEN_MEMBERS], ids=[b[0] for b in BROKEN_MEMBERS]
+)
+def test_a_users_task_member_that_returns_nan_or_the_wrong_shape_is_refused_naming_it(
+    pusht_source, member, code, mode, needle
+):
+    """Issue 62 #1, #2: a task whose perturb returned a NaN was grown as if real (non-finite aug.start,
+    actions and states written); a perturb 5 numbers short, an object_pose of shape (3, 3) or a
+    target_to_action 3 wide for a 2-wide action were tracebacks deep in the env or the replay. Each is
+    now one DataError line naming the member, the shape it gave and the one it owes, before anything is
+    simulated from it; datagen.check's perturb check says the same before a long run."""
+    from ch37.errors import DataError
+    from datagen import Perturbation, engine
+    from datagen.check import perturb_problem
+    from datagen.tasks.pusht import PushT
+
+    task = type("PushT", (PushT,), {member: code})()
+    with pytest.raises(DataError) as e:
+        engine.attempt(task, pusht_source, 0, Perturbation(0, 0.02, 0.1), mode=mode)
+    assert len(str(e.value).splitlines()) == 1 and needle in str(e.value), str(e.value)
+    if member == "perturb":
+        problem, _ = perturb_problem(task, [pusht_source.states[0]], 0)
+        assert problem is not None and needle in problem, problem
+    else:  # the engine's own task passes the same check
+        assert perturb_problem(PushT(), [pusht_source.states[0]], 0)[0] is None

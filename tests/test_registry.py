@@ -258,3 +258,38 @@ def test_sets_name_their_task_so_a_users_variant_and_ours_each_grow_their_own(tm
     assert _run(copy, "augment_demos.py", *args).returncode == 0
     r = _run(copy, "augment_demos.py", *args[:3], tmp_path / "g3", "--task", "nope")
     assert r.returncode == 2 and "--task 'nope' is no task of the engine" in r.stderr, r.stderr
+
+
+NAN_TASK = """\"\"\"A user's task whose perturb returns a NaN (issue 62 #1).\"\"\"
+
+from datagen.task import register
+from datagen.tasks.pusht import PushT
+
+
+class NanPushT(PushT):
+    name = "nan_pusht"
+
+    def perturb(self, first_state, rng, how):
+        return (float("nan"),) + tuple(PushT.perturb(self, first_state, rng, how))[1:]
+
+
+NAN_PUSHT = register(NanPushT())
+"""
+
+
+def test_a_users_task_that_returns_nan_is_one_line_from_the_workers_and_nothing_is_written(tmp_path):
+    """Issue 62 #1: augment_demos.py grew a task whose perturb returned a NaN ("4 kept", non-finite
+    aug.start, actions and states in the set). Run by worker processes, it is now one error line naming
+    the member, exit 2, and no set is written."""
+    copy = _copy_with(tmp_path, "nan_pusht.py", NAN_TASK)
+    src, out = tmp_path / "s", tmp_path / "grown"
+    assert (
+        _run(copy, "gen_demos.py", "--task", "pusht", "--episodes", "2", "--quiet", "--out", src).returncode
+        == 0
+    )
+    args = ["--src", src, "--out", out, "--per_demo", "2", "--workers", "2", "--task", "nan_pusht", "--quiet"]
+    r = _run(copy, "augment_demos.py", *args)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), r.stderr
+    assert "NanPushT.perturb returned a non-finite number" in lines[0], lines
+    assert not (out / "data").exists() and "Traceback" not in r.stderr
