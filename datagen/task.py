@@ -54,6 +54,7 @@ import numpy as np
 from ch37.parallel import step_each
 
 __all__ = [
+    "DeltaCommand",
     "EnvSpec",
     "GymnasiumEnv",
     "Outcome",
@@ -442,6 +443,42 @@ class Task(abc.ABC):
     @property
     def modes(self) -> tuple[str, ...]:
         return tuple(self.failures)
+
+
+class DeltaCommand:
+    """An action kind, mixed into a Task (class MyTask(DeltaCommand, Task)): each arm's action is a step of
+    its point's position target, taken from where the point is now, as MimicGen's OSC delta pose and a
+    mocap move take it: target = point + scale * action[delta_columns[arm]] (`scale` length units per
+    action unit). It gives action_to_target (a source's waypoints: where each arm's point was at each
+    frame, and its velocity: the step the source commanded there, per second) and target_to_action (the
+    step that takes the point from where it is now to its waypoint and on by that velocity, clipped to
+    action_limit), so a delta-command arm writes no encoding of its own; at zero perturbation each step is
+    the source's own. Gripper columns (grip_columns[arm], optional) ride along as commands. Orientation
+    deltas are not covered: an arm that turns gives its own pair."""
+
+    delta_columns: dict[str, slice]  # {arm: its step's columns of the action}
+    grip_columns: dict[str, int] = {}  # {arm: its gripper command's column of the action}
+    scale: float = 1.0  # length units per action unit
+    action_limit: float = 1.0  # |action| at most this, per number (the env's clip)
+
+    def action_to_target(self, states, actions) -> dict:
+        states, actions = np.asarray(states, np.float64), np.asarray(actions, np.float64)
+        per_second = self.scale * self.spec.fps
+        out = {}
+        for arm, cols in self.delta_columns.items():
+            grip = actions[:, self.grip_columns[arm]] if arm in self.grip_columns else None
+            out[arm] = (states[:, self.arms[arm]], per_second * actions[:, cols], grip)
+        return out
+
+    def target_to_action(self, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
+        action = np.zeros(self.spec.act_dim)
+        here, fps = np.asarray(obs, np.float64), self.spec.fps
+        for arm, cols in self.delta_columns.items():
+            gap = np.asarray(waypoints[arm], np.float64) - here[self.arms[arm]]  # to where it should be
+            action[cols] = (gap + np.asarray(velocities[arm], np.float64) / fps) / self.scale
+            if arm in self.grip_columns and grips is not None:
+                action[self.grip_columns[arm]] = grips[arm]
+        return np.clip(action, -self.action_limit, self.action_limit).astype(np.float32)
 
 
 def owed(task: Task, member: str, value, *shapes: tuple[int, ...]):

@@ -12,6 +12,7 @@ from ch37.seeds import env_seed
 from datagen import PUSHT, Outcome, Perturbation, Source, engine, rollout
 from datagen.lockstep import replay_from
 from datagen.poses import interpolate, planar_pose, quat_of, rotation, rotation_of, transform_segment
+from datagen.task import DeltaCommand
 from datagen.tasks import pusht
 from scripted_expert import PushTExpert
 
@@ -138,6 +139,32 @@ def test_identity_replay_reproduces_the_source(env):
     assert len(ep["action"]) == len(source.actions)  # no bridge: the pusher is on the first waypoint
     np.testing.assert_allclose(ep["observation.state"], source.states, atol=1e-6)
     np.testing.assert_allclose(ep["action"], source.actions, atol=1e-6)
+
+
+class DeltaPushT(DeltaCommand, pusht.PushT):
+    """PushT read as a delta-command arm (issue 58 #4): its 1 m/s velocity command held for one 0.1 s
+    control step moves the pusher's position target 0.1 m, so an action is a step of the target in units
+    of 0.1 m. The task writes no encoding of its own: DeltaCommand's action_to_target (each frame's point
+    plus its step) and target_to_action (the step from the point now to the waypoint) replace PushT's
+    velocity-and-gain pair."""
+
+    name = "delta_pusht"
+    delta_columns = {"pusher": slice(0, 2)}
+    scale = 1.0 / pusht_env.FPS  # m of target step per action unit
+
+
+def test_a_delta_command_task_replays_its_sources_at_zero_perturbation(env):
+    """Issue 58 #4: a task whose action is a step of a position target (MimicGen's OSC delta pose, a mocap
+    move) fits the contract through DeltaCommand alone: replayed from its own start (nothing moved),
+    every source is reproduced, action for action, and kept."""
+    task = DeltaPushT()
+    assert task.action_to_target is not pusht.PushT.action_to_target
+    for i in range(3):
+        source, start = expert_source(env, i)
+        got = replay_from(task, env, start, source)
+        assert got.kept and got.steps == len(source.actions), (i, got.reason, got.detail)
+        np.testing.assert_allclose(got.episode["action"], source.actions, atol=1e-5)
+        np.testing.assert_allclose(got.episode["observation.state"], source.states, atol=1e-5)
 
 
 def test_a_moved_block_makes_the_replay_miss_and_names_why(env):
