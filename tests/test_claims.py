@@ -836,3 +836,37 @@ def test_results_live_under_results_each_with_its_provenance():
     top = {p.name + ("/" if p.is_dir() else "") for p in RESULTS.iterdir() if p.name != "README.md"}
     missing = [name for name in top if f"| `{name}`" not in table and f"| `{name} " not in table]
     assert not missing, f"results/README.md names no provenance for {missing}"
+
+
+# --- docs/engine.md: the engine at its physics, every task (issue 58 #6) ----------------------------------
+
+TASK_ORDER = ("pusht", "aloha", "gym_pusht", "pusher", "aloha_transfer_cube", "aloha_insertion")
+
+
+def bench_rows() -> list[str]:
+    """docs/engine.md's speed table, one row per kept python -m tools.bench engine --costs_only run
+    (results/bench_engine/TASK_MODE/bench_engine_costs.json), as the page prints it."""
+    rows = []
+    runs = [
+        kept(f"bench_engine/{d.name}/bench_engine_costs.json") for d in (RESULTS / "bench_engine").iterdir()
+    ]
+    order = {(t, m): i for i, (t, m) in enumerate((t, m) for t in TASK_ORDER for m in ("resolve", "replay"))}
+    for r in sorted(runs, key=lambda r: order[r["per_demo_costs"]["task"], r["per_demo_costs"]["mode"]]):
+        c = r["per_demo_costs"]
+        rows.append(
+            f"| {c['task']} | {c['mode']} | {c['attempts']} | {c['kept']} | {thousands(c['frames'])} | "
+            f"{c['one_at_a_time_s']:.2f} | {c['lockstep_s']:.2f} | {c['physics_s']:.2f} | "
+            f"{c['lockstep_over_physics']:.2f}x | {c['lockstep_and_write_over_physics']:.2f}x |"
+        )
+    return rows
+
+
+def test_the_engines_speed_table_is_its_kept_benches_recounted():
+    """Issue 58 #6: every registered task's generation against its physics, each row from its kept
+    bench (commit and host in the file, AMD EPYC)."""
+    rows = bench_rows()
+    assert {r.split(" | ")[0].strip("| ") for r in rows} == set(TASK_ORDER)
+    for d in (RESULTS / "bench_engine").iterdir():
+        prov = kept(f"bench_engine/{d.name}/bench_engine_costs.json")["provenance"]
+        assert not prov["git"]["dirty"] and prov["platform"]["cpu_model"] == "AMD EPYC"
+    has("docs/engine.md", *rows)

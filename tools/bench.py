@@ -448,7 +448,7 @@ def kept_runs(root: Path) -> list:
 
 
 def per_demo_costs(
-    task, src: Path, attempts_per_demo: int, seed: int, repeats: int, mode: str = "resolve"
+    task, src: Path, attempts_per_demo: int, seed: int, repeats: int, mode: str = "resolve", sigma=None
 ) -> dict:
     """Where one core's time goes, in this process, for augment_demos.py's first attempts_per_demo
     attempts of every source episode at `seed` in `mode`: one attempt at a time, in lockstep (where the
@@ -460,7 +460,8 @@ def per_demo_costs(
     # the run's own read of a source (augment_demos.py): the task's whole observation, environment state too
     sources = engine.sources(successful_only(read_source(task, src), src)[0])
     jobs = [(e, k) for e in sorted(sources) for k in range(attempts_per_demo)]
-    how = Perturbation(seed=seed, pos_sigma=DEFAULTS["aug_pos_sigma"], yaw_sigma=DEFAULTS["aug_yaw_sigma"])
+    pos, yaw = sigma or (DEFAULTS["aug_pos_sigma"], DEFAULTS["aug_yaw_sigma"])  # m, rad
+    how = Perturbation(seed=seed, pos_sigma=pos, yaw_sigma=yaw)
     sims = engine.Simulators()  # the envs (and plans) both sides reuse, made once
     engine.attempt(task, sources[jobs[0][0]], 10**6, how, mode=mode, sims=sims)  # warm up
     got = {}  # each variant's last results: lockstep's kept episodes feed the floor and the write
@@ -495,6 +496,11 @@ def per_demo_costs(
     times = alternate(measure, repeats, after_round=same_kept)
     med, kept = medians(times), got["kept"]
     frames = sum(len(ep["action"]) for ep in kept)
+    if not frames:  # nothing kept, nothing to time the physics on
+        raise DataError(
+            f"{task.name} {mode}: none of the {len(jobs)} attempts was kept, so no kept frames to time the "
+            "physics on; give more --cost_attempts_per_demo or a smaller --pos_sigma"
+        )
     return {
         "task": task.name,
         "mode": mode,
@@ -566,12 +572,15 @@ def engine_args(argv: list[str]):
     arg("--cost_attempts_per_demo", type=int, default=50, help="attempts per source episode of the costs")
     arg("--cost_repeats", type=int, default=3, help="rounds of the in-process costs (0: none)")
     arg("--costs_only", action="store_true", help="only the in-process costs (no runs)")
+    arg("--pos_sigma", type=float, default=DEFAULTS["aug_pos_sigma"], help="the costs' perturbation, m")
+    arg("--yaw_sigma", type=float, default=DEFAULTS["aug_yaw_sigma"], help="the costs' perturbation, rad")
     arg("--src", type=Path, help="a set of --task (default: a 12-episode set made under --out)")
     arg("--out", type=Path, default=ROOT / "outputs" / "bench_engine")
     help = "the checkout whose augment_demos.py runs (default this one); another commit's for a before/after"
     arg("--checkout", type=Path, default=ROOT, help=help)
     a = p.parse_args(argv)
-    check(a, positive=("workers", "cost_attempts_per_demo"), non_negative=("seed", "cost_repeats"))
+    positive, non_negative = ("workers", "cost_attempts_per_demo"), ("seed", "cost_repeats")
+    check(a, positive=positive, non_negative=non_negative, finite=("pos_sigma", "yaw_sigma"))
     if not (a.checkout / "augment_demos.py").is_file():
         raise DataError(f"--checkout {a.checkout} has no augment_demos.py")
     if min(a.sizes) < 1:
@@ -595,7 +604,8 @@ def engine_costs(task, src: Path, a) -> dict:
     """per_demo_costs at --cost_* and its line ({} with --cost_repeats 0)."""
     if not a.cost_repeats:
         return {}
-    c = per_demo_costs(task, src, a.cost_attempts_per_demo, a.seed, a.cost_repeats, a.mode)
+    sigma = (a.pos_sigma, a.yaw_sigma)
+    c = per_demo_costs(task, src, a.cost_attempts_per_demo, a.seed, a.cost_repeats, a.mode, sigma)
     print(
         f"this checkout, one core, {task.title} {a.mode}: {c['attempts']} attempts, {c['kept']} kept "
         f"({c['frames']} frames), "
