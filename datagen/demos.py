@@ -58,7 +58,7 @@ def name_task(root: Path, name: str) -> None:
 def write_dataset(
     out: Path,
     *,
-    task_name: str,
+    task_name: str | None = None,
     repo_id: str,
     fps: int,
     robot_type: str,
@@ -69,12 +69,14 @@ def write_dataset(
     **how,
 ) -> None:
     """Write `episodes` as a LeRobot v3 set (lerobot_v3.write_set) of the engine task `task_name` (named in
-    the set: TASK_FILE) to the new folder `out`, whole or not at all, under our stamp listing every file
-    with its sha256 (ch37.ownership.publish_dir). `how`: write_set's other options (per_frame)."""
+    the set: TASK_FILE; every set the project makes names one) to the new folder `out`, whole or not at
+    all, under our stamp listing every file with its sha256 (ch37.ownership.publish_dir). `how`:
+    write_set's other options (per_frame)."""
     how |= dict(repo_id=repo_id, fps=fps, robot_type=robot_type, task=task, feats=feats, episodes=episodes)
     with publish_dir(out, stamp) as tmp:
         write_set(tmp, **how)
-        name_task(tmp, task_name)
+        if task_name is not None:  # None: a set as another program writes one (the tests' stand-ins)
+            name_task(tmp, task_name)
 
 
 REWARD_FEATURES = {  # what a task with records_reward adds to its sets, as lerobot/pusht_keypoints has them
