@@ -70,6 +70,9 @@ def task_of(src: Path, name: str | None = None) -> Task:
     readable but not of LeRobot's form (a list where an object belongs) is named here, before any task's
     widths are blamed."""
     known = known_tasks()
+    info = read_json(Path(src) / "meta" / "info.json")
+    if info is not None and (problem := info_problem(src)):  # readable, but not LeRobot's form
+        raise DataError(f"--src {problem}")
     if name is not None:
         if name not in known:
             raise DataError(f"--task {name!r} is no task of the engine; it knows {', '.join(known)}")
@@ -84,18 +87,15 @@ def task_of(src: Path, name: str | None = None) -> Task:
                 f"not know here (it knows {', '.join(known)}): add its module to datagen/tasks/, or --task"
             )
         task = known[named["task"]]
-        robot = (read_json(Path(src) / "meta" / "info.json") or {}).get("robot_type")
+        robot = (info or {}).get("robot_type")
         if robot and robot != task.spec.robot_type:  # an edited set: its two records disagree
             raise DataError(
                 f"--src {src} names the task {task.name!r} ({TASK_FILE}) but records robot_type {robot!r}, "
                 f"not {task.title}'s {task.spec.robot_type!r}: it is no set of that task"
             )
         return task
-    info = read_json(Path(src) / "meta" / "info.json")
     if info is None:
         return known["pusht"]
-    if problem := info_problem(src):
-        raise DataError(f"--src {problem}")
     feats = info["features"]  # an object of objects (info_problem)
     shapes = tuple(feats.get(k, {}).get("shape") for k in ("observation.state", "action"))
     robot = info.get("robot_type")
