@@ -1277,15 +1277,24 @@ def test_the_gpu_check_refuses_a_bad_argument_before_it_starts(tmp_path):
     assert "--run CMD" in p.stdout and p.stderr == "" and not out.exists()
 
 
-@pytest.mark.parametrize("task", ["pusher", "gym_pusht"])
-def test_bench_engine_refuses_a_task_it_cannot_measure_in_one_line(tmp_path, task):
-    """Issue 51 #2: `python -m tools.bench engine --task pusher` (or gym_pusht) made a source set, then
-    ended in a traceback: its in-process costs read a set's observation.state as the task's whole state,
-    which only PushT's and ALOHA's sets are. One `error:` line, exit 2, before anything is made."""
-    p = run("-m", "tools.bench", "engine", "--task", task, "--costs_only", "--out", tmp_path / "o")
+def test_bench_engine_measures_every_task_and_refuses_an_unknown_one_in_one_line(tmp_path):
+    """Issue 51 #2 refused gym-pusht and Pusher, whose sets keep part of the observation in
+    observation.environment_state; issue 58 #6: the costs read a source as a run does, so every registered
+    task is measured (gym-pusht here, on a 2-episode set, one attempt per source, one round). A task the
+    engine does not know is one `error:` line, exit 2, before anything is made."""
+    p = run("-m", "tools.bench", "engine", "--task", "nope", "--costs_only", "--out", tmp_path / "o")
     err = p.stderr.strip().splitlines()
-    assert p.returncode == 2 and len(err) == 1 and f"invalid choice: '{task}'" in err[0], p.stderr[-2000:]
+    assert p.returncode == 2 and len(err) == 1 and "invalid choice: 'nope'" in err[0], p.stderr[-2000:]
     assert not (tmp_path / "o").exists()
+    src = tmp_path / "src"
+    assert (
+        run("gen_demos.py", "--task", "gym_pusht", "--episodes", "2", "--quiet", "--out", src).returncode == 0
+    )
+    args = ["--task", "gym_pusht", "--costs_only", "--src", src, "--cost_attempts_per_demo", "1"]
+    p = run("-m", "tools.bench", "engine", *args, "--cost_repeats", "1", "--out", tmp_path / "o")
+    assert p.returncode == 0, p.stderr[-2000:]
+    costs = json.loads((tmp_path / "o" / "bench_engine_costs.json").read_text())["per_demo_costs"]
+    assert costs["task"] == "gym_pusht" and costs["attempts"] == 2 and costs["physics_s"] > 0
 
 
 # ---------------------------------------------------------------------------------------------
