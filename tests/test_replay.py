@@ -305,7 +305,7 @@ def test_tools_replay_smoke_feeds_meta_yaml(tmp_path):
     """python -m tools.replay compare (smoke) writes both files; tools.meta turns them into meta.yaml's
     `replay` section, marked provisional, and leaves the section as found when they are absent."""
     import yaml
-    from conftest import run_script
+    from conftest import ROOT, run_script
     from test_packaging import sweep_files
 
     out = tmp_path / "replay"
@@ -319,7 +319,8 @@ def test_tools_replay_smoke_feeds_meta_yaml(tmp_path):
     assert steps == -(-30 * row["arms"]["resolve_all"]["frames"] // 64)  # the chapter's full budget
     a, b = sweep_files(tmp_path, [0.1, 0.2], [0.0, 0.1, 0.2])
     meta = tmp_path / "meta.yaml"
-    meta.write_text(yaml.safe_dump({"replay": {"kept": True}}))
+    lab = yaml.safe_load((ROOT / "meta.yaml").read_text())["scale_lab"]  # ex3's answer reads the lab's curves
+    meta.write_text(yaml.safe_dump({"replay": {"kept": True}, "scale_lab": lab}))
     base = [
         "-m",
         "tools.meta",
@@ -364,7 +365,7 @@ def test_the_check_command_tells_a_newcomer_what_is_wrong_before_a_long_run():
 
     r = run_script("-m", "datagen.check", "aloha", "--episodes", "2", cwd=ROOT, check=False)
     lines = r.stdout.strip().splitlines()
-    assert r.returncode == 0 and len(lines) == 7 and all(" ok: " in x for x in lines[1:]), r.stdout + r.stderr
+    assert r.returncode == 0 and len(lines) == 8 and all(" ok: " in x for x in lines[1:]), r.stdout + r.stderr
     assert run_script("-m", "datagen.check", "nope", cwd=ROOT, check=False).returncode == 2
 
     class NoYaw(PushT):
