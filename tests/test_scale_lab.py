@@ -111,10 +111,11 @@ def test_meta_writes_the_scale_lab_section_from_the_json_and_keeps_it_otherwise(
 
     a, b = sweep_files(tmp_path, [0.1, 0.2], [0.0, 0.1, 0.2])
     meta = tmp_path / "meta.yaml"
-    meta.write_text(yaml.safe_dump({"scale_lab": {"kept": True}}))
+    kept = yaml.safe_load((ROOT / "meta.yaml").read_text())["scale_lab"]  # ex3's answer reads its curves
+    meta.write_text(yaml.safe_dump({"scale_lab": kept}))
     base = ["-m", "tools.meta", "--sweep", a, "--aug-sweep", b, "--meta", meta, "--replay", tmp_path / "none"]
     run_script(*base, "--scale-lab", tmp_path / "absent.json")
-    assert yaml.safe_load(meta.read_text())["scale_lab"] == {"kept": True}  # no lab: left as found
+    assert yaml.safe_load(meta.read_text())["scale_lab"] == kept  # no lab: left as found
     run_script(*base, "--scale-lab", local / "scale_lab.json")
     sec = yaml.safe_load(meta.read_text())["scale_lab"]
     r = json.loads((local / "scale_lab.json").read_text())

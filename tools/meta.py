@@ -321,9 +321,14 @@ def main(argv: list[str]) -> int:
     meta = {k: old.get(k, v) for k, v in META_STATIC.items()} | old
     try:
         meta["reference_run"] = reference_run(seeds, aug)
+        kept_lab = meta.get("scale_lab")
         if lab is not None:
             meta["scale_lab"] = scale_lab_section(lab)
-        meta["exercise_checks"] = derive_checks(seeds, aug, meta.get("scale_lab"))  # ex3 reads the lab's
+        # ex3 reads the lab's curves; a smoke lab (provisional) has not the N the answer needs: the lab kept
+        ex3_lab = (
+            kept_lab if meta.get("scale_lab", {}).get("provisional") and kept_lab else meta.get("scale_lab")
+        )
+        meta["exercise_checks"] = derive_checks(seeds, aug, ex3_lab)
     except ValueError as e:
         raise DataError(str(e)) from None
     except (KeyError, TypeError, IndexError) as e:
