@@ -3,11 +3,10 @@
 The engine (datagen.engine: one attempt in either mode; datagen.replay: the one replay; datagen.lockstep;
 datagen.run: a run, its shards, resume, report and merge) knows no task. Everything about one task lives in
 one module named for it (datagen/tasks/pusht.py, datagen/tasks/aloha.py), and only that module (and the
-engine's
-bit-identical fast copies, datagen/tasks/fast_*.py) imports its env and its expert. A task is an instance of a
-Task subclass that its module registers as it is imported (TASK = register(MyTask())): known_tasks()
-finds it, no list names it, and the digests that guard resumed shards and cached demo sets read its
-code from what the run imported.
+engine's bit-identical fast copies, datagen/tasks/fast_*.py) imports its env and its expert. A task is an
+instance of a Task subclass that its module registers as it is imported (TASK = register(MyTask())):
+known_tasks() finds it, no list names it, and the digests that guard resumed shards and cached demo sets read
+its code from what the run imported.
 
 In MimicGen's division of work, a task only describes (Task below, an abstract base: ten required
 members, each attribute and method with its inputs, outputs and units; everything else a default):

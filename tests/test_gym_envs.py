@@ -188,8 +188,7 @@ def test_a_copy_or_a_pickle_mid_episode_steps_as_the_env_bit_for_bit(env_id, mod
 
 def test_a_copy_of_a_pusht_env_that_shares_an_mjdata_is_a_standalone_env():
     """A lockstep lane (datagen.tasks.fast_pusht.SharedPushTEnv made with share=) borrows another's MjData;
-    its
-    copy carries its own state only, in an MjData of its own, and steps as it does while the env it
+    its copy carries its own state only, in an MjData of its own, and steps as it does while the env it
     shared with steps too."""
     import copy
     import pickle

@@ -1,7 +1,6 @@
 """GymPushTExpert on gym-pusht, LeRobot's own PushT (datagen/tasks/gym_pusht_expert.py): the block pose it
-reads
-back from the keypoints is gym-pusht's, and it solves seeded starts by gym-pusht's own success criterion.
-The full count: python -m tools.bench gym_pusht --episodes 50 --seed 0."""
+reads back from the keypoints is gym-pusht's, and it solves seeded starts by gym-pusht's own success
+criterion. The full count: python -m tools.bench gym_pusht --episodes 50 --seed 0."""
 
 import ast
 import math

@@ -1,8 +1,7 @@
 """Lockstep attempts and batched experts give today's one-at-a-time bytes: every decision of
-datagen.tasks.fast_experts' PushTBatch and AlohaBatch equals the expert's act bit for bit along real
-episodes, and
-datagen.lockstep.attempts_lockstep returns exactly what datagen.engine.attempt returns, for both modes
-on PushT and for ALOHA's re-solve."""
+datagen.tasks.fast_experts' PushTBatch and AlohaBatch equals the expert's act bit for bit along real episodes,
+and datagen.lockstep.attempts_lockstep returns exactly what datagen.engine.attempt returns, for both modes on
+PushT and for ALOHA's re-solve."""
 
 import numpy as np
 import pytest

@@ -4,8 +4,8 @@ every module here, so a new task is one module in this folder, listed nowhere el
 
 aloha                 our ALOHA cube handoff (aloha_env.py, scripted_expert.AlohaExpert)
 pusht                 our PushT (pusht_env.py, scripted_expert.PushTExpert)
-fast_experts          their experts over a batch of lanes (the same bits); fast_pusht: PushT's lanes in one
-MjData
+fast_experts          their experts over a batch of lanes (the same bits)
+fast_pusht            PushT's lanes in one MjData
 gym_pusht             LeRobot's gym-pusht, pixels; gym_pusht_expert its expert
 pusher                Gymnasium's 7-DoF Pusher-v5, in SE(3); pusher_expert its controller and expert
 aloha_transfer_cube   gym-aloha's ViperX transfer-cube; aloha_insertion its insertion; aloha_sim the two

@@ -196,8 +196,7 @@ def align(waypoints, peg, socket, left_at, right_at) -> tuple[list, list]:
 
 class InsertionExpert(TransferCubeExpert):
     """The insertion expert (datagen/tasks/aloha_insertion.py's): act(obs) as TransferCubeExpert's, for the
-    peg
-    and the socket the observation shows (obs[14:21], obs[21:28]); at ALIGN the insertion is planned from
+    peg and the socket the observation shows (obs[14:21], obs[21:28]); at ALIGN the insertion is planned from
     where the two parts then lie in the hands."""
 
     scene = "insertion"
