@@ -6,6 +6,7 @@ import argparse
 import csv
 import hashlib
 import json
+import math
 import os
 import platform
 from pathlib import Path
@@ -194,20 +195,91 @@ def config_hash(config: dict) -> str:
     return hashlib.sha256(json.dumps(c, sort_keys=True, separators=(",", ":")).encode()).hexdigest()[:12]
 
 
-def expected_wallclock(tier: str, config: str, csv_path: Path = ROOT / "wallclock.csv") -> str:
-    """This tier's measured wall-clock, only when its wallclock.csv row measured this configuration
-    (config: config_hash of this run); any other configuration may take much longer or shorter."""
+# The sub-second probe behind the banner's estimate: PROBE_STEPS training steps of two arms side by side
+# at the run's shapes (bc_recipe.train's network, loss and Adam, on random rows), each timed; the median
+# step (a burst of other work slows only a few). Training is most of a default run on a CPU (tools.bench
+# lesson), so a row's minutes scale from the machine that measured it to this one by their probes' ratio.
+PROBE_STEPS = 30
+
+
+def step_probe(hidden: int, batch: int, device: str = "cpu") -> float:
+    """Milliseconds per training step of two arms side by side, `hidden` wide, `batch` rows, on the kernel
+    path in force here (bc_recipe.train's step): about 0.3 s on two cores at the default shapes, after a
+    one-step training that warms up what the run's first training would. Torch's random state is left as
+    it was, so the run after it draws what it would have drawn."""
+    import statistics
+    import time
+
+    import torch
+
+    import bc_recipe
+    from ch37.ensemble import side_by_side
+
+    with torch.random.fork_rng(devices=[]):
+        init = bc_recipe.init_weights(hidden, 0)
+        rows = (
+            torch.randn(2, batch, init["0.weight"].shape[1]),
+            torch.randn(2, batch, 2),
+        )  # (arms, B, 10), (arms, B, 2)
+        bc_recipe.train(
+            [(x.numpy(), y.numpy()) for x, y in zip(*rows)], 1, init, batch_size=batch, lr=1e-3, seed=0
+        )
+        nets = [bc_recipe.mlp(hidden) for _ in range(2)]
+        times = []
+        with side_by_side(init, nets, device) as model:
+            opt = torch.optim.Adam(model.parameters(), lr=1e-3, fused=device in ("cpu", "cuda"))
+            xb, yb = (t.to(device) for t in rows)
+            for _ in range(PROBE_STEPS):
+                t0 = time.perf_counter()
+                loss = ((model(xb) - yb) ** 2).mean(dim=(1, 2)).sum()
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+                times.append(time.perf_counter() - t0)
+    return statistics.median(times) * 1e3
+
+
+def expected_wallclock(
+    tier: str, config: str, csv_path: Path = ROOT / "wallclock.csv", probe_ms: float | None = None
+) -> str:
+    """The wall-clock a run of this configuration (config: its config_hash) should take here. A row of
+    wallclock.csv measured on this configuration gives it: this tier's row, else (on a CPU, probe_ms
+    given: this machine's step_probe) the CPU row whose probe is nearest this one's. A row with a probe
+    of its own is scaled by the two probes' ratio (another CPU of one tier, a busier or quieter machine);
+    any other configuration may take much longer or shorter: no estimate."""
     try:
-        rows = list(csv.DictReader(csv_path.open()))
+        rows = [r for r in csv.DictReader(csv_path.open()) if r.get("status") == "measured"]
     except OSError:
         rows = []
-    for r in rows:
-        if r.get("tier") == tier and r.get("status") == "measured":
-            if r.get("config_hash") != config:
-                return "wall-clock: measured for the default run only (wallclock.csv), not this configuration"
-            minutes, date = float(r["minutes"]), r["date"]
-            return f"about {minutes:.1f} min for this configuration (wallclock.csv, measured {date})"
-    return "default-run wall-clock not yet measured for this tier"
+    own = next((r for r in rows if r.get("tier") == tier), None)
+    if own is not None and own.get("config_hash") != config:
+        return "wall-clock: measured for the default run only (wallclock.csv), not this configuration"
+    if (
+        own is None and probe_ms and tier.startswith("cpu-")
+    ):  # an unmeasured CPU: the CPU row of this configuration nearest in speed
+        probed = [r for r in rows if r["tier"].startswith("cpu-") and r.get("config_hash") == config]
+        probed = [r for r in probed if _ms(r)]
+        own = min(probed, key=lambda r: abs(math.log(_ms(r) / probe_ms)), default=None)
+    if own is None:
+        return "default-run wall-clock not yet measured for this tier"
+    minutes, date, row_ms = float(own["minutes"]), own["date"], _ms(own)
+    if not (probe_ms and row_ms):  # nothing to scale by: the row as measured
+        return f"about {minutes:.1f} min for this configuration (wallclock.csv, measured {date})"
+    unmeasured = "this tier is unmeasured; " if own["tier"] != tier else ""
+    return (
+        f"about {minutes * probe_ms / row_ms:.1f} min here ({unmeasured}wallclock.csv's {own['tier']} row"
+        f" took {minutes:.2f} min, measured {date} at {row_ms:.1f} ms a training step; a probe here:"
+        f" {probe_ms:.1f} ms)"
+    )
+
+
+def _ms(row: dict) -> float | None:
+    """A wallclock.csv row's probe (step_ms: step_probe on the machine that measured it), or None."""
+    try:
+        ms = float(row.get("step_ms") or "nan")
+    except ValueError:
+        return None
+    return ms if math.isfinite(ms) and ms > 0 else None
 
 
 READS = (ROOT / "meta.yaml",)  # the five-seed reference a run is placed beside: part of the result cache key
@@ -350,7 +422,8 @@ def banner(args: argparse.Namespace, reminder=None) -> None:
     head = f"ch3.7 Datasets at Scale | seed {args.seed} | device {args.device} (wall-clock tier {tier})"
     print(f"{head} | torch {torch.__version__}")
     smoke = "smoke run: tiny configuration, seconds, numbers not meaningful"
-    print(smoke if args.smoke else expected_wallclock(tier, config_hash(result_config(args))))
+    probe = None if args.smoke or args.device != "cpu" else step_probe(args.hidden_dim, args.batch_size)
+    print(smoke if args.smoke else expected_wallclock(tier, config_hash(result_config(args)), probe_ms=probe))
     default = not args.smoke and five_seed_reference(result_config(args)) is not None  # ex1's experiment
     if default and (why := other_draw(args.device)):
         print(

@@ -87,6 +87,31 @@ def arms_matmul(a: torch.Tensor, b: torch.Tensor, pool: ThreadPoolExecutor | Non
     return torch.from_numpy(out)
 
 
+def arms_grads(x, w, gy, pool, need_gx: bool):
+    """gy @ w^T (if need_gx) and x^T @ gy per arm, both of an arm in one job: arms 1.. on `pool`."""
+    xs, ws, gys = x.detach().numpy(), w.detach().numpy(), gy.detach().numpy()
+    e_n, b, i = xs.shape
+    o = ws.shape[2]
+    gx = np.empty((e_n, b, i), np.float32) if need_gx else None
+    gw = np.empty((e_n, i, o), np.float32)
+
+    def arm(e):
+        if need_gx:
+            np.matmul(gys[e], ws[e].T, out=gx[e])
+        np.matmul(xs[e].T, gys[e], out=gw[e])
+
+    if pool is None or b * i * o < 1_000_000:
+        if need_gx:
+            gx = np.matmul(gys, ws.transpose(0, 2, 1))
+        gw = np.matmul(xs.transpose(0, 2, 1), gys)
+    else:
+        jobs = [pool.submit(arm, e) for e in range(1, e_n)]
+        arm(0)
+        for j in jobs:
+            j.result()
+    return (torch.from_numpy(gx) if need_gx else None), torch.from_numpy(gw)
+
+
 class ArmsLinear(torch.autograd.Function):
     """b + x @ w per arm, and its gradients, through arms_matmul: (E, B, in), (E, in, out), (E, 1, out)."""
 
@@ -100,8 +125,7 @@ class ArmsLinear(torch.autograd.Function):
     def backward(ctx, gy):
         x, w = ctx.saved_tensors
         gy = gy.contiguous()
-        gx = arms_matmul(gy, w.transpose(1, 2), ctx.pool) if ctx.needs_input_grad[0] else None  # (E, B, in)
-        gw = arms_matmul(x.transpose(1, 2), gy, ctx.pool)  # (E, in, out)
+        gx, gw = arms_grads(x, w, gy, ctx.pool, ctx.needs_input_grad[0])  # (E, B, in), (E, in, out)
         return gx, gw, gy.sum(1, keepdim=True), None
 
 

@@ -6,6 +6,7 @@ import contextlib
 import csv
 import importlib.metadata
 import json
+import math
 import os
 import platform
 import shutil
@@ -844,6 +845,51 @@ def test_wallclock_row_replaces_only_its_tier(tmp_path):
     # issue 33 #7: another configuration (a bigger --pusht_data, another seed) gets no estimate
     assert "not this configuration" in ch37.cli.expected_wallclock("t4", "def", path)
     assert "not yet measured" in ch37.cli.expected_wallclock("mps", "abc", path)
+
+
+def _measured(tier: str, minutes: str, step_ms: str = "", config: str = "abc") -> dict:
+    return wallclock._pending(tier) | dict(
+        minutes=minutes, config_hash=config, date="2026-11-28", status="measured"
+    )
+
+
+def test_an_unmeasured_cpu_gets_an_estimate_from_its_probe(tmp_path):
+    """Issue 59 #3: a CPU whose tier has no row is estimated from the measured CPU row of this
+    configuration nearest in speed, scaled by the two probes (ms a training step); without a probe, or on
+    another configuration, nothing is invented."""
+    path = tmp_path / "wallclock.csv"
+    wallclock.write_wallclock_row(path, _measured("cpu-2core-amd", "3.00") | {"step_ms": "10.00"})
+    wallclock.write_wallclock_row(path, _measured("cpu-16core-amd", "1.00") | {"step_ms": "2.00"})
+    wallclock.write_wallclock_row(path, _measured("t4", "1.40"))
+    shown = ch37.cli.expected_wallclock("cpu-2core-intel", "abc", path, probe_ms=5.0)
+    assert shown.startswith(
+        "about 1.5 min here (this tier is unmeasured; wallclock.csv's cpu-2core-amd row"
+    ), shown
+    # nearest in speed: a fast machine scales from the fast row (1.00 min x 3 / 2), not the slow one
+    assert ch37.cli.expected_wallclock("cpu-64core-intel", "abc", path, probe_ms=3.0).startswith(
+        "about 1.5 min"
+    )
+    assert "not yet measured" in ch37.cli.expected_wallclock("cpu-2core-intel", "abc", path)  # no probe
+    assert "not yet measured" in ch37.cli.expected_wallclock("cpu-2core-intel", "other", path, probe_ms=5.0)
+    assert "not yet measured" in ch37.cli.expected_wallclock(
+        "l4", "abc", path, probe_ms=5.0
+    )  # GPUs: CPU rows never
+    # a measured tier is scaled to this machine too (another CPU of one tier, a busier machine)
+    assert ch37.cli.expected_wallclock("cpu-2core-amd", "abc", path, probe_ms=12.0).startswith(
+        "about 3.6 min here"
+    )
+    assert ch37.cli.expected_wallclock("t4", "abc", path, probe_ms=12.0).startswith("about 1.4 min for this")
+
+
+def test_the_step_probe_times_a_training_step_and_leaves_the_random_state():
+    """Issue 59 #3: the banner's probe returns milliseconds a step (a positive, finite figure; its speed is
+    tools.wallclock's to print, not a test's) and draws nothing from torch's random state."""
+    import torch
+
+    before = torch.random.get_rng_state()
+    ms = ch37.cli.step_probe(16, 8)
+    assert math.isfinite(ms) and ms > 0
+    assert torch.equal(torch.random.get_rng_state(), before)
 
 
 INTEL = "processor\t: 0\nvendor_id\t: GenuineIntel\nmodel name\t: Intel(R) Xeon(R)\n\nprocessor\t: 1\n"

@@ -36,10 +36,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 # numpy and torch are imported where used: `lesson` times torch's import (numpy's included) itself
-from ch37 import ROOT, config, errors
+from ch37 import ROOT, cli, config, errors
 from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
 from ch37.ownership import is_ours, read_stamp
+from exercises.rules import ARMS
 from tools.common import META, check_results, parse_regions, parser, provenance, subcommands, write_result
 
 
@@ -260,26 +261,74 @@ def lesson_main(argv: list[str]) -> int:
     on that code only, so nothing else slows down), and wraps the shared functions the script calls (demo
     generation, dataset loading and writing, the engine's attempts, bc_recipe's training and rollouts) to
     attribute their time. For training it reports achieved GFLOP/s next to a dense fp32 matmul measured in
-    the same process, i.e. how close training runs to the machine's limit.
+    the same process, and (its last lines) against this machine's best training-step rate over the kernel
+    paths `tools.bench kernels` times, each in a fresh process. The run takes the learner's kernel path: the
+    published one (ch37.cli.kernel_path) is set before numpy loads here, as the setup region sets it before
+    numpy loads in `python scale_data.py`; the last line says whether seed 0 printed meta.yaml's row.
     """
     p = parser("bench lesson", lesson_main.__doc__)
     arg = p.add_argument
     arg("--smoke", action="store_true", help="benchmark the smoke run")
     arg("--repeat", type=int, default=1, help="runs per phase; the median is printed")
     arg("--seed", type=int, default=0)
+    arg("--kernel_steps", type=int, default=300, help="training steps per kernel path for the best rate")
     a, extra = p.parse_known_args(argv)  # anything else goes to scale_data.py, e.g. --epochs 100
+    config.check(a, positive=("repeat", "kernel_steps"))
+    # the learner's path: numpy and torch load here, before the script's setup region could hold their
+    # kernels, so they are held first, as that region holds them (a value of yours is kept)
+    os.environ.update(cli.kernel_path())
     import_s, _ = clock(importlib.import_module, "torch")  # after the flags: a phase of the report
     with tempfile.TemporaryDirectory(prefix="ch37-bench-") as tmp:
 
         def run(i: int) -> dict:
             args = ["--seed", str(a.seed), "--no-rerun", "--no-cache", "--out", f"{tmp}/run{i}"]
             wall, got = clock(run_once, a.script, args + ["--smoke"] * a.smoke + extra)
-            return got | {"wall": wall}
+            m = json.loads(Path(f"{tmp}/run{i}/metrics.json").read_text())
+            n = m["config"]["eval_episodes"]
+            wins = {arm: round(m["arms"][arm]["success"] * n) for arm in ARMS}  # meta.yaml's row's arms
+            return got | {"wall": wall, "budgets": m["budgets"], "successes": wins}
 
         runs = alternate({"run": run}, a.repeat)["run"]
     title = f"{a.script.name} {'--smoke' if a.smoke else '(default)'} seed {a.seed}"
     report(runs, [r["wall"] for r in runs], import_s, title)
+    in_run_rate(runs, a)
     return 0
+
+
+def in_run_rate(runs: list[dict], a) -> None:
+    """The run's training rate against this machine's best: the fastest kernel path of `tools.bench
+    kernels` (a training step of the run's shapes, each path in a fresh process), in GFLOP/s of the same
+    count; and whether the run took the published kernel path and printed meta.yaml's seed-0 row."""
+    import yaml
+
+    import pusht_env
+    from ch37.ensemble import blas_core
+
+    f = runs[0]["facts"]
+    per_row = step_flops(1, f["hidden"], pusht_env.OBS_DIM, pusht_env.ACT_DIM)
+    train_s = statistics.median(
+        sum(v for k, v in r["inner"].items() if k.startswith("train budget")) for r in runs
+    )
+    rate = sum(f["train_rows"].values()) * per_row / train_s / 1e9
+    paths = {path: train_step(path, a.kernel_steps, f["hidden"], f["batch"], 2) for path in KERNEL_PATHS}
+    step_rows = 2 * f["batch"]  # the kernel step trains two arms side by side, 2 threads as the run
+    rates = {path: step_rows * per_row / m["s_per_step"] / 1e9 for path, m in paths.items()}
+    best = max(rates, key=rates.get)
+    each = ", ".join(f"{path} {r:.0f}" for path, r in rates.items())
+    print(
+        f"in-run training: {rate:.0f} GFLOP/s on OpenBLAS {blas_core() or 'absent'} kernels,"
+        f" {rate / rates[best]:.0%} of this machine's best matrix rate ({best}: {rates[best]:.0f} GFLOP/s;"
+        f" a training step of the run's shapes, {a.kernel_steps} steps per path in a fresh process: {each})"
+    )
+    row = yaml.safe_load(META.read_text())["reference_run"]["seeds"]["rows"][0]
+    same = [
+        r["budgets"] == row["steps"] and r["successes"] == row["successes"] for r in runs if "budgets" in r
+    ]
+    if a.seed == 0 and not a.smoke and same:
+        print(
+            f"the run printed meta.yaml's seed-0 row: {'yes' if all(same) else 'no'}"
+            f" (published path: {cli.PUBLISHED_PATH})"
+        )
 
 
 # --- engine: validated demos per second of the data engine, against its own physics ---------------------

@@ -32,6 +32,7 @@ from pathlib import Path
 
 from ch37 import CHAPTER_ID, ROOT, errors
 from ch37.cli import TIERS, config_hash, device_tier
+from ch37.config import CHAPTER
 from ch37.errors import DataError
 from ch37.ownership import write_atomic
 from tools.common import WALLCLOCK, parser, rel, supports_flag
@@ -40,7 +41,10 @@ from tools.lock import drift, ran_versions
 # the versions the timed run ran on (tools.lock; setup_env.sh installs them from requirements.lock); rows
 # measured before they were recorded leave them empty
 VERSION_FIELDS = ("python", "torch", "numpy", "mujoco", "lerobot")
-WALLCLOCK_FIELDS = ("chapter", "tier", "minutes", "config_hash", "date", "status", *VERSION_FIELDS)
+# step_ms: ch37.cli.step_probe on the machine that measured the row, just before the timed run: the banner
+# scales the row's minutes to another machine by the two probes (rows measured before it leave it empty)
+WALLCLOCK_FIELDS = ("chapter", "tier", "minutes", "config_hash", "date", "status", "step_ms", *VERSION_FIELDS)
+OPTIONAL_FIELDS = ("step_ms", *VERSION_FIELDS)
 
 
 def _pending(tier: str) -> dict:
@@ -54,9 +58,9 @@ def read_wallclock(path: Path) -> list[dict]:
         return [_pending(t) for t in TIERS]
     with path.open(newline="") as f:
         rows = list(csv.DictReader(f))
-    if rows and set(rows[0]) not in (set(WALLCLOCK_FIELDS), set(WALLCLOCK_FIELDS) - set(VERSION_FIELDS)):
+    if rows and not set(WALLCLOCK_FIELDS) - set(OPTIONAL_FIELDS) <= set(rows[0]) <= set(WALLCLOCK_FIELDS):
         raise DataError(f"{rel(path)}: columns must be {','.join(WALLCLOCK_FIELDS)}")
-    rows = [dict.fromkeys(VERSION_FIELDS, "") | r for r in rows]  # a file from before the version columns
+    rows = [dict.fromkeys(OPTIONAL_FIELDS, "") | r for r in rows]  # a file from before the later columns
     have = {r["tier"] for r in rows}
     return rows + [_pending(t) for t in TIERS if t not in have]
 
@@ -77,6 +81,7 @@ def write_wallclock_row(path: Path, row: dict) -> list[dict]:
 
 def measure_wallclock(script: Path, smoke: bool, tier: str | None) -> dict:
     """Run the chapter cold once and return its wallclock.csv row (tier from the device it used)."""
+    probe = step_ms(CHAPTER.hidden_dim, CHAPTER.batch_size) if not smoke else None
     with tempfile.TemporaryDirectory(prefix="ch37-wallclock-") as tmp:  # cold: demos made, as on a first run
         cmd = [sys.executable, str(script), "--seed", "0", "--no-rerun", "--out", tmp, *(["--smoke"] * smoke)]
         cmd += ["--no-cache"] if supports_flag(script, "--cache") else []  # time the work, never a replay
@@ -92,7 +97,29 @@ def measure_wallclock(script: Path, smoke: bool, tier: str | None) -> dict:
     row = _pending(tier or device_tier(config["device"])) | {"minutes": f"{wall / 60:.2f}", "date": date}
     if off := drift():
         print(f"warning: .venv differs from requirements.lock ({'; '.join(off[:3])})", file=sys.stderr)
-    return row | {"config_hash": config_hash(config), "status": "measured"} | ran_versions(VERSION_FIELDS)
+    row |= {
+        "config_hash": config_hash(config),
+        "status": "measured",
+        "step_ms": f"{probe:.2f}" if probe else "",
+    }
+    return row | ran_versions(VERSION_FIELDS)
+
+
+# the probe as the banner runs it: in a new process, on the kernel path scale_data.py's setup region sets
+PROBE = """
+import os, sys
+from ch37 import cli
+os.environ.update(cli.kernel_path())
+print(cli.step_probe(int(sys.argv[1]), int(sys.argv[2])))
+"""
+
+
+def step_ms(hidden: int, batch: int) -> float:
+    """ch37.cli.step_probe at these shapes, in a new Python on the published kernel path (as the banner)."""
+    p = subprocess.run([sys.executable, "-c", PROBE, str(hidden), str(batch)], cwd=ROOT, capture_output=True)
+    if p.returncode != 0:
+        raise DataError(f"the step probe failed: {(p.stderr.decode().strip().splitlines() or [''])[-1]}")
+    return float(p.stdout.split()[-1])
 
 
 def main(argv: list[str]) -> int:
