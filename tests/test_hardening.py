@@ -1297,6 +1297,34 @@ def test_bench_engine_measures_every_task_and_refuses_an_unknown_one_in_one_line
     assert costs["task"] == "gym_pusht" and costs["attempts"] == 2 and costs["physics_s"] > 0
 
 
+def test_bench_reference_refuses_what_is_not_a_reference_checkout_in_one_line(tmp_path):
+    """Issue 59 #1's one command for the other host kind: a --ref without the reference chapter's script,
+    a --ref_python that is not a program, --rounds 0: one `error:` line each, exit 2, nothing run or made."""
+    from tools import bench
+
+    (tmp_path / "ref").mkdir()
+    fake_py = tmp_path / "python"
+    fake_py.write_text("")
+    out = tmp_path / "o"
+    for args, said in (
+        (["--ref", tmp_path / "ref", "--ref_python", sys.executable], "no curriculum/phase3_advanced"),
+        (["--ref", ROOT, "--ref_python", fake_py, "--rounds", "0"], "--rounds"),
+    ):
+        p = run("-m", "tools.bench", "reference", *args, "--out", out)
+        err = p.stderr.strip().splitlines()
+        assert p.returncode == 2 and len(err) == 1 and said in err[0], p.stderr[-2000:]
+        assert not out.exists()
+    script = tmp_path / "ref" / bench.REF_SCRIPT
+    script.parent.mkdir(parents=True)
+    script.write_text("")
+    p = run(
+        "-m", "tools.bench", "reference", "--ref", tmp_path / "ref", "--ref_python", fake_py, "--out", out
+    )
+    assert p.returncode == 2 and "not an executable Python" in p.stderr and not out.exists(), p.stderr[-2000:]
+    # the reference's work: two arms of 500 epochs, a last short minibatch each epoch counted as a step
+    assert bench.ref_arm_steps({"source_frames": 420, "aug_frames": 3070}) == 500 * (4 + 28)
+
+
 # ---------------------------------------------------------------------------------------------
 # Issue 62: datagen.check's arguments (#3), --out through a link (#5), a relative --out (#6)
 # ---------------------------------------------------------------------------------------------

@@ -6,6 +6,7 @@
     python -m tools.bench envs              speed and competence of the two embodiments and their experts
     python -m tools.bench gym_pusht         the scripted expert on LeRobot's own PushT, by its success rule
     python -m tools.bench kernels           what the kernel path costs the training, and its bits
+    python -m tools.bench reference         the lesson beside the reference chapter, cold, in one sitting
     python -m tools.bench writer            the one-pass LeRobot v3 writer vs LeRobot's per-frame path
 
 `SUBCOMMAND --help` says what each measures. One timing path: alternate() (every variant once a round,
@@ -21,9 +22,11 @@ import importlib
 import json
 import math
 import os
+import re
 import resource
 import runpy
 import secrets
+import shlex
 import shutil
 import socket
 import statistics
@@ -990,6 +993,122 @@ def kernels_main(argv: list[str]) -> int:
     return 0
 
 
+# --- reference: the lesson beside the reference chapter, cold, in one sitting ----------------------------
+REF_SCRIPT = "curriculum/phase3_advanced/ch3.7_scale_data/scale_data.py"  # in a zero2robot checkout
+REF_EPOCHS, REF_BATCH = 500, 128  # its defaults: every arm takes ceil(frames / batch) steps per epoch
+VERSUS = "bench_reference"  # OUT/VERSUS.json
+
+
+def ref_arm_steps(metrics: dict) -> int:
+    """The reference's training work in arm-steps, from its metrics.json: its two arms (source, source +
+    augmented) each train REF_EPOCHS epochs of ceil(frames / REF_BATCH) minibatches."""
+    src, aug = metrics["source_frames"], metrics["aug_frames"]
+    return REF_EPOCHS * (math.ceil(src / REF_BATCH) + math.ceil((src + aug) / REF_BATCH))
+
+
+def timed_run(cmd: list, cwd: Path, env: dict, out: Path) -> tuple[float, str, dict]:
+    """(wall seconds, stdout, metrics.json) of one cold run writing into `out` (a new folder)."""
+    t0 = time.perf_counter()
+    p = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if p.returncode != 0:
+        tail = (p.stdout + p.stderr).strip().splitlines()[-1:] or [""]
+        raise DataError(f"{shlex.join(map(str, cmd))} exited {p.returncode}: {tail[0]}")
+    return wall, p.stdout, json.loads((out / "metrics.json").read_text())
+
+
+def reference_main(argv: list[str]) -> int:
+    """The lesson beside the reference chapter (zero2robot's ch3.7: its own checkout and venv), both cold
+    (new output folders, demos generated, our result cache off), alternated, in one sitting:
+
+        python -m tools.bench reference --ref ~/zero2robot --ref_python ~/z2r-venv/bin/python --rounds 2
+
+    Ours is `scale_data.py --seed 0 --no-rerun --no-cache` on the published kernel path (its setup region
+    holds it); the reference is its `scale_data.py --seed 0 --no-rerun --device cpu` on its own kernels
+    (MKL's own, none of our kernel variables passed on). Per run: the wall-clock and the training work in
+    arm-steps (ours: both budgets' steps, two arms each, from metrics.json; the reference: its two arms'
+    epochs x minibatches, from its metrics.json); medians, their ratio and the ratio per unit of work;
+    and ours's banner estimate against its own run. Run it alone: another busy process moves the figures
+    more than the paths do. Writes OUT/bench_reference.json (default outputs/bench_reference).
+    """
+    p = parser("bench reference", reference_main.__doc__)
+    arg = p.add_argument
+    arg("--ref", type=Path, required=True, help="a zero2robot checkout (holds " + REF_SCRIPT + ")")
+    arg("--ref_python", type=Path, required=True, help="the Python of the reference's own venv")
+    arg("--rounds", type=int, default=2, help="runs of each, alternated")
+    arg("--out", type=Path, default=ROOT / "outputs" / VERSUS, help="where bench_reference.json goes")
+    a = p.parse_args(argv)
+    config.check(a, positive=("rounds",))
+    if not (a.ref / REF_SCRIPT).is_file():
+        raise DataError(f"--ref {a.ref}: no {REF_SCRIPT} in it (a zero2robot checkout)")
+    if not os.access(a.ref_python, os.X_OK) or a.ref_python.is_dir():
+        raise DataError(f"--ref_python {a.ref_python}: not an executable Python")
+    check_results(a.out, VERSUS)
+    ours_env = {k: v for k, v in os.environ.items() if k not in ("MKL_CBWR", "OPENBLAS_CORETYPE")}
+    ref_env = ours_env | {"PYTHONPATH": str(a.ref.resolve())}
+    with tempfile.TemporaryDirectory(prefix="ch37-versus-") as tmp:
+
+        def ours(r: int) -> dict:
+            out = Path(tmp) / f"ours{r}"
+            cmd = [sys.executable, a.script, "--seed", "0", "--no-rerun", "--no-cache", "--out", out]
+            wall, stdout, m = timed_run(cmd, ROOT, ours_env, out)
+            said = re.search(r"^about ([0-9.]+) min", stdout, re.MULTILINE)
+            steps = 2 * sum(m["budgets"].values())  # two arms per budget
+            est = float(said.group(1)) * 60 if said else None
+            print(f"ours      {wall:6.1f} s, {steps} arm-steps; the banner said {said and said.group(0)}")
+            return {"wall_s": wall, "arm_steps": steps, "banner_estimate_s": est}
+
+        def ref(r: int) -> dict:
+            out = Path(tmp) / f"ref{r}"
+            cmd = [
+                a.ref_python,
+                a.ref / REF_SCRIPT,
+                "--seed",
+                "0",
+                "--no-rerun",
+                "--device",
+                "cpu",
+                "--out",
+                out,
+            ]
+            wall, _, m = timed_run(cmd, a.ref, ref_env, out)
+            print(f"reference {wall:6.1f} s, {ref_arm_steps(m)} arm-steps")
+            return {"wall_s": wall, "arm_steps": ref_arm_steps(m)}
+
+        got = alternate({"ours": ours, "reference": ref}, a.rounds)
+    med = {k: statistics.median(r["wall_s"] for r in runs) for k, runs in got.items()}
+    work = {k: runs[0]["arm_steps"] for k, runs in got.items()}
+    ratio = med["ours"] / med["reference"]
+    per_work = ratio * work["reference"] / work["ours"]
+    errors_ = [r["banner_estimate_s"] / r["wall_s"] - 1 for r in got["ours"] if r["banner_estimate_s"]]
+    print(
+        f"medians of {a.rounds}: ours {med['ours']:.1f} s ({work['ours']} arm-steps), the reference"
+        f" {med['reference']:.1f} s ({work['reference']} arm-steps): ratio {ratio:.3f},"
+        f" {per_work:.3f} per unit of training work"
+    )
+    if errors_:
+        print("the banner's estimate against each of our runs: " + ", ".join(f"{e:+.0%}" for e in errors_))
+    result = {
+        "kind": VERSUS,
+        "runs": got,
+        "median_wall_s": med,
+        "arm_steps": work,
+        "ratio": ratio,
+        "ratio_per_unit_of_work": per_work,
+        "banner_estimate_errors": errors_,
+        "reference": {"script": REF_SCRIPT, "python": str(a.ref_python), "commit": ref_commit(a.ref)},
+        "provenance": provenance(a.script),
+    }
+    print(f"wrote {write_result(a.out / f'{VERSUS}.json', result)}")
+    return 0
+
+
+def ref_commit(ref: Path) -> str | None:
+    """The reference checkout's commit (git rev-parse HEAD), or None where it is no git work tree."""
+    p = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ref, capture_output=True, text=True)
+    return p.stdout.strip() if p.returncode == 0 else None
+
+
 # --- writer: the one-pass LeRobot v3 writer vs LeRobot's per-frame path ---------------------------------
 def synthetic_demos(n: int, frames: int, seed: int = 0) -> list[dict]:
     """n demos of `frames` frames: random float32 arrays of the PushT set's features."""
@@ -1069,6 +1188,7 @@ SUBCOMMANDS = {
     "envs": envs_main,
     "gym_pusht": gym_pusht_main,
     "kernels": kernels_main,
+    "reference": reference_main,
     "writer": writer_main,
 }
 
