@@ -341,9 +341,61 @@ def test_reproducibility_timings_are_wallclock_csvs():
     amd, h100 = wallclock("cpu-2core-amd"), wallclock("h100")
     has(
         "docs/reproducibility.md",
-        f"took {amd['minutes']} min (wallclock.csv's cpu-2core-amd row, AMD EPYC, 2 cores, {amd['date']})",
+        f"took {amd['minutes']} min (wallclock.csv's cpu-2core-amd row, AMD EPYC, 2 cores, {amd['date']}) at"
+        f" {amd['step_ms']} ms a training step",
         f"timed the cold default run at {h100['minutes']} min (wallclock.csv's `h100` row, "
         f"numpy {h100['numpy']})",
+    )
+
+
+def test_reproducibility_costs_are_the_kept_sitting():
+    """Issue 59: the lesson beside the reference chapter, the banner's estimate against the runs, and the
+    in-run training rate against this machine's best, as results/versus_reference/bench_reference.json
+    (python -m tools.bench reference) and results/bench_lesson.txt (python -m tools.bench lesson) say."""
+    import re
+
+    v = kept("versus_reference/bench_reference.json")
+    med, work, n = v["median_wall_s"], v["arm_steps"], len(v["runs"]["ours"])
+    assert n == len(v["runs"]["reference"]) and v["ratio"] == pytest.approx(
+        med["ours"] / med["reference"], 1e-3
+    )
+    per_work = med["ours"] / med["reference"] * work["reference"] / work["ours"]
+    assert v["ratio_per_unit_of_work"] == pytest.approx(per_work, 1e-3)
+    errors = [r["banner_estimate_s"] / r["wall_s"] - 1 for r in v["runs"]["ours"]]
+    lesson = (RESULTS / "bench_lesson.txt").read_text()
+    got = re.search(
+        r"in-run training: (\d+) GFLOP/s on OpenBLAS (\w+) kernels, (\d+)% of this machine's best matrix rate"
+        r" \((\w+): (\d+) GFLOP/s",
+        lesson,
+    )
+    assert got and got.group(2) == "Haswell" and "the run printed meta.yaml's seed-0 row: yes" in lesson
+    rate, _, pct, best, best_rate = got.groups()
+    train_s = re.search(r"TFLOP in ([0-9.]+) s", lesson).group(1)
+    wall_s = float(re.search(r"wall \(one run, in process\) +([0-9.]+)", lesson).group(1))
+    has(
+        "docs/reproducibility.md",
+        f"ours {med['ours']:.1f} s ({thousands(work['ours'])} arm-steps), the reference"
+        f" {med['reference']:.1f} s ({thousands(work['reference'])} arm-steps), medians of {n} cold runs"
+        f" each, alternated: a ratio of {v['ratio']:.3f}, {per_work:.3f} per unit of training work",
+        f"the banner's estimate against each of our runs: {', '.join(f'{e:+.0%}' for e in errors)}",
+        f"{rate} GFLOP/s in the run, {pct}% of this machine's best matrix rate ({best}: {best_rate} GFLOP/s)",
+        f"zero2robot at {v['reference']['commit'][:7]}",
+        f"Training took {train_s} s of the run's {wall_s:.1f} s",
+    )
+    # the bits table: each path's median ms a step, its weights and its ratio to the held path
+    kernels = {}
+    for line in (RESULTS / "bench_kernels.txt").read_text().splitlines()[1:]:
+        got = re.match(r"\s+(\w+) 2 +threads +([0-9.]+) ms/step .* x([0-9.]+) of held .* weights (\w+)", line)
+        kernels[got.group(1)] = (float(got.group(2)), got.group(3), got.group(4))
+    row = "| {} | {:.1f} | {} |"
+    has(
+        "docs/reproducibility.md",
+        row.format("held: OpenBLAS Haswell, one thread a product", kernels["held"][0], kernels["held"][2]),
+        row.format(
+            "MKL held to COMPATIBLE (issue 41's path)", kernels["compatible"][0], kernels["compatible"][2]
+        ),
+        row.format("MKL's own kernels", kernels["native"][0], kernels["native"][2]),
+        f"MKL's own kernels take a step in {kernels['native'][1]} of the held path's time",
     )
 
 
@@ -818,7 +870,8 @@ def test_performance_figures_are_wallclock_csv_and_meta_yaml():
     seed0 = meta()["reference_run"]["seeds"]["rows"][0]["steps"]
     has(
         "docs/PERFORMANCE.md",
-        f"{amd['minutes']} min (AMD EPYC, 2 cores, {amd['date']}; wallclock.csv's cpu-2core-amd row)",
+        f"{amd['minutes']} min (AMD EPYC, 2 cores, {amd['date']}; wallclock.csv's cpu-2core-amd row), a Zen 3"
+        f" at {amd['step_ms']} ms a training step",
         f"{old['minutes']} min (a 2-core host whose CPU vendor was not recorded, {old['date']}; "
         "wallclock.csv's cpu-2core-vendor-unrecorded row)",
         f"{h100['minutes']} min ({h100['date']}, numpy {h100['numpy']}; wallclock.csv's h100 row)",

@@ -890,6 +890,10 @@ def test_the_step_probe_times_a_training_step_and_leaves_the_random_state():
     ms = ch37.cli.step_probe(16, 8)
     assert math.isfinite(ms) and ms > 0
     assert torch.equal(torch.random.get_rng_state(), before)
+    readme = " ".join((ROOT / "README.md").read_text().split())
+    assert (
+        f"the run first times {ch37.cli.PROBE_STEPS} training steps" in readme
+    )  # the README says what it does
 
 
 INTEL = "processor\t: 0\nvendor_id\t: GenuineIntel\nmodel name\t: Intel(R) Xeon(R)\n\nprocessor\t: 1\n"
