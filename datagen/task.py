@@ -212,7 +212,7 @@ class GymnasiumEnv:
     """A Gymnasium env (reset(seed=, options=) -> (obs, info); step -> (obs, reward, terminated,
     truncated, info)) as the engine steps one: reset(seed, options) -> obs, set_start(*start) -> obs (the
     task's place), step(action) -> (obs, reward, done, info with "success"), success (latched), reward
-    (the last step's: what a set's next.reward records, Task.records_reward), render(size) (--video's
+    (the last step's: what a set's next.reward records, spec.records_reward), render(size) (--video's
     frames).
 
     observe(obs) -> the task's observation vector ((obs_dim,) float32). What the task is done means:
@@ -264,7 +264,7 @@ class GymnasiumEnv:
 @dataclass(frozen=True)
 class Subtask:
     """One of a task's subtasks, as MimicGen's task config names them: its name, the object frame each arm's
-    motion is relative to (task.arms order; names of task.frame_pose), the signal (task.signals) whose
+    motion is relative to (task.replay.arms order; names of task.frame_pose), the signal (task.signals) whose
     rise ends it (None: it runs to the source's end), whether it is entered by interpolation from where
     the arms are (bridge), and, per arm, a frame the arm's frame slides onto over the subtask (onto;
     None: it stays put). Every arm moves through every subtask in step (a coordination subtask is one
