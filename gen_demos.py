@@ -79,10 +79,10 @@ def _main(emb: Task | None, argv=None, tasks: dict | None = None) -> int:
     if emb is not None:
         doc = f"Generate {emb.name} expert demos as a local LeRobot v3 dataset."
         defaults = dict(out=Path(f"outputs/demos/{emb.name}"), noise=emb.default_noise)
-        helps = dict(noise=f"{noise}, {emb.noise_unit}")
+        helps = dict(noise=f"{noise}, {emb.expert.noise_unit}")
     else:
         doc = "Generate expert demos of a task of the engine (--task) as a local LeRobot v3 dataset."
-        units = "; ".join(f"{name} {t.noise_unit}" for name, t in tasks.items())
+        units = "; ".join(f"{name} {t.expert.noise_unit}" for name, t in tasks.items())
         defaults = {}
         helps = dict(noise=f"{noise}, in the task's units ({units}); default: the task's own")
         helps["out"] = "a new dataset folder (default: outputs/demos/TASK)"
@@ -116,7 +116,7 @@ def by_task(argv=None) -> int:
 
 def _by_task(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    tasks = {name: t for name, t in known_tasks().items() if t.expert_class is not None}
+    tasks = {name: t for name, t in known_tasks().items() if t.expert is not None}
     # the task first (its units and defaults are the help's), then every flag in one parse, --task with them
     p = argparse.ArgumentParser(add_help=False, allow_abbrev=False, exit_on_error=False)
     p.add_argument("--task")

@@ -1,8 +1,8 @@
 """The data engine: grow a demo set of any task that implements datagen.task.Task, MimicGen-style.
 
-task       Task (what a task describes, in MimicGen's division: an abstract base with ten required
-           members: its EnvSpec, starts and their perturbation, its arms and reach, object frames,
-           subtasks and their signals, the action conversion, an optional expert), EnvSpec, Subtask,
+task       Task (what a task describes, in MimicGen's division: an abstract base with eight required
+           members: its name, EnvSpec, starts and their perturbation, object pose, ReplaySpec (arms,
+           reach, subtasks, bridges, hold, the action kind); an optional ExpertSpec), EnvSpec, Subtask,
            Outcome (what one attempt came to), Perturbation, Source
 poses      SE(3): transform_segment, interpolate (slerp), planar_pose; planar tasks are its SE(2) case
 check      python -m datagen.check TASK: a task's contract, starts, expert, ranges and replay, in seconds

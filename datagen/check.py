@@ -1,11 +1,11 @@
 """python -m datagen.check TASK: what a newcomer needs while writing a task, in seconds, before a long run.
 
     the contract     the required members (datagen.task.contract_problem) and the episode limit: the
-                     task's max_steps against its env's own (a Gymnasium env's TimeLimit)
+                     task's spec.max_steps against its env's own (a Gymnasium env's TimeLimit)
     the start        place(start_of(obs)) puts a fresh env where obs was, on reset and mid-episode
     perturb          the starts it draws have start_names' numbers, all finite, and place() takes them
     the expert       it solves the starts of --episodes resets (seeds --seed ..)
-    the ranges       every state and action of those rollouts lies in state_ranges / action_ranges
+    the ranges       every state and action of those rollouts lies in spec.state_ranges / action_ranges
     the replay       every solved rollout, replayed at zero perturbation (MimicGen's move with nothing
                      moved), succeeds again; a failure names the subtask and the waypoint
 
@@ -54,7 +54,7 @@ def round_trip(task: Task, obs) -> tuple[float, str]:
     again = np.asarray(task.place(task.make_env(), task.start_of(obs)), np.float64)
     gap = np.abs(again - np.asarray(obs, np.float64))
     i = int(np.argmax(gap))
-    return float(gap[i]), task.obs_names[i]
+    return float(gap[i]), task.spec.observation_names[i]
 
 
 def perturb_problem(task: Task, obs: list, seed: int) -> tuple[str | None, str]:
@@ -80,18 +80,19 @@ def checks(task: Task, episodes: int, seed: int, tol: float):
     yield "contract", contract_problem(task), "the required members are there"
     env = task.make_env()
     limit = env_limit(env)
-    bad = limit is not None and limit != task.max_steps
-    fine = f"max_steps {task.max_steps}" + (", as the env's own" if limit else " (the env declares none)")
-    yield "episode limit", bad and f"max_steps {task.max_steps} but the env stops at {limit}", fine
+    steps = task.spec.max_steps
+    bad = limit is not None and limit != steps
+    fine = f"max_steps {steps}" + (", as the env's own" if limit else " (the env declares none)")
+    yield "episode limit", bad and f"max_steps {steps} but the env stops at {limit}", fine
     obs = [env.reset(seed=seed + i) for i in range(episodes)]  # a source's first frame is such a start
     worst = max((round_trip(task, o) for o in obs), key=lambda g: g[0])
     far = worst[0] > tol and f"place(start_of(obs)) is {worst[0]:.3g} off in {worst[1]} (over --tol {tol:g})"
     yield "start round-trip", far, f"within {worst[0]:.3g} on {len(obs)} starts"
     yield "perturb", *perturb_problem(task, obs, seed)
     eps = []
-    for i, first in enumerate(obs if task.expert_class is not None else ()):
+    for i, first in enumerate(obs if task.expert is not None else ()):
         env.reset(seed=seed + i)
-        eps.append(rollout(env, task.expert(), first))
+        eps.append(rollout(env, task.expert.cls(noise=0.0), first))
     if not eps:
         return
     solved = [ep for ep in eps if ep["success"]]
@@ -100,7 +101,7 @@ def checks(task: Task, episodes: int, seed: int, tol: float):
     states = np.concatenate([ep["observation.state"] for ep in eps])
     actions = np.concatenate([ep["action"] for ep in eps])
     yield "ranges", state_range_problem(task, Path(f"the {task.name} rollouts"), states, actions), "inside"
-    if "replay" not in task.modes:
+    if task.replay is None:
         return
     failed = []
     for i, ep in enumerate(solved):

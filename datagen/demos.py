@@ -79,7 +79,7 @@ def write_dataset(
             name_task(tmp, task_name)
 
 
-REWARD_FEATURES = {  # what a task with records_reward adds to its sets, as lerobot/pusht_keypoints has them
+REWARD_FEATURES = {  # what a task with spec.records_reward adds, as lerobot/pusht_keypoints has them
     "next.reward": {"dtype": "float32", "shape": (1,), "names": None},
     "next.done": {"dtype": "bool", "shape": (1,), "names": None},
 }
@@ -133,20 +133,22 @@ def rollout(env, policy, obs, *, render: bool = False, rewards: bool = False) ->
 # code that made it.
 @functools.cache
 def generator_version(task) -> str:  # at the first set made or checked, not at import
-    classes = (task.expert_class, type(task))
+    classes = (task.expert.cls, type(task))
     roots = (sys.modules[__name__],) + tuple(sys.modules[c.__module__] for c in classes)  # and their imports
-    packages = "".join(f"+{p}{version(p)}" for p in ("lerobot", *task.packages))  # the writer, the simulator
+    packages = "".join(
+        f"+{p}{version(p)}" for p in ("lerobot", *task.spec.packages)
+    )  # the writer, the simulator
     return f"3+{code_digest(roots)}{packages}"
 
 
 def expert_episodes(task, env, seed: int, n: int, *, noise: float = 0.0, render: bool = False):
     """Episodes 0..n-1 of the seed's demo set of `task`, one by one: episode i rolled out in `env` from
-    env.reset(env_seed(seed, "demo", i)) by task.expert_class seeded with that same number (its action
+    env.reset(env_seed(seed, "demo", i)) by task.expert.cls seeded with that same number (its action
     noise `noise`), with next.reward and next.done for a task with records_reward."""
     for i in range(n):
         s = env_seed(seed, "demo", i)
-        expert = task.expert_class(noise=noise, seed=s)
-        yield rollout(env, expert, env.reset(s), render=render, rewards=task.records_reward)
+        expert = task.expert.cls(noise=noise, seed=s)
+        yield rollout(env, expert, env.reset(s), render=render, rewards=task.spec.records_reward)
 
 
 def generate(
@@ -159,7 +161,7 @@ def generate(
     video: bool = False,
     quiet: bool = False,
 ) -> dict:
-    """Write a demo set of the task `emb` (datagen.task.Task: its env, expert_class, name) to `out` and
+    """Write a demo set of the task `emb` (datagen.task.Task: its env, expert.cls, name) to `out` and
     return its summary (episodes, frames, successes: of those written; unstable: the episodes in which the
     simulation blew up, not written; DataError when that is every one)."""
     env = emb.make_env()
@@ -182,11 +184,13 @@ def generate(
                 f"{noise:g}, so none was written; lower --noise"
             )
 
-    extra = (REWARD_FEATURES if emb.records_reward else {}) | emb.frame_features
+    extra = (REWARD_FEATURES if emb.spec.records_reward else {}) | emb.spec.frame_features
     feats = features(m.state_names, m.action_names, extra, video=video, env_state_names=m.env_state_names)
     stamp = stamp_for(emb, episodes=episodes, seed=seed, noise=noise, video=video)
     how = dict(repo_id=f"local/{emb.name}_demos", fps=m.fps, robot_type=m.robot_type, task=m.task)
-    how["obs_names"] = emb.obs_names  # the frames' observations: the set's state (and env state) columns
+    how["obs_names"] = (
+        emb.spec.observation_names
+    )  # the frames' observations: the set's state (and env state) columns
     # the AV1 encoder (video only) prints its banner unless SVT_LOG says errors only; a value of yours is kept
     with environment(SVT_LOG=os.environ.get("SVT_LOG", "1")):
         write_dataset(out, task_name=emb.name, feats=feats, episodes=episodes_iter(), stamp=stamp, **how)

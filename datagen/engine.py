@@ -28,7 +28,7 @@ import numpy as np
 from ch37.parallel import map_jobs
 from datagen import lockstep
 from datagen.lockstep import Simulators, attempt_rng, with_provenance
-from datagen.task import Outcome, Perturbation, Source, Task
+from datagen.task import Outcome, Perturbation, Source, Task, failures_of
 
 __all__ = [
     "ATTEMPTS_PER_KEPT",
@@ -216,7 +216,7 @@ def grow(
         lambda jobs: run_attempts(
             task, sources, jobs, how, mode=mode, select=select, workers=workers, bar=bar
         ),
-        reasons=task.failures[mode],
+        reasons=failures_of(task)[mode],
         cap=cap,
     )
 
@@ -232,9 +232,13 @@ def save(task: Task, root, kept: list[dict], *, repo_id: str, stamp: dict) -> No
     replace_own_dir(root)
     if kept:
         m = task.spec
-        extra = provenance(task) | (REWARD_FEATURES if task.records_reward else {}) | task.frame_features
+        extra = (
+            provenance(task)
+            | (REWARD_FEATURES if task.spec.records_reward else {})
+            | task.spec.frame_features
+        )
         feats = features(m.state_names, m.action_names, extra, env_state_names=m.env_state_names)
-        if task.frame_features:
+        if task.spec.frame_features:
             kept = [ep | task.frame_columns(ep["observation.state"], ep["action"]) for ep in kept]
         write_dataset(
             root,
@@ -246,5 +250,6 @@ def save(task: Task, root, kept: list[dict], *, repo_id: str, stamp: dict) -> No
             feats=feats,
             episodes=kept,
             stamp={"made_by": MADE_BY} | stamp,
-            obs_names=task.obs_names,  # the frames' observations: the set's state (and env state) columns
+            # the frames' observations: the set's state (and env state) columns
+            obs_names=task.spec.observation_names,
         )

@@ -9,7 +9,7 @@ recorded here and nowhere else.
 
 attempts_lockstep returns exactly what [datagen.engine.attempt(task, sources[e], k, how, ...) for (e, k)
 in jobs] returns, frame for frame and bit for bit (tests/test_lockstep.py): it is the same runner with
-more lanes. Where the task decides for a batch (resolve: its batch_expert, datagen.tasks.fast_experts; replay:
+more lanes. Where the task decides for a batch (resolve: its expert.batch, datagen.tasks.fast_experts; replay:
 a task that steps its envs as one batch, its step_batch, PushT's datagen.tasks.fast_pusht.step_many), up to
 `lanes` attempts are stepped together and the expert's ~40 small numpy calls per frame are paid once
 per control step for all of them; otherwise the runner runs one lane, each attempt in turn. Each attempt
@@ -262,9 +262,9 @@ class Mode:
 
 class Resolve(Mode):
     """Mode "resolve": the task's noise-free expert from each perturbed start, kept on success.
-    act_batch (the task's batch_expert()) decides for all lanes in one call; without it each lane runs
-    its own task.expert(), reset at its start (the same bits: the batch expert is the expert's act over
-    a batch). start_for(job): a given start instead of the drawn one."""
+    act_batch (its expert.batch's act_batch) decides for all lanes in one call; without it each lane
+    runs its own expert (task.expert.cls, noise-free), reset at its start (the same bits: the batch
+    expert is the expert's act over a batch). start_for(job): a given start instead of the drawn one."""
 
     def __init__(self, task: Task, sources: dict, how: Perturbation, act_batch=None, start_for=None):
         self.task, self.act_batch = task, act_batch
@@ -276,7 +276,7 @@ class Resolve(Mode):
             return Outcome("no_valid_start", source_episode=job[0])
         if self.act_batch is not None:
             return Lane(job, self.task.place(env, start), start=start)
-        expert = self.task.expert()
+        expert = self.task.expert.cls(noise=0.0)
         lane = Lane(job, self.task.place(env, start), start=start, expert=expert)
         expert.reset()
         return lane
@@ -294,8 +294,8 @@ class Replaying(Mode):
     """Mode "replay": the engine's one replay (datagen.replay.Replay.act, one per lane) of the attempt's
     own source, or of the pool's nearest to its start (MimicGen's selection; pool None: its own). plans:
     the worker's cut sources (None: cut for this call). start_for(job): a given start instead of the drawn
-    one. follow: (length, rad), mode "replay_live" (task.follow_tol): each lane re-anchors the rest of a
-    segment on the object's live pose once it drifts that far (None: open loop)."""
+    one. follow: (length, rad), mode "replay_live" (task.replay.follow_tol): each lane re-anchors the rest
+    of a segment on the object's live pose once it drifts that far (None: open loop)."""
 
     def __init__(self, task: Task, sources: dict, how, pool=None, plans=None, start_for=None, follow=None):
         self.task, self.sources, self.pool, self.plans, self.follow = task, sources, pool, plans, follow
@@ -320,7 +320,7 @@ class Replaying(Mode):
         # a user's conversion that returns a NaN or the wrong width: one line, not a traceback in the env
         for a in actions:
             if a is not None:
-                owed(self.task, "target_to_action", a, act_dim)
+                owed(self.task, "replay.action.to_action", a, act_dim)
         stop = np.array([a is None for a in actions], bool)
         if stop.all():  # nothing is stepped: the rows are never read
             return np.zeros((len(lanes), self.task.spec.act_dim), np.float32), stop
@@ -337,21 +337,23 @@ def mode_parts(
     task: Task, sources: dict, how: Perturbation, mode: str, *, pool=None, plans=None, lanes: bool = True
 ) -> tuple[Mode, bool]:
     """(the Mode object for `mode`, whether its lanes can run together): resolve with the task's
-    batch_expert, replay where the task steps its envs as one batch (its own step_batch). A replay
-    decides lane by lane, so its lanes pay only where the envs step as one batch; stepped env by env
+    batch expert (expert.batch), replay where the task steps its envs as one batch (its own step_batch). A
+    replay decides lane by lane, so its lanes pay only where the envs step as one batch; stepped env by env
     they cost more than one at a time. lanes False: a Mode for one lane (resolve: the plain expert, faster
     on one row than the batch expert, which is then not made)."""
     if mode == "resolve":
-        act_batch = task.batch_expert() if lanes else None
+        batch = task.expert.batch if lanes else None
+        act_batch = batch().act_batch if batch is not None else None
         return Resolve(task, sources, how, act_batch), act_batch is not None
-    follow = task.follow_tol if mode == "replay_live" else None
+    follow = task.replay.follow_tol if mode == "replay_live" else None
     kind = Replaying(task, sources, how, pool, plans, follow=follow)
     return kind, type(task).step_batch is not Task.step_batch
 
 
 def _dims(task: Task) -> dict:
-    m, reward_of = task.spec, (lambda env: env.reward) if task.records_reward else None
-    return {"max_frames": task.max_steps, "obs_dim": m.obs_dim, "act_dim": m.act_dim, "reward_of": reward_of}
+    m = task.spec
+    reward_of = (lambda env: env.reward) if m.records_reward else None
+    return {"max_frames": m.max_steps, "obs_dim": m.obs_dim, "act_dim": m.act_dim, "reward_of": reward_of}
 
 
 def one_lane(task: Task, env, jobs, mode: Mode) -> list:

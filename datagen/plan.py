@@ -44,9 +44,9 @@ def run_key(config: dict) -> str:
 
 def versions(task=None) -> dict:
     """The packages whose versions can change a shard's bytes: LeRobot's writer, MuJoCo, numpy, pyarrow,
-    and the task's own simulator packages (task.packages: gym-pusht's pymunk). Read once per process:
+    and the task's own simulator packages (task.spec.packages: gym-pusht's pymunk). Read once per process:
     every shard's stamp names them, and each lookup parses the package's metadata, ~5 ms."""
-    return dict(_versions(tuple(task.packages) if task is not None else ()))
+    return dict(_versions(tuple(task.spec.packages) if task is not None else ()))
 
 
 @functools.cache

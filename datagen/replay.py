@@ -1,34 +1,35 @@
 """The engine's one replay, for every task: MimicGen's generation loop (its data_generator.py), with the
-task only describing (datagen.task.Task: arms, subtasks, frames, signals, the action conversion).
+task only describing (datagen.task.Task and its ReplaySpec, `task.replay` (called spec below): arms,
+subtasks, bridges, hold, follow tolerance and the action kind; the task's frames and signals).
 
     plan = cut(task, source)                # the source's subtasks: [Segment], by the task's signals
     run = Replay(task, source, plan, start)  # one attempt: run.act(obs, env) its actions, run.outcome(...)
     e = nearest(task, pool, start)          # MimicGen's nearest source selection
 
-A source is cut into the task's subtasks at its signals: a subtask with `ends` stops at the first frame
+A source is cut into spec.subtasks at its signals: a subtask with `ends` stops at the first frame
 after its start at which that signal turns on, found by re-simulating the source from its first frame
 through its recorded actions (the signals live in the physics, not in the 10 Hz frames), as MimicGen's
 prepare_src_dataset annotates a source through its env. The last subtask runs to the source's end.
 
 An attempt is executed subtask by subtask. At each subtask's start, the object frames are read from the
 current observation (open loop in between, as MimicGen reads the object pose once per subtask), and every
-arm's segment (the source's targets: task.action_to_target) is re-expressed from its frame's pose in the
+arm's segment (the source's targets: spec.action.to_target) is re-expressed from its frame's pose in the
 source (at the subtask's first frame) into the same frame's pose now (datagen.poses.transform_segment; a
 subtask's `onto` makes an arm's frame slide onto another over the subtask). A subtask with `bridge` is
 entered by linear interpolation from where the arms are to their first waypoints, all arms in step, at up
-to task.bridge_speed (none when every arm is within task.bridge_tol); each gripper keeps its last command.
-Then every step is task.target_to_action of each arm's waypoint, velocity and gripper command of that
-frame. Mode "replay_live" (Replay's follow, task.follow_tol) follows the objects' live poses: before each
+to spec.bridge_speed (none when every arm is within spec.bridge_tol); each gripper keeps its last command.
+Then every step is spec.action.to_action of each arm's waypoint, velocity and gripper command of that
+frame. Mode "replay_live" (Replay's follow, spec.follow_tol) follows the objects' live poses: before each
 step of a subtask every object frame of it is read, and once one lies beyond follow from where the segment
 as re-expressed expects it (the source's own pose of that frame, moved as the waypoints were), the rest of
 the segment is re-expressed from the poses now, as its start was (a frame sliding onto another slides
 again from there over the remaining frames): still no expert, only the source's path relative to its
-objects. After the last subtask the arms hold still for task.hold_steps steps (so a success that must be
+objects. After the last subtask the arms hold still for spec.hold_steps steps (so a success that must be
 held can complete). The attempt is kept only on the env's success; otherwise the first reason of
 REASONS that applies:
 
-    path_out_of_reach     a re-expressed waypoint lies beyond its arm's reach (task.reach)
-    approach_blocked      a bridge moved the object (task.object_pose) beyond task.bridge_moves
+    path_out_of_reach     a re-expressed waypoint lies beyond its arm's reach (spec.reach)
+    approach_blocked      a bridge moved the object (task.object_pose) beyond spec.bridge_moves
     <signal>_missed       a subtask's end signal never came on (in the task's subtask order)
     out_of_time           the episode ended before the plan did
     finished_off_target   the plan ran to its end without success
@@ -66,11 +67,11 @@ class Segment:
 def signals(task: Task, source: Source, env=None) -> np.ndarray:
     """(T+1, n) bool: the task's signals (the ends of its subtasks, in order) at each frame of `source`
     and after its last action (the last row repeats the last frame's when read from the frames). Read
-    from the recorded frames where the task's signals need no physics (task.resimulate False); else
+    from the recorded frames where the task's signals need no physics (spec.resimulate False); else
     re-simulated from its first frame through its recorded actions, and a ValueError when that leaves
     the recorded frames by more than 1 mm (a set from another env)."""
-    names = [s.ends for s in task.subtasks if s.ends]
-    if not task.resimulate:
+    names = [s.ends for s in task.replay.subtasks if s.ends]
+    if not task.replay.resimulate:
         on = [[task.signals(obs, None)[n] for n in names] for obs in source.states]
         return np.array(on + on[-1:], bool).reshape(len(on) + 1, len(names))
     env = task.make_env() if env is None else env
@@ -88,13 +89,13 @@ def signals(task: Task, source: Source, env=None) -> np.ndarray:
 
 
 def cut(task: Task, source: Source, env=None) -> list[Segment]:
-    """The source's frames cut into task.subtasks: each subtask with an end signal stops at that signal's
+    """The source's frames cut into spec.subtasks: each subtask with an end signal stops at that signal's
     first rising edge after its start (signals), the last one at the source's end. Raises ValueError
     when a signal never rises there (the source does not show that subtask)."""
     n = len(source.actions)
-    on = signals(task, source, env) if any(s.ends for s in task.subtasks) else None
+    on = signals(task, source, env) if any(s.ends for s in task.replay.subtasks) else None
     out, start, i = [], 0, 0
-    for sub in task.subtasks:
+    for sub in task.replay.subtasks:
         stop = n
         if sub.ends:
             rise = np.flatnonzero(on[start + 1 : n, i] & ~on[start : n - 1, i])
@@ -114,7 +115,7 @@ def plan_of(task: Task, source: Source, plans: dict | None = None) -> list[Segme
         return cut(task, source)
     h = hashlib.sha256(np.ascontiguousarray(source.states).tobytes())
     h.update(np.ascontiguousarray(source.actions).tobytes())
-    key = (task.name, task.subtasks, source.episode, h.hexdigest())
+    key = (task.name, task.replay.subtasks, source.episode, h.hexdigest())
     if key not in plans:
         plans[key] = cut(task, source)
     return plans[key]
@@ -138,14 +139,14 @@ class Replay:
 
     def __init__(self, task: Task, source: Source, plan: list[Segment], start, follow=None):
         self.task, self.source, self.plan, self.start = task, source, plan, start
-        # (length, rad), task.follow_tol: re-express the rest of a segment from the object frames' live
+        # (length, rad), spec.follow_tol: re-express the rest of a segment from the object frames' live
         # poses once one drifts this far from where the segment expects it (None: open loop)
         self.follow = follow
         self.reanchored = 0  # how often the rest of a segment was re-expressed from live poses
         self._source_poses = {}  # frame -> its pose in every source frame (follow's expectations)
         self.out_of_reach = False  # a re-expressed waypoint beyond its arm's reach
         self.blocked = False  # a bridge moved the object
-        self.seen = dict.fromkeys((s.ends for s in task.subtasks if s.ends), False)  # signals ever on
+        self.seen = dict.fromkeys((s.ends for s in task.replay.subtasks if s.ends), False)  # signals ever on
         self.planned = False  # the plan ran to its end with the episode still going
         self.bridging = None  # the object pose a bridge under way started from
         self.current = None  # the subtask under way
@@ -160,10 +161,10 @@ class Replay:
         (T, 3, 3) or None)} of `seg`, re-expressed for the frames in the observation `now`."""
         task, src = self.task, self.source
         rows = slice(seg.start, seg.stop)
-        targets = task.action_to_target(src.states[rows], src.actions[rows])
+        targets = task.replay.action.to_target(task, src.states[rows], src.actions[rows])
         first, out = src.states[seg.start], {}
-        onto = seg.subtask.onto or (None,) * len(task.arms)
-        for arm, frame, to in zip(task.arms, seg.subtask.frames, onto):
+        onto = seg.subtask.onto or (None,) * len(task.replay.arms)
+        for arm, frame, to in zip(task.replay.arms, seg.subtask.frames, onto):
             pts, vel, grip, *turns = targets[arm]
             rots = turns[0] if turns else None
             if to is None:
@@ -199,7 +200,7 @@ class Replay:
         segment re-expressed for the observation `now` expects it, the source's own poses of that frame
         moved as segment moves the waypoints (a frame that slides onto another: the pose of that step)."""
         task, first, out = self.task, self.source.states[seg.start], {}
-        onto = seg.subtask.onto or (None,) * len(task.arms)
+        onto = seg.subtask.onto or (None,) * len(task.replay.arms)
         for frame, to in zip(seg.subtask.frames, onto):
             if frame in out:
                 continue
@@ -231,7 +232,7 @@ class Replay:
     def check_reach(self, segs: dict) -> None:
         """Note (once) the first re-expressed waypoint of `segs` beyond its arm's reach."""
         for arm, (pts, *_) in segs.items():
-            inside = self.task.in_reach(arm, pts)
+            inside = self.task.replay.in_reach(arm, pts)
             if not inside.all() and not self.out_of_reach:
                 i = int(np.argmin(inside))
                 at_ = ", ".join(f"{v:.4g}" for v in pts[i])
@@ -271,11 +272,12 @@ class Replay:
                     return self._frame_action(obs)
                 self._phase = "start"
             elif self._phase == "hold":  # hold still so a success hold can complete
-                if self._held < self.task.hold_steps:
+                spec = self.task.replay
+                if self._held < spec.hold_steps:
                     self._held += 1
-                    here = {a: self.task.arm_pose(a, obs, env)[0] for a in self.task.arms}
-                    still = {a: np.zeros(len(here[a])) for a in self.task.arms}
-                    return self.task.target_to_action(obs, here, still, self._grips, self._turns)
+                    here = {a: self.task.arm_pose(a, obs, env)[0] for a in spec.arms}
+                    still = {a: np.zeros(len(here[a])) for a in spec.arms}
+                    return spec.action.to_action(self.task, obs, here, still, self._grips, self._turns)
                 self._phase = "done"
             else:
                 return None
@@ -295,14 +297,14 @@ class Replay:
         self.check_reach(segs)
         self._expect = self.expected(seg, obs) if self.follow is not None else None
         if self._grips is None and gripping:
-            self._grips = {a: float(segs[a][2][0]) for a in task.arms}
+            self._grips = {a: float(segs[a][2][0]) for a in task.replay.arms}
         self._phase, self._t, self._at = "frames", 0, 0
         if seg.subtask.bridge:
-            poses = {a: task.arm_pose(a, obs, env) for a in task.arms}
+            poses = {a: task.arm_pose(a, obs, env) for a in task.replay.arms}
             self._here = {a: p for a, (p, _) in poses.items()}
-            self._first = {a: segs[a][0][0] for a in task.arms}
+            self._first = {a: segs[a][0][0] for a in task.replay.arms}
             self._facing = {a: r for a, (_, r) in poses.items()}
-            self._aims = {a: segs[a][3][0] for a in task.arms} if self._turning else None
+            self._aims = {a: segs[a][3][0] for a in task.replay.arms} if self._turning else None
             speed = self.bridge_speed(segs)
             self._n = self.bridge_steps(self._here, self._first, self._facing, self._aims, speed)
             self._i, self._phase = 0, "bridge"
@@ -313,12 +315,12 @@ class Replay:
         bridge's speed, each gripper holding its last command."""
         task, i, n, here, first = self.task, self._i, self._n, self._here, self._first
         self._i += 1
-        wp = {a: here[a] + i / n * (first[a] - here[a]) for a in task.arms}
-        vel = {a: (first[a] - here[a]) * task.spec.fps / n for a in task.arms}
+        wp = {a: here[a] + i / n * (first[a] - here[a]) for a in task.replay.arms}
+        vel = {a: (first[a] - here[a]) * task.spec.fps / n for a in task.replay.arms}
         if self._turning:
-            self._turns = {a: self.turned(self._facing[a], self._aims[a], i / n) for a in task.arms}
+            self._turns = {a: self.turned(self._facing[a], self._aims[a], i / n) for a in task.replay.arms}
         grips = None if self._grips is None else dict(self._grips)
-        return task.target_to_action(obs, wp, vel, grips, self._turns)
+        return task.replay.action.to_action(task, obs, wp, vel, grips, self._turns)
 
     def _frame_action(self, obs) -> np.ndarray:
         """Frame t of the segment: its re-expressed waypoint, velocity, gripper command and orientation
@@ -332,32 +334,34 @@ class Replay:
             self.check_reach(self._segs)
         segs, i = self._segs, t - self._at
         if self._grips is not None:
-            self._grips = {a: float(segs[a][2][i]) for a in task.arms}
+            self._grips = {a: float(segs[a][2][i]) for a in task.replay.arms}
         if self._turning:
-            self._turns = {a: segs[a][3][i] for a in task.arms}
-        wp = {a: segs[a][0][i] for a in task.arms}
-        vel = {a: segs[a][1][i] for a in task.arms} if self._moving else None
-        return task.target_to_action(obs, wp, vel, self._grips, self._turns)
+            self._turns = {a: segs[a][3][i] for a in task.replay.arms}
+        wp = {a: segs[a][0][i] for a in task.replay.arms}
+        vel = {a: segs[a][1][i] for a in task.replay.arms} if self._moving else None
+        return task.replay.action.to_action(task, obs, wp, vel, self._grips, self._turns)
 
     def bridge_steps(self, here: dict, first: dict, facing: dict, turns: dict | None, speed: float) -> int:
         """Steps of the bridge from the arms at `here` (positions, orientations `facing`) to their first
         waypoints `first` (orientations `turns`): the farthest arm at `speed`, or the most
-        turned at task.bridge_turn_speed where the task sets one; 0 when every arm is within bridge_tol."""
+        turned at spec.bridge_turn_speed where the task sets one; 0 when every arm is within bridge_tol."""
         task = self.task
         fps = task.spec.fps
-        gaps = [first[a] - here[a] for a in task.arms]  # a planar gap's length as np.hypot gives it
+        gaps = [first[a] - here[a] for a in task.replay.arms]  # a planar gap's length as np.hypot gives it
         dist = max(float(np.hypot(*g)) if len(g) == 2 else float(np.linalg.norm(g)) for g in gaps)
-        n = math.ceil(dist / (speed / fps) - 1e-9) if dist > task.bridge_tol else 0
-        if turns is not None and task.bridge_turn_speed is not None:
-            angle = max(rotation_angle(facing[a], turns[a]) for a in task.arms if facing[a] is not None)
-            n = max(n, math.ceil(angle / (task.bridge_turn_speed / fps) - 1e-9))
+        n = math.ceil(dist / (speed / fps) - 1e-9) if dist > task.replay.bridge_tol else 0
+        if turns is not None and task.replay.bridge_turn_speed is not None:
+            angle = max(
+                rotation_angle(facing[a], turns[a]) for a in task.replay.arms if facing[a] is not None
+            )
+            n = max(n, math.ceil(angle / (task.replay.bridge_turn_speed / fps) - 1e-9))
         return n
 
     def bridge_speed(self, segs: dict) -> float:
-        """task.bridge_speed, or where the task sets none, the source's own top speed over `segs` (each
+        """spec.bridge_speed, or where the task sets none, the source's own top speed over `segs` (each
         arm's waypoints, frame to frame): a bridge then moves no faster than the demo did."""
-        if self.task.bridge_speed is not None:
-            return self.task.bridge_speed
+        if self.task.replay.bridge_speed is not None:
+            return self.task.replay.bridge_speed
         steps = [np.linalg.norm(np.diff(pts, axis=0), axis=1) for pts, *_ in segs.values() if len(pts) > 1]
         top = max((float(s.max()) for s in steps if len(s)), default=0.0) * self.task.spec.fps
         return top if top > 0 else math.inf
@@ -368,8 +372,8 @@ class Replay:
         return toward if facing is None else slerp(facing, toward, s)
 
     def end_bridge(self, obs) -> None:
-        """Whether the bridge that started at self.bridging moved the object beyond task.bridge_moves."""
-        tol = self.task.bridge_moves
+        """Whether the bridge that started at self.bridging moved the object beyond spec.bridge_moves."""
+        tol = self.task.replay.bridge_moves
         if self.bridging is not None and tol is not None:
             moved, turned = pose_gap(self.bridging, self.task.object_pose(obs))
             if (moved > tol[0] or turned > tol[1]) and not self.blocked:
@@ -395,10 +399,10 @@ class Replay:
         elif self.blocked:
             why, detail = "approach_blocked", self.bumped
         elif missed:
-            ending = next(s.name for s in self.task.subtasks if s.ends == missed[0])
+            ending = next(s.name for s in self.task.replay.subtasks if s.ends == missed[0])
             why, detail = f"{missed[0]}_missed", f"subtask {ending!r}: its end signal never came on"
         elif not self.planned:
-            why, detail = "out_of_time", f"{where}: the episode's {self.task.max_steps} steps ran out"
+            why, detail = "out_of_time", f"{where}: the episode's {self.task.spec.max_steps} steps ran out"
         else:
             why, detail = "finished_off_target", f"{where}: its last waypoint reached without success"
         got = ended(episode | {"success": success}, why, self.start, self.source.episode)

@@ -48,7 +48,7 @@ from ch37.ownership import (
 from datagen.plan import run_key
 from datagen.report import REPORT_NAME
 from datagen.shards import MERGE_DIR, SHARD_NAMES, SHARDS_DIR, remove_shards
-from datagen.task import known_tasks
+from datagen.task import failures_of, known_tasks
 
 # What a run writes directly in OUT and in OUT/shards (both its own, under its lock); anything else
 # there is the user's, and a resume refuses to start rather than delete it (foreign).
@@ -203,7 +203,10 @@ def finished(out: Path, config: dict, shards: list) -> dict[int, dict]:
             damaged = changed_files(path, stamp)  # its files against the sha256 its stamp recorded
             why = f"{names(damaged)} differs from its stamp" if damaged else None
             why = why or stamp_problem(
-                path, stamp, shards[int(m.group(1))], known_tasks()[config["task"]].failures[config["mode"]]
+                path,
+                stamp,
+                shards[int(m.group(1))],
+                failures_of(known_tasks()[config["task"]])[config["mode"]],
             )
             if not why:
                 done[int(m.group(1))] = stamp

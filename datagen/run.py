@@ -44,7 +44,7 @@ from datagen.plan import attempts_per_demo, plan, plan_memory_problem, stored, v
 from datagen.report import REPORT_NAME, describe, report_of
 from datagen.shards import SHARDS_DIR, collect, make_shard, many_files_note, merge
 from datagen.source_check import read_source, source_identity, successful_only, task_of
-from datagen.task import Task, known_tasks
+from datagen.task import Task, failures_of, known_tasks
 
 
 def engine_version(task: Task) -> str:
@@ -128,7 +128,7 @@ def _generate(src, claim, sources, shards, config, *, workers, ray, quiet, t0) -
     seconds = time.perf_counter() - t0
     report = report_of(
         [done[i] for i in range(len(shards))],
-        known_tasks()[config["task"]].failures[config["mode"]],
+        failures_of(known_tasks()[config["task"]])[config["mode"]],
         describe(src, out, config, ray=ray, episodes=merged)
         | {
             "shards": {"total": len(shards), "made_this_run": len(todo), "reused": len(shards) - len(todo)},

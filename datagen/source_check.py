@@ -36,12 +36,12 @@ def state_range_problem(
     task: Task, src: Path, states: np.ndarray, actions: np.ndarray | None = None
 ) -> str | None:
     """None if every state (N, obs_dim) and action (N, act_dim) lies in the task's documented ranges
-    (task.state_ranges, task.action_ranges; 1e-6 of slack: float32 rounding), else the first dimension
-    outside, how many frames and the first row. A value outside is no state or action of the task: its
-    attempts could only fail."""
+    (task.spec.state_ranges, task.spec.action_ranges; 1e-6 of slack: float32 rounding), else the first
+    dimension outside, how many frames and the first row. A value outside is no state or action of the task:
+    its attempts could only fail."""
     for key, values, ranges in (
-        ("observation.state", states, task.state_ranges),
-        ("action", actions, task.action_ranges),
+        ("observation.state", states, task.spec.state_ranges),
+        ("action", actions, task.spec.action_ranges),
     ):
         for i, (name, (lo, hi)) in enumerate(ranges.items() if values is not None else ()):
             bad = (values[:, i] < lo - 1e-6) | (values[:, i] > hi + 1e-6)
@@ -116,13 +116,18 @@ def task_of(src: Path, name: str | None = None) -> Task:
         )
     described = "; ".join(
         f"{t.title}: robot_type '{t.spec.robot_type}', observation.state {_widths(t)[0]}, "
-        f"action {_widths(t)[1]} (make one with {t.generator})"
+        f"action {_widths(t)[1]} (make one with {_made_with(t)})"
         for t in known.values()
     )
     raise DataError(
         f"--src {src} fits no task of the engine (robot_type {robot!r}, observation.state {shapes[0]}, "
         f"action {shapes[1]}); it grows {described}"
     )
+
+
+def _made_with(task: Task) -> str:
+    """The command that makes a source set of `task`: its expert's generator, by default gen_demos.py's."""
+    return (task.expert and task.expert.generator) or f"gen_demos.py --task {task.name}"
 
 
 def read_source(task: Task, src: Path) -> dict:
@@ -133,7 +138,7 @@ def read_source(task: Task, src: Path) -> dict:
 
     m, title = task.spec, task.title
     if not src.is_dir():
-        raise DataError(f"--src {src} is not a folder; make a {title} set with {task.generator}")
+        raise DataError(f"--src {src} is not a folder; make a {title} set with {_made_with(task)}")
     n_state = len(m.state_names)
     problem = schema_problem(src, n_state, m.act_dim)
     if problem:
@@ -144,7 +149,9 @@ def read_source(task: Task, src: Path) -> dict:
         # names as a list are checked; the hub's {"motors": [...]} form names the set's own axes
         if isinstance(names, list) and names != list(want):
             raise DataError(f"--src {src}: {key} names {names} are not {title}'s {list(want)}")
-    whole = task.obs_names != tuple(m.state_names)  # the observation holds the environment state too
+    whole = task.spec.observation_names != tuple(
+        m.state_names
+    )  # the observation holds the environment state too
     if whole and ENV_STATE_KEY not in feats:
         raise DataError(f"--src {src} has no {ENV_STATE_KEY} (a {title} observation needs it)")
     problem = fps_problem(src, m.fps)
@@ -187,7 +194,9 @@ def read_source(task: Task, src: Path) -> dict:
     if problem:
         raise DataError(f"--src {problem}")
     if whole:  # the observation vector the task's env gives: state and environment state together
-        arrays["observation.state"] = observation(arrays, task.obs_names, m.state_names, env_names)
+        arrays["observation.state"] = observation(
+            arrays, task.spec.observation_names, m.state_names, env_names
+        )
     problem = state_range_problem(task, src, arrays["observation.state"], arrays["action"])
     if problem:
         raise DataError(problem)

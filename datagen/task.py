@@ -8,24 +8,25 @@ instance of a Task subclass that its module registers as it is imported (TASK = 
 known_tasks() finds it, no list names it, and the digests that guard resumed shards and cached demo sets read
 its code from what the run imported.
 
-In MimicGen's division of work, a task only describes (Task below, an abstract base: ten required
-members, each attribute and method with its inputs, outputs and units; everything else a default):
+In MimicGen's division of work, a task only describes. Task (below, an abstract base) has eight required
+members and twelve with defaults; its settings come in three frozen groups, each one idea:
 
-    required             name, spec (an EnvSpec: its env, what its sets record), start_names, arms;
-                         make_env (our envs, or a Gymnasium env through GymnasiumEnv), start_of (the start an
-                         observation shows), perturb (a start near a source's first observation),
-                         object_pose, action_to_target and target_to_action (how an action becomes a
-                         world-frame target and back: a velocity command, a position target, a pose
-                         target through the robot's controller)
-    its env (defaults)   place (env.set_start), success (env.success), max_steps (the spec's), the
-                         ranges of its states and actions, state_problem
-    its robot            reach (in_reach), arm_pose (where an observation does not show the hand's
-                         orientation), bridge_speed, bridge_tol, bridge_turn_speed, hold_steps
-    its objects          frame_pose (the object frames its subtasks live in), start_distance, follow_tol
-    its subtasks         subtasks (per arm, the frame each lives in; the signal that ends it; whether
-                         it is entered by interpolation), signals (the env's subtask-end signals)
-    its expert           expert_class (optional: a task without one only replays; the demo generators
-                         roll it out with default_noise), batch_expert (optional)
+    spec     EnvSpec: its env and what its sets record (names, fps, robot_type, episode limit, the ranges
+             a source may hold, the simulator packages, next.reward, extra per-frame columns)
+    replay   ReplaySpec (MimicGen's task_spec): its arms, their reach, its subtasks, how bridges move,
+             the hold, the live-follow tolerance and the action kind (how an action becomes a world-frame
+             target and back: VelocityCommand, PositionTarget, PoseTarget, DeltaCommand, or one of its
+             own); None: the task only re-solves
+    expert   ExpertSpec: its scripted expert, the noise its demo sets carry and its unit, its batched
+             copy; None: the task only replays
+
+    required             name, spec, start_names, replay; make_env (our envs, or a Gymnasium env through
+                         GymnasiumEnv), start_of (the start an observation shows), perturb (a start near a
+                         source's first observation), object_pose
+    defaults             title, expert, default_noise; place (env.set_start), success (env.success: an
+                         env's info key through GymnasiumEnv's success_key), state_problem; frame_pose
+                         (the object frames its subtasks live in), start_distance, signals (its subtasks'
+                         end signals), arm_pose; frame_columns; step_batch
 
 Poses are SE(3) (datagen.poses); a planar task's (x, y, yaw) frames and (x, y) points are the special case.
 python -m datagen.check TASK runs what a task must satisfy before a long run.
@@ -33,7 +34,7 @@ python -m datagen.check TASK runs what a task must satisfy before a long run.
 and the engine does the rest: the modes ("resolve": perturb, the expert re-solves, keep on success;
 "replay": perturb, the source's subtasks re-expressed in the new object frames and executed, keep on
 success: datagen.replay; "replay_live": the same, re-expressed again from the objects' live poses once
-they drift beyond follow_tol), lockstep, shards, resume, report and merge.
+they drift beyond replay.follow_tol), lockstep, shards, resume, report and merge.
 """
 
 from __future__ import annotations
@@ -45,25 +46,35 @@ import math
 import pkgutil
 import sys
 import traceback
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ch37.parallel import step_each
+from datagen.poses import quat_of, rotation_of
 
 __all__ = [
+    "REQUIRED_ATTRIBUTES",
+    "ActionKind",
     "DeltaCommand",
     "EnvSpec",
+    "ExpertSpec",
     "GymnasiumEnv",
     "Outcome",
     "Perturbation",
+    "PoseTarget",
+    "PositionTarget",
+    "ReplaySpec",
     "Source",
     "Subtask",
     "Task",
-    "ended",
-    "known_tasks",
+    "VelocityCommand",
     "contract_problem",
+    "ended",
+    "failures_of",
+    "known_tasks",
+    "modes_of",
     "owed",
     "register",
 ]
@@ -72,22 +83,36 @@ __all__ = [
 @dataclass(frozen=True)
 class EnvSpec:
     """What a task's env is and what its LeRobot sets record, in one typed place (a task's `spec`).
-    EnvSpec.of(module) reads an env module's constants (pusht_env, aloha_env: STATE_NAMES, ACTION_NAMES,
-    ENV_STATE_NAMES, FPS, ROBOT_TYPE, TASK, MAX_STEPS, and OBS_NAMES where it has them)."""
+    EnvSpec.of(module, **more) reads an env module's constants (pusht_env, aloha_env: STATE_NAMES,
+    ACTION_NAMES, ENV_STATE_NAMES, FPS, ROBOT_TYPE, TASK, MAX_STEPS, and OBS_NAMES where it has them)."""
 
     state_names: tuple[str, ...]  # observation.state's entries, in order
     action_names: tuple[str, ...]  # action's entries, in order
     fps: int  # control steps per second: the set's fps
     robot_type: str  # the set's robot_type (meta/info.json)
     task: str  # the set's one task, in words
-    max_steps: int  # the env's episode limit, in control steps
+    max_steps: int  # the env's episode limit, in control steps (datagen.check compares the env's own)
     env_state_names: tuple[str, ...] = ()  # observation.environment_state's entries: names of state_names
     # entries (our envs: the objects' share of the state), or, with obs_names, the entries the observation
     # vector holds beside state_names (lerobot/pusht_keypoints' keypoints)
     obs_names: tuple[str, ...] = ()  # the env's observation vector where it is more than observation.state
+    # {name: (low, high)} of observation_names / action_names: a source set holding a value outside is
+    # refused (a block at 1e30 m is no start); the action ranges are the env's clip range
+    state_ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+    action_ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+    # the third-party packages whose versions can change its frames (its simulator), named in the digest
+    # of its demo sets (datagen.demos) and in every shard's stamp (datagen.plan.versions)
+    packages: tuple[str, ...] = ("mujoco",)
+    # its sets carry next.reward (the env's reward, float32) and next.done (the env ended the episode there)
+    # beside next.success, as the hub's sets of its env do (lerobot/pusht_keypoints); the env keeps its last
+    # step's reward as env.reward (GymnasiumEnv does)
+    records_reward: bool = False
+    # LeRobot features of per-frame columns its sets carry beyond state, action and success (the ALOHA
+    # transfer-cube's end-effector targets), each computed from an episode's frames by Task.frame_columns
+    frame_features: dict[str, dict] = field(default_factory=dict)
 
     def __post_init__(self):
-        for name in ("state_names", "action_names", "env_state_names", "obs_names"):
+        for name in ("state_names", "action_names", "env_state_names", "obs_names", "packages"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
         if not self.state_names or not self.action_names:
             raise TypeError("an EnvSpec needs state_names and action_names")
@@ -97,17 +122,25 @@ class EnvSpec:
             )
 
     @property
+    def observation_names(self) -> tuple[str, ...]:
+        """The names of the observation vector's entries: obs_names where the env's observation holds more
+        than a set's observation.state (its env_state_names beside it, as lerobot/pusht_keypoints records
+        them), else state_names."""
+        return self.obs_names or self.state_names
+
+    @property
     def obs_dim(self) -> int:
         """Entries of the env's observation vector."""
-        return len(self.obs_names or self.state_names)
+        return len(self.observation_names)
 
     @property
     def act_dim(self) -> int:
         return len(self.action_names)
 
     @classmethod
-    def of(cls, module) -> EnvSpec:
-        """The spec an env module's constants say; a missing one is a TypeError naming it."""
+    def of(cls, module, **more) -> EnvSpec:
+        """The spec an env module's constants say, with `more` (the fields no module constant gives); a
+        missing constant is a TypeError naming it."""
         need = ("STATE_NAMES", "ACTION_NAMES", "FPS", "ROBOT_TYPE", "TASK", "MAX_STEPS")
         if missing := [c for c in need if not hasattr(module, c)]:
             raise TypeError(f"{getattr(module, '__name__', module)} has no {', '.join(missing)}")
@@ -120,6 +153,7 @@ class EnvSpec:
             max_steps=module.MAX_STEPS,
             env_state_names=getattr(module, "ENV_STATE_NAMES", ()),
             obs_names=getattr(module, "OBS_NAMES", ()),
+            **more,
         )
 
 
@@ -178,7 +212,7 @@ class GymnasiumEnv:
     """A Gymnasium env (reset(seed=, options=) -> (obs, info); step -> (obs, reward, terminated,
     truncated, info)) as the engine steps one: reset(seed, options) -> obs, set_start(*start) -> obs (the
     task's place), step(action) -> (obs, reward, done, info with "success"), success (latched), reward
-    (the last step's: what a set's next.reward records, Task.records_reward), render(size) (--video's
+    (the last step's: what a set's next.reward records, spec.records_reward), render(size) (--video's
     frames).
 
     observe(obs) -> the task's observation vector ((obs_dim,) float32). What the task is done means:
@@ -230,7 +264,7 @@ class GymnasiumEnv:
 @dataclass(frozen=True)
 class Subtask:
     """One of a task's subtasks, as MimicGen's task config names them: its name, the object frame each arm's
-    motion is relative to (task.arms order; names of task.frame_pose), the signal (task.signals) whose
+    motion is relative to (task.replay.arms order; names of task.frame_pose), the signal (task.signals) whose
     rise ends it (None: it runs to the source's end), whether it is entered by interpolation from where
     the arms are (bridge), and, per arm, a frame the arm's frame slides onto over the subtask (onto;
     None: it stays put). Every arm moves through every subtask in step (a coordination subtask is one
@@ -243,61 +277,152 @@ class Subtask:
     onto: tuple[str | None, ...] | None = None
 
 
-class Task(abc.ABC):
-    """The contract between the engine and a task, in MimicGen's division of work: the task describes,
-    the engine runs (the modes, the one replay: datagen.replay, lockstep, shards, resume, report, merge).
+class ActionKind(abc.ABC):
+    """How a task's action becomes a world-frame target per arm and back (a ReplaySpec's `action`). The
+    engine re-expresses the targets in new object frames and asks for the action that follows them. Our
+    kinds: VelocityCommand, PositionTarget, PoseTarget, DeltaCommand; a task whose action is none of these
+    (joint targets through inverse kinematics: datagen/tasks/aloha_transfer_cube.py) writes its own."""
 
-    Required (REQUIRED_ATTRIBUTES and the abstract methods: ten names, checked when the task registers):
-    name, spec, start_names, arms; make_env, start_of, perturb, object_pose, action_to_target,
-    target_to_action. Everything else has a default. Units are the task's own (PushT's and ALOHA's
-    metres, gym-pusht's pixels; angles in rad, times in s), each attribute saying which; an observation
-    is the env's (obs_dim,) float32 vector, an action its (act_dim,) float32 vector."""
+    @abc.abstractmethod
+    def to_target(self, task: Task, states, actions) -> dict:
+        """A source's frames (states (T, obs_dim), actions (T, act_dim)) as world-frame targets, per arm:
+        {arm: (waypoints (T, d), velocities (T, d) or None, gripper commands (T,) or None[, orientations
+        (T, 3, 3)])}: planar, d = 2 and no orientation; in SE(3), d = 3 and the orientations of the arm's
+        frame (a position-controlled arm gives velocities None). The gripper rides along."""
 
-    REQUIRED_ATTRIBUTES = ("name", "spec", "start_names", "arms")
+    @abc.abstractmethod
+    def to_action(self, task: Task, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
+        """The action ((act_dim,) float32) that takes each arm from where `obs` shows it towards its
+        `waypoints[arm]` ((d,)) moving at `velocities[arm]` ((d,) or None), turned to `orientations[arm]`
+        ((3, 3); None for a planar task), with `grips[arm]` (None: no grippers) its gripper command."""
 
-    # ---- what the task is ----
-    name: str  # "pusht": its key in known_tasks(), recorded in a run's settings
-    spec: EnvSpec  # its env and what its sets record (EnvSpec.of(pusht_env), or an EnvSpec(...) of its own)
-    start_names: tuple[str, ...]  # a start's numbers, in place()'s order (stored as aug.start)
-    state_ranges: dict[str, tuple[float, float]] = {}  # {state name: (low, high)}: a source outside: refused
-    action_ranges: dict[str, tuple[float, float]] = {}  # {action name: (low, high)}: the clip range
-    expert_class: type | None = None  # its scripted expert: expert_class(noise=std, seed=int); optional
-    default_noise: float = 0.0  # the expert's action noise (std, in noise_unit) in the task's demo sets
-    noise_unit: str = "m/s"  # the unit of the expert's noise: its actions' (gen_demos.py --noise)
-    # the third-party packages whose versions can change its frames (its simulator), named in the digest
-    # of its demo sets (datagen.demos) and in every shard's stamp (datagen.plan.versions)
-    packages: tuple[str, ...] = ("mujoco",)
-    # its sets carry next.reward (the env's reward, float32) and next.done (the env ended the episode there)
-    # beside next.success, as the hub's sets of its env do (lerobot/pusht_keypoints); the env keeps its last
-    # step's reward as env.reward (GymnasiumEnv does)
-    records_reward: bool = False
-    # LeRobot features of per-frame columns its sets carry beyond state, action and success (the ALOHA
-    # transfer-cube's end-effector targets), each computed from an episode's frames by frame_columns
-    frame_features: dict[str, dict] = {}
 
-    @property
-    def title(self) -> str:
-        """How messages name the task ("PushT"); by default its name."""
-        return self.name
+def _grip(actions, grips: dict, arm: str):
+    return actions[:, grips[arm]] if arm in grips else None
 
-    @property
-    def generator(self) -> str:
-        """The command that makes a source set of this task; by default gen_demos.py's."""
-        return f"gen_demos.py --task {self.name}"
 
-    @property
-    def max_steps(self) -> int:
-        """Control steps an episode may last: the env's limit (spec.max_steps by default)."""
-        return int(self.spec.max_steps)
+@dataclass(frozen=True)
+class VelocityCommand(ActionKind):
+    """Each arm's action is its point's velocity (length unit / s) in `columns[arm]` (our PushT and ALOHA):
+    a source's waypoints are where the point was, its velocities what was commanded; a replayed step
+    commands the segment's velocity plus `gain` times the waypoint error, clipped to +-limit. Gripper
+    commands (grips[arm]: a column of the action) ride along."""
 
-    # ---- what replay reads (datagen.replay) ----
-    # Poses live in SE(3) (datagen.poses): a frame is a (4, 4) pose, an arm's target a position (3,), an
-    # orientation (3, 3) and its gripper command. A planar task (a robot on a table) gives its frames as
-    # (x, y, yaw) triples and its targets as (x, y) points without orientation: the special case.
+    columns: dict[str, slice]  # {arm: its velocity's columns of the action}
+    gain: float  # 1/s: velocity added per length unit of waypoint error
+    limit: float  # |action| at most this, per number (the env's clip)
+    grips: dict[str, int] = field(default_factory=dict)  # {arm: its gripper command's column}
+
+    def to_target(self, task, states, actions) -> dict:
+        arms = task.replay.arms
+        return {
+            arm: (states[:, arms[arm]], actions[:, c], _grip(actions, self.grips, arm))
+            for arm, c in self.columns.items()
+        }
+
+    def to_action(self, task, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
+        a = np.zeros(task.spec.act_dim)
+        for arm, cols in self.columns.items():
+            here = np.asarray(obs[task.replay.arms[arm]], np.float64)
+            a[cols] = velocities[arm] + self.gain * (waypoints[arm] - here)  # track the waypoint
+            if arm in self.grips:
+                a[self.grips[arm]] = grips[arm]
+        return np.clip(a, -self.limit, self.limit).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class PositionTarget(ActionKind):
+    """Each arm's action is its point's position target in `columns[arm]` (gym-pusht's agent): a source's
+    waypoints are its targets (velocities zero), a replayed step sends the re-expressed target, clipped to
+    [low, high]."""
+
+    columns: dict[str, slice]  # {arm: its target's columns of the action}
+    low: float = -math.inf
+    high: float = math.inf
+
+    def to_target(self, task, states, actions) -> dict:
+        return {
+            arm: (actions[:, c], np.zeros((len(actions), c.stop - c.start)), None)
+            for arm, c in self.columns.items()
+        }
+
+    def to_action(self, task, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
+        a = np.zeros(task.spec.act_dim)
+        for arm, cols in self.columns.items():
+            a[cols] = waypoints[arm]
+        return np.clip(a, self.low, self.high).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class PoseTarget(ActionKind):
+    """Each arm's action is its frame's pose target (Pusher's hand, through the robot's controller): in
+    `columns[arm]`, a position (3) then an orientation quaternion (w, x, y, z), world frame. A replayed
+    step sends the re-expressed pose as it is."""
+
+    columns: dict[str, slice]  # {arm: its 7 columns of the action}
+
+    def to_target(self, task, states, actions) -> dict:
+        a = np.asarray(actions, np.float64)
+        out = {}
+        for arm, c in self.columns.items():
+            pose = a[:, c]
+            out[arm] = (pose[:, :3], None, None, np.stack([rotation_of(q) for q in pose[:, 3:7]]))
+        return out
+
+    def to_action(self, task, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
+        a = np.zeros(task.spec.act_dim)
+        for arm, cols in self.columns.items():
+            a[cols] = np.r_[waypoints[arm], quat_of(orientations[arm])]
+        return a.astype(np.float32)
+
+
+@dataclass(frozen=True)
+class DeltaCommand(ActionKind):
+    """Each arm's action is a step of its point's position target, taken from where the point is now, as
+    MimicGen's OSC delta pose and a mocap move take it: target = point + scale * action[columns[arm]]
+    (`scale` length units per action unit). A source's waypoints are where each arm's point was at each
+    frame, its velocity the step the source commanded there, per second; a replayed step is the step that
+    takes the point from where it is now to its waypoint and on by that velocity, clipped to +-limit, so
+    at zero perturbation each step is the source's own. Gripper commands (grips[arm]) ride along.
+    Orientation steps are not covered: an arm that turns gives its own kind."""
+
+    columns: dict[str, slice]  # {arm: its step's columns of the action}
+    scale: float = 1.0  # length units per action unit
+    limit: float = 1.0  # |action| at most this, per number (the env's clip)
+    grips: dict[str, int] = field(default_factory=dict)  # {arm: its gripper command's column}
+
+    def to_target(self, task, states, actions) -> dict:
+        states, actions = np.asarray(states, np.float64), np.asarray(actions, np.float64)
+        per_second, arms = self.scale * task.spec.fps, task.replay.arms
+        return {
+            arm: (states[:, arms[arm]], per_second * actions[:, c], _grip(actions, self.grips, arm))
+            for arm, c in self.columns.items()
+        }
+
+    def to_action(self, task, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
+        action = np.zeros(task.spec.act_dim)
+        here, fps = np.asarray(obs, np.float64), task.spec.fps
+        for arm, cols in self.columns.items():
+            gap = (
+                np.asarray(waypoints[arm], np.float64) - here[task.replay.arms[arm]]
+            )  # to where it should be
+            action[cols] = (gap + np.asarray(velocities[arm], np.float64) / fps) / self.scale
+            if arm in self.grips and grips is not None:
+                action[self.grips[arm]] = grips[arm]
+        return np.clip(action, -self.limit, self.limit).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class ReplaySpec:
+    """How the engine replays a task's sources (modes "replay" and "replay_live": datagen.replay), in one
+    place, as MimicGen's task_spec: lengths are the task's unit (PushT's and ALOHA's m, gym-pusht's px),
+    angles rad, times s. A task sets replay = ReplaySpec(...), or None where it cannot replay."""
+
     arms: dict[str, slice]  # {arm: the columns of its controlled point's position in an observation}
-    reach: dict[str, tuple] = {}  # {arm: ((low, high) per axis of its point)}: a box it can reach (none: all)
+    action: ActionKind  # how an action becomes each arm's world-frame target and back
     # in order, the last one running to the source's end; by default one, every arm relative to the object
     subtasks: tuple[Subtask, ...] = (Subtask("whole", ("object",)),)
+    reach: dict[str, tuple] = field(default_factory=dict)  # {arm: ((low, high) per axis)}: a box (none: all)
     bridge_speed: float | None = None  # length unit / s: a bridge's top speed (None: the source's own)
     bridge_tol: float = 0.0  # length unit: arms this close to their first waypoints are not bridged
     bridge_moves: tuple[float, float] | None = None  # (length, rad): a bridge moving the object more hit it
@@ -308,6 +433,65 @@ class Task(abc.ABC):
     # default, 2 mm and 0.02 rad for a task in metres, is bridge_moves' "the object moved": contact jitter
     # stays below it, so a segment that tracks is left as it was
     follow_tol: tuple[float, float] = (0.002, 0.02)
+    # Task.signals reads the env's physics: a source is re-simulated to cut it (False: an observation alone
+    # shows the signals, and a source's recorded frames are read)
+    resimulate: bool = True
+
+    def __post_init__(self):
+        object.__setattr__(self, "subtasks", tuple(self.subtasks))
+
+    def in_reach(self, arm: str, points) -> np.ndarray:
+        """(T,) bool: which of `points` ((T, d) positions) `arm` can reach: its `reach` box."""
+        pts = np.asarray(points)
+        inside = np.ones(len(pts), bool)
+        for axis, (lo, hi) in enumerate(self.reach.get(arm, ())):
+            inside &= (pts[:, axis] >= lo) & (pts[:, axis] <= hi)
+        return inside
+
+
+@dataclass(frozen=True)
+class ExpertSpec:
+    """A task's scripted expert (a task's `expert`; None: it only replays): the demo generators roll it out
+    (gen_demos.py) and mode "resolve" re-solves a perturbed start with it, noise-free."""
+
+    cls: type  # cls(noise=std, seed=int) with reset() and act(obs) -> (act_dim,) action
+    noise: float = 0.0  # its action noise in the task's demo sets (std, in noise_unit)
+    noise_unit: str = "m/s"  # the unit of that noise: its actions' (gen_demos.py --noise)
+    # lockstep's copy over a batch: batch() has act_batch(obs (N, obs_dim)) -> (N, act_dim), each row bit for
+    # bit cls(noise=0.0).act of that row; None: mode "resolve" runs one expert per lane
+    batch: type | None = None
+    generator: str | None = None  # the command that makes a source set (None: gen_demos.py --task NAME)
+
+
+REQUIRED_ATTRIBUTES = ("name", "spec", "start_names", "replay")  # besides Task's abstract methods
+
+
+class Task(abc.ABC):
+    """The contract between the engine and a task, in MimicGen's division of work: the task describes,
+    the engine runs (the modes, the one replay: datagen.replay, lockstep, shards, resume, report, merge).
+
+    Required (REQUIRED_ATTRIBUTES and the abstract methods: eight names, checked when the task registers):
+    name, spec, start_names, replay; make_env, start_of, perturb, object_pose. Everything else has a
+    default. Units are the task's own (PushT's and ALOHA's metres, gym-pusht's pixels; angles in rad, times
+    in s), each attribute saying which; an observation is the env's (obs_dim,) float32 vector, an action
+    its (act_dim,) float32 vector."""
+
+    # ---- what the task is ----
+    name: str  # "pusht": its key in known_tasks(), recorded in a run's settings and its sets
+    spec: EnvSpec  # its env and what its sets record (EnvSpec.of(pusht_env), or an EnvSpec(...) of its own)
+    start_names: tuple[str, ...]  # a start's numbers, in place()'s order (stored as aug.start)
+    replay: ReplaySpec | None  # how its sources are replayed (MimicGen's task_spec); None: it only re-solves
+    expert: ExpertSpec | None = None  # its scripted expert; None: it only replays
+
+    @property
+    def title(self) -> str:
+        """How messages name the task ("PushT"); by default its name."""
+        return self.name
+
+    @property
+    def default_noise(self) -> float:
+        """The expert's action noise in the task's demo sets (expert.noise; 0 without an expert)."""
+        return 0.0 if self.expert is None else self.expert.noise
 
     @abc.abstractmethod
     def make_env(self, share=None):
@@ -332,30 +516,30 @@ class Task(abc.ABC):
         returns the first observation. By default the env's own set_start(*start)."""
         return env.set_start(*start)
 
-    def expert(self):
-        """The noise-free expert that re-solves a placed start (mode "resolve"): reset() and act(obs) ->
-        action; None: the task has no expert, and only replays."""
-        return None if self.expert_class is None else self.expert_class(noise=0.0)
-
     def success(self, env) -> bool:
-        """Whether `env` reports the task done: by default its latched `success`."""
+        """Whether `env` reports the task done: by default its latched `success` (GymnasiumEnv latches the
+        info key its success_key names, "is_success" by default)."""
         return bool(env.success)
 
     def state_problem(self, states) -> tuple[int, str] | None:
         """None if every observation of a source (N, obs_dim) is one the task's env can be in, else (the
-        first row that is not, what is wrong with it). state_ranges checks each number alone; a task whose
-        observation holds numbers that belong together checks them here (gym-pusht: its 8 keypoints must
-        be a rigid placement of the T), so that nothing is grown from a state no env was ever in."""
+        first row that is not, what is wrong with it). spec.state_ranges checks each number alone; a task
+        whose observation holds numbers that belong together checks them here (gym-pusht: its 8 keypoints
+        must be a rigid placement of the T), so that nothing is grown from a state no env was ever in."""
         return None
 
+    # ---- what replay reads (datagen.replay), beside the ReplaySpec ----
+    # Poses live in SE(3) (datagen.poses): a frame is a (4, 4) pose, an arm's target a position (3,), an
+    # orientation (3, 3) and its gripper command. A planar task (a robot on a table) gives its frames as
+    # (x, y, yaw) triples and its targets as (x, y) points without orientation: the special case.
     @abc.abstractmethod
     def object_pose(self, state):
         """The pose of the object the task is about, read from an observation: (x, y, yaw) for a planar
         task, a (4, 4) matrix in SE(3) (datagen.poses)."""
 
     def frame_pose(self, frame: str, state):
-        """The pose of the object frame named `frame` (a name in subtasks' frames) in an observation, as
-        object_pose gives one; by default every frame is the object's."""
+        """The pose of the object frame named `frame` (a name in replay.subtasks' frames) in an
+        observation, as object_pose gives one; by default every frame is the object's."""
         return self.object_pose(state)
 
     def start_distance(self, a, b) -> float:
@@ -363,121 +547,49 @@ class Task(abc.ABC):
         their numbers."""
         return math.dist(a, b)
 
-    resimulate: bool = True  # signals() reads the env's physics: a source is re-simulated to read them
-
     def signals(self, obs, env) -> dict[str, bool]:
-        """{signal: on} for every name in subtasks' ends (MimicGen's subtask termination signals), in the
-        observation `obs` of `env`, read after every step of a replay. A task whose signals the
-        observation alone shows sets resimulate = False (env is then None when a source is cut: its
+        """{signal: on} for every name in replay.subtasks' ends (MimicGen's subtask termination signals),
+        in the observation `obs` of `env`, read after every step of a replay. A task whose signals the
+        observation alone shows sets replay.resimulate = False (env is then None when a source is cut: its
         recorded frames are read); otherwise a source is re-simulated to read them."""
         return {}
 
     def arm_pose(self, arm: str, obs, env) -> tuple[np.ndarray, np.ndarray | None]:
         """Where `arm` is in the observation `obs` of `env`: (position (d,), orientation (3, 3) or None).
-        By default its `arms` columns of obs, no orientation (a planar point); an arm whose orientation
-        the observation does not show reads it from env (a bridge starts from it)."""
-        return np.asarray(obs[self.arms[arm]], np.float64), None
-
-    def in_reach(self, arm: str, points) -> np.ndarray:
-        """(T,) bool: which of `points` ((T, d) positions) `arm` can reach; by default its `reach` box."""
-        pts = np.asarray(points)
-        inside = np.ones(len(pts), bool)
-        for axis, (lo, hi) in enumerate(self.reach.get(arm, ())):
-            inside &= (pts[:, axis] >= lo) & (pts[:, axis] <= hi)
-        return inside
-
-    @abc.abstractmethod
-    def action_to_target(self, states, actions) -> dict:
-        """A source's frames (states (T, obs_dim), actions (T, act_dim)) as world-frame targets, per arm:
-        {arm: (waypoints (T, d), velocities (T, d) or None, gripper commands (T,) or None[, orientations
-        (T, 3, 3)])}: planar, d = 2 and no orientation; in SE(3), d = 3 and the orientations of the arm's
-        frame (a position-controlled arm gives velocities None). The engine re-expresses waypoints,
-        velocities and orientations in a new object frame; the gripper rides along."""
-
-    @abc.abstractmethod
-    def target_to_action(
-        self, obs, waypoints: dict, velocities: dict, grips: dict | None, orientations: dict | None = None
-    ) -> np.ndarray:
-        """The action ((act_dim,) float32) that takes each arm from where `obs` shows it towards its
-        `waypoints[arm]` ((d,)) moving at `velocities[arm]` ((d,) or None), turned to `orientations[arm]`
-        ((3, 3); None for a planar task), with `grips[arm]` its gripper command: a velocity command for
-        our two robots, a position target for a robot that takes one, torques through the robot's own
-        controller for one driven by torques (datagen/tasks/pusher.py)."""
+        By default its replay.arms columns of obs, no orientation (a planar point); an arm whose
+        orientation the observation does not show reads it from env (a bridge starts from it)."""
+        return np.asarray(obs[self.replay.arms[arm]], np.float64), None
 
     def frame_columns(self, states, actions) -> dict[str, np.ndarray]:
-        """frame_features' columns ((T, d) float32 each) of an episode's frames (states (T, obs_dim),
+        """spec.frame_features' columns ((T, d) float32 each) of an episode's frames (states (T, obs_dim),
         actions (T, act_dim)): written beside them in its demo sets and in the engine's; none by default."""
         return {}
 
-    # ---- what lockstep needs; each default runs the same bytes one attempt (or one env) at a time ----
-    def batch_expert(self):
-        """expert() over a batch, obs (N, obs_dim) float32 -> actions (N, act_dim) float32, each row bit for
-        bit expert().act of that row; None: mode "resolve" is run one attempt at a time."""
-        return None
-
     def step_batch(self, envs, actions):
-        """envs[i] stepped with actions[i]: (obs (N, obs_dim), success (N,) bool, done (N,) bool), bit for
-        bit env.step per env (what this default does)."""
+        """lockstep's: envs[i] stepped with actions[i]: (obs (N, obs_dim), success (N,) bool, done (N,)
+        bool), bit for bit env.step per env (what this default does)."""
         return step_each(envs, actions)
 
-    @property
-    def obs_names(self) -> tuple[str, ...]:
-        """The names of the observation vector's entries: spec.obs_names where the env's observation holds
-        more than a set's observation.state (its env_state_names beside it, as lerobot/pusht_keypoints
-        records them), else spec.state_names."""
-        return self.spec.obs_names or self.spec.state_names
 
-    @property
-    def failures(self) -> dict[str, tuple[str, ...]]:
-        """{mode: every reason an attempt of that mode can return}; a task without an expert only replays.
-        Replay's, in the order datagen.replay checks them: a waypoint beyond reach, a bridge that moved the
-        object (for a task with bridge_moves), each subtask's end signal that never came on, and the rest."""
-        resolve = {"resolve": ("expert_failed", "no_valid_start")} if self.expert_class is not None else {}
-        blocked = ("approach_blocked",) if self.bridge_moves is not None else ()
-        missed = tuple(f"{s.ends}_missed" for s in self.subtasks if s.ends)
-        tail = ("out_of_time", "finished_off_target", "source_not_split", "no_valid_start")
-        replay = ("path_out_of_reach",) + blocked + missed + tail
-        return resolve | {"replay": replay, "replay_live": replay}
-
-    @property
-    def modes(self) -> tuple[str, ...]:
-        return tuple(self.failures)
+def failures_of(task: Task) -> dict[str, tuple[str, ...]]:
+    """{mode: every reason an attempt of that mode can return}: a task without an expert only replays, one
+    without a ReplaySpec only re-solves. Replay's, in the order datagen.replay checks them: a waypoint
+    beyond reach, a bridge that moved the object (for a task with bridge_moves), each subtask's end signal
+    that never came on, and the rest."""
+    resolve = {"resolve": ("expert_failed", "no_valid_start")} if task.expert is not None else {}
+    spec = task.replay
+    if spec is None:
+        return resolve
+    blocked = ("approach_blocked",) if spec.bridge_moves is not None else ()
+    missed = tuple(f"{s.ends}_missed" for s in spec.subtasks if s.ends)
+    tail = ("out_of_time", "finished_off_target", "source_not_split", "no_valid_start")
+    replay = ("path_out_of_reach",) + blocked + missed + tail
+    return resolve | {"replay": replay, "replay_live": replay}
 
 
-class DeltaCommand:
-    """An action kind, mixed into a Task (class MyTask(DeltaCommand, Task)): each arm's action is a step of
-    its point's position target, taken from where the point is now, as MimicGen's OSC delta pose and a
-    mocap move take it: target = point + scale * action[delta_columns[arm]] (`scale` length units per
-    action unit). It gives action_to_target (a source's waypoints: where each arm's point was at each
-    frame, and its velocity: the step the source commanded there, per second) and target_to_action (the
-    step that takes the point from where it is now to its waypoint and on by that velocity, clipped to
-    action_limit), so a delta-command arm writes no encoding of its own; at zero perturbation each step is
-    the source's own. Gripper columns (grip_columns[arm], optional) ride along as commands. Orientation
-    deltas are not covered: an arm that turns gives its own pair."""
-
-    delta_columns: dict[str, slice]  # {arm: its step's columns of the action}
-    grip_columns: dict[str, int] = {}  # {arm: its gripper command's column of the action}
-    scale: float = 1.0  # length units per action unit
-    action_limit: float = 1.0  # |action| at most this, per number (the env's clip)
-
-    def action_to_target(self, states, actions) -> dict:
-        states, actions = np.asarray(states, np.float64), np.asarray(actions, np.float64)
-        per_second = self.scale * self.spec.fps
-        out = {}
-        for arm, cols in self.delta_columns.items():
-            grip = actions[:, self.grip_columns[arm]] if arm in self.grip_columns else None
-            out[arm] = (states[:, self.arms[arm]], per_second * actions[:, cols], grip)
-        return out
-
-    def target_to_action(self, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
-        action = np.zeros(self.spec.act_dim)
-        here, fps = np.asarray(obs, np.float64), self.spec.fps
-        for arm, cols in self.delta_columns.items():
-            gap = np.asarray(waypoints[arm], np.float64) - here[self.arms[arm]]  # to where it should be
-            action[cols] = (gap + np.asarray(velocities[arm], np.float64) / fps) / self.scale
-            if arm in self.grip_columns and grips is not None:
-                action[self.grip_columns[arm]] = grips[arm]
-        return np.clip(action, -self.action_limit, self.action_limit).astype(np.float32)
+def modes_of(task: Task) -> tuple[str, ...]:
+    """The modes a task can be grown in (failures_of's keys)."""
+    return tuple(failures_of(task))
 
 
 def owed(task: Task, member: str, value, *shapes: tuple[int, ...]):
@@ -515,19 +627,32 @@ def _file_of(module: str) -> str:
 
 
 def contract_problem(task: Task) -> str | None:
-    """None if `task` holds the contract's required attributes and its subtasks fit its arms, else what
-    is missing or wrong, in words."""
-    missing = [a for a in Task.REQUIRED_ATTRIBUTES if not hasattr(task, a)]
+    """None if `task` holds the contract's required attributes, its groups are of their types and its
+    subtasks fit its arms, else what is missing or wrong, in words."""
+    missing = [a for a in REQUIRED_ATTRIBUTES if not hasattr(task, a)]
     if missing:
         plural = "s" * (len(missing) > 1)
         return f"misses the required attribute{plural} {', '.join(missing)} (datagen.task.Task)"
-    if not isinstance(task.spec, EnvSpec):
-        return f"has a spec of type {type(task.spec).__name__}: give an EnvSpec (datagen.task.EnvSpec)"
-    for sub in task.subtasks:
-        if len(sub.frames) != len(task.arms):
+    for member, kind, none in (
+        ("spec", EnvSpec, False),
+        ("replay", ReplaySpec, True),
+        ("expert", ExpertSpec, True),
+    ):
+        value = getattr(task, member)
+        if not isinstance(value, kind) and not (none and value is None):
+            give = ("an " if kind.__name__[0] in "AEIOU" else "a ") + kind.__name__ + " or None" * none
+            return f"has a {member} of type {type(value).__name__}: give {give} (datagen.task)"
+    if task.replay is None:
+        return None
+    arms = task.replay.arms
+    if not isinstance(task.replay.action, ActionKind):
+        kind = type(task.replay.action).__name__
+        return f"has a replay.action of type {kind}: give an ActionKind (datagen.task)"
+    for sub in task.replay.subtasks:
+        if len(sub.frames) != len(arms):
             return (
-                f"has subtask {sub.name!r} with {len(sub.frames)} frame(s) for {len(task.arms)} arm(s) "
-                f"({', '.join(task.arms)}): give each arm its frame"
+                f"has subtask {sub.name!r} with {len(sub.frames)} frame(s) for {len(arms)} arm(s) "
+                f"({', '.join(arms)}): give each arm its frame"
             )
     return None
 
@@ -535,7 +660,7 @@ def contract_problem(task: Task) -> str | None:
 def register(task: Task) -> Task:
     """Make `task` known to the engine under task.name; a task module calls it as it is imported
     (PUSHT = register(PushT())), as MimicGen's env interfaces register through their metaclass. A task
-    that misses a required member (Task.REQUIRED_ATTRIBUTES; an abstract method already stops its
+    that misses a required member (REQUIRED_ATTRIBUTES; an abstract method already stops its
     class from being made) or whose subtasks do not name one frame per arm is refused in one line."""
     if problem := contract_problem(task):
         raise TypeError(f"{_file_of(type(task).__module__)}: {type(task).__name__} {problem}")

@@ -162,7 +162,8 @@ def write_set(
     ENV_STATE_KEY, when `feats` has it and an episode does not, is taken from the episode's
     observation.state columns of the same names (see features). obs_names: the names of an episode's
     observation.state columns when they are a task's whole observation (state and environment state,
-    datagen.task.Task.obs_names); the set's observation.state then holds feats' state names of them.
+    datagen.task.EnvSpec.observation_names); the set's observation.state then holds feats' state names of
+    them.
 
     A set of numeric features of shape (d,) (every set the chapter writes) is written in one pass
     from the arrays (_write_direct): the same files, columns, Arrow types and metadata LeRobot's

@@ -210,7 +210,7 @@ def test_replay_keeps_what_re_executes_and_names_every_rejection(env):
         for k in range(4)
     ]
     kept = [r for r in results if r.kept]
-    assert kept and all(r.reason in ALOHA.failures["replay"] for r in results if not r.kept)
+    assert kept and all(r.reason in dt.failures_of(ALOHA)["replay"] for r in results if not r.kept)
     ep, start = kept[0].episode, kept[0].start
     obs = env.set_start(*start)  # the recorded actions from the recorded start give the same frames
     for s, a in zip(ep["observation.state"], ep["action"]):

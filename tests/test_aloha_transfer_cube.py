@@ -13,7 +13,7 @@ from ch37.seeds import env_seed
 from datagen import Perturbation, engine, known_tasks
 from datagen.demos import expert_episodes
 from datagen.source_check import read_source
-from datagen.task import Source
+from datagen.task import Source, failures_of
 from datagen.tasks.aloha_sim import CUBE_RANGE, box_pose
 from datagen.tasks.aloha_sim_expert import TransferCubeExpert
 from lerobot_v3 import load_arrays
@@ -185,7 +185,7 @@ def test_insertion_starts_success_and_expert_are_gym_alohas():
     np.testing.assert_array_equal(task.make_env().reset(3)[14:28], want)
     for seed in (5000, 5001):
         env = task.make_env()
-        obs, expert, done, rewards, theirs = env.reset(seed), task.expert_class(seed=seed), False, [], []
+        obs, expert, done, rewards, theirs = env.reset(seed), task.expert.cls(seed=seed), False, [], []
         while not done:
             obs, reward, done, info = env.step(expert.act(obs))
             rewards.append(reward)
@@ -230,7 +230,7 @@ def test_the_engines_guarantees_hold_on_transfer_cube_replay(demo_set, tmp_path)
     flags += ["--aug_pos_sigma", "0.02", "--quiet"]
     report = json.loads((same_bytes_everywhere(flags, tmp_path) / "generation_report.json").read_text())
     assert report["attempts"] == 2 and report["shards"]["made_this_run"] == 2
-    assert report["kept"] >= 1 and set(report["failures"]) <= set(TASK.failures[mode])
+    assert report["kept"] >= 1 and set(report["failures"]) <= set(failures_of(TASK)[mode])
 
 
 def test_the_replay_yield_tool_takes_both_aloha_sim_tasks(tmp_path):
@@ -354,7 +354,7 @@ def test_an_episode_the_simulation_blows_up_in_is_a_failure_and_nothing_lands_ou
     env = TASK.make_env()
     s = env_seed(0, "demo", 0)
     ep = rollout(env, TransferCubeExpert(noise=1e9, seed=s), env.reset(s))
-    assert ep["unstable"] and not ep["success"] and len(ep["action"]) < TASK.max_steps, len(ep["action"])
+    assert ep["unstable"] and not ep["success"] and len(ep["action"]) < TASK.spec.max_steps, len(ep["action"])
     ep = rollout(env, TransferCubeExpert(noise=0.0, seed=s), env.reset(s))  # the same env, fresh again
     assert not ep["unstable"] and ep["success"]
 

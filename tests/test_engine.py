@@ -23,6 +23,7 @@ import pusht_env
 from ch37.ownership import LOCK_NAME, MADE_BY, STAMP_NAME
 from datagen import ALOHA, PUSHT, Perturbation, engine, plan, shards
 from datagen.report import REPORT_NAME
+from datagen.task import failures_of
 from datagen.tasks import pusht
 from lerobot_v3.dataset import load_arrays, open_dataset
 
@@ -101,7 +102,7 @@ def test_an_impossible_perturbation_is_a_reason_not_a_demo(src):
     sources = engine.sources(load_arrays(src))
     got = engine.attempt(PUSHT, sources[0], 0, Perturbation(0, 5.0, 0.5))
     assert not got.kept and got.reason == "no_valid_start" and got.episode is None and got.steps == 0
-    assert "no_valid_start" in PUSHT.failures["resolve"]
+    assert "no_valid_start" in failures_of(PUSHT)["resolve"]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -728,7 +729,9 @@ def test_aloha_replay_nearest_same_bytes_for_workers_ray_and_resume(aloha_src, t
     assert all(int(w.episode["aug.source_episode"][0, 0]) == w.source_episode for w in want if w.kept)
     assert chosen != own  # nearest chose another source for some attempt (else this test shows nothing)
     rep = json.loads((ref / REPORT_NAME).read_text())
-    assert set(rep["failures"]) == set(ALOHA.failures["replay"]) and rep["settings"]["select"] == "nearest"
+    assert (
+        set(rep["failures"]) == set(failures_of(ALOHA)["replay"]) and rep["settings"]["select"] == "nearest"
+    )
     assert rep["kept"] + sum(rep["failures"].values()) == rep["attempts"] == 6
 
 
@@ -744,7 +747,7 @@ def test_aloha_resolve_is_a_lerobot_set_of_the_handoff(aloha_src, tmp_path):
     assert ds.meta.features["aug.start"]["names"] == list(ALOHA.start_names)
     frame = ds[0]
     assert tuple(frame["action"].shape) == (6,) and tuple(frame["aug.start"].shape) == (8,)
-    assert set(rep["failures"]) == set(ALOHA.failures["resolve"])
+    assert set(rep["failures"]) == set(failures_of(ALOHA)["resolve"])
 
 
 def test_a_killed_worker_is_named_with_its_exit_code_even_when_its_pipe_ends_first():

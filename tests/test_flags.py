@@ -314,10 +314,11 @@ def test_the_copies_kept_for_an_instant_help_match_their_sources():
     import pusht_env
     from ch37 import cli
     from datagen import engine
+    from datagen.task import modes_of
 
     # every mode a task has is a --aug_mode choice (a task without an expert only replays)
-    assert all(set(t.modes) <= set(config.MODES) for t in datagen.known_tasks().values())
-    assert datagen.PUSHT.modes == config.MODES
+    assert all(set(modes_of(t)) <= set(config.MODES) for t in datagen.known_tasks().values())
+    assert modes_of(datagen.PUSHT) == config.MODES
     assert augment_demos.Args.__dataclass_fields__["select"].metadata["kw"]["choices"] == engine.SELECTS
     assert (cli.PUSHT_MAX_STEPS, cli.ALOHA_MAX_STEPS) == (pusht_env.MAX_STEPS, aloha_env.MAX_STEPS)
 
@@ -336,7 +337,7 @@ def test_gen_demos_help_needs_no_task_lists_the_tasks_and_their_units():
     and every unit is the task's own."""
     from datagen import known_tasks
 
-    tasks = {n: t for n, t in known_tasks().items() if t.expert_class is not None}
+    tasks = {n: t for n, t in known_tasks().items() if t.expert is not None}
     r = run_script(ROOT / "gen_demos.py", "--help", check=False)
     assert r.returncode == 0 and r.stderr == "" and "--task" in r.stdout.split("\n\n")[0], r.stdout + r.stderr
     task_help = _flag_help(r.stdout, "task")

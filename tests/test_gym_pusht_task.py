@@ -9,6 +9,7 @@ import pytest
 from conftest import ROOT, run_script
 
 from datagen import known_tasks
+from datagen.task import failures_of
 from lerobot_v3 import ENV_STATE_KEY, load_arrays
 
 TASK = known_tasks()["gym_pusht"]
@@ -80,7 +81,7 @@ def test_augment_demos_grows_it_and_every_kept_episode_re_executes(source, tmp_p
     r = run_script(ROOT / "augment_demos.py", *args)
     assert r.returncode == 0, r.stderr
     report = json.loads((out / "generation_report.json").read_text())
-    assert report["attempts"] == 9 and set(report["failures"]) <= set(TASK.failures[mode])
+    assert report["attempts"] == 9 and set(report["failures"]) <= set(failures_of(TASK)[mode])
     assert report["kept"] >= (8 if mode == "resolve" else 1)  # the expert re-solves nearly every start
     assert replays_exactly(out) == report["kept"]
 
@@ -225,9 +226,9 @@ def test_an_upgrade_of_gym_pusht_or_pymunk_remakes_cached_sets_and_refuses_old_s
     r = run_script(ROOT / "augment_demos.py", "--src", source, "--out", out, "--per_demo", "1", "--quiet")
     assert r.returncode == 0, r.stderr
     ran = json.loads((out / "scale_data_stamp.json").read_text())["config"]["versions"]
-    for p in TASK.packages:
+    for p in TASK.spec.packages:
         assert f"+{p}{version(p)}" in digest and ran[p] == version(p)
-    assert {"gym-pusht", "pymunk"} <= set(TASK.packages)
+    assert {"gym-pusht", "pymunk"} <= set(TASK.spec.packages)
 
 
 def test_live_replay_gives_the_same_bytes_for_any_workers_and_every_kept_episode_re_executes(
@@ -245,5 +246,5 @@ def test_live_replay_gives_the_same_bytes_for_any_workers_and_every_kept_episode
         assert r.returncode == 0, r.stderr
     assert tree(tmp_path / "1") == tree(tmp_path / "2")
     report = json.loads((tmp_path / "1" / "generation_report.json").read_text())
-    assert report["attempts"] == 9 and set(report["failures"]) <= set(TASK.failures["replay_live"])
+    assert report["attempts"] == 9 and set(report["failures"]) <= set(failures_of(TASK)["replay_live"])
     assert report["kept"] >= 1 and replays_exactly(tmp_path / "1") == report["kept"]

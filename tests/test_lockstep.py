@@ -3,6 +3,8 @@ datagen.tasks.fast_experts' PushTBatch and AlohaBatch equals the expert's act bi
 and datagen.lockstep.attempts_lockstep returns exactly what datagen.engine.attempt returns, for both modes on
 PushT and for ALOHA's re-solve."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -178,7 +180,7 @@ class PlainPushT(type(PUSHT)):
     """PushT with lockstep's hooks removed: the Task contract's defaults (no batch expert, no replay
     each env stepped by its own step)."""
 
-    batch_expert = Task.batch_expert
+    expert = replace(type(PUSHT).expert, batch=None)
     step_batch = Task.step_batch
 
 
@@ -198,7 +200,7 @@ def test_a_task_without_the_batch_hooks_gives_the_same_results(sources, mode, si
     assert sum(r.kept for r in want) >= 3
     for task in (PlainPushT(), PerEnvPushT()):
         assert_same_results(want, lockstep.attempts_lockstep(task, sources, jobs, how, mode=mode, lanes=9))
-    assert PlainPushT().batch_expert() is None
+    assert PlainPushT().expert.batch is None
 
 
 def test_the_simulators_a_worker_keeps_are_passed_not_hidden():
@@ -217,9 +219,10 @@ def test_the_simulators_a_worker_keeps_are_passed_not_hidden():
 
 
 def test_experts_without_a_batch_run_one_per_lane_and_equal_one_at_a_time(sources):
-    """The one runner's resolve for a task without a batch expert: each lane runs its own task.expert(),
-    reset at its start. Several lanes at once (refilled) give exactly the one-lane results, and one lane
-    gives exactly the demo generators' rollout of the expert from the same start."""
+    """The one runner's resolve for a task without a batch expert: each lane runs its own expert
+    (expert.cls(noise=0.0)), reset at its start. Several lanes at once (refilled) give exactly the
+    one-lane results, and one lane gives exactly the demo generators' rollout of the expert from the same
+    start."""
     task, how = PlainPushT(), Perturbation(1, 0.08, 0.5)
     jobs = [(e, k) for e in sorted(sources) for k in range(6)]  # 24 attempts
     one = [engine.attempt(task, sources[e], k, how) for e, k in jobs]
@@ -228,13 +231,13 @@ def test_experts_without_a_batch_run_one_per_lane_and_equal_one_at_a_time(source
     assert not together  # attempts_lockstep runs such a task in one lane; the lanes still agree
     sims = engine.Simulators()
     lanes = lockstep.run_lanes(
-        jobs, kind, envs=sims.lanes(task, 5), max_frames=task.max_steps, obs_dim=10, act_dim=2, lanes=5
+        jobs, kind, envs=sims.lanes(task, 5), max_frames=task.spec.max_steps, obs_dim=10, act_dim=2, lanes=5
     )
     assert_same_results(one, lanes)
     env = task.make_env()
     for (e, k), got in zip(jobs[:4], one):
         start = lockstep.start_of_job(task, sources, (e, k), how)
-        ep = rollout(env, task.expert(), task.place(env, start))
+        ep = rollout(env, task.expert.cls(noise=0.0), task.place(env, start))
         assert ep["success"] is got.kept and len(ep["action"]) == got.steps
         if got.kept:
             for key in ("observation.state", "action", "next.success"):
@@ -246,7 +249,7 @@ def test_a_task_whose_max_steps_is_shorter_than_its_env_is_one_line(sources):
     index error deep in the arrays."""
 
     class ShortPushT(type(PUSHT)):
-        max_steps = 5
+        spec = replace(PUSHT.spec, max_steps=5)
 
     with pytest.raises(RuntimeError, match="ran past 5 steps without ending: the task's max_steps"):
         engine.attempt(ShortPushT(), sources[0], 0, Perturbation(1, 0.08, 0.5))

@@ -66,7 +66,7 @@ def test_the_expert_pushes_the_object_onto_the_goal_from_starts_it_was_not_tuned
         while not done:
             obs, _, done, info = env.step(expert.act(obs))
             steps += 1
-        assert info["success"] and steps < TASK.max_steps, (seed, steps)
+        assert info["success"] and steps < TASK.spec.max_steps, (seed, steps)
         assert np.hypot(*(obs[17:19] - obs[20:22])) < 0.05
 
 

@@ -44,7 +44,7 @@ def _edited(monkeypatch, target: Path) -> None:
 @pytest.mark.parametrize("name", ["pusht", "aloha"])
 def test_an_edit_to_a_task_module_its_env_or_its_expert_changes_the_digests(monkeypatch, name):
     task = known_tasks()[name]
-    expert = task.expert_class
+    expert = task.expert.cls
     module = sys.modules[type(task).__module__]
     env = sys.modules[f"{name}_env"]  # pusht_env, aloha_env
     digest_run = lambda: run.engine_version(task)  # noqa: E731
@@ -130,27 +130,31 @@ def test_a_task_module_that_fails_to_import_makes_only_its_own_task_unavailable(
 
 
 def test_the_contract_is_small_and_a_task_that_breaks_it_is_refused_in_one_line():
-    """Issue 46: Task is an abstract base whose required part fits in a head (at most ten members; MimicGen's
-    has six methods); a class missing a required method cannot be made, one missing a required attribute
-    or giving a subtask no frame for one of its arms is refused at registration, each in one line that
-    names what is missing."""
-    from datagen.task import Subtask, Task
+    """Issues 46 and 58 #4: Task is an abstract base read in one sitting (at most 20 public names, at most
+    8 of them required; MimicGen's has six methods), its settings in three typed groups (spec, replay,
+    expert); a class missing a required method cannot be made, one missing a required attribute, giving
+    a group of the wrong type or a subtask no frame for one of its arms is refused at registration, each
+    in one line that names what is wrong."""
+    from datagen.task import REQUIRED_ATTRIBUTES, Subtask, Task, contract_problem, modes_of
     from datagen.tasks.pusht import PushT
 
-    required = set(Task.__abstractmethods__) | set(Task.REQUIRED_ATTRIBUTES)
-    assert len(required) <= 10, sorted(required)
+    public = {n for n in (*vars(Task), *Task.__annotations__) if not n.startswith("_")}
+    assert len(public) <= 20, sorted(public)
+    required = set(Task.__abstractmethods__) | set(REQUIRED_ATTRIBUTES)
+    assert required == set(Task.__abstractmethods__) | {
+        a for a in Task.__annotations__ if a not in vars(Task)
+    }
+    assert len(required) <= 8, sorted(required)
 
-    class NoAction(PushT):
-        target_to_action = Task.target_to_action  # the abstract one: not written yet
+    class NoPose(PushT):
+        object_pose = Task.object_pose  # the abstract one: not written yet
 
-    with pytest.raises(TypeError, match="abstract method 'target_to_action'"):
-        NoAction()
+    with pytest.raises(TypeError, match="abstract method 'object_pose'"):
+        NoPose()
 
     # a task written from scratch that never says its name: PushT's methods, its other attributes
     parts = {m: getattr(PushT, m) for m in Task.__abstractmethods__}
-    parts |= {a: getattr(PushT, a) for a in Task.REQUIRED_ATTRIBUTES if a != "name"} | {
-        "__module__": __name__
-    }
+    parts |= {a: getattr(PushT, a) for a in REQUIRED_ATTRIBUTES if a != "name"} | {"__module__": __name__}
     with pytest.raises(TypeError) as e:
         register(type("NoName", (Task,), parts)())
     assert len(str(e.value).splitlines()) == 1 and "misses the required attribute name" in str(e.value)
@@ -164,6 +168,17 @@ def test_the_contract_is_small_and_a_task_that_breaks_it_is_refused_in_one_line(
     assert len(str(e.value).splitlines()) == 1 and "has a spec of type module: give an EnvSpec" in str(
         e.value
     )
+
+    class LooseReplay(PushT):  # the replay settings as a plain dict, not the typed spec
+        replay = {"arms": PushT.replay.arms, "action": PushT.replay.action}
+
+    with pytest.raises(TypeError) as e:
+        register(LooseReplay())
+    assert len(
+        str(e.value).splitlines()
+    ) == 1 and "has a replay of type dict: give a ReplaySpec or None" in str(e.value)
+    only_resolves = type("OnlyResolves", (PushT,), {"name": "only_resolves", "replay": None})()
+    assert contract_problem(only_resolves) is None and modes_of(only_resolves) == ("resolve",)
     with pytest.raises(TypeError, match="pusht_env has no MAX_STEPS"):
         EnvSpec.of(
             types.SimpleNamespace(**{k: getattr(pusht_env, k) for k in dir(pusht_env) if k != "MAX_STEPS"})
@@ -179,6 +194,8 @@ def test_the_contract_is_small_and_a_task_that_breaks_it_is_refused_in_one_line(
 
 USER_TASK = """\"\"\"A user's task: PushT with a tighter reach, beside ours (no list names it).\"\"\"
 
+from dataclasses import replace
+
 from datagen.tasks.pusht import PushT
 from datagen.task import register
 
@@ -186,7 +203,7 @@ from datagen.task import register
 class MyPushT(PushT):
     name = "my_pusht"
     title = "my PushT"
-    reach = {"pusher": ((-0.3, 0.3), (-0.3, 0.3))}
+    replay = replace(PushT.replay, reach={"pusher": ((-0.3, 0.3), (-0.3, 0.3))})
 
 
 MY_PUSHT = register(MyPushT())

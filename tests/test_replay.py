@@ -3,6 +3,7 @@ the success filter's reasons, and keep_first's rule (the first successes in k or
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from ch37.seeds import env_seed
 from datagen import PUSHT, Outcome, Perturbation, Source, engine, rollout
 from datagen.lockstep import replay_from
 from datagen.poses import interpolate, planar_pose, quat_of, rotation, rotation_of, transform_segment
-from datagen.task import DeltaCommand
+from datagen.task import DeltaCommand, failures_of
 from datagen.tasks import pusht
 from scripted_expert import PushTExpert
 
@@ -141,16 +142,16 @@ def test_identity_replay_reproduces_the_source(env):
     np.testing.assert_allclose(ep["action"], source.actions, atol=1e-6)
 
 
-class DeltaPushT(DeltaCommand, pusht.PushT):
+class DeltaPushT(pusht.PushT):
     """PushT read as a delta-command arm (issue 58 #4): its 1 m/s velocity command held for one 0.1 s
     control step moves the pusher's position target 0.1 m, so an action is a step of the target in units
-    of 0.1 m. The task writes no encoding of its own: DeltaCommand's action_to_target (each frame's point
-    plus its step) and target_to_action (the step from the point now to the waypoint) replace PushT's
-    velocity-and-gain pair."""
+    of 0.1 m. The task writes no encoding of its own: the action kind DeltaCommand (a source's targets:
+    each frame's point plus its step; an action: the step from the point now to the waypoint) replaces
+    PushT's VelocityCommand."""
 
     name = "delta_pusht"
-    delta_columns = {"pusher": slice(0, 2)}
-    scale = 1.0 / pusht_env.FPS  # m of target step per action unit
+    step = DeltaCommand({"pusher": slice(0, 2)}, scale=1 / pusht_env.FPS)  # m of target step per action unit
+    replay = replace(pusht.PushT.replay, action=step)
 
 
 def test_a_delta_command_task_replays_its_sources_at_zero_perturbation(env):
@@ -158,7 +159,7 @@ def test_a_delta_command_task_replays_its_sources_at_zero_perturbation(env):
     move) fits the contract through DeltaCommand alone: replayed from its own start (nothing moved),
     every source is reproduced, action for action, and kept."""
     task = DeltaPushT()
-    assert task.action_to_target is not pusht.PushT.action_to_target
+    assert isinstance(task.replay.action, DeltaCommand)
     for i in range(3):
         source, start = expert_source(env, i)
         got = replay_from(task, env, start, source)
@@ -188,7 +189,7 @@ def test_kept_replays_hold_the_actions_actually_executed(env):
     ]
     kept = [r for r in results if r.kept]
     assert kept, [r.reason for r in results]
-    assert all(r.reason in PUSHT.failures["replay"] and r.episode is None for r in results if not r.kept)
+    assert all(r.reason in failures_of(PUSHT)["replay"] and r.episode is None for r in results if not r.kept)
     k = next(k for k, r in enumerate(results) if r.kept)
     ep = results[k].episode
     assert results[k].steps == len(ep["action"]) and results[k].source_episode == source.episode
@@ -284,7 +285,7 @@ def test_scale_data_replay_names_its_mode_and_what_the_filter_rejected(tmp_path)
     assert m["aug_mode"] == "replay" and m["config"]["aug_mode"] == "replay"
     assert m["yield"] < 1 and m["attempts"] > m["kept"]
     assert sum(m["augment_failures"].values()) == m["attempts"] - m["kept"]
-    assert set(m["augment_failures"]) == set(PUSHT.failures["replay"])
+    assert set(m["augment_failures"]) == set(failures_of(PUSHT)["replay"])
     assert f"the success filter rejected {m['attempts'] - m['kept']} of {m['attempts']}" in p.stdout
     assert (tmp_path / "run" / "demos" / "pusht_aug_seed0_src4_k2_replay").is_dir() or m["kept"] == 0
 
@@ -373,10 +374,10 @@ def test_the_check_command_tells_a_newcomer_what_is_wrong_before_a_long_run():
             return super().start_of(state)[:2] + (0.0,) + super().start_of(state)[3:]
 
     class Shorter(GymPushT):
-        max_steps = 100
+        spec = replace(GymPushT.spec, max_steps=100)
 
     class Fenced(NoYaw):  # started at the wrong yaw, its replays fail; a reach that excludes their paths
-        reach = {"pusher": ((-0.05, 0.05), (-0.05, 0.05))}
+        replay = replace(PushT.replay, reach={"pusher": ((-0.05, 0.05), (-0.05, 0.05))})
 
     found = {c: {n: p for n, p, _ in checks(c(), 2, 0, 1e-3)} for c in (NoYaw, Shorter, Fenced)}
     assert "off in block_cos_yaw" in found[NoYaw]["start round-trip"]
@@ -418,7 +419,7 @@ def test_live_replay_re_expresses_the_rest_of_the_segment_once_the_block_drifts(
     from datagen.replay import Replay, plan_of
 
     source, start = expert_source(env, 0)
-    run = Replay(PUSHT, source, plan_of(PUSHT, source), start, follow=PUSHT.follow_tol)
+    run = Replay(PUSHT, source, plan_of(PUSHT, source), start, follow=PUSHT.replay.follow_tol)
     r = 10
     for t in range(r):
         assert np.allclose(run.act(source.states[t], None), source.actions[t], atol=1e-6)
@@ -426,7 +427,9 @@ def test_live_replay_re_expresses_the_rest_of_the_segment_once_the_block_drifts(
     near[2] += 0.001
     assert np.allclose(
         run.act(near, None),
-        PUSHT.target_to_action(near, {"pusher": source.states[r, :2]}, {"pusher": source.actions[r]}, None),
+        PUSHT.replay.action.to_action(
+            PUSHT, near, {"pusher": source.states[r, :2]}, {"pusher": source.actions[r]}, None
+        ),
         atol=1e-6,
     )
     assert run.reanchored == 0
@@ -437,9 +440,9 @@ def test_live_replay_re_expresses_the_rest_of_the_segment_once_the_block_drifts(
     (wp,), (vel,) = transform_segment(
         source.states[r + 1 : r + 2, :2], source.actions[r + 1 : r + 2], was, pusht.block_pose(live)
     )
-    want = PUSHT.target_to_action(live, {"pusher": wp}, {"pusher": vel}, None)
-    open_loop = PUSHT.target_to_action(
-        live, {"pusher": source.states[r + 1, :2]}, {"pusher": source.actions[r + 1]}, None
+    want = PUSHT.replay.action.to_action(PUSHT, live, {"pusher": wp}, {"pusher": vel}, None)
+    open_loop = PUSHT.replay.action.to_action(
+        PUSHT, live, {"pusher": source.states[r + 1, :2]}, {"pusher": source.actions[r + 1]}, None
     )
     got = run.act(live, None)
     assert (

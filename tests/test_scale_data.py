@@ -355,7 +355,7 @@ def test_code_files_hold_every_file_the_lesson_imports():
     from datagen import demos
 
     emb = importlib.import_module("gen_demos_pusht").PUSHT  # a demo set's digest reads a subset of them
-    expert = importlib.import_module(emb.expert_class.__module__)
+    expert = importlib.import_module(emb.expert.cls.__module__)
     assert set(ch37.code_files((demos, importlib.import_module("pusht_env"), expert))) <= got
     assert not any(name.startswith(("tests/", ".venv/")) for name in got)
 

@@ -29,7 +29,7 @@ from ch37.parallel import map_jobs
 from ch37.seeds import env_seed
 from datagen import ALOHA, PUSHT, Perturbation, engine
 from datagen.demos import expert_episodes
-from datagen.task import Source, Task, known_tasks
+from datagen.task import Source, Task, failures_of, known_tasks
 from datagen.tasks.aloha import WHOLE, Aloha
 from datagen.tasks.aloha_insertion import ALOHA_INSERTION
 from datagen.tasks.aloha_transfer_cube import ALOHA_TRANSFER_CUBE, AlohaTransferCube
@@ -195,7 +195,7 @@ def sigma_row(srcs: dict, m: float, mode: str, attempts: int, workers: int) -> d
     row = {"multiplier": m, "pos_sigma": m * POS_SIGMA, "yaw_sigma": m * YAW_SIGMA, "mode": mode}
     row |= {"attempts": n, "kept": kept, "yield": kept / n, "ci95": bc.wilson(kept / n, n)}
     reasons = [r.reason for r in results]
-    row["failures"] = {why: reasons.count(why) for why in PUSHT.failures[mode]}
+    row["failures"] = {why: reasons.count(why) for why in failures_of(PUSHT)[mode]}
     stats = {"median": np.median, "max": np.max}
     row["kept_block_shift_m"] = {k: float(f(shift)) if shift else None for k, f in stats.items()}
     return row | {"seconds": round(time.perf_counter() - t, 1)}

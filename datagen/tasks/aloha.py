@@ -30,11 +30,21 @@ MimicGen's move without its subtasks, for contrast (tools.replay yield).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 import aloha_env
-from datagen.task import EnvSpec, Perturbation, Subtask, Task, register
+from datagen.task import (
+    EnvSpec,
+    ExpertSpec,
+    Perturbation,
+    ReplaySpec,
+    Subtask,
+    Task,
+    VelocityCommand,
+    register,
+)
 from datagen.tasks.fast_experts import AlohaBatch
 from scripted_expert import AlohaExpert
 
@@ -127,21 +137,28 @@ class Aloha(Task):
     """The ALOHA handoff's description for the engine (see the module docstring). A perturbation moves
     cube, target and both end-effectors by pos_sigma (m) each (yaw_sigma is not read: nothing turns)."""
 
-    name, title, generator = "aloha", "ALOHA", "gen_demos_aloha.py"
-    spec = EnvSpec.of(aloha_env)
+    name, title = "aloha", "ALOHA"
+    spec = EnvSpec.of(aloha_env, state_ranges=STATE_RANGES, action_ranges=ACTION_RANGES)
     start_names = START_NAMES
-    state_ranges, action_ranges = STATE_RANGES, ACTION_RANGES
-    expert_class = AlohaExpert
-    noise_unit = "m/s, grip commands alike (-1..1)"  # one std on all six action numbers
-    max_steps = aloha_env.MAX_STEPS
-    arms = XY
-    reach = REACH
-    bridge_speed = AlohaExpert.MAX_SPEED  # m/s, the expert's own top speed, so a bridge looks like it
-    bridge_tol = 1e-6  # m: an arm this close to its first waypoint needs no bridge
-    hold_steps = aloha_env.SUCCESS_HOLD
+    expert = ExpertSpec(
+        AlohaExpert,
+        noise_unit="m/s, grip commands alike (-1..1)",  # one std on all six action numbers
+        batch=AlohaBatch,
+        generator="gen_demos_aloha.py",
+    )
+    replay = ReplaySpec(
+        arms=XY,
+        action=VelocityCommand(XY, gain=TRACK_GAIN, limit=1.0, grips=GRIP),  # the env clips to [-1, 1]
+        subtasks=SUBTASKS,
+        reach=REACH,
+        bridge_speed=AlohaExpert.MAX_SPEED,  # m/s, the expert's own top speed, so a bridge looks like it
+        bridge_tol=1e-6,  # m: an arm this close to its first waypoint needs no bridge
+        hold_steps=aloha_env.SUCCESS_HOLD,
+    )
 
-    def __init__(self, subtasks: tuple[Subtask, ...] = SUBTASKS):
-        self.subtasks = subtasks
+    def __init__(self, subtasks: tuple[Subtask, ...] | None = None):  # None: SUBTASKS
+        if subtasks is not None:
+            self.replay = replace(self.replay, subtasks=subtasks)
 
     def make_env(self, share=None):
         return aloha_env.AlohaCubeEnv(share.model if share is not None else None)
@@ -151,9 +168,6 @@ class Aloha(Task):
 
     def perturb(self, first_state, rng, how: Perturbation):
         return perturbed_start(first_state, rng, how.pos_sigma)
-
-    def batch_expert(self):
-        return AlohaBatch().act_batch
 
     def object_pose(self, state) -> np.ndarray:
         return np.array([float(state[6]), float(state[7]), 0.0])  # the cube (x, y m); it never turns
@@ -171,17 +185,6 @@ class Aloha(Task):
     def signals(self, obs, env) -> dict[str, bool]:  # the grasp rule lives in the physics: re-simulated
         right, left = env.holding
         return {"grasp": right, "handoff": left and not right}
-
-    def action_to_target(self, states, actions) -> dict:
-        return {arm: (states[:, XY[arm]], actions[:, XY[arm]], actions[:, GRIP[arm]]) for arm in XY}
-
-    def target_to_action(self, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
-        a = np.zeros(aloha_env.ACT_DIM)
-        for arm in XY:
-            here = np.asarray(obs[XY[arm]], np.float64)
-            a[XY[arm]] = velocities[arm] + TRACK_GAIN * (waypoints[arm] - here)  # track the waypoint
-            a[GRIP[arm]] = grips[arm]
-        return np.clip(a, -1.0, 1.0).astype(np.float32)
 
 
 ALOHA = register(Aloha())

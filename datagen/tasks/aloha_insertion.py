@@ -21,20 +21,22 @@ datagen/tasks/aloha_transfer_cube.py has it (the columns, the arms, the end-effe
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from datagen.poses import rotation_of
-from datagen.task import EnvSpec, GymnasiumEnv, Perturbation, Subtask, register
+from datagen.task import GymnasiumEnv, Perturbation, Subtask, register
 from datagen.tasks.aloha_sim import PEG_RANGE, SOCKET_RANGE
 from datagen.tasks.aloha_sim_expert import InsertionExpert
-from datagen.tasks.aloha_transfer_cube import MAX_STEPS, MOTORS, TRIES, AlohaTransferCube
+from datagen.tasks.aloha_transfer_cube import MAX_STEPS, MOTORS, TRIES, AlohaTransferCube, JointIK
+from datagen.tasks.aloha_transfer_cube import SPEC as TRANSFER_CUBE_SPEC
 
 __all__ = ["ALOHA_INSERTION", "AlohaInsertion", "SPEC", "START_NAMES"]
 
 START_NAMES = tuple(f"{o}_{n}" for o in ("peg", "socket") for n in ("x", "y", "z", "qw", "qx", "qy", "qz"))
-SPEC = EnvSpec(
-    state_names=MOTORS,
-    action_names=MOTORS,
+SPEC = replace(  # the transfer-cube's columns, packages, reward and end-effector targets; its own objects
+    TRANSFER_CUBE_SPEC,
     fps=50,
     robot_type="aloha",  # the hub sets' own (lerobot/aloha_sim_insertion_*)
     task="Insert the peg into the socket.",
@@ -65,18 +67,24 @@ class AlohaInsertion(AlohaTransferCube):
     name, title = "aloha_insertion", "ALOHA insertion (gym-aloha's ViperX sim)"
     spec = SPEC
     start_names = START_NAMES
-    expert_class = InsertionExpert
+    expert = replace(AlohaTransferCube.expert, cls=InsertionExpert)
+    replay = replace(
+        AlohaTransferCube.replay,
+        action=JointIK("insertion"),
+        subtasks=SUBTASKS,
+        # m/s. A source takes 361 of ACT's 400 steps, and a replay adds two bridges, each about as long as
+        # the farther part moved (into the parts' frames for the grasp, back to the fixed meeting point for
+        # the insert); at the source's own top speed (0.10-0.12 m/s) the two cost 10 steps per cm and ran
+        # out of time beyond about 4 cm, at this speed 5 per cm (8 cm). They move the arms in the air,
+        # which the position servos track at this speed (docs/replay.md: the insertion's time limit)
+        bridge_speed=0.2,
+        resimulate=False,  # "held" shows in an observation
+    )
     scene, objects = "insertion", OBJECTS
-    resimulate = False  # "held" shows in an observation
-    # m/s. A source takes 361 of ACT's 400 steps, and a replay adds two bridges, each about as long as the
-    # farther part moved (into the parts' frames for the grasp, back to the fixed meeting point for the
-    # insert); at the source's own top speed (0.10-0.12 m/s) the two cost 10 steps per cm and ran out of
-    # time beyond about 4 cm, at this speed 5 per cm (8 cm). They move the arms in the air, which the
-    # position servos track at this speed (docs/replay.md: the insertion's time limit)
-    bridge_speed = 0.2
 
-    def __init__(self, subtasks: tuple[Subtask, ...] = SUBTASKS):
-        self.subtasks = subtasks
+    def __init__(self, subtasks: tuple[Subtask, ...] | None = None):  # None: SUBTASKS
+        if subtasks is not None:
+            self.replay = replace(self.replay, subtasks=subtasks)
 
     def make_env(self, share=None):
         from datagen.tasks.aloha_sim import InsertionEnv

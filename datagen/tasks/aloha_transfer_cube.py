@@ -28,11 +28,23 @@ data-engine task: two ViperX 300s arms in 3-D, the model files of the gym-aloha 
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
 import mujoco
 import numpy as np
 
 from datagen.poses import quat_of, rotation_of
-from datagen.task import EnvSpec, GymnasiumEnv, Perturbation, Subtask, Task, register
+from datagen.task import (
+    ActionKind,
+    EnvSpec,
+    ExpertSpec,
+    GymnasiumEnv,
+    Perturbation,
+    ReplaySpec,
+    Subtask,
+    Task,
+    register,
+)
 from datagen.tasks.aloha_sim import CUBE_RANGE, FPS, gripper_pose, ik, model
 from datagen.tasks.aloha_sim_expert import STEPS, TransferCubeExpert
 
@@ -47,16 +59,6 @@ MOTORS = tuple(
     for j in ("waist", "shoulder", "elbow", "forearm_roll", "wrist_angle", "wrist_rotate", "gripper")
 )
 START_NAMES = ("cube_x", "cube_y", "cube_z", "cube_qw", "cube_qx", "cube_qy", "cube_qz")  # m; quaternion
-SPEC = EnvSpec(
-    state_names=MOTORS,
-    action_names=MOTORS,
-    fps=FPS,
-    robot_type="aloha",  # the hub sets' own
-    task="Pick up the cube with the right arm and transfer it to the left arm.",
-    max_steps=MAX_STEPS,
-    env_state_names=START_NAMES,
-    obs_names=MOTORS + START_NAMES,
-)
 CUBE = slice(14, 21)  # the cube's pose in an observation
 JOINTS = (slice(0, 6), slice(7, 13))  # each arm's joints in an observation or an action
 GRIP = (6, 13)
@@ -68,6 +70,21 @@ REST_Z, LIFT = 0.02, 0.02
 # the end-effector targets' column: per arm, left first, the grasp point (m) and the gripper's orientation
 EE_KEY = "action.end_effector"
 EE_NAMES = tuple(f"{side}_{n}" for side in ARMS for n in ("x", "y", "z", "qw", "qx", "qy", "qz"))
+SPEC = EnvSpec(
+    state_names=MOTORS,
+    action_names=MOTORS,
+    fps=FPS,
+    robot_type="aloha",  # the hub sets' own
+    task="Pick up the cube with the right arm and transfer it to the left arm.",
+    max_steps=MAX_STEPS,
+    env_state_names=START_NAMES,
+    obs_names=MOTORS + START_NAMES,
+    packages=("gym-aloha", "mujoco"),  # its model files and the physics
+    records_reward=True,  # gym-aloha's reward stages, as lerobot's sets of its env carry next.reward
+    frame_features={  # the end-effector targets each frame's joint action encodes (JointIK.to_target)
+        EE_KEY: {"dtype": "float32", "shape": (len(EE_NAMES),), "names": list(EE_NAMES)}
+    },
+)
 # A recorded quaternion's norm may differ from 1 by float32 rounding (~1e-7: MuJoCo normalises its free
 # joints' quaternions every step); one farther off (all zeros, a hand-edited pose) is no rotation at all
 QUAT_TOL = 1e-3
@@ -91,25 +108,59 @@ def _poses(scratch: mujoco.MjData, joints) -> list:
     return [gripper_pose(scratch.model, scratch, arm) for arm in (0, 1)]
 
 
+@dataclass(frozen=True)
+class JointIK(ActionKind):
+    """The arms' action: per arm (left, right) 6 joint angles and a gripper command. A source's targets are
+    the grasp points and orientations its joint actions put each gripper at (forward kinematics of
+    gym-aloha's `scene`); a replayed step is the joints inverse kinematics finds for each re-expressed
+    target, from the joints the observation holds (TARGET_IK_ITERS)."""
+
+    scene: str  # gym-aloha's model (aloha_sim.model)
+
+    def to_target(self, task, states, actions) -> dict:
+        scratch = mujoco.MjData(model(self.scene))
+        poses = [_poses(scratch, a) for a in np.asarray(actions, np.float64)]
+        a = np.asarray(actions, np.float64)
+        return {
+            name: (
+                np.stack([p[i][0] for p in poses]),
+                None,
+                a[:, GRIP[i]],
+                np.stack([p[i][1] for p in poses]),
+            )
+            for i, name in enumerate(ARMS)
+        }
+
+    def to_action(self, task, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
+        m = model(self.scene)
+        scratch = mujoco.MjData(m)
+        o = np.asarray(obs, np.float64)
+        scratch.qpos[0:6], scratch.qpos[8:14] = o[JOINTS[0]], o[JOINTS[1]]
+        action = np.zeros(14)
+        for i, name in enumerate(ARMS):
+            q = ik(m, scratch, i, o[JOINTS[i]], waypoints[name], orientations[name], TARGET_IK_ITERS)
+            action[JOINTS[i]], action[GRIP[i]] = q, grips[name]
+        return action.astype(np.float32)
+
+
 class AlohaTransferCube(Task):
     """gym-aloha's transfer-cube for the engine (see the module docstring)."""
 
     name, title = "aloha_transfer_cube", "ALOHA transfer-cube (gym-aloha's ViperX sim)"
     spec = SPEC
     start_names = START_NAMES
-    noise_unit = "m (on the grasp points' targets)"
-    packages = ("gym-aloha", "mujoco")  # its model files and the physics
-    resimulate = False  # "lifted" shows in an observation
-    records_reward = True  # gym-aloha's reward stages, as lerobot's sets of its env carry next.reward
-    arms = {"left": JOINTS[0], "right": JOINTS[1]}  # the joints that place each grasp point (arm_pose)
-    expert_class = TransferCubeExpert
+    expert = ExpertSpec(TransferCubeExpert, noise_unit="m (on the grasp points' targets)")
+    replay = ReplaySpec(
+        arms={"left": JOINTS[0], "right": JOINTS[1]},  # the joints that place each grasp point (arm_pose)
+        action=JointIK("transfer_cube"),
+        subtasks=SUBTASKS,
+        resimulate=False,  # "lifted" shows in an observation
+    )
     scene, objects = "transfer_cube", CUBE  # gym-aloha's model (aloha_sim.model); the objects' obs columns
-    frame_features = {  # the end-effector targets each frame's joint action encodes (action_to_target)
-        EE_KEY: {"dtype": "float32", "shape": (len(EE_NAMES),), "names": list(EE_NAMES)}
-    }
 
-    def __init__(self, subtasks: tuple[Subtask, ...] = SUBTASKS):
-        self.subtasks = subtasks
+    def __init__(self, subtasks: tuple[Subtask, ...] | None = None):  # None: SUBTASKS
+        if subtasks is not None:
+            self.replay = replace(self.replay, subtasks=subtasks)
 
     def make_env(self, share=None):
         from datagen.tasks.aloha_sim import TransferCubeEnv
@@ -160,35 +211,10 @@ class AlohaTransferCube(Task):
         scratch = mujoco.MjData(model(self.scene))
         return _poses(scratch, obs)[ARMS.index(arm)]
 
-    def action_to_target(self, states, actions) -> dict:
-        scratch = mujoco.MjData(model(self.scene))
-        poses = [_poses(scratch, a) for a in np.asarray(actions, np.float64)]
-        a = np.asarray(actions, np.float64)
-        return {
-            name: (
-                np.stack([p[i][0] for p in poses]),
-                None,
-                a[:, GRIP[i]],
-                np.stack([p[i][1] for p in poses]),
-            )
-            for i, name in enumerate(ARMS)
-        }
-
     def frame_columns(self, states, actions) -> dict[str, np.ndarray]:
-        targets = self.action_to_target(states, actions)
+        targets = self.replay.action.to_target(self, states, actions)
         per_arm = [np.concatenate([t[0], [quat_of(r) for r in t[3]]], axis=1) for t in targets.values()]
         return {EE_KEY: np.concatenate(per_arm, axis=1).astype(np.float32)}
-
-    def target_to_action(self, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
-        m = model(self.scene)
-        scratch = mujoco.MjData(m)
-        o = np.asarray(obs, np.float64)
-        scratch.qpos[0:6], scratch.qpos[8:14] = o[JOINTS[0]], o[JOINTS[1]]
-        action = np.zeros(14)
-        for i, name in enumerate(ARMS):
-            q = ik(m, scratch, i, o[JOINTS[i]], waypoints[name], orientations[name], TARGET_IK_ITERS)
-            action[JOINTS[i]], action[GRIP[i]] = q, grips[name]
-        return action.astype(np.float32)
 
 
 ALOHA_TRANSFER_CUBE = register(AlohaTransferCube())

@@ -30,10 +30,21 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import replace
 
 import numpy as np
 
-from datagen.task import EnvSpec, GymnasiumEnv, Perturbation, Subtask, Task, register
+from datagen.task import (
+    EnvSpec,
+    ExpertSpec,
+    GymnasiumEnv,
+    Perturbation,
+    PositionTarget,
+    ReplaySpec,
+    Subtask,
+    Task,
+    register,
+)
 from datagen.tasks.gym_pusht_expert import GymPushTExpert, block_pose_from_keypoints, keypoint_residual
 from lerobot_v3 import ENV_STATE_KEY, IMAGE_SIZE
 
@@ -81,6 +92,10 @@ SPEC = EnvSpec(
     max_steps=300,  # gym-pusht's registered limit
     env_state_names=KEYPOINT_NAMES,  # observation.environment_state
     obs_names=STATE_NAMES + KEYPOINT_NAMES,  # the engine's observation vector
+    state_ranges=dict.fromkeys(STATE_NAMES + KEYPOINT_NAMES, (-512.0, 1024.0)),  # px: keypoints may overhang
+    action_ranges=dict.fromkeys(("target_x", "target_y"), (0.0, 512.0)),  # px: gym-pusht's action space
+    packages=("gym-pusht", "pymunk", "shapely"),  # the env, its physics, its success (the goal's coverage)
+    records_reward=True,  # next.reward (gym-pusht's: the goal's coverage over 95%, at most 1) and next.done
 )
 
 
@@ -117,24 +132,24 @@ def _observe(obs) -> np.ndarray:
 class GymPushT(Task):
     """gym-pusht's description for the engine (see the module docstring)."""
 
-    name, title, generator = "gym_pusht", "gym-pusht (LeRobot's PushT)", "gen_demos.py --task gym_pusht"
+    name, title = "gym_pusht", "gym-pusht (LeRobot's PushT)"
     spec = SPEC
     start_names = START_NAMES
-    state_ranges = dict.fromkeys(SPEC.obs_names, (-512.0, 1024.0))  # px: keypoints may overhang the table
-    action_ranges = dict.fromkeys(SPEC.action_names, (0.0, 512.0))  # px: gym-pusht's action space
-    expert_class = GymPushTExpert
-    noise_unit = "px"  # the expert's noise is on its position targets
-    packages = ("gym-pusht", "pymunk", "shapely")  # the env, its physics, its success (the goal's coverage)
-    records_reward = True  # next.reward (gym-pusht's: the goal's coverage over 95%, at most 1) and next.done
-    arms = {"agent": slice(0, 2)}
-    reach = {"agent": ((0.0, 512.0), (0.0, 512.0))}  # px: a target outside the action space is none
-    bridge_speed = 300.0  # px/s: the expert's top pushing speed
-    bridge_tol = 120.0  # px: how far ahead of the agent the expert's own targets lead (0.2 s x 600 px/s)
-    bridge_moves = (2.0, 0.02)  # px, rad: a bridge that moves the block more has hit it
-    follow_tol = (2.0, 0.02)  # px, rad: replay_live re-anchors beyond this (PushT's 2 mm at 1 px = 1 mm)
+    expert = ExpertSpec(GymPushTExpert, noise_unit="px")  # the expert's noise is on its position targets
+    replay = ReplaySpec(
+        arms={"agent": slice(0, 2)},
+        action=PositionTarget({"agent": slice(0, 2)}, low=0.0, high=512.0),
+        subtasks=ONE_SEGMENT,
+        reach={"agent": ((0.0, 512.0), (0.0, 512.0))},  # px: a target outside the action space is none
+        bridge_speed=300.0,  # px/s: the expert's top pushing speed
+        bridge_tol=120.0,  # px: how far ahead of the agent the expert's own targets lead (0.2 s x 600 px/s)
+        bridge_moves=(2.0, 0.02),  # px, rad: a bridge that moves the block more has hit it
+        follow_tol=(2.0, 0.02),  # px, rad: replay_live re-anchors beyond this (PushT's 2 mm at 1 px = 1 mm)
+    )
 
-    def __init__(self, subtasks: tuple[Subtask, ...] = ONE_SEGMENT):
-        self.subtasks = subtasks
+    def __init__(self, subtasks: tuple[Subtask, ...] | None = None):  # None: ONE_SEGMENT
+        if subtasks is not None:
+            self.replay = replace(self.replay, subtasks=subtasks)
 
     def make_env(self, share=None):
         import gymnasium
@@ -193,12 +208,6 @@ class GymPushT(Task):
     def start_distance(self, a, b) -> float:
         pa, pb = start_to_pose(a), start_to_pose(b)  # block poses; an angle weighs as the T's half-width
         return math.hypot(*(pa[:2] - pb[:2])) + 60.0 * abs(math.remainder(pa[2] - pb[2], math.tau))
-
-    def action_to_target(self, states, actions) -> dict:
-        return {"agent": (actions[:, :2], np.zeros((len(actions), 2)), None)}
-
-    def target_to_action(self, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
-        return np.clip(waypoints["agent"], 0.0, 512.0).astype(np.float32)
 
 
 GYM_PUSHT = register(GymPushT())

@@ -31,12 +31,22 @@ nobody here wrote, described on the engine's SE(3) contract. The only engine mod
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import mujoco
 import numpy as np
 
-from datagen.poses import quat_of, rotation_of
-from datagen.task import EnvSpec, GymnasiumEnv, Perturbation, Subtask, Task, register
+from datagen.task import (
+    EnvSpec,
+    ExpertSpec,
+    GymnasiumEnv,
+    Perturbation,
+    PoseTarget,
+    ReplaySpec,
+    Subtask,
+    Task,
+    register,
+)
 from datagen.tasks.pusher_expert import PoseControl, PusherExpert, hand_rotation, held, model
 
 __all__ = ["PUSHER", "Pusher", "START_NAMES", "SUBTASKS", "SPEC", "WHOLE"]
@@ -72,6 +82,7 @@ SPEC = EnvSpec(
     max_steps=MAX_STEPS,
     env_state_names=ENV_STATE_NAMES,
     obs_names=STATE_NAMES + ENV_STATE_NAMES,  # Pusher-v5's own observation, in order
+    packages=("gymnasium", "mujoco"),  # Pusher-v5's env code and its physics
 )
 
 
@@ -109,20 +120,21 @@ class Pusher(Task):
     name, title = "pusher", "Pusher (Gymnasium's Pusher-v5)"
     spec = SPEC
     start_names = START_NAMES
-    noise_unit = "m (on the hand's target position)"
-    packages = ("gymnasium", "mujoco")  # Pusher-v5's env code and its physics
-    default_noise = 0.005
-    arms = {"hand": HAND}
-    # m: the robot's controller approaches any target itself (its error clipped to 0.15 m a step), so the
-    # engine's bridge would only replace that approach with another: zero-perturbation replays of 40
-    # sources reproduced 34 with bridges beyond 1 cm, 40 without (docs/replay.md)
-    bridge_tol = math.inf
-    resimulate = False  # "held" shows in an observation
+    expert = ExpertSpec(PusherExpert, noise=0.005, noise_unit="m (on the hand's target position)")
+    replay = ReplaySpec(
+        arms={"hand": HAND},
+        action=PoseTarget({"hand": slice(0, 7)}),  # the robot's controller tracks the pose target
+        subtasks=SUBTASKS,
+        # m: the robot's controller approaches any target itself (its error clipped to 0.15 m a step), so
+        # the engine's bridge would only replace that approach with another: zero-perturbation replays of
+        # 40 sources reproduced 34 with bridges beyond 1 cm, 40 without (docs/replay.md)
+        bridge_tol=math.inf,
+        resimulate=False,  # "held" shows in an observation
+    )
 
-    expert_class = PusherExpert
-
-    def __init__(self, subtasks: tuple[Subtask, ...] = SUBTASKS):
-        self.subtasks = subtasks
+    def __init__(self, subtasks: tuple[Subtask, ...] | None = None):  # None: SUBTASKS
+        if subtasks is not None:
+            self.replay = replace(self.replay, subtasks=subtasks)
 
     def make_env(self, share=None):
         import gymnasium  # its MuJoCo envs load here, when the task runs
@@ -156,13 +168,6 @@ class Pusher(Task):
 
     def arm_pose(self, arm: str, obs, env):
         return np.asarray(obs[HAND], np.float64), hand_rotation(obs, _scratch(env))
-
-    def action_to_target(self, states, actions) -> dict:
-        a = np.asarray(actions, np.float64)
-        return {"hand": (a[:, :3], None, None, np.stack([rotation_of(q) for q in a[:, 3:7]]))}
-
-    def target_to_action(self, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
-        return np.r_[waypoints["hand"], quat_of(orientations["hand"])].astype(np.float32)
 
 
 PUSHER = register(Pusher())

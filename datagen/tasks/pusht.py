@@ -25,11 +25,21 @@ tools/replay.py (yield) studies both; the engine's --aug_mode replay uses the on
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 import pusht_env
-from datagen.task import EnvSpec, Perturbation, Subtask, Task, register
+from datagen.task import (
+    EnvSpec,
+    ExpertSpec,
+    Perturbation,
+    ReplaySpec,
+    Subtask,
+    Task,
+    VelocityCommand,
+    register,
+)
 from datagen.tasks.fast_experts import PushTBatch
 from datagen.tasks.fast_pusht import SharedPushTEnv, step_many
 from scripted_expert import PushTExpert
@@ -102,20 +112,24 @@ class PushT(Task):
     """PushT's description for the engine (see the module docstring); subtasks: ONE_SEGMENT (the
     engine's), or a study's BY_CONTACT / BY_CONTACT_BLOCK."""
 
-    name, title, generator = "pusht", "PushT", "gen_demos_pusht.py"
-    spec = EnvSpec.of(pusht_env)
+    name, title = "pusht", "PushT"
+    spec = EnvSpec.of(pusht_env, state_ranges=STATE_RANGES, action_ranges=ACTION_RANGES)
     start_names = START_NAMES
-    state_ranges, action_ranges = STATE_RANGES, ACTION_RANGES
-    expert_class = PushTExpert
-    max_steps = pusht_env.MAX_STEPS
-    arms = {"pusher": slice(0, 2)}
-    reach = {"pusher": ((-REACH, REACH), (-REACH, REACH))}
-    bridge_speed = 0.8  # m/s, the expert's own top speed
-    bridge_tol = 0.002  # m: closer, the tracking absorbs the gap
-    bridge_moves = (0.002, 0.02)  # m, rad: a bridge that moves the block more has hit it
+    expert = ExpertSpec(PushTExpert, batch=PushTBatch, generator="gen_demos_pusht.py")
+    replay = ReplaySpec(
+        arms={"pusher": slice(0, 2)},
+        action=VelocityCommand({"pusher": slice(0, 2)}, gain=TRACK_GAIN, limit=_LIMIT),
+        subtasks=ONE_SEGMENT,
+        reach={"pusher": ((-REACH, REACH), (-REACH, REACH))},
+        bridge_speed=0.8,  # m/s, the expert's own top speed
+        bridge_tol=0.002,  # m: closer, the tracking absorbs the gap
+        bridge_moves=(0.002, 0.02),  # m, rad: a bridge that moves the block more has hit it
+        resimulate=False,  # contact shows in an observation: a source's recorded frames are read
+    )
 
-    def __init__(self, subtasks: tuple[Subtask, ...] = ONE_SEGMENT):
-        self.subtasks = subtasks
+    def __init__(self, subtasks: tuple[Subtask, ...] | None = None):  # None: ONE_SEGMENT
+        if subtasks is not None:
+            self.replay = replace(self.replay, subtasks=subtasks)
 
     def make_env(self, share=None):
         return SharedPushTEnv(share)
@@ -126,9 +140,6 @@ class PushT(Task):
 
     def perturb(self, first_state, rng, how: Perturbation):
         return perturbed_start(first_state, rng, how.pos_sigma, how.yaw_sigma)
-
-    def batch_expert(self):
-        return PushTBatch().act_batch
 
     def step_batch(self, envs, actions):
         return step_many(envs, actions)
@@ -143,19 +154,9 @@ class PushT(Task):
     def start_distance(self, a, b) -> float:
         return pose_distance(a[:3], b[:3])
 
-    resimulate = False  # contact shows in an observation: a source's recorded frames are read
-
     def signals(self, obs, env) -> dict[str, bool]:
         gap = pusht_env.t_signed_distance(obs[0], obs[1], obs[2], obs[3], math.atan2(obs[4], obs[5]))
         return {"contact": gap <= pusht_env.PUSHER_RADIUS + CONTACT_TOL}
-
-    def action_to_target(self, states, actions) -> dict:
-        return {"pusher": (states[:, :2], actions[:, :2], None)}
-
-    def target_to_action(self, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
-        here = np.asarray(obs[:2], np.float64)
-        a = velocities["pusher"] + TRACK_GAIN * (waypoints["pusher"] - here)
-        return np.clip(a, -_LIMIT, _LIMIT).astype(np.float32)
 
 
 PUSHT = register(PushT())
