@@ -37,6 +37,7 @@ HASH_EXCLUDE = ("device", "workers", "cache", "rerun")
 # the run's in scale_data.py's Args. --epochs and --full_steps cost time, not memory: a huge value runs
 # long (Ctrl-C stops it cleanly). The step limits bound a run's frames for the memory estimate.
 PUSHT_MAX_STEPS, ALOHA_MAX_STEPS = 300, 400  # pusht_env.MAX_STEPS, aloha_env.MAX_STEPS (not imported: slow)
+PUSHT_OBS_DIM, PUSHT_ACT_DIM = 10, 2  # pusht_env.OBS_DIM, ACT_DIM: the step probe's network
 ENV_BYTES = 1 << 20  # one evaluation env (a MuJoCo model and data), rounded up (docs/engine.md, figures)
 
 
@@ -195,48 +196,48 @@ def config_hash(config: dict) -> str:
     return hashlib.sha256(json.dumps(c, sort_keys=True, separators=(",", ":")).encode()).hexdigest()[:12]
 
 
-# The sub-second probe behind the banner's estimate: PROBE_STEPS training steps of two arms side by side
-# at the run's shapes (bc_recipe.train's network, loss and Adam, on random rows), each timed; the median
-# step (a burst of other work slows only a few). Training is most of a default run on a CPU (tools.bench
-# lesson), so a row's minutes scale from the machine that measured it to this one by their probes' ratio.
-PROBE_STEPS = 30
+# The sub-second probe behind the banner's estimate: PROBE_STEPS training steps of two arms side by side at
+# the run's shapes (the lesson's MLP stack, squared error, fused Adam, on random rows), each timed, after
+# PROBE_WARMUP untimed ones; the median step (a burst of other work slows only a few). Training is most of a
+# default run on a CPU (tools.bench lesson), so a row's minutes scale from the machine that measured it to
+# this one by their probes' ratio.
+PROBE_STEPS, PROBE_WARMUP = 30, 3
 
 
 def step_probe(hidden: int, batch: int, device: str = "cpu") -> float:
-    """Milliseconds per training step of two arms side by side, `hidden` wide, `batch` rows, on the kernel
-    path in force here (bc_recipe.train's step): about 0.3 s on two cores at the default shapes, after a
-    one-step training that warms up what the run's first training would. Torch's random state is left as
-    it was, so the run after it draws what it would have drawn."""
+    """Milliseconds per training step of two arms side by side (PushT's 10 -> hidden -> hidden -> 2 MLP,
+    `batch` rows each) on the kernel path in force here: about 0.3 s on two cores at the default shapes,
+    after the warm-up (the first optimizer in a process pays torch's one-time set-up, as the run's first
+    training would). Torch's random state is left as it was: the run after it draws what it would have."""
     import statistics
     import time
 
     import torch
 
-    import bc_recipe
-    from ch37.ensemble import side_by_side
+    from ch37.ensemble import stacked
 
+    sizes = (PUSHT_OBS_DIM, hidden, hidden, PUSHT_ACT_DIM)
+    times = []
     with torch.random.fork_rng(devices=[]):
-        init = bc_recipe.init_weights(hidden, 0)
-        rows = (
-            torch.randn(2, batch, init["0.weight"].shape[1]),
-            torch.randn(2, batch, 2),
+        init = {}  # a Sequential's state dict: Linear layers 0, 2, 4 with ReLUs between
+        for i, (n_in, n_out) in enumerate(zip(sizes, sizes[1:])):
+            init[f"{2 * i}.weight"] = torch.randn(n_out, n_in) / n_in**0.5
+            init[f"{2 * i}.bias"] = torch.zeros(n_out)
+        xb, yb = (
+            torch.randn(2, batch, sizes[0]),
+            torch.randn(2, batch, sizes[-1]),
         )  # (arms, B, 10), (arms, B, 2)
-        bc_recipe.train(
-            [(x.numpy(), y.numpy()) for x, y in zip(*rows)], 1, init, batch_size=batch, lr=1e-3, seed=0
-        )
-        nets = [bc_recipe.mlp(hidden) for _ in range(2)]
-        times = []
-        with side_by_side(init, nets, device) as model:
+        with stacked(init, 2, device) as model:
             opt = torch.optim.Adam(model.parameters(), lr=1e-3, fused=device in ("cpu", "cuda"))
-            xb, yb = (t.to(device) for t in rows)
-            for _ in range(PROBE_STEPS):
+            xb, yb = xb.to(device), yb.to(device)
+            for _ in range(PROBE_WARMUP + PROBE_STEPS):
                 t0 = time.perf_counter()
                 loss = ((model(xb) - yb) ** 2).mean(dim=(1, 2)).sum()
                 opt.zero_grad()
                 loss.backward()
                 opt.step()
                 times.append(time.perf_counter() - t0)
-    return statistics.median(times) * 1e3
+    return statistics.median(times[PROBE_WARMUP:]) * 1e3
 
 
 def expected_wallclock(

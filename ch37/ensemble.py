@@ -175,13 +175,12 @@ class MLPStack(torch.nn.Module):
 
 
 @contextlib.contextmanager
-def side_by_side(init: dict, nets: list[torch.nn.Sequential], device="cpu"):
-    """The arms `nets` (Sequentials shaped as the state dict `init`) as one MLPStack on `device`, every arm
-    starting from `init`, for one training loop: yields the stack; on leaving the block, each arm's
-    trained weights are in its net. While the stack's products run on numpy's OpenBLAS (the published
-    kernel path, its arms on threads of their own), torch's own ops, too small here to split, get one
-    thread; torch's thread count is put back on leaving, whatever happens."""
-    stack = MLPStack([init] * len(nets)).to(device)  # arm e = slice e of every weight
+def stacked(init: dict, arms: int, device="cpu"):
+    """`arms` copies of the state dict `init` as one MLPStack on `device`, for one training loop: yields the
+    stack. While its products run on numpy's OpenBLAS (the published kernel path, its arms on threads of
+    their own), torch's own ops, too small here to split, get one thread; torch's thread count is put back
+    on leaving, whatever happens."""
+    stack = MLPStack([init] * arms).to(device)  # arm e = slice e of every weight
     threads = torch.get_num_threads()
     if stack.on_numpy():
         torch.set_num_threads(1)
@@ -189,6 +188,15 @@ def side_by_side(init: dict, nets: list[torch.nn.Sequential], device="cpu"):
         yield stack
     finally:
         torch.set_num_threads(threads)
+
+
+@contextlib.contextmanager
+def side_by_side(init: dict, nets: list[torch.nn.Sequential], device="cpu"):
+    """The arms `nets` (Sequentials shaped as the state dict `init`) as one MLPStack on `device`, every arm
+    starting from `init`, for one training loop (stacked): yields the stack; on leaving the block, each
+    arm's trained weights are in its net."""
+    with stacked(init, len(nets), device) as stack:
+        yield stack
     for e, net in enumerate(nets):
         stack.load_into(net, e)
 

@@ -321,6 +321,10 @@ def test_the_copies_kept_for_an_instant_help_match_their_sources():
     assert modes_of(datagen.PUSHT) == config.MODES
     assert augment_demos.Args.__dataclass_fields__["select"].metadata["kw"]["choices"] == engine.SELECTS
     assert (cli.PUSHT_MAX_STEPS, cli.ALOHA_MAX_STEPS) == (pusht_env.MAX_STEPS, aloha_env.MAX_STEPS)
+    assert (cli.PUSHT_OBS_DIM, cli.PUSHT_ACT_DIM) == (
+        pusht_env.OBS_DIM,
+        pusht_env.ACT_DIM,
+    )  # the step probe's
 
 
 def _flag_help(text: str, name: str) -> str:
