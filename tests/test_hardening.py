@@ -1415,12 +1415,28 @@ BROKEN_MEMBERS = [  # (id, the member overridden, its code, the mode that calls 
     ),
     (
         "action-3-wide",
-        "target_to_action",
-        lambda self, *a, **k: np.zeros(3, np.float32),
         "replay",
-        "target_to_action returned shape (3,); it owes (2,)",
+        "an action kind whose to_action returns 3 numbers",  # made in the test: ThreeWide below
+        "replay",
+        "replay.action.to_action returned shape (3,); it owes (2,)",
     ),
 ]
+
+
+def three_wide_replay():
+    """PushT's replay settings with an action kind that answers 3 numbers for PushT's 2-wide action (issue
+    58 #4 moved the action's conversion from Task.target_to_action into the ReplaySpec's action kind)."""
+    from dataclasses import replace
+
+    from datagen.task import VelocityCommand
+    from datagen.tasks.pusht import PushT
+
+    class ThreeWide(VelocityCommand):
+        def to_action(self, *a, **k):
+            return np.zeros(3, np.float32)
+
+    action = PushT.replay.action
+    return replace(PushT.replay, action=ThreeWide(action.columns, action.gain, action.limit, action.grips))
 
 
 @pytest.mark.parametrize(
@@ -1431,14 +1447,16 @@ def test_a_users_task_member_that_returns_nan_or_the_wrong_shape_is_refused_nami
 ):
     """Issue 62 #1, #2: a task whose perturb returned a NaN was grown as if real (non-finite aug.start,
     actions and states written); a perturb 5 numbers short, an object_pose of shape (3, 3) or a
-    target_to_action 3 wide for a 2-wide action were tracebacks deep in the env or the replay. Each is
-    now one DataError line naming the member, the shape it gave and the one it owes, before anything is
-    simulated from it; datagen.check's perturb check says the same before a long run."""
+    target_to_action (now the replay's action kind) 3 wide for a 2-wide action were tracebacks deep in the
+    env or the replay. Each is now one DataError line naming the member, the shape it gave and the one it
+    owes, before anything is simulated from it; datagen.check's perturb check says the same before a long
+    run."""
     from ch37.errors import DataError
     from datagen import Perturbation, engine
     from datagen.check import perturb_problem
     from datagen.tasks.pusht import PushT
 
+    code = three_wide_replay() if member == "replay" else code
     task = type("PushT", (PushT,), {member: code})()
     with pytest.raises(DataError) as e:
         engine.attempt(task, pusht_source, 0, Perturbation(0, 0.02, 0.1), mode=mode)
