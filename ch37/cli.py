@@ -223,10 +223,8 @@ def step_probe(hidden: int, batch: int, device: str = "cpu") -> float:
         for i, (n_in, n_out) in enumerate(zip(sizes, sizes[1:])):
             init[f"{2 * i}.weight"] = torch.randn(n_out, n_in) / n_in**0.5
             init[f"{2 * i}.bias"] = torch.zeros(n_out)
-        xb, yb = (
-            torch.randn(2, batch, sizes[0]),
-            torch.randn(2, batch, sizes[-1]),
-        )  # (arms, B, 10), (arms, B, 2)
+        # (arms, B, 10) states, (arms, B, 2) actions
+        xb, yb = torch.randn(2, batch, sizes[0]), torch.randn(2, batch, sizes[-1])
         with stacked(init, 2, device) as model:
             opt = torch.optim.Adam(model.parameters(), lr=1e-3, fused=device in ("cpu", "cuda"))
             xb, yb = xb.to(device), yb.to(device)
@@ -255,9 +253,8 @@ def expected_wallclock(
     own = next((r for r in rows if r.get("tier") == tier), None)
     if own is not None and own.get("config_hash") != config:
         return "wall-clock: measured for the default run only (wallclock.csv), not this configuration"
-    if (
-        own is None and probe_ms and tier.startswith("cpu-")
-    ):  # an unmeasured CPU: the CPU row of this configuration nearest in speed
+    # an unmeasured CPU: the CPU row of this configuration nearest in speed
+    if own is None and probe_ms and tier.startswith("cpu-"):
         probed = [r for r in rows if r["tier"].startswith("cpu-") and r.get("config_hash") == config]
         probed = [r for r in probed if _ms(r)]
         own = min(probed, key=lambda r: abs(math.log(_ms(r) / probe_ms)), default=None)

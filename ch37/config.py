@@ -35,11 +35,8 @@ BOUNDS = (POSITIVE, NON_NEGATIVE, FINITE, FINITE_POSITIVE)
 # (datagen.tasks.pusht.R_LO, R_HI), so a 10 m std almost never lands one, and a yaw wraps every 6.3 rad;
 # beyond that a value can only waste attempts, and 1e308 overflows the angle to inf (math domain error).
 SIGMA_MAX = 10.0
-MODES = (
-    "resolve",
-    "replay",
-    "replay_live",
-)  # datagen.task.modes_of (not imported here: --help stays instant)
+# datagen.task.modes_of (not imported here: --help stays instant)
+MODES = ("resolve", "replay", "replay_live")
 
 
 def flag(default, help: str, *, bound=None, at_most=None, aliases=(), why=None, **argparse_kw):

@@ -72,12 +72,15 @@ def one_blas_thread() -> bool:
     return True
 
 
+SPLIT_MIN = 1_000_000  # multiply-adds of one arm's product below which a thread's hand-off costs more
+
+
 def arms_matmul(a: torch.Tensor, b: torch.Tensor, pool: ThreadPoolExecutor | None) -> torch.Tensor:
     """a @ b per arm, (E, m, k) @ (E, k, n) -> (E, m, n), float32 CPU tensors: one numpy (OpenBLAS) sgemm
     per arm, arms 1.. on `pool` while this thread does arm 0. Where a product is too small to pay for a
     thread's hand-off, numpy loops over the arms itself: the same sgemm per arm, the same bits."""
     x, y = a.detach().numpy(), b.detach().numpy()
-    if pool is None or x.shape[1] * x.shape[2] * y.shape[2] < 1_000_000:
+    if pool is None or x.shape[1] * x.shape[2] * y.shape[2] < SPLIT_MIN:
         return torch.from_numpy(np.matmul(x, y))
     out = np.empty((x.shape[0], x.shape[1], y.shape[2]), np.float32)
     jobs = [pool.submit(np.matmul, x[e], y[e], out=out[e]) for e in range(1, len(x))]
@@ -88,7 +91,8 @@ def arms_matmul(a: torch.Tensor, b: torch.Tensor, pool: ThreadPoolExecutor | Non
 
 
 def arms_grads(x, w, gy, pool, need_gx: bool):
-    """gy @ w^T (if need_gx) and x^T @ gy per arm, both of an arm in one job: arms 1.. on `pool`."""
+    """gy @ w^T (if need_gx) and x^T @ gy per arm, both of an arm in one job, arms 1.. on `pool`: one
+    hand-off where two arms_matmul calls took two, the same sgemm per arm and product."""
     xs, ws, gys = x.detach().numpy(), w.detach().numpy(), gy.detach().numpy()
     e_n, b, i = xs.shape
     o = ws.shape[2]
@@ -100,15 +104,13 @@ def arms_grads(x, w, gy, pool, need_gx: bool):
             np.matmul(gys[e], ws[e].T, out=gx[e])
         np.matmul(xs[e].T, gys[e], out=gw[e])
 
-    if pool is None or b * i * o < 1_000_000:
-        if need_gx:
-            gx = np.matmul(gys, ws.transpose(0, 2, 1))
-        gw = np.matmul(xs.transpose(0, 2, 1), gys)
-    else:
-        jobs = [pool.submit(arm, e) for e in range(1, e_n)]
-        arm(0)
-        for j in jobs:
-            j.result()
+    if pool is None or b * i * o < SPLIT_MIN:  # arms_matmul's own loop over the arms, one product at a time
+        gx = arms_matmul(gy, w.transpose(1, 2), None) if need_gx else None
+        return gx, arms_matmul(x.transpose(1, 2), gy, None)
+    jobs = [pool.submit(arm, e) for e in range(1, e_n)]
+    arm(0)
+    for j in jobs:
+        j.result()
     return (torch.from_numpy(gx) if need_gx else None), torch.from_numpy(gw)
 
 

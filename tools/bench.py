@@ -44,7 +44,16 @@ from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
 from ch37.ownership import is_ours, read_stamp
 from exercises.rules import ARMS
-from tools.common import META, check_results, parse_regions, parser, provenance, subcommands, write_result
+from tools.common import (
+    META,
+    check_results,
+    in_fresh_process,
+    parse_regions,
+    parser,
+    provenance,
+    subcommands,
+    write_result,
+)
 
 
 # --- The one timing path --------------------------------------------------------------------------------
@@ -71,18 +80,6 @@ def alternate(measure: dict[str, Callable[[int], object]], rounds: int, after_ro
 
 def medians(got: dict[str, list[float]]) -> dict[str, float]:
     return {name: float(statistics.median(v)) for name, v in got.items()}
-
-
-def in_fresh_process(
-    code: str, args: list, env: dict | None = None, what: str = "the timing process"
-) -> dict:
-    """Run `code` in a new Python (its arguments `args`, environment `env`); the JSON of its last line."""
-    p = subprocess.run(
-        [sys.executable, "-c", code, *map(str, args)], cwd=ROOT, env=env, capture_output=True, text=True
-    )
-    if p.returncode != 0:
-        raise DataError(f"{what} failed: {(p.stderr.strip().splitlines() or [''])[-1]}")
-    return json.loads(p.stdout.strip().splitlines()[-1])
 
 
 # --- lesson: where the time of one scale_data.py run goes -----------------------------------------------
@@ -207,7 +204,8 @@ OWNER = {"wrangle": ("demo generation", "load"), "augment": ("augmentation", "wr
 OWNER["measure"] = ("train", "rollouts")  # the regions whose calls are broken down
 
 
-def report(runs: list[dict], walls: list[float], import_s: float, title: str) -> None:
+def report(runs: list[dict], walls: list[float], import_s: float, title: str) -> float:
+    """Prints where the runs' time went; returns their training rate, GFLOP/s."""
     import torch
 
     import pusht_env
@@ -249,6 +247,7 @@ def report(runs: list[dict], walls: list[float], import_s: float, title: str) ->
         f"floor at matmul rate {flops / gflops / 1e9:.1f} s"
     )
     print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
+    return rate
 
 
 def lesson_main(argv: list[str]) -> int:
@@ -293,15 +292,16 @@ def lesson_main(argv: list[str]) -> int:
 
         runs = alternate({"run": run}, a.repeat)["run"]
     title = f"{a.script.name} {'--smoke' if a.smoke else '(default)'} seed {a.seed}"
-    report(runs, [r["wall"] for r in runs], import_s, title)
-    in_run_rate(runs, a)
+    rate = report(runs, [r["wall"] for r in runs], import_s, title)
+    in_run_rate(runs, a, rate)
     return 0
 
 
-def in_run_rate(runs: list[dict], a) -> None:
-    """The run's training rate against this machine's best: the fastest kernel path of `tools.bench
-    kernels` (a training step of the run's shapes, each path in a fresh process), in GFLOP/s of the same
-    count; and whether the run took the published kernel path and printed meta.yaml's seed-0 row."""
+def in_run_rate(runs: list[dict], a, rate: float) -> None:
+    """The run's training rate (report's, GFLOP/s) against this machine's best: the fastest kernel path of
+    `tools.bench kernels` (a training step of the run's shapes, each path in a fresh process), in GFLOP/s
+    of the same count; and whether the run took the published kernel path and printed meta.yaml's seed-0
+    row."""
     import yaml
 
     import pusht_env
@@ -309,10 +309,6 @@ def in_run_rate(runs: list[dict], a) -> None:
 
     f = runs[0]["facts"]
     per_row = step_flops(1, f["hidden"], pusht_env.OBS_DIM, pusht_env.ACT_DIM)
-    train_s = statistics.median(
-        sum(v for k, v in r["inner"].items() if k.startswith("train budget")) for r in runs
-    )
-    rate = sum(f["train_rows"].values()) * per_row / train_s / 1e9
     paths = {path: train_step(path, a.kernel_steps, f["hidden"], f["batch"], 2) for path in KERNEL_PATHS}
     step_rows = 2 * f["batch"]  # the kernel step trains two arms side by side, 2 threads as the run
     rates = {path: step_rows * per_row / m["s_per_step"] / 1e9 for path, m in paths.items()}
@@ -1008,9 +1004,7 @@ def ref_arm_steps(metrics: dict) -> int:
 
 def timed_run(cmd: list, cwd: Path, env: dict, out: Path) -> tuple[float, str, dict]:
     """(wall seconds, stdout, metrics.json) of one cold run writing into `out` (a new folder)."""
-    t0 = time.perf_counter()
-    p = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True)
-    wall = time.perf_counter() - t0
+    wall, p = clock(subprocess.run, cmd, cwd=cwd, env=env, capture_output=True, text=True)
     if p.returncode != 0:
         tail = (p.stdout + p.stderr).strip().splitlines()[-1:] or [""]
         raise DataError(f"{shlex.join(map(str, cmd))} exited {p.returncode}: {tail[0]}")

@@ -14,6 +14,7 @@ import datetime
 import hashlib
 import importlib.metadata
 import inspect
+import json
 import math
 import os
 import platform
@@ -104,6 +105,16 @@ def mean_ci(d: list[float]) -> tuple[float, float | None, list[float] | None]:
     std = math.sqrt(sum((x - mean) ** 2 for x in d) / (n - 1)) if n > 1 else None
     half = None if std is None else t975(n - 1) * std / math.sqrt(n)
     return mean, std, None if half is None else [mean - half, mean + half]
+
+
+def in_fresh_process(code: str, args: list, env: dict | None = None, what: str = "the process") -> dict:
+    """Run `code` in a new Python (its arguments `args`, environment `env`); the JSON of its last line."""
+    p = subprocess.run(
+        [sys.executable, "-c", code, *map(str, args)], cwd=ROOT, env=env, capture_output=True, text=True
+    )
+    if p.returncode != 0:
+        raise DataError(f"{what} failed: {(p.stderr.strip().splitlines() or [''])[-1]}")
+    return json.loads(p.stdout.strip().splitlines()[-1])
 
 
 def write_result(path: Path, result: dict) -> Path:

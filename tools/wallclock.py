@@ -35,7 +35,7 @@ from ch37.cli import TIERS, config_hash, device_tier
 from ch37.config import CHAPTER
 from ch37.errors import DataError
 from ch37.ownership import write_atomic
-from tools.common import WALLCLOCK, parser, rel, supports_flag
+from tools.common import WALLCLOCK, in_fresh_process, parser, rel, supports_flag
 from tools.lock import drift, ran_versions
 
 # the versions the timed run ran on (tools.lock; setup_env.sh installs them from requirements.lock); rows
@@ -107,19 +107,16 @@ def measure_wallclock(script: Path, smoke: bool, tier: str | None) -> dict:
 
 # the probe as the banner runs it: in a new process, on the kernel path scale_data.py's setup region sets
 PROBE = """
-import os, sys
+import json, os, sys
 from ch37 import cli
 os.environ.update(cli.kernel_path())
-print(cli.step_probe(int(sys.argv[1]), int(sys.argv[2])))
+print(json.dumps({"ms": cli.step_probe(int(sys.argv[1]), int(sys.argv[2]))}))
 """
 
 
 def step_ms(hidden: int, batch: int) -> float:
     """ch37.cli.step_probe at these shapes, in a new Python on the published kernel path (as the banner)."""
-    p = subprocess.run([sys.executable, "-c", PROBE, str(hidden), str(batch)], cwd=ROOT, capture_output=True)
-    if p.returncode != 0:
-        raise DataError(f"the step probe failed: {(p.stderr.decode().strip().splitlines() or [''])[-1]}")
-    return float(p.stdout.split()[-1])
+    return in_fresh_process(PROBE, [hidden, batch], what="the step probe")["ms"]
 
 
 def main(argv: list[str]) -> int:
