@@ -13,6 +13,7 @@ the data engine), whose entry point is `main(fn)`.
 
 from __future__ import annotations
 
+import _thread
 import atexit
 import contextlib
 import errno
@@ -20,6 +21,7 @@ import os
 import signal
 import sys
 import threading
+import time
 
 RESUME = "run the same command again to continue (nothing half-written was kept)"
 # errno values that say something about the user's machine or paths, not about our code
@@ -79,6 +81,25 @@ def _raise_terminated(signum, frame):
     raise Terminated()
 
 
+def _redeliver(unraisable) -> None:
+    """sys.unraisablehook: Ctrl-C or SIGTERM that landed in a finalizer (a `__del__`, a weakref
+    callback) is swallowed by Python ("Exception ignored in ..."), and the run went on to exit 0 as if
+    nobody had pressed Ctrl-C. Deliver it again, from another thread: raised here or in the finalizer
+    it would be lost again; the main thread takes it at its next step in the run's own code, where it
+    stops the run as any Ctrl-C does."""
+    if not isinstance(unraisable.exc_value, KeyboardInterrupt):
+        sys.__unraisablehook__(unraisable)
+        return
+    signum = signal.SIGTERM if isinstance(unraisable.exc_value, Terminated) else signal.SIGINT
+    # threading's start() waits for the thread, and the wait would take the signal here: _thread's does not
+    _thread.start_new_thread(_signal_main_soon, (signum,))
+
+
+def _signal_main_soon(signum: int) -> None:
+    time.sleep(0.01)  # the finalizer has returned by then; if another one runs, _redeliver goes again
+    signal.pthread_kill(threading.main_thread().ident, signum)  # a real signal: it ends a blocking wait
+
+
 def _exit_now(code: int) -> None:
     """Exit with `code` from inside sys.excepthook: run atexit (worker shutdown), flush, leave."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not interrupt the shutdown
@@ -107,6 +128,7 @@ def guard() -> None:
             _exit_now(code)
 
     sys.excepthook = hook
+    sys.unraisablehook = _redeliver
     signal.signal(signal.SIGTERM, _raise_terminated)
 
 
@@ -115,6 +137,9 @@ def run_main(fn, *args, **kwargs) -> int:
     (see the module docstring). SIGTERM is handled like Ctrl-C while fn runs."""
     main_thread = threading.current_thread() is threading.main_thread()
     saved = signal.signal(signal.SIGTERM, _raise_terminated) if main_thread else None
+    saved_hook = sys.unraisablehook
+    if main_thread:
+        sys.unraisablehook = _redeliver
     try:
         return fn(*args, **kwargs)
     except (KeyboardInterrupt, DataError, OSError) as e:
@@ -123,6 +148,7 @@ def run_main(fn, *args, **kwargs) -> int:
             raise
         return code
     finally:
+        sys.unraisablehook = saved_hook
         if main_thread:
             signal.signal(signal.SIGTERM, saved)
 

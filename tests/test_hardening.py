@@ -958,6 +958,41 @@ def test_kill_term_and_ctrl_c_leave_nothing_behind_and_the_same_command_continue
     assert not [x for x in out.rglob(".*") if x.name != ownership.LOCK_NAME]  # no temp file, no partial set
 
 
+# A finalizer that is running when the signal's handler runs: the interrupt is raised inside it
+FINALIZER = """
+import signal, sys, time
+from ch37 import errors
+class Closing:
+    def __del__(self):
+        signal.raise_signal(signal.SIG{sig})
+        sum(range(1000))  # the handler runs here, inside the finalizer
+def run(argv):
+    Closing()
+    time.sleep(30)  # the run goes on
+    print("finished")
+    return 0
+{entry}
+time.sleep(30)
+print("finished")
+"""
+
+
+@pytest.mark.parametrize("sig,code,word", [("INT", 130, "interrupted"), ("TERM", 143, "terminated")])
+@pytest.mark.parametrize("entry", ["errors.guard(); Closing()", "errors.main(run)"])
+def test_ctrl_c_in_a_finalizer_still_stops_the_run(sig, code, word, entry):
+    """Python swallows an exception raised in a finalizer ("Exception ignored in ..."): a Ctrl-C that
+    landed while a worker pipe's __del__ ran let the run finish with exit 0 (a clean-clone CI run of
+    the test above). Both ways in (guard, main) stop with the one line and the signal's exit code."""
+    script = FINALIZER.format(sig=sig, entry=entry)
+    # the signal must end the run's sleep (a blocking wait), not the sleep's own end (timeout: the test fails)
+    p = subprocess.run(
+        [sys.executable, "-c", script], cwd=ROOT, env=env_for(), capture_output=True, text=True, timeout=25
+    )
+    assert p.returncode == code, p.stdout + p.stderr
+    assert "finished" not in p.stdout and p.stderr.strip().startswith(word), p.stdout + p.stderr
+    assert "Traceback" not in p.stderr and "Exception ignored" not in p.stderr, p.stderr
+
+
 @pytest.fixture
 def small_disk(tmp_path):
     """A 3 MB tmpfs; fill(free) leaves `free` bytes beside a user's file. Skipped where mounts fail."""
