@@ -26,7 +26,12 @@
 # 1024, 2 encoder and 2 VAE-encoder layers (4.3 M parameters; LeRobot's default has 40 M without a
 # backbone), chunks of 50 actions (1 s at 50 fps), all executed, batch 8, lr 1e-4 (LeRobot's 1e-5 is for
 # 100k steps). A finished step (its evaluation) is never redone: run the same command again to finish a
-# stopped run.
+# stopped run. A training saves a checkpoint every CHECKPOINT steps and a stopped one resumes from its
+# last (lerobot-train --resume: the same data order, optimizer and RNG state), so a row of hours runs in
+# parts. A resumed training is not the same bits as an uninterrupted one: torch's DataLoader draws its
+# seed from torch's RNG after LeRobot restores it, which moves ACT's latent noise by one draw (20 steps,
+# resumed at 10: other weights; the same weights on every resume at 10). Its log says where it resumed
+# ("Resuming data order"); the row's numbers are draws of the same recipe.
 set -euo pipefail
 usage="usage: bash tools/lerobot_row.sh gym_pusht|aloha_transfer_cube OUT [SEEDS] [STEPS] [EPISODES] [LANES]"
 task=${1:-} out=${2:-}
@@ -39,6 +44,7 @@ esac
 [ ! -e "$out" ] || [ -d "$out" ] || { echo "error: OUT $out is not a folder; $usage" >&2 && exit 2; }
 [ $# -le 6 ] || { echo "error: too many arguments (from '${7}' on); $usage" >&2 && exit 2; }
 seeds=${3:-3} steps=${4:-1000} episodes=${5:-50} lanes=${6:-2}
+checkpoint=1000  # steps between a training's checkpoints (ACT: ~5 min of one core), where a stopped one resumes
 # every number checked before any work: a bad one once ran no seed (SEEDS=0) or generated sets first and
 # failed in lerobot-train (STEPS=abc); nine digits keep bash's arithmetic far from overflow
 for arg in "SEEDS=$seeds" "STEPS=$steps" "EPISODES=$episodes" "LANES=$lanes"; do
@@ -76,12 +82,18 @@ sets() {  # the three training sets of seed $1
 
 run() {  # train and evaluate one set: $1 seed, $2 set
     local s=$1 set=$2 d="$out/seed$1"
-    local train="$d/train_$set" eval="$d/eval_$set" model result=eval_info.json  # lerobot-eval's own file
+    local train="$d/train_$set" eval="$d/eval_$set" model final result=eval_info.json  # lerobot-eval's own file
     local -a policy
-    model="$train/checkpoints/last/pretrained_model"
+    # LeRobot names a checkpoint by its step, zero-padded to at least 6 digits; the last step's is the model
+    final=$(printf "%0$((${#steps} > 6 ? ${#steps} : 6))d" "$steps")
+    model="$train/checkpoints/$final/pretrained_model"
     [ "$task" = gym_pusht ] || result=lerobot_eval.json  # tools.lerobot eval's
     [ -f "$eval/$result" ] && return 0
-    if [ ! -f "$model/config.json" ]; then
+    if [ -f "$train/checkpoints/last/pretrained_model/train_config.json" ] && [ ! -f "$model/config.json" ]; then
+        "$bin/lerobot-train" --config_path="$train/checkpoints/last/pretrained_model/train_config.json" \
+            --resume=true >> "$d/train_$set.log" 2>&1 ||
+            { echo "seed $s $set: lerobot-train failed to resume, see $d/train_$set.log"; return 1; }
+    elif [ ! -f "$model/config.json" ]; then
         rm -rf "$train"
         if [ "$task" = gym_pusht ]; then
             policy=(--policy.type=diffusion --policy.horizon=16 --policy.n_action_steps=8 --policy.n_obs_steps=2
@@ -94,9 +106,12 @@ run() {  # train and evaluate one set: $1 seed, $2 set
         fi
         "$bin/lerobot-train" --dataset.repo_id="local/$set" --dataset.root="$d/$set" --dataset.video_backend=pyav \
             "${policy[@]}" --policy.device=cpu --policy.push_to_hub=false --num_workers=0 \
-            --steps="$steps" --save_freq="$steps" --log_freq=100 --seed="$s" --output_dir="$train" \
-            > "$d/train_$set.log" 2>&1 || { echo "seed $s $set: lerobot-train failed, see $d/train_$set.log"; return 1; }
+            --steps="$steps" --save_freq=$((steps < checkpoint ? steps : checkpoint)) --log_freq=100 --seed="$s" \
+            --output_dir="$train" > "$d/train_$set.log" 2>&1 ||
+            { echo "seed $s $set: lerobot-train failed, see $d/train_$set.log"; return 1; }
     fi
+    # the model is the last checkpoint; the others (~50 MB each for ACT) only served a resume
+    find "$train/checkpoints" -mindepth 1 -maxdepth 1 ! -name "$final" ! -name last -exec rm -rf {} +
     rm -rf "$eval" "$eval.part"
     mkdir -p "$eval.part"
     if [ "$task" = gym_pusht ]; then
@@ -114,6 +129,6 @@ run() {  # train and evaluate one set: $1 seed, $2 set
 
 for s in $(seq 0 $((seeds - 1))); do sets "$s" > "$out/sets_seed$s.log" 2>&1; done
 export -f run
-export out steps episodes bin task root
+export out steps episodes bin task root checkpoint
 for s in $(seq 0 $((seeds - 1))); do for set in sources "$grown" fresh; do echo "$s $set"; done; done |
     xargs -P "$lanes" -L 1 bash -c 'run "$0" "$1"'
