@@ -117,6 +117,14 @@ def model(scene: str = "transfer_cube") -> mujoco.MjModel:
     return mujoco.MjModel.from_xml_path(str(assets() / f"bimanual_viperx_{scene}.xml"))
 
 
+@functools.cache  # making an MjData of these models costs ~0.8 ms, more than a control step's physics
+def scratch(scene: str = "transfer_cube") -> mujoco.MjData:
+    """One MjData of `scene` per process for kinematics alone (grasp points, inverse kinematics). Its users
+    write only the arms' joints (qpos[0:6], qpos[8:14]) and read only what mj_kinematics and mj_comPos
+    make of them, so a reused one gives the bits a new one gives."""
+    return mujoco.MjData(model(scene))
+
+
 def normalize_gripper(x):
     """A finger's position (m) as gym-aloha normalizes it: 0 closed, 1 open."""
     return (x - GRIPPER_CLOSE) / (GRIPPER_OPEN - GRIPPER_CLOSE)

@@ -45,7 +45,7 @@ from datagen.task import (
     Task,
     register,
 )
-from datagen.tasks.aloha_sim import CUBE_RANGE, FPS, gripper_pose, ik, model
+from datagen.tasks.aloha_sim import CUBE_RANGE, FPS, gripper_pose, ik, model, scratch
 from datagen.tasks.aloha_sim_expert import STEPS, TransferCubeExpert
 
 __all__ = ["ALOHA_TRANSFER_CUBE", "AlohaTransferCube", "MOTORS", "SPEC", "START_NAMES"]
@@ -100,12 +100,12 @@ def _observe(obs) -> np.ndarray:
     return np.asarray(obs, np.float32)
 
 
-def _poses(scratch: mujoco.MjData, joints) -> list:
+def _poses(d: mujoco.MjData, joints) -> list:
     """Each arm's grasp point and orientation for the joint angles in `joints` (an observation or action)."""
     j = np.asarray(joints, np.float64)
-    scratch.qpos[0:6], scratch.qpos[8:14] = j[JOINTS[0]], j[JOINTS[1]]
-    mujoco.mj_kinematics(scratch.model, scratch)
-    return [gripper_pose(scratch.model, scratch, arm) for arm in (0, 1)]
+    d.qpos[0:6], d.qpos[8:14] = j[JOINTS[0]], j[JOINTS[1]]
+    mujoco.mj_kinematics(d.model, d)
+    return [gripper_pose(d.model, d, arm) for arm in (0, 1)]
 
 
 @dataclass(frozen=True)
@@ -118,8 +118,7 @@ class JointIK(ActionKind):
     scene: str  # gym-aloha's model (aloha_sim.model)
 
     def to_target(self, task, states, actions) -> dict:
-        scratch = mujoco.MjData(model(self.scene))
-        poses = [_poses(scratch, a) for a in np.asarray(actions, np.float64)]
+        poses = [_poses(scratch(self.scene), a) for a in np.asarray(actions, np.float64)]
         a = np.asarray(actions, np.float64)
         return {
             name: (
@@ -132,13 +131,12 @@ class JointIK(ActionKind):
         }
 
     def to_action(self, task, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:
-        m = model(self.scene)
-        scratch = mujoco.MjData(m)
+        m, d = model(self.scene), scratch(self.scene)
         o = np.asarray(obs, np.float64)
-        scratch.qpos[0:6], scratch.qpos[8:14] = o[JOINTS[0]], o[JOINTS[1]]
+        d.qpos[0:6], d.qpos[8:14] = o[JOINTS[0]], o[JOINTS[1]]
         action = np.zeros(14)
         for i, name in enumerate(ARMS):
-            q = ik(m, scratch, i, o[JOINTS[i]], waypoints[name], orientations[name], TARGET_IK_ITERS)
+            q = ik(m, d, i, o[JOINTS[i]], waypoints[name], orientations[name], TARGET_IK_ITERS)
             action[JOINTS[i]], action[GRIP[i]] = q, grips[name]
         return action.astype(np.float32)
 
@@ -208,8 +206,7 @@ class AlohaTransferCube(Task):
         return {"lifted": bool(obs[CUBE][2] > REST_Z + LIFT)}
 
     def arm_pose(self, arm: str, obs, env):
-        scratch = mujoco.MjData(model(self.scene))
-        return _poses(scratch, obs)[ARMS.index(arm)]
+        return _poses(scratch(self.scene), obs)[ARMS.index(arm)]
 
     def frame_columns(self, states, actions) -> dict[str, np.ndarray]:
         targets = self.replay.action.to_target(self, states, actions)
