@@ -145,12 +145,13 @@ def grow(mode: str, seed: int, srcs: dict, per_demo: int, cap: int, pos_sigma: f
 
 def expert_success(seed: int, eval_seeds: list[int]):
     """The noise-free expert's own success on these eval starts: the ceiling a BC policy aims at."""
+    import datagen
     import pusht_env
     from datagen import rollout
     from scripted_expert import PushTExpert
 
     env = pusht_env.PushTEnv()
-    wins = sum(rollout(env, PushTExpert(noise=0.0), env.reset(s))["success"] for s in eval_seeds)
+    wins = sum(rollout(datagen.PUSHT, env, PushTExpert(), env.reset(s))["success"] for s in eval_seeds)
     return "expert", seed, wins
 
 

@@ -257,9 +257,10 @@ def step_envs(envs, actions):
     return step_each(envs, actions)
 
 
-def step_each(envs, actions):
+def step_each(envs, actions, infos: list | None = None):
     """envs[i] stepped with actions[i] by env.step, one env after the other: (obs (N, obs_dim), success
-    (N,) bool, done (N,) bool). Any env with the Gym-like step(action) -> (obs, reward, done, info)."""
+    (N,) bool, done (N,) bool). Any env with the Gym-like step(action) -> (obs, reward, done, info).
+    infos: a list that gets each step's info, in env order."""
     import numpy as np
 
     obs, success, done = [], np.zeros(len(envs), bool), np.zeros(len(envs), bool)
@@ -267,6 +268,8 @@ def step_each(envs, actions):
         o, _, done[k], info = env.step(a)
         obs.append(o)
         success[k] = info["success"]
+        if infos is not None:
+            infos.append(info)
     return np.stack(obs), success, done
 
 

@@ -1,5 +1,5 @@
-"""Demo sets: roll out an expert (rollout: the demo generators' loop), write LeRobot v3 (write_dataset: a
-stamped set, whole or not at all), and keep a private cache of generated sets.
+"""Demo sets: roll out an expert (rollout: the engine's one attempt runner, mode Rollout), write LeRobot
+v3 (write_dataset: a stamped set, whole or not at all), and keep a private cache of generated sets.
 
 A demo set is a pure function of (embodiment, episodes, seed, noise, video): episode i of seed s
 is rolled out from env seed seeds.env_seed(s, "demo", i), and the expert's action noise is
@@ -14,8 +14,6 @@ import os
 import sys
 from importlib.metadata import version
 from pathlib import Path
-
-import numpy as np
 
 from ch37 import code_digest
 from ch37.errors import DataError
@@ -32,8 +30,8 @@ from ch37.ownership import (
 from ch37.parallel import progress
 from ch37.process import environment
 from ch37.seeds import env_seed
+from datagen.lockstep import Rollout, one_lane
 from lerobot_v3 import (
-    IMAGE_KEY,
     IMAGE_SIZE,
     features,
     fps_problem,
@@ -85,46 +83,19 @@ REWARD_FEATURES = {  # what a task with spec.records_reward adds, as lerobot/pus
 }
 
 
-def rollout(env, policy, obs, *, render: bool = False, rewards: bool = False) -> dict:
-    """Run `policy` from `obs` (what reset or set_start returned) to the end of the episode.
+def rollout(task, env, policy, obs, *, render: bool = False) -> dict:
+    """Run `policy` in `env` of `task` from `obs` (what reset or set_start returned) to the end of the
+    episode: the engine's one attempt runner in one lane (datagen.lockstep.one_lane, mode Rollout).
 
     Frame t pairs the obs before action t with action t.
     Returns arrays: observation.state (T, obs_dim) float32, action (T, act_dim) float32,
-    next.success (T, 1) bool, with `rewards` next.reward (T, 1) float32 and next.done (T, 1) bool (the
-    step's reward and whether it ended the episode: REWARD_FEATURES), and IMAGE_KEY (T, IMAGE_SIZE,
-    IMAGE_SIZE, 3) uint8 when render is set, and with an env whose step says whether the sim blew up
-    (info["unstable"]: the ALOHA sims, datagen.tasks.aloha_sim) unstable: whether it did (the episode
-    ended there).
+    next.success (T, 1) bool, "success" (the last next.success), for a task with spec.records_reward
+    next.reward (T, 1) float32 and next.done (T, 1) bool (the step's reward and whether it ended the
+    episode: REWARD_FEATURES), and IMAGE_KEY (T, IMAGE_SIZE, IMAGE_SIZE, 3) uint8 when render is set, and
+    with an env whose step says whether the sim blew up (info["unstable"]: the ALOHA sims,
+    datagen.tasks.aloha_sim) unstable: whether it did (the episode ended there).
     """
-    policy.reset()
-    states, actions, succ, rews, dones, frames = [], [], [], [], [], []
-    done, unstable = False, None
-    while not done:
-        if render:
-            frames.append(env.render(IMAGE_SIZE))
-        act = policy.act(obs)
-        states.append(obs)
-        actions.append(act)
-        obs, reward, done, info = env.step(act)
-        succ.append(bool(info["success"]))
-        rews.append(reward)
-        dones.append(bool(done))
-        if "unstable" in info:
-            unstable = unstable or bool(info["unstable"])
-    ep = {
-        "observation.state": np.asarray(states, np.float32),
-        "action": np.asarray(actions, np.float32),
-        "next.success": np.asarray(succ, bool)[:, None],
-        "success": bool(succ[-1]),
-    }
-    if rewards:
-        ep["next.reward"] = np.asarray(rews, np.float32)[:, None]
-        ep["next.done"] = np.asarray(dones, bool)[:, None]
-    if render:
-        ep[IMAGE_KEY] = np.asarray(frames, np.uint8)
-    if unstable is not None:
-        ep["unstable"] = unstable
-    return ep
+    return one_lane(task, env, [0], Rollout(lambda job, env: (policy, obs), render=render))[0]
 
 
 # Any edit to the code that shapes a set's frames (this module, the task's module and the env it imports,
@@ -145,10 +116,14 @@ def expert_episodes(task, env, seed: int, n: int, *, noise: float = 0.0, render:
     """Episodes 0..n-1 of the seed's demo set of `task`, one by one: episode i rolled out in `env` from
     env.reset(env_seed(seed, "demo", i)) by task.expert.cls seeded with that same number (its action
     noise `noise`), with next.reward and next.done for a task with records_reward."""
-    for i in range(n):
+
+    def start(i: int, env):
         s = env_seed(seed, "demo", i)
-        expert = task.expert.cls(noise=noise, seed=s)
-        yield rollout(env, expert, env.reset(s), render=render, rewards=task.spec.records_reward)
+        return task.expert.cls(noise=noise, seed=s), env.reset(s)
+
+    mode = Rollout(start, render=render)
+    for i in range(n):  # one at a time: the writer takes each as it comes
+        yield one_lane(task, env, [i], mode)[0]
 
 
 def generate(

@@ -17,7 +17,7 @@ still gets its own simulator state, fully reset at its start (PushT's lanes keep
 shared MjData: fast_pusht.SharedPushTEnv), so its frames do not depend on what shares its batch, on the
 lane it runs in, or on when it was started.
 
-The runner (run_lanes) knows no task. A Mode object (mode_parts: Resolve, Replaying) gives it
+The runner (run_lanes) knows no task. A Mode object (mode_parts: Resolve, Replaying; Rollout) gives it
     envs                         the lanes' envs, each with step(action) -> (obs, reward, done,
                                     info["success"]); made by the caller (Simulators: sharing the first's
                                     model, and PushT's MjData) and reused between calls: begin resets an
@@ -34,8 +34,9 @@ The runner (run_lanes) knows no task. A Mode object (mode_parts: Resolve, Replay
                                  -> the attempt's result, from the frames recorded for it (last_obs: the
                                     observation after its last step)
 and the runner keeps `lanes` envs busy, refilling a lane as soon as its attempt ends, recording every
-frame into preallocated arrays (lanes x max_steps), and returns the results in job order. datagen.demos'
-rollout runs an expert for the demo generators (gen_demos.py, with --video's frames); no attempt uses it.
+frame into preallocated arrays (lanes x max_steps), and returns the results in job order. The demo
+generators' episodes go through it too, one lane at a time (mode Rollout: the expert with its action noise,
+every episode kept, with --video's frames; datagen.demos.rollout).
 """
 
 from __future__ import annotations
@@ -45,10 +46,12 @@ from dataclasses import replace
 
 import numpy as np
 
+from ch37.errors import DataError
 from ch37.parallel import step_each, step_envs
 from ch37.seeds import env_seed
 from datagen import replay
 from datagen.task import Outcome, Perturbation, Source, Task, owed
+from lerobot_v3 import IMAGE_KEY, IMAGE_SIZE
 
 __all__ = [
     "LANES",
@@ -60,6 +63,7 @@ __all__ = [
     "Mode",
     "Replaying",
     "Resolve",
+    "Rollout",
     "mode_parts",
     "one_lane",
     "replay_from",
@@ -202,7 +206,7 @@ def run_lanes(
         t[slots] = at + 1
         full = at + 1 >= max_frames
         if full.any() and not done[full].all():
-            raise RuntimeError(
+            raise DataError(  # a user's task: one line (augment_demos.py, datagen.check), not a traceback
                 f"an episode ran past {max_frames} steps without ending: the task's max_steps must be "
                 "the env's own episode limit"
             )
@@ -258,6 +262,10 @@ class Mode:
 
     def finish(self, lane, env, episode, last_obs):
         raise NotImplementedError
+
+    def step(self, envs, actions):
+        """The step of a run in one lane (one_lane): env.step per env."""
+        return step_each(envs, actions)
 
 
 class Resolve(Mode):
@@ -333,6 +341,50 @@ class Replaying(Mode):
         return replace(got, episode=kept)
 
 
+class Rollout(Mode):
+    """The demo generators' mode (datagen.demos: gen_demos.py's episodes, datagen.check's, the tests'
+    rollout): a policy, the task's expert with its seeded action noise, from the start its env was placed
+    at, to the episode's end. Every episode is the result, solved or not ("success": its last
+    next.success), with the frames drawn before each action (render: IMAGE_KEY, IMAGE_SIZE square) and,
+    with an env whose step says whether its simulation blew up (info["unstable"]: the ALOHA sims, which
+    end the episode there), "unstable". start(job, env) -> (the policy, the first observation)."""
+
+    def __init__(self, start, *, render: bool = False):
+        self.start, self.render = start, render
+        self._unstable: dict[int, bool | None] = {}  # id(env) -> a step blew its sim up (None: unsaid)
+
+    def begin(self, job, env):
+        policy, obs = self.start(job, env)
+        policy.reset()
+        self._unstable[id(env)] = None
+        return Lane(job, obs, policy=policy, frames=[])
+
+    def decide(self, lanes, envs, obs):
+        if self.render:
+            for lane, env in zip(lanes, envs):
+                lane.frames.append(env.render(IMAGE_SIZE))
+        return np.stack([lane.policy.act(o) for lane, o in zip(lanes, obs)]), None
+
+    def step(self, envs, actions):
+        """step_each, noting each step's info["unstable"] where the env says it."""
+        infos = []
+        got = step_each(envs, actions, infos)
+        for env, info in zip(envs, infos):
+            if "unstable" in info:
+                self._unstable[id(env)] = bool(self._unstable[id(env)]) or bool(info["unstable"])
+        return got
+
+    def finish(self, lane, env, episode, last_obs):
+        ep = {k: episode.pop(k) for k in ("observation.state", "action", "next.success")}
+        ep["success"] = bool(ep["next.success"][-1, 0])
+        ep |= episode  # next.reward and next.done, for a task that records its reward
+        if self.render:
+            ep[IMAGE_KEY] = np.asarray(lane.frames, np.uint8)
+        if (unstable := self._unstable.pop(id(env))) is not None:
+            ep["unstable"] = unstable
+        return ep
+
+
 def mode_parts(
     task: Task, sources: dict, how: Perturbation, mode: str, *, pool=None, plans=None, lanes: bool = True
 ) -> tuple[Mode, bool]:
@@ -357,9 +409,9 @@ def _dims(task: Task) -> dict:
 
 
 def one_lane(task: Task, env, jobs, mode: Mode) -> list:
-    """[Outcome of job] for `jobs`, each attempt in turn through the runner in one lane on `env`, stepped
-    by env.step."""
-    return run_lanes(jobs, mode, envs=[env], step=step_each, lanes=1, **_dims(task))
+    """[result of job] for `jobs`, each attempt in turn through the runner in one lane on `env`, stepped
+    by the mode's step (env.step)."""
+    return run_lanes(jobs, mode, envs=[env], step=mode.step, lanes=1, **_dims(task))
 
 
 def replay_from(task: Task, env, start, source: Source, plans: dict | None = None) -> Outcome:

@@ -37,7 +37,7 @@ def aloha_source(env, i, *, placed=True):
     obs = env.reset(env_seed(0, "demo", i))
     if placed:
         obs = env.set_start(*at.start_of(obs))
-    ep = rollout(env, AlohaExpert(noise=0.0), obs)
+    ep = rollout(ALOHA, env, AlohaExpert(noise=0.0), obs)
     assert ep["success"]
     return dt.Source(i, ep["observation.state"], ep["action"])
 
@@ -46,13 +46,13 @@ def aloha_source(env, i, *, placed=True):
 def test_set_start_gives_reset_bytes_and_fresh_counters(env):
     seed = env_seed(0, "demo", 3)
     obs, start = drawn_start(env, seed)
-    first = rollout(env, AlohaExpert(noise=0.0), obs)
+    first = rollout(ALOHA, env, AlohaExpert(noise=0.0), obs)
     assert first["success"] and env.steps > 0 and env.success and env.holding[1]  # used, cube held
     again = env.set_start(*start)
     assert env.steps == 0 and not env.success and env.holding == (False, False)
     assert env.grip == (0.0, 0.0)
     assert again.tobytes() == obs.tobytes()
-    second = rollout(env, AlohaExpert(noise=0.0), again)
+    second = rollout(ALOHA, env, AlohaExpert(noise=0.0), again)
     for k in ("observation.state", "action", "next.success"):
         assert second[k].tobytes() == first[k].tobytes(), k
 
@@ -246,7 +246,7 @@ def test_nearest_picks_the_source_with_the_nearest_objects(env):
 def pusht_source(env, i):
     obs = env.reset(env_seed(0, "demo", i))
     start = tuple(float(v) for v in pt.block_pose(obs)) + (float(obs[0]), float(obs[1]))
-    ep = rollout(env, PushTExpert(noise=0.0), env.set_start(*start))
+    ep = rollout(PUSHT, env, PushTExpert(noise=0.0), env.set_start(*start))
     assert ep["success"]
     return dt.Source(i, ep["observation.state"], ep["action"])
 

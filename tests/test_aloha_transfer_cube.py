@@ -353,9 +353,9 @@ def test_an_episode_the_simulation_blows_up_in_is_a_failure_and_nothing_lands_ou
 
     env = TASK.make_env()
     s = env_seed(0, "demo", 0)
-    ep = rollout(env, TransferCubeExpert(noise=1e9, seed=s), env.reset(s))
+    ep = rollout(TASK, env, TransferCubeExpert(noise=1e9, seed=s), env.reset(s))
     assert ep["unstable"] and not ep["success"] and len(ep["action"]) < TASK.spec.max_steps, len(ep["action"])
-    ep = rollout(env, TransferCubeExpert(noise=0.0, seed=s), env.reset(s))  # the same env, fresh again
+    ep = rollout(TASK, env, TransferCubeExpert(noise=0.0, seed=s), env.reset(s))  # the same env, fresh again
     assert not ep["unstable"] and ep["success"]
 
     caller = tmp_path / "caller"

@@ -51,7 +51,7 @@ def test_round_trip_matches_direct_rollout(tmp_path, gen, emb, noise, capsys):
     env = emb.make_env()
     for i in range(3):
         s = seeds.env_seed(1, "demo", i)
-        ep = rollout(env, emb.expert.cls(noise=noise, seed=s), env.reset(s))
+        ep = rollout(emb, env, emb.expert.cls(noise=noise, seed=s), env.reset(s))
         rows = d["episode_index"] == i
         assert d["observation.state"][rows].tobytes() == ep["observation.state"].tobytes()
         assert d["action"][rows].tobytes() == ep["action"].tobytes()
@@ -138,7 +138,7 @@ def test_a_set_without_environment_state_still_serves_the_lesson(tmp_path):
 
     emb, m = gen_demos_pusht.PUSHT, gen_demos_pusht.PUSHT.spec
     env = emb.make_env()
-    eps = [rollout(env, emb.expert.cls(noise=0.0), env.reset(seeds.env_seed(0, "demo", i))) for i in range(2)]
+    eps = [rollout(emb, env, emb.expert.cls(), env.reset(seeds.env_seed(0, "demo", i))) for i in range(2)]
     old = tmp_path / "old"
     write_dataset(
         old,

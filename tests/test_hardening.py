@@ -1418,11 +1418,11 @@ def pusht_source():
     """One seed-0 PushT expert demo as a source (the engine's Source)."""
     import pusht_env
     from ch37.seeds import env_seed
-    from datagen import Source, rollout
+    from datagen import PUSHT, Source, rollout
     from scripted_expert import PushTExpert
 
     env = pusht_env.PushTEnv()
-    ep = rollout(env, PushTExpert(noise=0.0), env.reset(env_seed(0, "demo", 0)))
+    ep = rollout(PUSHT, env, PushTExpert(noise=0.0), env.reset(env_seed(0, "demo", 0)))
     return Source(0, ep["observation.state"], ep["action"])
 
 

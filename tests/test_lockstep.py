@@ -19,12 +19,12 @@ from lerobot_v3.dataset import load_arrays
 from scripted_expert import AlohaExpert, PushTExpert
 
 
-def states_along(env, expert_class, seeds, noise: float) -> np.ndarray:
+def states_along(task, env, expert_class, seeds, noise: float) -> np.ndarray:
     """Every observation of the expert's episodes from env.reset(seed); every other one noisy, so the
     states also come from off the clean expert's path (recoveries, orbits, failed grasps)."""
     obs = []
     for i, s in enumerate(seeds):
-        ep = rollout(env, expert_class(noise=noise if i % 2 else 0.0, seed=s), env.reset(s))
+        ep = rollout(task, env, expert_class(noise=noise if i % 2 else 0.0, seed=s), env.reset(s))
         obs.append(ep["observation.state"])
     return np.concatenate(obs)
 
@@ -38,13 +38,13 @@ def assert_same_decisions(expert, batch, states: np.ndarray, chunk: int) -> None
 
 
 def test_pusht_batched_expert_is_bit_identical():
-    states = states_along(pusht_env.PushTEnv(), PushTExpert, range(240), noise=0.3)
+    states = states_along(PUSHT, pusht_env.PushTEnv(), PushTExpert, range(240), noise=0.3)
     assert len(states) > 3000
     assert_same_decisions(PushTExpert(), PushTBatch(), states, chunk=37)  # 37: batches mix every kind
 
 
 def test_aloha_batched_expert_is_bit_identical():
-    states = states_along(aloha_env.AlohaCubeEnv(), AlohaExpert, range(16), noise=0.3)
+    states = states_along(ALOHA, aloha_env.AlohaCubeEnv(), AlohaExpert, range(16), noise=0.3)
     assert len(states) > 2000
     assert_same_decisions(AlohaExpert(), AlohaBatch(), states, chunk=29)
 
@@ -76,9 +76,10 @@ def assert_same_results(one_at_a_time: list, together: list) -> None:
                 assert_same_results([a.episode], [b.episode])
             continue
         assert list(a) == list(b), f"attempt {i}: keys differ"
-        assert a["success"] is b["success"]
         for key in a:
-            if key != "success":
+            if key in ("success", "unstable"):  # the episode's flags
+                assert a[key] is b[key], f"attempt {i}: {key}"
+            else:
                 x, y = a[key], b[key]
                 assert (x.dtype, x.shape) == (y.dtype, y.shape), f"attempt {i}: {key}"
                 assert x.tobytes() == y.tobytes(), f"attempt {i}: {key} differs"
@@ -132,9 +133,70 @@ def test_the_runner_is_task_agnostic_aloha_episodes_equal_rollout():
         lanes=5,
     )
     env = aloha_env.AlohaCubeEnv()
-    want = [rollout(env, AlohaExpert(), env.reset(s)) for s in seeds]
+    want = [rollout(ALOHA, env, AlohaExpert(), env.reset(s)) for s in seeds]
     assert sum(ep["success"] for ep in want) >= 6 and len({len(ep["action"]) for ep in want}) > 1
     assert_same_results(want, got)
+
+
+def plain_rollout(env, policy, obs, *, rewards: bool) -> dict:
+    """A plain Gym loop, as the demo generators ran their episodes before those went through the engine's
+    runner (datagen.lockstep, mode Rollout): the reference datagen.demos.rollout keeps, bit for bit."""
+    policy.reset()
+    states, actions, succ, rews, dones, unstable = [], [], [], [], [], None
+    done = False
+    while not done:
+        act = policy.act(obs)
+        states.append(obs)
+        actions.append(act)
+        obs, reward, done, info = env.step(act)
+        succ.append(bool(info["success"]))
+        rews.append(reward)
+        dones.append(bool(done))
+        if "unstable" in info:
+            unstable = unstable or bool(info["unstable"])
+    ep = {
+        "observation.state": np.asarray(states, np.float32),
+        "action": np.asarray(actions, np.float32),
+        "next.success": np.asarray(succ, bool)[:, None],
+        "success": bool(succ[-1]),
+    }
+    if rewards:
+        ep["next.reward"] = np.asarray(rews, np.float32)[:, None]
+        ep["next.done"] = np.asarray(dones, bool)[:, None]
+    if unstable is not None:
+        ep["unstable"] = unstable
+    return ep
+
+
+@pytest.mark.parametrize(
+    "name, noise",
+    [
+        ("pusht", 0.3),
+        ("aloha", 0.3),
+        ("gym_pusht", 5),  # px
+        ("aloha_transfer_cube", 0),
+        ("aloha_transfer_cube", 1e9),  # blows the simulation up
+    ],
+)
+def test_the_demo_generators_rollout_is_a_plain_gym_loop(name, noise):
+    """Issue 58 #2: gen_demos.py's episodes go through the engine's one runner (mode Rollout, one lane)
+    and are what a plain Gym loop records, frame for frame and bit for bit: noisy experts (every other
+    episode), gym-pusht's reward and termination, and a transfer-cube episode whose simulation blows up
+    (noise 1e9: "unstable", the episode ends there) beside a solved one."""
+    from ch37.seeds import env_seed
+    from datagen.task import known_tasks
+
+    task = known_tasks()[name]
+    env = task.make_env()
+    got, want = [], []
+    for i in range(3 if name != "aloha_transfer_cube" else 1):
+        s = env_seed(4, "demo", i)
+        policy = lambda: task.expert.cls(noise=noise if i % 2 or noise > 1e6 else 0.0, seed=s)  # noqa: E731
+        got.append(rollout(task, env, policy(), env.reset(s)))
+        want.append(plain_rollout(env, policy(), env.reset(s), rewards=task.spec.records_reward))
+    assert_same_results(want, got)
+    blown = got[0].get("unstable", False)
+    assert ("unstable" in got[0]) is name.startswith("aloha_") and blown is (noise > 1e6)
 
 
 @pytest.mark.parametrize("mode, select", [("resolve", "own"), ("replay", "own"), ("replay", "nearest")])
@@ -237,7 +299,7 @@ def test_experts_without_a_batch_run_one_per_lane_and_equal_one_at_a_time(source
     env = task.make_env()
     for (e, k), got in zip(jobs[:4], one):
         start = lockstep.start_of_job(task, sources, (e, k), how)
-        ep = rollout(env, task.expert.cls(noise=0.0), task.place(env, start))
+        ep = rollout(task, env, task.expert.cls(noise=0.0), task.place(env, start))
         assert ep["success"] is got.kept and len(ep["action"]) == got.steps
         if got.kept:
             for key in ("observation.state", "action", "next.success"):
@@ -251,7 +313,9 @@ def test_a_task_whose_max_steps_is_shorter_than_its_env_is_one_line(sources):
     class ShortPushT(type(PUSHT)):
         spec = replace(PUSHT.spec, max_steps=5)
 
-    with pytest.raises(RuntimeError, match="ran past 5 steps without ending: the task's max_steps"):
+    from ch37.errors import DataError
+
+    with pytest.raises(DataError, match="ran past 5 steps without ending: the task's max_steps"):
         engine.attempt(ShortPushT(), sources[0], 0, Perturbation(1, 0.08, 0.5))
 
 

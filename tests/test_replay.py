@@ -127,7 +127,7 @@ def expert_source(env, i):
     """Source demo i of seed 0, rolled out from the start its first (float32) frame describes."""
     obs = env.reset(env_seed(0, "demo", i))
     start = tuple(float(v) for v in pusht.block_pose(obs)) + (float(obs[0]), float(obs[1]))
-    ep = rollout(env, PushTExpert(noise=0.0), env.set_start(*start))
+    ep = rollout(PUSHT, env, PushTExpert(noise=0.0), env.set_start(*start))
     assert ep["success"]
     return Source(i, ep["observation.state"], ep["action"]), start
 

@@ -776,7 +776,7 @@ def expert_record(emb, starts: int, noise: float) -> tuple[int, float]:
 
     env, wins, lengths = emb.make_env(), 0, []
     for s in range(starts):
-        ep = rollout(env, emb.expert.cls(noise=noise, seed=s), env.reset(s))
+        ep = rollout(emb, env, emb.expert.cls(noise=noise, seed=s), env.reset(s))
         wins += ep["success"]
         lengths.append(len(ep["action"]))
     return wins, statistics.median(lengths)
