@@ -79,9 +79,11 @@ def parse(argv=None):
     return a
 
 
-def settings(a) -> dict:
-    """The run's settings (datagen.plan.SETTINGS) from the flags: the engine's own names for them."""
-    return dict(
+def settings(a):
+    """The run's settings (datagen.plan.Settings) from the flags: the engine's own names for them."""
+    from datagen.plan import Settings
+
+    return Settings(
         mode=a.aug_mode,
         select=a.select,
         attempts_per_demo=a.attempts_per_demo,

@@ -1,8 +1,10 @@
-"""A run's plan: its settings (as the engine names them and as its stamps store them), their key, the
-packages whose versions can change its bytes, the attempts cut into shards, and the memory that cut needs.
+"""A run's plan: its settings (one frozen object from the command line to the attempt loop, and as its
+stamps store them), what else names the run, the packages whose versions can change its bytes, the
+attempts cut into shards, and the memory that cut needs.
 
-    SETTINGS, stored(settings), attempts_per_demo(config)   the settings and their stored names
-    run_key(config), versions(task)                         what every shard's stamp carries
+    Settings                                 augment_demos.py's flags in the engine's names
+    RunConfig(settings, task, source, ...)   a run: its settings and what it grows; stored() for stamps
+    run_key(config), versions(task)          what every shard's stamp carries
     plan(episodes, attempts_per_demo, shard_size)           the attempts (e, k), cut into shards
     plan_memory_problem(n_sources, attempts_per_demo, free) whether that cut fits in memory
 
@@ -15,11 +17,35 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+from dataclasses import asdict, dataclass, fields
 from importlib.metadata import version
 
-# A run's settings in the engine's names (augment_demos.py maps its flags onto them): attempts_per_demo is
-# the attempts per source episode, every one made (datagen.engine.grow's per_source counts kept demos).
-SETTINGS = ("mode", "select", "attempts_per_demo", "seed", "pos_sigma", "yaw_sigma", "shard_size")
+from datagen.task import Perturbation
+
+
+@dataclass(frozen=True)
+class Settings:
+    """A run's settings in the engine's names (augment_demos.py maps its flags onto them), passed as they
+    are from the command line down to the attempt loop (datagen.shards.make_shard)."""
+
+    mode: str  # resolve, replay or replay_live (datagen.lockstep.mode_parts)
+    select: str  # the source a replay transforms: own or nearest
+    attempts_per_demo: int  # attempts per source episode, every one made (engine.grow's per_source: kept)
+    seed: int  # of the perturbations (ch37.seeds: disjoint per seed)
+    pos_sigma: float  # m (the task's length unit): the perturbation's position spread
+    yaw_sigma: float  # rad: its rotation spread
+    shard_size: int  # attempts per shard
+
+    @property
+    def perturbation(self) -> Perturbation:
+        return Perturbation(self.seed, self.pos_sigma, self.yaw_sigma)
+
+    def stored(self) -> dict:
+        """As a run's stamps and its report store them (STORED_SETTINGS' names)."""
+        return {STORED.get(k, k): v for k, v in asdict(self).items()}
+
+
+SETTINGS = tuple(f.name for f in fields(Settings))
 # How a run's stamps and its report store them (OUT's stamp, every shard's, generation_report.json; a
 # resume compares them): attempts_per_demo under its first name "per_demo", kept so that what a run
 # writes stays the same bytes, for readers of earlier runs. Nothing but this mapping reads "per_demo".
@@ -27,19 +53,30 @@ STORED = {"attempts_per_demo": "per_demo"}
 STORED_SETTINGS = tuple(STORED.get(k, k) for k in SETTINGS)
 
 
-def stored(settings: dict) -> dict:
-    """`settings` (SETTINGS' names) as a run's stamps store them (STORED_SETTINGS' names)."""
-    return {STORED.get(k, k): v for k, v in settings.items()}
+@dataclass(frozen=True)
+class RunConfig:
+    """A run: its settings and what it grows (the task's name, the source's identity: datagen.source_check),
+    with the engine's code digest and the package versions (versions) that could change its bytes. Its
+    stored() form is what the run's stamp holds (a resume compares it) and run_key digests."""
+
+    settings: Settings
+    task: str
+    source: dict
+    engine: str
+    versions: dict
+
+    def stored(self) -> dict:
+        return self.settings.stored() | {
+            "task": self.task,
+            "source": self.source,
+            "engine": self.engine,
+            "versions": self.versions,
+        }
 
 
-def attempts_per_demo(config: dict) -> int:
-    """The attempts per source episode of a run's stored config."""
-    return config[STORED["attempts_per_demo"]]
-
-
-def run_key(config: dict) -> str:
-    """A short digest of a run's settings; every shard stamp carries it."""
-    return hashlib.sha256(json.dumps(config, sort_keys=True).encode()).hexdigest()[:16]
+def run_key(config: RunConfig) -> str:
+    """A short digest of a run's stored config; every shard stamp carries it."""
+    return hashlib.sha256(json.dumps(config.stored(), sort_keys=True).encode()).hexdigest()[:16]
 
 
 def versions(task=None) -> dict:

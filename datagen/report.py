@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from datagen.plan import STORED_SETTINGS
+from datagen.plan import RunConfig
 
 REPORT_NAME = "generation_report.json"
 
@@ -58,20 +58,20 @@ def report_of(stamps: list[dict], failures_known, base: dict) -> dict:
     }
 
 
-def describe(src: Path, out: Path, config: dict, *, ray: str | None, episodes: int) -> dict:
+def describe(src: Path, out: Path, config: RunConfig, *, ray: str | None, episodes: int) -> dict:
     """The report's fields that say what the run was: its source, settings, command and versions (Ray's
     too when it ran on Ray), and how to load the merged set of `episodes` episodes."""
-    vers = {"python": platform.python_version(), **config["versions"]}
+    vers = {"python": platform.python_version(), **config.versions}
     if ray is not None:
         vers["ray"] = version("ray")
     return {
-        "task": config["task"],  # the engine task the source was grown as (datagen.source_check.task_of)
-        "source": {"path": str(src.resolve()), **config["source"]},
-        "settings": {k: config[k] for k in STORED_SETTINGS},
+        "task": config.task,  # the engine task the source was grown as (datagen.source_check.task_of)
+        "source": {"path": str(src.resolve()), **config.source},
+        "settings": config.settings.stored(),
         "command": " ".join(shlex.quote(x) for x in [Path(sys.executable).name, *sys.argv]),
         "versions": vers,
         "dataset": {  # pyav: torchcodec without system FFmpeg logs a long traceback before falling back
             "episodes": episodes,
-            "load": f"LeRobotDataset('local/{config['task']}_aug', root='{out}', video_backend='pyav')",
+            "load": f"LeRobotDataset('local/{config.task}_aug', root='{out}', video_backend='pyav')",
         },
     }

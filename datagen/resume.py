@@ -45,7 +45,7 @@ from ch37.ownership import (
     unlock,
     write_atomic,
 )
-from datagen.plan import run_key
+from datagen.plan import RunConfig, run_key
 from datagen.report import REPORT_NAME
 from datagen.shards import MERGE_DIR, SHARD_NAMES, SHARDS_DIR, remove_shards
 from datagen.task import failures_of, known_tasks
@@ -65,8 +65,9 @@ class RunClaim:
     report: dict | None = None  # the report of a run already complete: nothing to do
     done: dict[int, dict] = field(default_factory=dict)  # {shard index: stamp}: an earlier run's whole shards
 
-    def refuse_other_settings(self, config: dict) -> None:
-        """DataError if the folder holds a run of settings other than `config`."""
+    def refuse_other_settings(self, run: RunConfig) -> None:
+        """DataError if the folder holds a run of settings other than `run`'s."""
+        config = run.stored()
         if self.stamp is None or self.stamp.get("config") == config:
             return
         old = self.stamp.get("config") or {}
@@ -92,7 +93,7 @@ def claim(out: Path, src: Path) -> RunClaim:
 
 
 @contextlib.contextmanager
-def taken(c: RunClaim, config: dict, shards: list):
+def taken(c: RunClaim, config: RunConfig, shards: list):
     """Hold c.out for a run of `config` (ch37.ownership.lock; a second run on it waits for the first),
     judged again under the lock (a run waited for may have changed the folder); files this command did
     not write are refused before anything is written (foreign). c then holds the report of a run already
@@ -116,7 +117,7 @@ def taken(c: RunClaim, config: dict, shards: list):
         else:
             c.done = finished(c.out, config, shards)
             # this run's stamp, not yet complete (the merge records the files it writes in it)
-            c.stamp = {"made_by": MADE_BY, "kind": "engine", "config": config, "complete": False}
+            c.stamp = {"made_by": MADE_BY, "kind": "engine", "config": config.stored(), "complete": False}
             write_atomic(c.out / STAMP_NAME, dump_json(c.stamp))
         yield c
     finally:
@@ -185,7 +186,7 @@ def stamp_problem(path: Path, stamp: dict, jobs, reasons) -> str | None:
     return None if ok else "its stamp's counts disagree with its files"
 
 
-def finished(out: Path, config: dict, shards: list) -> dict[int, dict]:
+def finished(out: Path, config: RunConfig, shards: list) -> dict[int, dict]:
     """{shard index: stamp} of the whole shards of this run (`shards`: its plan) whose files still have
     the sha256 their stamp records and whose stamp's counts agree with them (stamp_problem); the rest of
     shards/ is removed (a damaged shard with one printed line).
@@ -206,7 +207,7 @@ def finished(out: Path, config: dict, shards: list) -> dict[int, dict]:
                 path,
                 stamp,
                 shards[int(m.group(1))],
-                failures_of(known_tasks()[config["task"]])[config["mode"]],
+                failures_of(known_tasks()[config.task])[config.settings.mode],
             )
             if not why:
                 done[int(m.group(1))] = stamp

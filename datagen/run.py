@@ -40,7 +40,7 @@ from ch37.errors import DataError
 from ch37.parallel import map_jobs
 from ch37.process import available_memory
 from datagen import engine, resume
-from datagen.plan import attempts_per_demo, plan, plan_memory_problem, stored, versions
+from datagen.plan import RunConfig, Settings, plan, plan_memory_problem, versions
 from datagen.report import REPORT_NAME, describe, report_of
 from datagen.shards import SHARDS_DIR, collect, make_shard, many_files_note, merge
 from datagen.source_check import read_source, source_identity, successful_only, task_of
@@ -56,9 +56,9 @@ def engine_version(task: Task) -> str:
 
 
 def run(
-    src: Path, out: Path, settings: dict, *, task: str | None = None, workers: int, ray=None, quiet=False
+    src: Path, out: Path, settings: Settings, *, task: str | None = None, workers: int, ray=None, quiet=False
 ) -> dict:
-    """Grow `out` from the set `src` (of the task it names, or `task`: task_of) with `settings` (SETTINGS) on
+    """Grow `out` from the set `src` (of the task it names, or `task`: task_of) with `settings` on
     `workers` local processes or on Ray (ch37.parallel.map_jobs): a run cut off earlier is finished, its
     whole shards kept; a complete run is left as it is. A second run on `out` waits for the first.
     Returns the generation report."""
@@ -69,17 +69,12 @@ def run(
     if note:
         print(note, flush=True)
     n_sources = len(np.unique(arrays["episode_index"]))
-    problem = plan_memory_problem(n_sources, settings["attempts_per_demo"], available_memory())
+    problem = plan_memory_problem(n_sources, settings.attempts_per_demo, available_memory())
     if problem:
         raise DataError(problem)
-    config = stored(settings) | {
-        "task": task.name,
-        "source": source_identity(arrays),
-        "engine": engine_version(task),
-    }
-    config["versions"] = versions(task)
+    config = RunConfig(settings, task.name, source_identity(arrays), engine_version(task), versions(task))
     sources = engine.sources(arrays)
-    shards = plan(sources, attempts_per_demo(config), config["shard_size"])
+    shards = plan(sources, settings.attempts_per_demo, settings.shard_size)
     with resume.taken(claim, config, shards):
         if claim.report:
             print("already complete (same command, same settings); nothing to do")
@@ -87,17 +82,17 @@ def run(
         return _generate(src, claim, sources, shards, config, workers=workers, ray=ray, quiet=quiet, t0=t0)
 
 
-def _generate(src, claim, sources, shards, config, *, workers, ray, quiet, t0) -> dict:
-    out, done = claim.out, claim.done
+def _generate(src, claim, sources, shards, config: RunConfig, *, workers, ray, quiet, t0) -> dict:
+    out, done, settings = claim.out, claim.done, config.settings
     todo = [i for i in range(len(shards)) if i not in done]
-    note = many_files_note(len(shards), sum(map(len, shards)), config["shard_size"], out) if todo else None
+    note = many_files_note(len(shards), sum(map(len, shards)), settings.shard_size, out) if todo else None
     if note:
         print(note, flush=True)
     scratch = None if ray not in (None, "local") else str(out / SHARDS_DIR)  # this machine's disk
     (out / SHARDS_DIR).mkdir(exist_ok=True)
     # A shard gets the sources its attempts start from; with --select nearest a replay may choose any
     # source, so every shard gets them all.
-    pool = sources if config["select"] == "nearest" else None
+    pool = sources if settings.select == "nearest" else None
     # One Simulators for every shard: a forked worker fills its own copy and keeps it between its shards
     # (its lanes' envs are made once); on Ray each shard's task gets an empty one.
     sims = engine.Simulators()
@@ -122,13 +117,13 @@ def _generate(src, claim, sources, shards, config, *, workers, ray, quiet, t0) -
     how = dict(workers=workers, ray=ray, ordered=False, star=True, timing=timing)
     results = map_jobs(make_shard, tasks, **how) if tasks else []
     t_gen = time.perf_counter()
-    made = collect(out, results, done, config["versions"], total=sum(map(len, shards)), quiet=quiet)
+    made = collect(out, results, done, config.versions, total=sum(map(len, shards)), quiet=quiet)
     t_merge = time.perf_counter()
     merged = merge(out, len(shards), claim.stamp)
     seconds = time.perf_counter() - t0
     report = report_of(
         [done[i] for i in range(len(shards))],
-        failures_of(known_tasks()[config["task"]])[config["mode"]],
+        failures_of(known_tasks()[config.task])[settings.mode],
         describe(src, out, config, ray=ray, episodes=merged)
         | {
             "shards": {"total": len(shards), "made_this_run": len(todo), "reused": len(shards) - len(todo)},

@@ -1,6 +1,6 @@
 """A run's shards: each a LeRobot v3 set with a stamp, made by a worker, saved by the caller, merged once.
 
-    make_shard(index, jobs, sources, config)   a worker: one shard's attempts, its files as bytes
+    make_shard(index, jobs, sources, config)   a worker: one shard's attempts (config: a RunConfig), as bytes
     save_shard(out, index, result), collect    the caller: each shard saved as it arrives
     merge(out, n_shards, run_stamp)            the shards into OUT/data and OUT/meta, in one pass
     remove_shards(out)                         once the run is stamped complete
@@ -35,8 +35,8 @@ from ch37.errors import DataError
 from ch37.ownership import MADE_BY, STAMP_NAME, digests, dump_json, read_json, write_atomic
 from datagen import engine, lockstep
 from datagen.demos import TASK_FILE, name_task
-from datagen.plan import run_key, versions
-from datagen.task import Perturbation, known_tasks
+from datagen.plan import RunConfig, run_key, versions
+from datagen.task import known_tasks
 from lerobot_v3.merge import merge_sets
 
 SHARDS_DIR = "shards"  # OUT/shards
@@ -67,7 +67,9 @@ def shard_dir(out: Path, index: int) -> Path:
 # ----------------------------------------------------------------------------------------------
 # Worker side: one shard, returned as bytes
 # ----------------------------------------------------------------------------------------------
-def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | None = None, sims=None) -> dict:
+def make_shard(
+    index: int, jobs, sources: dict, config: RunConfig, scratch: str | None = None, sims=None
+) -> dict:
     """Run the shard's attempts and write its kept episodes as a LeRobot v3 set (in a temp folder
     under `scratch`, the system's when None), then read it back as bytes. sims: the worker's
     datagen.engine.Simulators, kept between its shards (a new one when None).
@@ -75,11 +77,10 @@ def make_shard(index: int, jobs, sources: dict, config: dict, scratch: str | Non
     Returns {"files": {relative path: bytes}, "stamp": the shard's stamp}. The stamp holds the
     counts the report needs (attempts, kept, failures by reason, per source, episode lengths) and
     seconds_write, the seconds the worker spent writing the set and reading it back."""
-    task = known_tasks()[config["task"]]
-    how = Perturbation(config["seed"], config["pos_sigma"], config["yaw_sigma"])
+    task, s = known_tasks()[config.task], config.settings
     # = engine.run_attempts', bit for bit (tests/test_lockstep.py), attempts stepped together
     results = lockstep.attempts_lockstep(
-        task, sources, jobs, how, mode=config["mode"], select=config["select"], sims=sims
+        task, sources, jobs, s.perturbation, mode=s.mode, select=s.select, sims=sims
     )
     kept = [r.episode for r in results if r.kept]
     per_source = {}  # source episode -> [attempts, kept]

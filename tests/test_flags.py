@@ -258,14 +258,15 @@ def test_per_demo_has_one_meaning():
 
     a = parse_with(augment_demos, ["--per_demo", "3", "--pos_sigma", "0.05", "--mode", "replay"])
     s = augment_demos.settings(a)
-    assert set(s) == set(plan.SETTINGS) and s["attempts_per_demo"] == 3 and s["pos_sigma"] == 0.05
-    stored = plan.stored(s)
+    assert s.attempts_per_demo == 3 and s.pos_sigma == 0.05 and s.mode == "replay"
+    stored = s.stored()
     assert (
         stored["per_demo"] == 3
         and "attempts_per_demo" not in stored
         and set(stored) == set(plan.STORED_SETTINGS)
     )
-    assert plan.attempts_per_demo(stored) == 3 and s["mode"] == "replay"
+    with pytest.raises(dataclasses.FrozenInstanceError):  # one object from the command line down: read only
+        s.mode = "resolve"
     assert "per_demo" not in config.DEFAULTS  # the lesson's kept count is aug_per_demo
     assert config.CHAPTER.aug_per_demo == 8
 

@@ -18,8 +18,8 @@ from datagen import engine, plan, shards
 from lerobot_v3 import frame_stats, merge
 from lerobot_v3.dataset import load_arrays, open_dataset
 
-CONFIG = {"task": "pusht", "mode": "resolve", "select": "own", "per_demo": 4, "seed": 0}
-CONFIG |= {"pos_sigma": 0.08, "yaw_sigma": 0.5, "shard_size": 5}
+SETTINGS = plan.Settings("resolve", "own", 4, seed=0, pos_sigma=0.08, yaw_sigma=0.5, shard_size=5)
+CONFIG = plan.RunConfig(SETTINGS, "pusht", source={}, engine="", versions={})
 LAYOUT = ("data/chunk_index", "data/file_index", "meta/episodes/chunk_index", "meta/episodes/file_index")
 
 
@@ -29,7 +29,7 @@ def roots(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("merge")
     assert gen_demos_pusht.main(["--episodes", "3", "--seed", "0", "--out", str(tmp / "src"), "--quiet"]) == 0
     sources = engine.sources(load_arrays(tmp / "src"))
-    cut = plan.plan(sources, CONFIG["per_demo"], CONFIG["shard_size"])
+    cut = plan.plan(sources, SETTINGS.attempts_per_demo, SETTINGS.shard_size)
     for i, jobs in enumerate(cut):
         result = shards.make_shard(i, jobs, {e: sources[e] for e in sorted({e for e, _ in jobs})}, CONFIG)
         shards.save_shard(tmp / "run", i, result)
