@@ -216,8 +216,9 @@ def test_the_readme_lerobot_lines_are_their_kept_files():
     p = act["pooled"]
     assert steps_of("aloha_transfer_cube_act") == {5000}
     assert steps_of("aloha_transfer_cube_act_10000") == {10000}
-    assert sorted(act["seeds"]) == ["0", "1", "2"] and list(act10["seeds"]) == ["0"]
-    s0 = act10["seeds"]["0"]
+    assert sorted(act["seeds"]) == sorted(act10["seeds"]) == ["0", "1", "2"]
+    p10 = act10["pooled"]
+    fr = act10["paired"]["fresh - replayed"]["max_reward_paired"]
     mlp, diff = kept("gym_pusht_value.json"), kept("gym_pusht_lerobot.json")
     q = mlp["pooled"]
     dp = diff["paired"]["resolved - sources"]["max_reward_paired"]
@@ -230,9 +231,11 @@ def test_the_readme_lerobot_lines_are_their_kept_files():
         f"{pooled_rate(p['sources'])} from the 10 sources alone, and {pooled_rate(p['replayed'])} from the "
         "sources plus "
         "about 200 replayed",
-        "one seed (seed 0) at 10,000 steps turns the order over (replayed "
-        f"{s0['replayed']['successes']}/{s0['replayed']['episodes']}, fresh {s0['fresh']['successes']}/"
-        f"{s0['fresh']['episodes']}, sources {s0['sources']['successes']}/{s0['sources']['episodes']})",
+        f"at 10,000 steps (seeds 0..2 again) the order turns over: {pooled_rate(p10['replayed'])} from the "
+        f"sources plus the replayed demos, {pooled_rate(p10['fresh'])} from fresh ones and "
+        f"{pooled_rate(p10['sources'])} from the sources alone",
+        f"(fresh - replayed {fr['mean']:+.2f} {ci(fr['ci95'], 2)} in the highest stage reached, "
+        "paired, 95% t)",
         f"from {q['source']['successes']}/{q['source']['episodes']} to "
         f"{pooled_rate(q['resolved'])} in gym-pusht's own success (108 fresh "
         f"expert demos: {pooled_rate(q['fresh'])}; seeds 0..2, 100 starts each",
@@ -584,44 +587,44 @@ def test_engine_transfer_cube_mlp_row_is_its_kept_json():
     )
 
 
-def test_engine_act_rows_are_their_kept_tables():
-    t5, t10 = kept("aloha_transfer_cube_act.json"), kept("aloha_transfer_cube_act_10000.json")
-    seeds, p = t5["seeds"], t5["pooled"]
-    names = {
-        "sources": "10 sources",
-        "replayed": "10 + replayed (subtasks, own source)",
-        "fresh": "210 fresh expert demos",
-    }
+ACT_SETS = {
+    "sources": "10 sources",
+    "replayed": "10 + replayed (subtasks, own source)",
+    "fresh": "210 fresh expert demos",
+}
+
+
+def act_table_lines(t: dict) -> list[str]:
+    """docs/engine.md's two tables of an ACT row (per set; the paired comparisons) from its kept table."""
+    seeds, p = t["seeds"], t["pooled"]
     lines = [
         f"| {name} | {' / '.join(str(s[k]['successes']) for s in seeds.values())} | {pooled_rate(p[k])} | "
         f"{' / '.join(str(p[k]['reached'][g]) for g in '124')} | "
         f"{' / '.join(f'{s[k]["loss"]:.3f}' for s in seeds.values())} |"
-        for k, name in names.items()
+        for k, name in ACT_SETS.items()
     ]
     for pair in ("replayed - sources", "fresh - replayed", "fresh - sources"):
-        q = t5["paired"][pair]
+        q = t["paired"][pair]
         m = q["max_reward_paired"]
         lines.append(
             f"| {pair} | "
             + " | ".join(f"{x:+.2f}" for x in q["success"].values())
             + f" | {m['mean']:+.2f} {ci(m['ci95'], 2)} |"
         )
-    s0 = t10["seeds"]["0"]
-    pooled10 = t10["pooled"]
-    for k, name in (("sources", "10 sources"), ("replayed", "10 + replayed"), ("fresh", "210 fresh")):
-        e = s0[k]
-        lo, hi = wilson(e["successes"] / e["episodes"], e["episodes"])
-        lines.append(
-            f"| {name} | {seeds['0'][k]['successes']}/{seeds['0'][k]['episodes']} | "
-            f"{e['successes']}/{e['episodes']} = "
-            f"{e['successes'] / e['episodes']:.2f} [{lo:.2f}, {hi:.2f}] | "
-            f"{' / '.join(str(pooled10[k]['reached'][g]) for g in '124')} | {e['loss']:.3f} |"
-        )
+    return lines
+
+
+def test_engine_act_rows_are_their_kept_tables():
+    t5, t10 = kept("aloha_transfer_cube_act.json"), kept("aloha_transfer_cube_act_10000.json")
+    seeds, p = t5["seeds"], t5["pooled"]
+    s10, p10 = t10["seeds"], t10["pooled"]
+    assert sorted(seeds) == sorted(s10) == ["0", "1", "2"]
     rs = t10["paired"]["replayed - sources"]
     fr = t10["paired"]["fresh - replayed"]
     has(
         "docs/engine.md",
-        *lines,
+        *act_table_lines(t5),
+        *act_table_lines(t10),
         f"give {p['sources']['successes']}, {p['replayed']['successes']} and "
         f"{p['fresh']['successes']} successes of 150",
         f"({p['fresh']['success']:.3f} {ci(p['fresh']['ci95']).replace('+', '')} against "
@@ -634,18 +637,28 @@ def test_engine_act_rows_are_their_kept_tables():
         f"({p['replayed']['reached']['4']} against {p['sources']['reached']['4']})",
         f"(the fresh arm: {', '.join(str(s['fresh']['successes']) for s in list(seeds.values())[:-1])} and "
         f"{seeds['2']['fresh']['successes']} of 50)",
-        f"replayed - sources is {rs['success']['0']:+.2f} in success and "
-        f"{rs['max_reward_paired']['mean']:+.2f} "
-        f"{ci(rs['max_reward_paired']['ci95'], 2)} (95% t) in the highest stage",
-        f"fresh - replayed is {fr['success']['0']:+.2f}",
-        f"({pooled10['replayed']['reached']['2']} lift, {pooled10['replayed']['reached']['4']} succeed)",
-        f"took the replayed arm from {seeds['0']['replayed']['successes']} to "
-        f"{s0['replayed']['successes']} of 50, "
-        f"the fresh arm stayed where it was ({seeds['0']['fresh']['successes']} and "
-        f"{s0['fresh']['successes']}), "
-        f"and the sources went from {seeds['0']['sources']['successes']} to {s0['sources']['successes']}",
+        f"all three seeds ({', '.join(f'{x:+.2f}' for x in list(rs['success'].values())[:-1])} and "
+        f"{rs['success']['2']:+.2f} in success; {p10['replayed']['successes']} against "
+        f"{p10['sources']['successes']} of 150 pooled, intervals apart), where at 5,000 steps it was below "
+        "them "
+        f"({p['replayed']['successes']} against {p['sources']['successes']})",
+        f"took the replayed arm from {p['replayed']['successes']} to {p10['replayed']['successes']} of 150, "
+        f"the fresh arm from {p['fresh']['successes']} to {p10['fresh']['successes']} and the sources from "
+        f"{p['sources']['successes']} to {p10['sources']['successes']}",
+        f"{p10['replayed']['successes']} against {p10['fresh']['successes']} of 150, with overlapping "
+        f"intervals; per seed fresh - replayed is "
+        f"{', '.join(f'{x:+.2f}' for x in list(fr['success'].values())[:-1])} and {fr['success']['2']:+.2f}, "
+        f"and the paired highest stage {fr['max_reward_paired']['mean']:+.2f} "
+        f"{ci(fr['max_reward_paired']['ci95'], 2)} takes in zero",
+        f"({p10['replayed']['reached']['2']} lift, {p10['replayed']['reached']['4']} succeed)",
     )
-    assert all(p[k]["reached"]["3"] == p[k]["reached"]["4"] for k in names)  # "No episode stopped at stage 3"
+    # "intervals apart", "overlapping intervals", "takes in zero", "on every seed"
+    assert p10["replayed"]["ci95"][0] > p10["sources"]["ci95"][1]
+    assert p10["fresh"]["ci95"][1] > p10["replayed"]["ci95"][0]
+    assert fr["max_reward_paired"]["ci95"][0] < 0 < fr["max_reward_paired"]["ci95"][1]
+    assert all(x > 0 for x in rs["success"].values())
+    for t in (p, p10):  # "No episode stopped at stage 3", at both budgets
+        assert all(t[k]["reached"]["3"] == t[k]["reached"]["4"] for k in ACT_SETS)
 
 
 # --- docs/gym_pusht.md --------------------------------------------------------------------------------
