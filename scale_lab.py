@@ -145,13 +145,12 @@ def grow(mode: str, seed: int, srcs: dict, per_demo: int, cap: int, pos_sigma: f
 
 def expert_success(seed: int, eval_seeds: list[int]):
     """The noise-free expert's own success on these eval starts: the ceiling a BC policy aims at."""
-    import datagen
     import pusht_env
-    from datagen import rollout
+    from datagen import PUSHT, rollout
     from scripted_expert import PushTExpert
 
     env = pusht_env.PushTEnv()
-    wins = sum(rollout(datagen.PUSHT, env, PushTExpert(), env.reset(s))["success"] for s in eval_seeds)
+    wins = sum(rollout(PUSHT, env, PushTExpert(), env.reset(s))["success"] for s in eval_seeds)
     return "expert", seed, wins
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from importlib.metadata import version
 
 from datagen.task import Perturbation
@@ -41,16 +41,14 @@ class Settings:
         return Perturbation(self.seed, self.pos_sigma, self.yaw_sigma)
 
     def stored(self) -> dict:
-        """As a run's stamps and its report store them (STORED_SETTINGS' names)."""
+        """As a run's stamps and its report store them (attempts_per_demo under STORED's name)."""
         return {STORED.get(k, k): v for k, v in asdict(self).items()}
 
 
-SETTINGS = tuple(f.name for f in fields(Settings))
 # How a run's stamps and its report store them (OUT's stamp, every shard's, generation_report.json; a
 # resume compares them): attempts_per_demo under its first name "per_demo", kept so that what a run
 # writes stays the same bytes, for readers of earlier runs. Nothing but this mapping reads "per_demo".
 STORED = {"attempts_per_demo": "per_demo"}
-STORED_SETTINGS = tuple(STORED.get(k, k) for k in SETTINGS)
 
 
 @dataclass(frozen=True)
