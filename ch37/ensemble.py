@@ -72,63 +72,82 @@ def one_blas_thread() -> bool:
     return True
 
 
-SPLIT_MIN = 1_000_000  # multiply-adds of one arm's product below which a thread's hand-off costs more
+SPLIT_MIN = 1_000_000  # multiply-adds of one arm's pass below which a thread's hand-off costs more
 
 
-def arms_matmul(a: torch.Tensor, b: torch.Tensor, pool: ThreadPoolExecutor | None) -> torch.Tensor:
-    """a @ b per arm, (E, m, k) @ (E, k, n) -> (E, m, n), float32 CPU tensors: one numpy (OpenBLAS) sgemm
-    per arm, arms 1.. on `pool` while this thread does arm 0. Where a product is too small to pay for a
-    thread's hand-off, numpy loops over the arms itself: the same sgemm per arm, the same bits."""
-    x, y = a.detach().numpy(), b.detach().numpy()
-    if pool is None or x.shape[1] * x.shape[2] * y.shape[2] < SPLIT_MIN:
-        return torch.from_numpy(np.matmul(x, y))
-    out = np.empty((x.shape[0], x.shape[1], y.shape[2]), np.float32)
-    jobs = [pool.submit(np.matmul, x[e], y[e], out=out[e]) for e in range(1, len(x))]
-    np.matmul(x[0], y[0], out=out[0])
+def on_arms(arm, arms: int, pool: ThreadPoolExecutor | None) -> None:
+    """arm(e) for every arm e: arms 1.. on `pool` while this thread does arm 0 (all on this thread if no
+    pool). The work of one arm never touches another's slices, so the order does not matter."""
+    jobs = [pool.submit(arm, e) for e in range(1, arms)] if pool is not None else []
+    for e in range(arms if pool is None else 1):
+        arm(e)
     for j in jobs:
         j.result()
-    return torch.from_numpy(out)
 
 
-def arms_grads(x, w, gy, pool, need_gx: bool):
-    """gy @ w^T (if need_gx) and x^T @ gy per arm, both of an arm in one job, arms 1.. on `pool`: one
-    hand-off where two arms_matmul calls took two, the same sgemm per arm and product."""
-    xs, ws, gys = x.detach().numpy(), w.detach().numpy(), gy.detach().numpy()
-    e_n, b, i = xs.shape
-    o = ws.shape[2]
-    gx = np.empty((e_n, b, i), np.float32) if need_gx else None
-    gw = np.empty((e_n, i, o), np.float32)
+class ArmsMLP(torch.autograd.Function):
+    """The stack's whole forward and backward, each arm's pass on a thread of its own: one hand-off per
+    pass where one per layer left each layer's bias, ReLU and small products on one thread.
 
-    def arm(e):
-        if need_gx:
-            np.matmul(gys[e], ws[e].T, out=gx[e])
-        np.matmul(xs[e].T, gys[e], out=gw[e])
-
-    if pool is None or b * i * o < SPLIT_MIN:  # arms_matmul's own loop over the arms, one product at a time
-        gx = arms_matmul(gy, w.transpose(1, 2), None) if need_gx else None
-        return gx, arms_matmul(x.transpose(1, 2), gy, None)
-    jobs = [pool.submit(arm, e) for e in range(1, e_n)]
-    arm(0)
-    for j in jobs:
-        j.result()
-    return (torch.from_numpy(gx) if need_gx else None), torch.from_numpy(gw)
-
-
-class ArmsLinear(torch.autograd.Function):
-    """b + x @ w per arm, and its gradients, through arms_matmul: (E, B, in), (E, in, out), (E, 1, out)."""
+    Per arm and layer i (weights W_i (in, out), biases b_i (1, out), on slices of the stacked tensors):
+        forward   z_i = h_{i-1} @ W_i + b_i;  h_i = relu(z_i) but for the last layer  (h_{-1} = x)
+        backward  dW_i = h_{i-1}^T @ g_i;  g_{i-1} = relu'(h_{i-1}) * (g_i @ W_i^T);  db_i = sum of g_i's rows
+    Every product is one numpy (OpenBLAS) sgemm of one arm's matrices, the bias, ReLU and its gradient
+    torch's own kernels (an elementwise op computes an element alike in any slice), the bias gradient one
+    sum over the stacked rows: the arithmetic, op for op, of torch's autograd over Linear and ReLU layers
+    whose products are these sgemms."""
 
     @staticmethod
-    def forward(ctx, x, w, b, pool):
-        ctx.save_for_backward(x, w)
+    def forward(ctx, x, pool, *params):
+        n = len(params) // 2
+        ws = [w.detach().numpy() for w in params[:n]]  # (E, in, out) each
+        bs = [b.detach() for b in params[n:]]  # (E, 1, out) each
+        xs = x.detach().numpy()  # (E, B, in)
+        arms, rows = xs.shape[:2]
+        hs = [np.empty((arms, rows, w.shape[2]), np.float32) for w in ws]  # each layer's output, (E, B, out)
+
+        def arm(e):
+            h = xs[e]
+            for i in range(n):
+                np.matmul(h, ws[i][e], out=hs[i][e])
+                z = torch.from_numpy(hs[i][e]).add_(bs[i][e])
+                if i < n - 1:
+                    z.relu_()  # the hidden layer's output, kept for the backward
+                h = hs[i][e]
+
+        on_arms(arm, arms, pool if rows * sum(w[0].size for w in ws) >= SPLIT_MIN else None)
         ctx.pool = pool
-        return arms_matmul(x, w, pool).add_(b)
+        ctx.save_for_backward(x, *params[:n], *map(torch.from_numpy, hs[:-1]))
+        return torch.from_numpy(hs[-1])
 
     @staticmethod
-    def backward(ctx, gy):
-        x, w = ctx.saved_tensors
-        gy = gy.contiguous()
-        gx, gw = arms_grads(x, w, gy, ctx.pool, ctx.needs_input_grad[0])  # (E, B, in), (E, in, out)
-        return gx, gw, gy.sum(1, keepdim=True), None
+    def backward(ctx, gout):
+        x, *saved = ctx.saved_tensors
+        n = (len(saved) + 1) // 2
+        ws = [w.detach().numpy() for w in saved[:n]]
+        ins = [x.detach().numpy()] + [h.numpy() for h in saved[n:]]  # each layer's input, (E, B, in)
+        arms, rows = ins[0].shape[:2]
+        gs = [np.empty_like(h) for h in ins[1:]] + [gout.contiguous().numpy()]  # dloss/dz_i, (E, B, out)
+        gws = [np.empty_like(w) for w in ws]  # (E, in, out)
+        need_gx = ctx.needs_input_grad[0]
+        gx = np.empty_like(ins[0]) if need_gx else None
+
+        def arm(e):
+            for i in reversed(range(n)):
+                g = gs[i][e]
+                np.matmul(ins[i][e].T, g, out=gws[i][e])
+                if i > 0:  # through the ReLU below: the gradient where its output was positive
+                    gh = torch.from_numpy(np.matmul(g, ws[i][e].T))
+                    h = torch.from_numpy(ins[i][e])
+                    torch.ops.aten.threshold_backward.grad_input(
+                        gh, h, 0, grad_input=torch.from_numpy(gs[i - 1][e])
+                    )
+                elif need_gx:
+                    np.matmul(g, ws[0][e].T, out=gx[e])
+
+        on_arms(arm, arms, ctx.pool if rows * sum(w[0].size for w in ws) >= SPLIT_MIN else None)
+        gbs = [torch.from_numpy(g).sum(1, keepdim=True) for g in gs]  # (E, 1, out)
+        return (torch.from_numpy(gx) if need_gx else None), None, *map(torch.from_numpy, gws), *gbs
 
 
 class MLPStack(torch.nn.Module):
@@ -155,12 +174,13 @@ class MLPStack(torch.nn.Module):
         return self.blas and w.device.type == "cpu" and w.dtype == torch.float32
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:  # (E, B, in) -> (E, B, out)
-        numpy_path = self.on_numpy()
-        if numpy_path and self.pool is None and min(len(x), self.threads) > 1:  # threads for arms 1..
-            self.pool = ThreadPoolExecutor(min(len(x), self.threads) - 1)
+        if self.on_numpy():
+            if self.pool is None and min(len(x), self.threads) > 1:  # threads for arms 1..
+                self.pool = ThreadPoolExecutor(min(len(x), self.threads) - 1)
+            return ArmsMLP.apply(x, self.pool, *self.weights, *self.biases)
         last = len(self.weights) - 1
         for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            x = ArmsLinear.apply(x, w, b, self.pool) if numpy_path else torch.baddbmm(b, x, w)  # b + x @ w
+            x = torch.baddbmm(b, x, w)  # b + x @ w
             if i < last:
                 x = x.relu()
         return x

@@ -70,6 +70,33 @@ def test_an_arm_in_the_stack_trains_as_if_alone(other_n):
     assert not torch.allclose(together[0][0].weight, together[1][0].weight)
 
 
+def test_the_arms_threads_change_no_bit(monkeypatch):
+    """Each arm's pass on a thread of its own (ch37.ensemble.ArmsMLP) or all on one thread: the same
+    weights, bit for bit, and the same input gradient, where the products run on numpy's OpenBLAS."""
+    from ch37 import ensemble
+
+    torch.manual_seed(2)
+    init = mlp().state_dict()
+    sets = [data(50, 0), data(37, 1), data(64, 2)]
+    threads = torch.get_num_threads()
+    torch.set_num_threads(3)  # the stack takes its arms' threads from torch's count as it is built
+    try:
+        got = {}
+        for split_min in (0, 10**12):  # every pass on the arms' threads; none
+            monkeypatch.setattr(ensemble, "SPLIT_MIN", split_min)
+            x = torch.stack([x[:16] for x, _ in sets]).requires_grad_()
+            stack = MLPStack([init] * 3)
+            stack(x).square().sum().backward()
+            got[split_min] = ([t.detach() for t in fit(sets, init)[0].state_dict().values()], x.grad)
+            if not stack.on_numpy():
+                pytest.skip("the products run on torch here: no arms' threads")
+            assert split_min or stack.pool is not None
+    finally:
+        torch.set_num_threads(threads)
+    (w0, g0), (w1, g1) = got.values()
+    assert all(torch.equal(a, b) for a, b in zip(w0, w1)) and torch.equal(g0, g1)
+
+
 def test_a_coupled_loss_would_be_caught():
     """The mean over arms (instead of the sum) halves each arm's gradient; Adam mostly hides a scale,
     so couple the arms for real: a loss on the arms' average prediction. The check must see it."""
