@@ -75,19 +75,25 @@ def one_blas_thread() -> bool:
 SPLIT_MIN = 1_000_000  # multiply-adds of one arm's pass below which a thread's hand-off costs more
 
 
-def on_arms(arm, arms: int, pool: ThreadPoolExecutor | None) -> None:
-    """arm(e) for every arm e: arms 1.. on `pool` while this thread does arm 0 (all on this thread if no
-    pool). The work of one arm never touches another's slices, so the order does not matter."""
-    jobs = [pool.submit(arm, e) for e in range(1, arms)] if pool is not None else []
-    for e in range(arms if pool is None else 1):
-        arm(e)
+def on_arms(arm, arms: int, pool: ThreadPoolExecutor | None, lanes: int) -> None:
+    """arm(e) for every arm e on `lanes` threads, lane j taking arms j, j + lanes, ...: lanes 1.. on
+    `pool`, lane 0 on this thread (all on this thread if no pool). The work of one arm never touches
+    another's slices, so neither the order nor the lane changes a bit."""
+    lanes = min(lanes, arms) if pool is not None else 1
+
+    def lane(j):
+        for e in range(j, arms, lanes):
+            arm(e)
+
+    jobs = [pool.submit(lane, j) for j in range(1, lanes)]
+    lane(0)
     for j in jobs:
         j.result()
 
 
 class ArmsMLP(torch.autograd.Function):
-    """The stack's whole forward and backward, each arm's pass on a thread of its own: one hand-off per
-    pass where one per layer left each layer's bias, ReLU and small products on one thread.
+    """The stack's whole forward and backward, the arms' passes spread over `lanes` threads (on_arms): one
+    hand-off per pass where one per layer left each layer's bias, ReLU and small products on one thread.
 
     Per arm and layer i (weights W_i (in, out), biases b_i (1, out), on slices of the stacked tensors):
         forward   z_i = h_{i-1} @ W_i + b_i;  h_i = relu(z_i) but for the last layer  (h_{-1} = x)
@@ -98,7 +104,7 @@ class ArmsMLP(torch.autograd.Function):
     whose products are these sgemms."""
 
     @staticmethod
-    def forward(ctx, x, pool, *params):
+    def forward(ctx, x, pool, lanes, *params):
         n = len(params) // 2
         ws = [w.detach().numpy() for w in params[:n]]  # (E, in, out) each
         bs = [b.detach() for b in params[n:]]  # (E, 1, out) each
@@ -115,8 +121,9 @@ class ArmsMLP(torch.autograd.Function):
                     z.relu_()  # the hidden layer's output, kept for the backward
                 h = hs[i][e]
 
-        on_arms(arm, arms, pool if rows * sum(w[0].size for w in ws) >= SPLIT_MIN else None)
-        ctx.pool = pool
+        ctx.pool = pool if rows * sum(w[0].size for w in ws) >= SPLIT_MIN else None  # worth a hand-off
+        ctx.lanes = lanes
+        on_arms(arm, arms, ctx.pool, lanes)
         ctx.save_for_backward(x, *params[:n], *map(torch.from_numpy, hs[:-1]))
         return torch.from_numpy(hs[-1])
 
@@ -145,9 +152,9 @@ class ArmsMLP(torch.autograd.Function):
                 elif need_gx:
                     np.matmul(g, ws[0][e].T, out=gx[e])
 
-        on_arms(arm, arms, ctx.pool if rows * sum(w[0].size for w in ws) >= SPLIT_MIN else None)
+        on_arms(arm, arms, ctx.pool, ctx.lanes)
         gbs = [torch.from_numpy(g).sum(1, keepdim=True) for g in gs]  # (E, 1, out)
-        return (torch.from_numpy(gx) if need_gx else None), None, *map(torch.from_numpy, gws), *gbs
+        return (torch.from_numpy(gx) if need_gx else None), None, None, *map(torch.from_numpy, gws), *gbs
 
 
 class MLPStack(torch.nn.Module):
@@ -175,9 +182,10 @@ class MLPStack(torch.nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:  # (E, B, in) -> (E, B, out)
         if self.on_numpy():
-            if self.pool is None and min(len(x), self.threads) > 1:  # threads for arms 1..
-                self.pool = ThreadPoolExecutor(min(len(x), self.threads) - 1)
-            return ArmsMLP.apply(x, self.pool, *self.weights, *self.biases)
+            lanes = min(len(x), self.threads)  # the arms' threads, this one included
+            if self.pool is None and lanes > 1:
+                self.pool = ThreadPoolExecutor(lanes - 1)
+            return ArmsMLP.apply(x, self.pool, lanes, *self.weights, *self.biases)
         last = len(self.weights) - 1
         for i, (w, b) in enumerate(zip(self.weights, self.biases)):
             x = torch.baddbmm(b, x, w)  # b + x @ w

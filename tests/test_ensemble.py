@@ -70,16 +70,18 @@ def test_an_arm_in_the_stack_trains_as_if_alone(other_n):
     assert not torch.allclose(together[0][0].weight, together[1][0].weight)
 
 
-def test_the_arms_threads_change_no_bit(monkeypatch):
-    """Each arm's pass on a thread of its own (ch37.ensemble.ArmsMLP) or all on one thread: the same
-    weights, bit for bit, and the same input gradient, where the products run on numpy's OpenBLAS."""
+@pytest.mark.parametrize("lanes", [2, 3])
+def test_the_arms_threads_change_no_bit(monkeypatch, lanes):
+    """Three arms' passes spread over `lanes` threads (ch37.ensemble.ArmsMLP; with 2, one thread takes
+    two arms) or all on one thread: the same weights, bit for bit, and the same input gradient, where the
+    products run on numpy's OpenBLAS."""
     from ch37 import ensemble
 
     torch.manual_seed(2)
     init = mlp().state_dict()
     sets = [data(50, 0), data(37, 1), data(64, 2)]
     threads = torch.get_num_threads()
-    torch.set_num_threads(3)  # the stack takes its arms' threads from torch's count as it is built
+    torch.set_num_threads(lanes)  # the stack takes its arms' threads from torch's count as it is built
     try:
         got = {}
         for split_min in (0, 10**12):  # every pass on the arms' threads; none
