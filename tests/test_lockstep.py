@@ -332,3 +332,22 @@ def test_live_replay_in_lockstep_equals_one_at_a_time(sources):
         )
         assert 5 <= sum(r.kept for r in one) < len(jobs)  # both outcomes are compared
         assert_same_results(one, together)
+
+
+def test_the_bench_notes_every_simulated_frame_kept_or_not(sources):
+    """Issue 58 #6: tools.bench engine's floor of every simulated frame steps the env through the frames
+    of the failed attempts too. Its notes are lockstep's own attempts: one per attempt that simulated,
+    as many frames as each Outcome's steps, and a kept one's actions byte for byte its episode's."""
+    from tools.bench import every_attempt
+
+    how = Perturbation(1, 0.02, 0.2)
+    jobs = [(e, k) for e in sorted(sources) for k in range(10)]
+    together = lockstep.attempts_lockstep(PUSHT, sources, jobs, how, mode="replay")
+    noted = every_attempt(PUSHT, sources, jobs, how, "replay", engine.Simulators())
+    ran = [r for r in together if r.steps]
+    assert 0 < sum(r.kept for r in ran) < len(ran)  # failed attempts are among them
+    assert len(noted) == len(ran)
+    for r, (start, actions) in zip(ran, noted):
+        assert start == r.start and len(actions) == r.steps
+        if r.kept:
+            assert actions.tobytes() == r.episode["action"].tobytes()

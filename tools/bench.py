@@ -495,13 +495,44 @@ def kept_runs(root: Path) -> list:
     return [(s[0], a) for s, a in zip(np.split(arrays["aug.start"], cuts), np.split(arrays["action"], cuts))]
 
 
+def every_attempt(task, sources: dict, jobs: list, how, mode: str, sims) -> list:
+    """(start, actions (T, act_dim)) of every attempt of `jobs` that simulated a frame, kept or not: the
+    engine's own Mode for `mode`, one attempt at a time (the same frames as lockstep, tests/test_lockstep.py),
+    noting each attempt's actions before its finish drops a failed one's frames."""
+    from datagen import lockstep
+
+    kind, _ = lockstep.mode_parts(task, sources, how, mode, plans=sims.plans, lanes=False)
+    runs = []
+
+    class Noting(lockstep.Mode):
+        def begin(self, job, env):
+            return kind.begin(job, env)
+
+        def decide(self, lanes, envs, obs):
+            return kind.decide(lanes, envs, obs)
+
+        def step(self, envs, actions):
+            return kind.step(envs, actions)
+
+        def finish(self, lane, env, episode, last_obs):
+            actions = episode["action"].copy()  # the frames the env was stepped through, before they go
+            got = kind.finish(lane, env, episode, last_obs)
+            runs.append((got.start, actions))
+            return got
+
+    lockstep.one_lane(task, sims.env(task), jobs, Noting())
+    return runs
+
+
 def per_demo_costs(
     task, src: Path, attempts_per_demo: int, seed: int, repeats: int, mode: str = "resolve", sigma=None
 ) -> dict:
     """Where one core's time goes, in this process, for augment_demos.py's first attempts_per_demo
     attempts of every source episode at `seed` in `mode`: one attempt at a time, in lockstep (where the
     task's mode has lanes; else the same one at a time), the physics floor of the kept frames, and the
-    engine's write of the kept set; `repeats` rounds, alternated, medians."""
+    engine's write of the kept set; `repeats` rounds, alternated, medians. And the floor of every frame
+    simulated, kept or not (physics_all_s): a mode that keeps few attempts pays for its failed ones' frames
+    too, which the kept frames' floor does not count (lockstep_over_all_physics: the engine's own cost)."""
     from datagen import Perturbation, engine, lockstep
     from datagen.source_check import read_source, successful_only
 
@@ -523,6 +554,7 @@ def per_demo_costs(
     def together(_):
         s, results = clock(lockstep.attempts_lockstep, task, sources, jobs, how, mode=mode, sims=sims)
         got["kept"] = [r.episode for r in results if r.kept]
+        got["simulated"] = sum(r.steps for r in results)  # control steps, kept or not
         return s
 
     def write(_):
@@ -533,17 +565,21 @@ def per_demo_costs(
         if sum(r.kept for r in got["one"]) != len(got["kept"]):
             raise DataError("lockstep kept another set than one attempt at a time")
 
+    every = every_attempt(task, sources, jobs, how, mode, sims)  # the same frames each round: noted once
     measure = {
         "one_at_a_time_s": one_at_a_time,
         "lockstep_s": together,
         "physics_s": lambda _: physics_floor(
             task, ((ep["aug.start"][0], ep["action"]) for ep in got["kept"])
         ),
+        "physics_all_s": lambda _: physics_floor(task, every),
         "write_s": write,
     }
     times = alternate(measure, repeats, after_round=same_kept)
     med, kept = medians(times), got["kept"]
     frames = sum(len(ep["action"]) for ep in kept)
+    if sum(len(a) for _, a in every) != got["simulated"]:
+        raise DataError("the attempts one at a time simulated other frames than lockstep's")
     if not frames:  # nothing kept, nothing to time the physics on
         raise DataError(
             f"{task.name} {mode}: none of the {len(jobs)} attempts was kept, so no kept frames to time the "
@@ -555,11 +591,13 @@ def per_demo_costs(
         "attempts": len(jobs),
         "kept": len(kept),
         "frames": frames,
+        "simulated_frames": got["simulated"],
         **med,
         "runs": times,
         "one_at_a_time_over_physics": med["one_at_a_time_s"] / med["physics_s"],
         "lockstep_over_physics": med["lockstep_s"] / med["physics_s"],
         "lockstep_and_write_over_physics": (med["lockstep_s"] + med["write_s"]) / med["physics_s"],
+        "lockstep_over_all_physics": med["lockstep_s"] / med["physics_all_s"],
         "physics_us_per_frame": med["physics_s"] / frames * 1e6,
         "write_us_per_frame": med["write_s"] / frames * 1e6,
     }
@@ -661,7 +699,9 @@ def engine_costs(task, src: Path, a) -> dict:
         f"lockstep {c['lockstep_s']:.2f} s, physics floor {c['physics_s']:.2f} s, write "
         f"{c['write_s']:.2f} s; lockstep {c['lockstep_over_physics']:.2f}x the physics "
         f"({c['lockstep_and_write_over_physics']:.2f}x with the write), "
-        f"one at a time {c['one_at_a_time_over_physics']:.2f}x"
+        f"one at a time {c['one_at_a_time_over_physics']:.2f}x; every simulated frame "
+        f"({c['simulated_frames']}) {c['physics_all_s']:.2f} s, "
+        f"lockstep {c['lockstep_over_all_physics']:.2f}x"
     )
     return c
 
