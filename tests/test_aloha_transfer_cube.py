@@ -14,6 +14,7 @@ from datagen import Perturbation, engine, known_tasks
 from datagen.demos import expert_episodes
 from datagen.source_check import read_source
 from datagen.task import Source, failures_of
+from datagen.tasks import aloha_sim as sim
 from datagen.tasks.aloha_sim import CUBE_RANGE, box_pose
 from datagen.tasks.aloha_sim_expert import TransferCubeExpert
 from lerobot_v3 import load_arrays
@@ -92,6 +93,49 @@ def test_a_start_is_the_cube_gym_aloha_draws():
         np.testing.assert_array_equal(obs[14:21], np.r_[want, 1, 0, 0, 0].astype(np.float32))
     big = box_pose(env_seed(10**9, "eval", 3))
     assert all(lo <= v <= hi for v, (lo, hi) in zip(big[:3], CUBE_RANGE))
+
+
+def plain_ik(m, d, arm, q, position, rotation, iters):
+    """aloha_sim.ik as the textbook writes it: each iteration's grasp point and orientation error, the
+    Jacobian, q += J^T (J J^T + lambda^2 I)^-1 e, clipped to the joints' ranges."""
+    q = np.array(q, np.float64)
+    b = m.body(sim.GRIPPERS[arm]).id
+    for _ in range(iters):
+        d.qpos[sim.QPOS[arm]] = q
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        p, rot = sim.gripper_pose(m, d, arm)
+        quat, vel = np.zeros(4), np.zeros(3)
+        mujoco.mju_mat2Quat(quat, (np.asarray(rotation) @ rot.T).ravel())
+        mujoco.mju_quat2Vel(vel, quat, 1.0)
+        err = np.concatenate([np.asarray(position, np.float64) - p, sim.ROT_WEIGHT * vel])
+        jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+        mujoco.mj_jac(m, d, jacp, jacr, p, b)
+        jac = np.vstack([jacp[:, sim.DOFS[arm]], sim.ROT_WEIGHT * jacr[:, sim.DOFS[arm]]])
+        step = jac.T @ np.linalg.solve(jac @ jac.T + sim.IK_DAMPING**2 * np.eye(6), err)
+        q = np.clip(q + step, *m.jnt_range[sim.JOINT_IDS[arm]].T)
+    return q
+
+
+def test_the_inverse_kinematics_is_the_plain_damped_least_squares_bit_for_bit():
+    """aloha_sim.ik writes the arithmetic out on buffers it makes once, with np.linalg.solve's own LAPACK
+    gufunc, for speed (issue 58 #6): the joints it returns, and the scratch MjData it leaves, are the
+    plain reading's bit for bit, from starts near and far, both arms, 1 to 24 iterations."""
+    m, d = sim.model("transfer_cube"), sim.scratch("transfer_cube")
+    rng = np.random.default_rng(0)
+    for i in range(200):
+        arm, iters = i % 2, int(rng.integers(1, 25))
+        d.qpos[:] = 0
+        d.qpos[0:6] = d.qpos[8:14] = sim.START_ARM_POSE[:6]
+        mujoco.mj_kinematics(m, d)
+        position, rotation = sim.gripper_pose(m, d, arm)
+        position = position + rng.normal(0, 0.05, 3)
+        q0 = sim.START_ARM_POSE[:6] + rng.normal(0, 0.3, 6)
+        before = d.qpos.copy()
+        want = plain_ik(m, d, arm, q0, position, rotation, iters)
+        left, d.qpos[:] = d.qpos.copy(), before
+        got = sim.ik(m, d, arm, q0, position, rotation, iters)
+        assert got.tobytes() == want.tobytes() and d.qpos.tobytes() == left.tobytes(), (i, got - want)
 
 
 def test_the_expert_solves_held_out_starts():

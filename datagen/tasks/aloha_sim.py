@@ -41,6 +41,7 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+from numpy.linalg import _umath_linalg  # np.linalg.solve's own LAPACK gufunc (ik)
 
 from ch37.errors import DataError
 
@@ -352,26 +353,32 @@ def ik(
     qadr, dofs = QPOS[arm], DOFS[arm]
     q = np.array(q, np.float64)
     b = m.body(GRIPPERS[arm]).id
-    # gripper_pose, the concatenations and np.clip written out on buffers made once: the same arithmetic
-    # in the same order (the same bits), without ~40 us of per-call overhead an iteration (a replayed
-    # ALOHA frame runs 2 x 20 of them)
+    # gripper_pose, the concatenations, np.clip and np.linalg.solve written out on buffers made once: the
+    # same arithmetic in the same order (the same bits: every product and sum is the same numpy loop,
+    # written into a buffer instead of a new array), without ~60 us of per-call overhead an iteration (a
+    # replayed ALOHA frame runs 2 x 20 of them). solve: the LAPACK gufunc np.linalg.solve calls, without its
+    # checks and error-state context; jac @ jac.T + damping is positive definite, never singular.
     position, rotation = np.asarray(position, np.float64), np.asarray(rotation)
     xpos, xmat = d.xpos[b], d.xmat[b].reshape(3, 3)  # views: mj_kinematics writes them in place
     jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+    jacp_arm, jacr_arm = jacp[:, dofs], jacr[:, dofs]  # views: mj_jac writes jacp and jacr in place
     lo, hi = m.jnt_range[JOINT_IDS[arm]].T
     err_q, vel, err, jac = np.zeros(4), np.zeros(3), np.zeros(6), np.zeros((6, 6))
+    p, turn, jjt, step = np.zeros(3), np.zeros((3, 3)), np.zeros((6, 6)), np.zeros(6)
     damping = IK_DAMPING**2 * np.eye(6)
     for _ in range(iters):
         d.qpos[qadr] = q
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
-        p = xpos + xmat @ TCP_OFFSET  # gripper_pose's grasp point
-        mujoco.mju_mat2Quat(err_q, (rotation @ xmat.T).ravel())
+        np.add(xpos, np.matmul(xmat, TCP_OFFSET, out=p), out=p)  # gripper_pose's grasp point
+        mujoco.mju_mat2Quat(err_q, np.matmul(rotation, xmat.T, out=turn).ravel())
         mujoco.mju_quat2Vel(vel, err_q, 1.0)
         np.subtract(position, p, out=err[:3])
         np.multiply(ROT_WEIGHT, vel, out=err[3:])
         mujoco.mj_jac(m, d, jacp, jacr, p, b)
-        jac[:3] = jacp[:, dofs]
-        np.multiply(ROT_WEIGHT, jacr[:, dofs], out=jac[3:])
-        q = np.minimum(np.maximum(q + jac.T @ np.linalg.solve(jac @ jac.T + damping, err), lo), hi)
+        jac[:3] = jacp_arm
+        np.multiply(ROT_WEIGHT, jacr_arm, out=jac[3:])
+        np.add(np.matmul(jac, jac.T, out=jjt), damping, out=jjt)
+        np.matmul(jac.T, _umath_linalg.solve1(jjt, err, signature="dd->d"), out=step)
+        np.minimum(np.maximum(np.add(q, step, out=q), lo, out=q), hi, out=q)
     return q
