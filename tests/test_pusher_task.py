@@ -11,6 +11,7 @@ from conftest import ROOT, run_script
 from datagen import Perturbation, engine, known_tasks
 from datagen.poses import quat_of
 from datagen.source_check import read_source
+from datagen.tasks import pusher_expert as pe
 from datagen.tasks.pusher_expert import PusherExpert, controller, hand_rotation, model, yaw_quat
 
 TASK = known_tasks()["pusher"]
@@ -55,6 +56,44 @@ def test_the_controller_takes_the_hand_to_a_pose_target():
     m = model()  # the torques it gives stay inside Pusher-v5's control range
     tau = controller(m, mujoco.MjData(m), obs.astype(np.float64), goal_pos + 1.0, goal_rot)
     assert np.all(np.abs(tau) <= 2.0)
+
+
+def plain_ik_step(m, data, target_pos, target_quat=None) -> np.ndarray:
+    """pusher_expert.ik_step as the textbook writes it: np.linalg.solve, np.r_, np.vstack, np.eye."""
+    bid = m.body("tips_arm").id
+    jp, jr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+    mujoco.mj_jacBody(m, data, jp, jr, bid)
+    e = np.asarray(target_pos, float) - data.xpos[bid]
+    e *= min(1.0, pe.MAX_POS_ERR / (np.linalg.norm(e) + 1e-12))
+    jac = jp[:, :7]
+    if target_quat is not None:
+        qinv, dqt, er = np.zeros(4), np.zeros(4), np.zeros(3)
+        mujoco.mju_negQuat(qinv, data.xquat[bid])
+        mujoco.mju_mulQuat(dqt, np.asarray(target_quat, float), qinv)
+        mujoco.mju_quat2Vel(er, dqt, 1.0)
+        er *= min(1.0, pe.MAX_ROT_ERR / (np.linalg.norm(er) + 1e-12))
+        e, jac = np.r_[e, pe.ROT_WEIGHT * er], np.vstack([jac, pe.ROT_WEIGHT * jr[:, :7]])
+    jjt = jac @ jac.T + pe.DAMPING**2 * np.eye(len(e))
+    base = m.body("r_shoulder_pan_link").pos
+    rest = pe.Q_REST.copy()
+    rest[0] = np.arctan2(target_pos[1] - base[1], target_pos[0] - base[0])
+    null = np.eye(7) - jac.T @ np.linalg.solve(jjt, jac)
+    return jac.T @ np.linalg.solve(jjt, e) + null @ (pe.K_NULL * (rest - data.qpos[:7]))
+
+
+def test_the_ik_step_is_the_plain_damped_least_squares_bit_for_bit():
+    """ik_step calls np.linalg.solve's own LAPACK gufuncs and reuses its lambda^2 I, for speed (issue 58
+    #6: the grasp choice's dry runs make ~700 steps an episode): its step is the plain reading's bit for
+    bit, with and without an orientation target, from joint angles across their ranges."""
+    m = model()
+    data, rng = mujoco.MjData(m), np.random.default_rng(0)
+    for i in range(300):
+        data.qpos[:7] = rng.uniform(*m.jnt_range[:7].T)
+        mujoco.mj_kinematics(m, data)
+        mujoco.mj_comPos(m, data)
+        target, quat = rng.uniform(-0.5, 0.8, 3), (yaw_quat(rng.uniform(-3, 3)) if i % 2 else None)
+        got, want = pe.ik_step(m, data, target, quat), plain_ik_step(m, data, target, quat)
+        assert got.tobytes() == want.tobytes(), (i, got - want)
 
 
 def test_the_expert_pushes_the_object_onto_the_goal_from_starts_it_was_not_tuned_on():
