@@ -921,8 +921,9 @@ def bench_rows() -> list[str]:
         c = r["per_demo_costs"]
         rows.append(
             f"| {c['task']} | {c['mode']} | {c['attempts']} | {c['kept']} | {thousands(c['frames'])} | "
-            f"{c['one_at_a_time_s']:.2f} | {c['lockstep_s']:.2f} | {c['physics_s']:.2f} | "
-            f"{c['lockstep_over_physics']:.2f}x | {c['lockstep_and_write_over_physics']:.2f}x |"
+            f"{thousands(c['simulated_frames'])} | {c['one_at_a_time_s']:.2f} | {c['lockstep_s']:.2f} | "
+            f"{c['physics_s']:.2f} | {c['lockstep_over_physics']:.2f}x | {c['physics_all_s']:.2f} | "
+            f"{c['lockstep_over_all_physics']:.2f}x | {c['lockstep_and_write_over_physics']:.2f}x |"
         )
     return rows
 
