@@ -16,6 +16,8 @@ depend on the 3-D path (tests/test_replay.py shows the two agree).
     interpolate(a, b, s)     the pose a fraction s of the way from a to b: position linear, orientation
                              by slerp (planar: yaw the short way)
     planar_pose(x, y, yaw)   the (4, 4) pose of a planar frame
+    solve(a, b)              np.linalg.solve(a, b) for float64 systems known to be well posed (an inverse
+                             kinematics' damped J J^T + lambda^2 I), its bits without its checks
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.linalg import _umath_linalg
 
 __all__ = [
     "interpolate",
@@ -35,6 +38,7 @@ __all__ = [
     "rotation_angle",
     "rotation_of",
     "slerp",
+    "solve",
     "transform_pose",
     "transform_segment",
 ]
@@ -179,3 +183,11 @@ def interpolate(a, b, s: float):
     out[:3, :3] = slerp(a[:3, :3], b[:3, :3], s)
     out[:3, 3] = a[:3, 3] + s * (b[:3, 3] - a[:3, 3])
     return out
+
+
+def solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """np.linalg.solve(a, b) of float64 arrays, the same bits: the LAPACK gufunc it calls, without its
+    checks and error-state context (~10 us a call, which a Python IK loop pays dozens of times a frame).
+    For a system known to be well posed (a damped least squares' J J^T + lambda^2 I, positive definite):
+    a singular `a` is not reported."""
+    return (_umath_linalg.solve1 if b.ndim == 1 else _umath_linalg.solve)(a, b, signature="dd->d")

@@ -41,9 +41,9 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-from numpy.linalg import _umath_linalg  # np.linalg.solve's own LAPACK gufunc (ik)
 
 from ch37.errors import DataError
+from datagen.poses import solve
 
 __all__ = [
     "CUBE_RANGE",
@@ -356,8 +356,8 @@ def ik(
     # gripper_pose, the concatenations, np.clip and np.linalg.solve written out on buffers made once: the
     # same arithmetic in the same order (the same bits: every product and sum is the same numpy loop,
     # written into a buffer instead of a new array), without ~60 us of per-call overhead an iteration (a
-    # replayed ALOHA frame runs 2 x 20 of them). solve: the LAPACK gufunc np.linalg.solve calls, without its
-    # checks and error-state context; jac @ jac.T + damping is positive definite, never singular.
+    # replayed ALOHA frame runs 2 x 20 of them). solve: np.linalg.solve's bits without its checks
+    # (datagen.poses.solve); jac @ jac.T + damping is positive definite, never singular.
     position, rotation = np.asarray(position, np.float64), np.asarray(rotation)
     xpos, xmat = d.xpos[b], d.xmat[b].reshape(3, 3)  # views: mj_kinematics writes them in place
     jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
@@ -379,6 +379,6 @@ def ik(
         jac[:3] = jacp_arm
         np.multiply(ROT_WEIGHT, jacr_arm, out=jac[3:])
         np.add(np.matmul(jac, jac.T, out=jjt), damping, out=jjt)
-        np.matmul(jac.T, _umath_linalg.solve1(jjt, err, signature="dd->d"), out=step)
+        np.matmul(jac.T, solve(jjt, err), out=step)
         np.minimum(np.maximum(np.add(q, step, out=q), lo, out=q), hi, out=q)
     return q

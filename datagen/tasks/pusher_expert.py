@@ -21,7 +21,8 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-from numpy.linalg import _umath_linalg  # np.linalg.solve's own LAPACK gufuncs (ik_step)
+
+from datagen.poses import solve
 
 __all__ = ["PoseControl", "PusherExpert", "controller", "hand_rotation", "held", "model"]
 
@@ -98,10 +99,10 @@ def ik_step(m, data, target_pos, target_quat=None) -> np.ndarray:
     base = m.body("r_shoulder_pan_link").pos
     rest = Q_REST.copy()
     rest[0] = np.arctan2(target_pos[1] - base[1], target_pos[0] - base[0])
-    # np.linalg.solve's own gufuncs without its checks and error-state context (jjt is positive definite):
-    # the same bits, ~10 us less a call; the grasp choice's dry runs make ~700 of these an episode
-    null = np.eye(7) - jac.T @ _umath_linalg.solve(jjt, jac, signature="dd->d")
-    return jac.T @ _umath_linalg.solve1(jjt, e, signature="dd->d") + null @ (K_NULL * (rest - data.qpos[:7]))
+    # np.linalg.solve's bits without its checks (jjt is positive definite): ~10 us less a call, and the
+    # grasp choice's dry runs make ~700 of these steps an episode
+    null = np.eye(7) - jac.T @ solve(jjt, jac)
+    return jac.T @ solve(jjt, e) + null @ (K_NULL * (rest - data.qpos[:7]))
 
 
 def controller(m, data, obs, target_pos, target_quat=None) -> np.ndarray:
