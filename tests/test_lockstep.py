@@ -351,3 +351,37 @@ def test_the_bench_notes_every_simulated_frame_kept_or_not(sources):
         assert start == r.start and len(actions) == r.steps
         if r.kept:
             assert actions.tobytes() == r.episode["action"].tobytes()
+
+
+def test_the_bench_clocks_the_tasks_own_code_once_and_changes_nothing(sources):
+    """Issue 58 #6: tools.bench engine splits lockstep's time into the task's own code (TaskClock: its
+    expert, its replay's conversions, its poses) and the rest (the engine and the physics). The clocked
+    copy of the task gives the same attempts bit for bit; its expert's every act is on the clock (one
+    call per simulated frame, besides a perturb per attempt); a call inside a clocked call counts once."""
+    from tools.bench import TaskClock
+
+    how = Perturbation(1, 0.02, 0.2)
+    jobs = [(e, k) for e in sorted(sources) for k in range(3)]
+    for mode in ("resolve", "replay"):
+        plain, _ = lockstep.mode_parts(PUSHT, sources, how, mode, lanes=False)
+        want = lockstep.one_lane(PUSHT, PUSHT.make_env(), jobs, plain)
+        clock = TaskClock(PUSHT)
+        timed, _ = lockstep.mode_parts(clock.clocked, sources, how, mode, lanes=False)
+        got = lockstep.one_lane(clock.clocked, PUSHT.make_env(), jobs, timed)
+        assert [r.steps for r in got] == [r.steps for r in want] and sum(r.kept for r in want)
+        for a, b in zip(got, want):
+            assert (a.episode is None) == (b.episode is None)
+            if a.episode is not None:
+                assert a.episode.keys() == b.episode.keys()
+                assert all(
+                    np.asarray(a.episode[k]).tobytes() == np.asarray(b.episode[k]).tobytes()
+                    for k in b.episode
+                )
+        # a frame's act (resolve) or to_action (replay), and each attempt's perturb
+        assert clock.calls >= sum(r.steps for r in want) + len(jobs) and clock.s > 0.0
+
+    clock = TaskClock(PUSHT)
+    inner = clock._timed(lambda: None)
+    outer = clock._timed(lambda: [inner() for _ in range(5)])
+    outer()
+    assert clock.calls == 1

@@ -17,6 +17,7 @@ process. Run them alone: another busy process moves the figures. Exit codes: 0 o
 from __future__ import annotations
 
 import contextlib
+import copy
 import hashlib
 import importlib
 import json
@@ -36,7 +37,9 @@ import tempfile
 import time
 import warnings
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 # numpy and torch are imported where used: `lesson` times torch's import (numpy's included) itself
 from ch37 import ROOT, cli, config, errors
@@ -524,6 +527,65 @@ def every_attempt(task, sources: dict, jobs: list, how, mode: str, sims) -> list
     return runs
 
 
+# The task's own code, as the engine calls it: the Task's members but make_env, place and step_batch (they
+# make, reset and step the env: what the physics floors time), its expert's act and act_batch, and its
+# replay's action kind (to_target, to_action: the gym-aloha tasks' inverse kinematics).
+TASK_MEMBERS = (
+    "start_of",
+    "perturb",
+    "success",
+    "state_problem",
+    "object_pose",
+    "frame_pose",
+    "start_distance",
+    "signals",
+    "arm_pose",
+    "frame_columns",
+)
+
+
+class TaskClock:
+    """The seconds and calls a task's own code (TASK_MEMBERS, its expert, its replay's action kind) takes
+    while the engine runs `clocked`, a shallow copy of the task with those members on a clock. A call
+    inside another clocked call (to_action reading arm_pose) counts once, in the outer one."""
+
+    def __init__(self, task):
+        self.s, self.calls, self._depth = 0.0, 0, 0
+        t = self.clocked = copy.copy(task)
+        for name in TASK_MEMBERS:
+            setattr(t, name, self._timed(getattr(task, name)))
+        if task.expert is not None:
+            batch = task.expert.batch and self._made(task.expert.batch, "act_batch")
+            t.expert = replace(task.expert, cls=self._made(task.expert.cls, "act"), batch=batch)
+        action = task.replay.action  # its two conversions on the clock
+        clocked = SimpleNamespace(
+            to_target=self._timed(action.to_target), to_action=self._timed(action.to_action)
+        )
+        t.replay = replace(task.replay, action=clocked)
+
+    def _timed(self, fn):
+        def run(*args, **kwargs):
+            self._depth += 1
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self._depth -= 1
+                if not self._depth:
+                    self.s += time.perf_counter() - t0
+                    self.calls += 1
+
+        return run
+
+    def _made(self, cls, method: str):
+        def make(*args, **kwargs):
+            obj = cls(*args, **kwargs)
+            setattr(obj, method, self._timed(getattr(obj, method)))
+            return obj
+
+        return make
+
+
 def per_demo_costs(
     task, src: Path, attempts_per_demo: int, seed: int, repeats: int, mode: str = "resolve", sigma=None
 ) -> dict:
@@ -532,7 +594,10 @@ def per_demo_costs(
     task's mode has lanes; else the same one at a time), the physics floor of the kept frames, and the
     engine's write of the kept set; `repeats` rounds, alternated, medians. And the floor of every frame
     simulated, kept or not (physics_all_s): a mode that keeps few attempts pays for its failed ones' frames
-    too, which the kept frames' floor does not count (lockstep_over_all_physics: the engine's own cost)."""
+    too, which the kept frames' floor does not count (lockstep_over_all_physics). And the seconds inside the
+    task's own code in one more lockstep run (task_s, TaskClock: its expert, its replay's conversions, its
+    poses and signals): what is left of lockstep without them is the engine and the physics
+    (engine_over_all_physics: lockstep_s - task_s over physics_all_s)."""
     from datagen import Perturbation, engine, lockstep
     from datagen.source_check import read_source, successful_only
 
@@ -554,8 +619,17 @@ def per_demo_costs(
     def together(_):
         s, results = clock(lockstep.attempts_lockstep, task, sources, jobs, how, mode=mode, sims=sims)
         got["kept"] = [r.episode for r in results if r.kept]
-        got["simulated"] = sum(r.steps for r in results)  # control steps, kept or not
+        got["steps"] = [r.steps for r in results]
+        got["simulated"] = sum(got["steps"])  # control steps, kept or not
         return s
+
+    def task_code(_):  # lockstep once more, the task's own code on a clock (TaskClock)
+        c = TaskClock(task)
+        results = lockstep.attempts_lockstep(c.clocked, sources, jobs, how, mode=mode, sims=sims)
+        if [r.steps for r in results] != got["steps"]:
+            raise DataError("lockstep with the task's code on a clock simulated other frames")
+        got["task_calls"] = c.calls
+        return c.s
 
     def write(_):
         with tempfile.TemporaryDirectory() as tmp:  # the engine's own writer, whatever columns it adds
@@ -573,6 +647,7 @@ def per_demo_costs(
             task, ((ep["aug.start"][0], ep["action"]) for ep in got["kept"])
         ),
         "physics_all_s": lambda _: physics_floor(task, every),
+        "task_s": task_code,
         "write_s": write,
     }
     times = alternate(measure, repeats, after_round=same_kept)
@@ -598,6 +673,9 @@ def per_demo_costs(
         "lockstep_over_physics": med["lockstep_s"] / med["physics_s"],
         "lockstep_and_write_over_physics": (med["lockstep_s"] + med["write_s"]) / med["physics_s"],
         "lockstep_over_all_physics": med["lockstep_s"] / med["physics_all_s"],
+        "task_calls": got["task_calls"],
+        "task_share": med["task_s"] / med["lockstep_s"],
+        "engine_over_all_physics": (med["lockstep_s"] - med["task_s"]) / med["physics_all_s"],
         "physics_us_per_frame": med["physics_s"] / frames * 1e6,
         "write_us_per_frame": med["write_s"] / frames * 1e6,
     }
@@ -701,7 +779,9 @@ def engine_costs(task, src: Path, a) -> dict:
         f"({c['lockstep_and_write_over_physics']:.2f}x with the write), "
         f"one at a time {c['one_at_a_time_over_physics']:.2f}x; every simulated frame "
         f"({c['simulated_frames']}) {c['physics_all_s']:.2f} s, "
-        f"lockstep {c['lockstep_over_all_physics']:.2f}x"
+        f"lockstep {c['lockstep_over_all_physics']:.2f}x; the task's own code {c['task_s']:.2f} s "
+        f"({c['task_calls']} calls, {100 * c['task_share']:.0f}% of lockstep), the rest (the engine and "
+        f"the physics) {c['engine_over_all_physics']:.2f}x the physics"
     )
     return c
 
