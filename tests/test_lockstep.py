@@ -3,6 +3,7 @@ datagen.tasks.fast_experts' PushTBatch and AlohaBatch equals the expert's act bi
 and datagen.lockstep.attempts_lockstep returns exactly what datagen.engine.attempt returns, for both modes on
 PushT and for ALOHA's re-solve."""
 
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -353,11 +354,12 @@ def test_the_bench_notes_every_simulated_frame_kept_or_not(sources):
             assert actions.tobytes() == r.episode["action"].tobytes()
 
 
-def test_the_bench_clocks_the_tasks_own_code_once_and_changes_nothing(sources):
-    """Issue 58 #6: tools.bench engine splits lockstep's time into the task's own code (TaskClock: its
-    expert, its replay's conversions, its poses) and the rest (the engine and the physics). The clocked
-    copy of the task gives the same attempts bit for bit; its expert's every act is on the clock (one
-    call per simulated frame, besides a perturb per attempt); a call inside a clocked call counts once."""
+def test_the_bench_clocks_the_tasks_code_and_the_physics_once_and_changes_nothing(sources):
+    """Issue 58 #6: tools.bench engine splits lockstep's time into the task's own code (its expert, its
+    replay's conversions, its poses), the physics (its envs' place and steps) and the engine's own, on the
+    clocks of a copy of the task (TaskClock). The copy gives the same attempts bit for bit; its expert's
+    every act is on the task's clock (one call per simulated frame, besides a perturb per attempt); a
+    call inside a clocked call counts once."""
     from tools.bench import TaskClock
 
     how = Perturbation(1, 0.02, 0.2)
@@ -367,7 +369,9 @@ def test_the_bench_clocks_the_tasks_own_code_once_and_changes_nothing(sources):
         want = lockstep.one_lane(PUSHT, PUSHT.make_env(), jobs, plain)
         clock = TaskClock(PUSHT)
         timed, _ = lockstep.mode_parts(clock.clocked, sources, how, mode, lanes=False)
-        got = lockstep.one_lane(clock.clocked, PUSHT.make_env(), jobs, timed)
+        t0 = time.perf_counter()
+        got = lockstep.one_lane(clock.clocked, clock.clocked.make_env(), jobs, timed)
+        wall = time.perf_counter() - t0
         assert [r.steps for r in got] == [r.steps for r in want] and sum(r.kept for r in want)
         for a, b in zip(got, want):
             assert (a.episode is None) == (b.episode is None)
@@ -377,11 +381,20 @@ def test_the_bench_clocks_the_tasks_own_code_once_and_changes_nothing(sources):
                     np.asarray(a.episode[k]).tobytes() == np.asarray(b.episode[k]).tobytes()
                     for k in b.episode
                 )
-        # a frame's act (resolve) or to_action (replay), and each attempt's perturb
-        assert clock.calls >= sum(r.steps for r in want) + len(jobs) and clock.s > 0.0
+        # a frame's act (resolve) or to_action (replay), and each attempt's perturb; a frame's step and
+        # each attempt's place
+        frames = sum(r.steps for r in want)
+        assert clock.calls["task"] >= frames + len(jobs) and clock.calls["physics"] == frames + len(jobs)
+        assert 0.0 < clock.seconds["task"] and 0.0 < clock.seconds["physics"]
+        assert clock.seconds["task"] + clock.seconds["physics"] < wall
 
     clock = TaskClock(PUSHT)
     inner = clock._timed(lambda: None)
     outer = clock._timed(lambda: [inner() for _ in range(5)])
     outer()
-    assert clock.calls == 1
+    assert clock.calls == {"task": 1, "physics": 0}
+    clock.start()
+    clock._timed(lambda: inner(), "physics")()  # the task's code inside the physics: the physics' call
+    assert (
+        clock.calls == {"task": 0, "physics": 1} and clock.seconds["task"] == 0.0 < clock.seconds["physics"]
+    )

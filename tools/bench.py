@@ -528,8 +528,8 @@ def every_attempt(task, sources: dict, jobs: list, how, mode: str, sims) -> list
 
 
 # The task's own code, as the engine calls it: the Task's members but make_env, place and step_batch (they
-# make, reset and step the env: what the physics floors time), its expert's act and act_batch, and its
-# replay's action kind (to_target, to_action: the gym-aloha tasks' inverse kinematics).
+# make, reset and step the env: what the physics floors time), its expert (made, reset, act, act_batch), and
+# its replay's action kind (to_target, to_action: the gym-aloha tasks' inverse kinematics).
 TASK_MEMBERS = (
     "start_of",
     "perturb",
@@ -545,25 +545,39 @@ TASK_MEMBERS = (
 
 
 class TaskClock:
-    """The seconds and calls a task's own code (TASK_MEMBERS, its expert, its replay's action kind) takes
-    while the engine runs `clocked`, a shallow copy of the task with those members on a clock. A call
-    inside another clocked call (to_action reading arm_pose) counts once, in the outer one."""
+    """Where a run's time goes, on two clocks, while the engine runs `clocked`, a shallow copy of the task:
+    seconds["task"], the task's own code (TASK_MEMBERS, its expert, its replay's action kind), and
+    seconds["physics"], its envs' (those its make_env makes) place, step and step_batch. What a run takes
+    besides them is the engine's own. A call inside another clocked call (to_action reading arm_pose,
+    step_batch asking success) counts once, on the outer one's clock; calls: each clock's."""
 
     def __init__(self, task):
-        self.s, self.calls, self._depth = 0.0, 0, 0
+        self.seconds, self.calls, self._depth = {"task": 0.0, "physics": 0.0}, {"task": 0, "physics": 0}, 0
         t = self.clocked = copy.copy(task)
         for name in TASK_MEMBERS:
             setattr(t, name, self._timed(getattr(task, name)))
         if task.expert is not None:
             batch = task.expert.batch and self._made(task.expert.batch, "act_batch")
-            t.expert = replace(task.expert, cls=self._made(task.expert.cls, "act"), batch=batch)
+            t.expert = replace(task.expert, cls=self._made(task.expert.cls, "reset", "act"), batch=batch)
         action = task.replay.action  # its two conversions on the clock
         clocked = SimpleNamespace(
             to_target=self._timed(action.to_target), to_action=self._timed(action.to_action)
         )
         t.replay = replace(task.replay, action=clocked)
+        t.place, t.step_batch = self._timed(task.place, "physics"), self._timed(task.step_batch, "physics")
 
-    def _timed(self, fn):
+        def make_env(*args, **kwargs):
+            env = task.make_env(*args, **kwargs)
+            env.step = self._timed(env.step, "physics")
+            return env
+
+        t.make_env = make_env
+
+    def start(self) -> None:
+        """The clocks and the count to zero (the envs made and their steps' wrappers kept)."""
+        self.seconds, self.calls = dict.fromkeys(self.seconds, 0.0), dict.fromkeys(self.calls, 0)
+
+    def _timed(self, fn, clock: str = "task"):
         def run(*args, **kwargs):
             self._depth += 1
             t0 = time.perf_counter()
@@ -572,15 +586,24 @@ class TaskClock:
             finally:
                 self._depth -= 1
                 if not self._depth:
-                    self.s += time.perf_counter() - t0
-                    self.calls += 1
+                    self.seconds[clock] += time.perf_counter() - t0
+                    self.calls[clock] += 1
 
         return run
 
-    def _made(self, cls, method: str):
+    def _made(self, cls, *methods: str):
         def make(*args, **kwargs):
-            obj = cls(*args, **kwargs)
-            setattr(obj, method, self._timed(getattr(obj, method)))
+            self._depth += 1  # the making is the task's too
+            t0 = time.perf_counter()
+            try:
+                obj = cls(*args, **kwargs)
+            finally:
+                self._depth -= 1
+                if not self._depth:
+                    self.seconds["task"] += time.perf_counter() - t0
+                    self.calls["task"] += 1
+            for m in methods:
+                setattr(obj, m, self._timed(getattr(obj, m)))
             return obj
 
         return make
@@ -595,9 +618,11 @@ def per_demo_costs(
     engine's write of the kept set; `repeats` rounds, alternated, medians. And the floor of every frame
     simulated, kept or not (physics_all_s): a mode that keeps few attempts pays for its failed ones' frames
     too, which the kept frames' floor does not count (lockstep_over_all_physics). And the seconds inside the
-    task's own code in one more lockstep run (task_s, TaskClock: its expert, its replay's conversions, its
-    poses and signals): what is left of lockstep without them is the engine and the physics
-    (engine_over_all_physics: lockstep_s - task_s over physics_all_s)."""
+    task's own code and in the physics in one more lockstep run on their clocks (clocked_s, TaskClock): task_s
+    (its expert, its replay's conversions, its poses and signals), physics_in_run_s (its envs' place and
+    steps) and the rest, engine_s, the engine's own (recording, the replay's plan, the bookkeeping);
+    engine_over_physics: (physics_in_run_s + engine_s) / physics_in_run_s, each round's own, whatever the
+    machine's speed did between the variants."""
     from datagen import Perturbation, engine, lockstep
     from datagen.source_check import read_source, successful_only
 
@@ -623,13 +648,27 @@ def per_demo_costs(
         got["simulated"] = sum(got["steps"])  # control steps, kept or not
         return s
 
-    def task_code(_):  # lockstep once more, the task's own code on a clock (TaskClock)
-        c = TaskClock(task)
-        results = lockstep.attempts_lockstep(c.clocked, sources, jobs, how, mode=mode, sims=sims)
+    # lockstep once more, on the task's and the physics' clocks, in envs of its own, made (and the engine
+    # warmed up on them) before any round; the replay plans are the others'
+    tc, clocked_sims = TaskClock(task), engine.Simulators()
+    clocked_sims.plans = sims.plans
+    lockstep.attempts_lockstep(tc.clocked, sources, jobs, how, mode=mode, sims=clocked_sims)
+    split = {"task_s": [], "physics_in_run_s": [], "engine_s": [], "engine_over_physics": []}
+
+    def clocked(_):
+        tc.start()
+        s, results = clock(
+            lockstep.attempts_lockstep, tc.clocked, sources, jobs, how, mode=mode, sims=clocked_sims
+        )
         if [r.steps for r in results] != got["steps"]:
-            raise DataError("lockstep with the task's code on a clock simulated other frames")
-        got["task_calls"] = c.calls
-        return c.s
+            raise DataError("lockstep on the clocks simulated other frames")
+        task_s, physics_s = tc.seconds["task"], tc.seconds["physics"]
+        split["task_s"].append(task_s)
+        split["physics_in_run_s"].append(physics_s)
+        split["engine_s"].append(s - task_s - physics_s)
+        split["engine_over_physics"].append((s - task_s) / physics_s)
+        got["task_calls"] = tc.calls["task"]
+        return s
 
     def write(_):
         with tempfile.TemporaryDirectory() as tmp:  # the engine's own writer, whatever columns it adds
@@ -647,10 +686,10 @@ def per_demo_costs(
             task, ((ep["aug.start"][0], ep["action"]) for ep in got["kept"])
         ),
         "physics_all_s": lambda _: physics_floor(task, every),
-        "task_s": task_code,
+        "clocked_s": clocked,
         "write_s": write,
     }
-    times = alternate(measure, repeats, after_round=same_kept)
+    times = alternate(measure, repeats, after_round=same_kept) | split
     med, kept = medians(times), got["kept"]
     frames = sum(len(ep["action"]) for ep in kept)
     if sum(len(a) for _, a in every) != got["simulated"]:
@@ -674,8 +713,8 @@ def per_demo_costs(
         "lockstep_and_write_over_physics": (med["lockstep_s"] + med["write_s"]) / med["physics_s"],
         "lockstep_over_all_physics": med["lockstep_s"] / med["physics_all_s"],
         "task_calls": got["task_calls"],
-        "task_share": med["task_s"] / med["lockstep_s"],
-        "engine_over_all_physics": (med["lockstep_s"] - med["task_s"]) / med["physics_all_s"],
+        "task_share": med["task_s"] / med["clocked_s"],
+        "engine_share": med["engine_s"] / med["clocked_s"],
         "physics_us_per_frame": med["physics_s"] / frames * 1e6,
         "write_us_per_frame": med["write_s"] / frames * 1e6,
     }
@@ -779,9 +818,11 @@ def engine_costs(task, src: Path, a) -> dict:
         f"({c['lockstep_and_write_over_physics']:.2f}x with the write), "
         f"one at a time {c['one_at_a_time_over_physics']:.2f}x; every simulated frame "
         f"({c['simulated_frames']}) {c['physics_all_s']:.2f} s, "
-        f"lockstep {c['lockstep_over_all_physics']:.2f}x; the task's own code {c['task_s']:.2f} s "
-        f"({c['task_calls']} calls, {100 * c['task_share']:.0f}% of lockstep), the rest (the engine and "
-        f"the physics) {c['engine_over_all_physics']:.2f}x the physics"
+        f"lockstep {c['lockstep_over_all_physics']:.2f}x; on the clocks, lockstep {c['clocked_s']:.2f} s: "
+        f"the task's own code {c['task_s']:.2f} s ({c['task_calls']} calls), the physics "
+        f"{c['physics_in_run_s']:.2f} s, the engine's own {c['engine_s']:.2f} s "
+        f"({100 * c['engine_share']:.0f}%): the physics and the engine {c['engine_over_physics']:.2f}x the "
+        "physics"
     )
     return c
 
