@@ -189,7 +189,8 @@ def run_lanes(
         at = t[slots]
         obs = f.obs[slots, at]  # (N, obs_dim): each live lane's current observation
         ids = slots.tolist()
-        actions, stop = mode.decide([live[s][1] for s in ids], [envs[s] for s in ids], obs)
+        stepped = [envs[s] for s in ids]
+        actions, stop = mode.decide([live[s][1] for s in ids], stepped, obs)
         f.act[slots, at] = actions  # a stopped lane's row lies past its frames: never read
         if stop is not None and stop.any():  # ended before this step, not stepped
             for slot in slots[stop].tolist():
@@ -197,7 +198,8 @@ def run_lanes(
             slots, at, actions = slots[~stop], at[~stop], actions[~stop]
             if not len(slots):
                 continue
-        o, success, done = step([envs[s] for s in slots.tolist()], actions)
+            stepped = [envs[s] for s in slots.tolist()]
+        o, success, done = step(stepped, actions)
         f.obs[slots, at + 1] = o
         f.succ[slots, at] = success
         if reward_of is not None:
@@ -323,17 +325,30 @@ class Replaying(Mode):
         return Lane(job, task.place(env, start), run=run)
 
     def decide(self, lanes, envs, obs):
-        act_dim = (self.task.spec.act_dim,)
+        act_dim = self.task.spec.act_dim
         actions = [lane.run.act(o, env) for lane, env, o in zip(lanes, envs, obs)]
-        # a user's conversion that returns a NaN or the wrong width: one line, not a traceback in the env
-        for a in actions:
-            if a is not None:
-                owed(self.task, "replay.action.to_action", a, act_dim)
-        stop = np.array([a is None for a in actions], bool)
-        if stop.all():  # nothing is stepped: the rows are never read
-            return np.zeros((len(lanes), self.task.spec.act_dim), np.float32), stop
-        blank = np.zeros_like(next(a for a in actions if a is not None))  # a stopped lane's row
-        return np.stack([blank if a is None else a for a in actions]), stop  # as made, their dtype too
+        made = [a for a in actions if a is not None]
+        stop = None if len(made) == len(actions) else np.array([a is None for a in actions], bool)
+        if not made:  # nothing is stepped: the rows are never read
+            return np.zeros((len(lanes), act_dim), np.float32), stop
+        if stop is not None:
+            blank = np.zeros_like(made[0])  # a stopped lane's row
+            actions = [blank if a is None else a for a in actions]
+        try:
+            out = np.stack(actions)  # as made, their dtype too
+        except (TypeError, ValueError):
+            out = None
+        # a user's conversion that returns a NaN or the wrong width: one line (owed's), not a traceback in
+        # the env; checked on the stack, each action only when the stack is not (N, act_dim) finite numbers
+        if (
+            out is None
+            or out.shape[1:] != (act_dim,)
+            or out.dtype.kind not in "fiu"
+            or not np.isfinite(out).all()
+        ):
+            for a in made:
+                owed(self.task, "replay.action.to_action", a, (act_dim,))
+        return out, stop
 
     def finish(self, lane, env, episode, last_obs):
         got = lane.run.outcome(env, last_obs, episode)

@@ -14,7 +14,8 @@ depend on the 3-D path (tests/test_replay.py shows the two agree).
                              re-expressed for that frame at `new`: the pose M pose, M = new src^-1
     pose_gap(a, b)           how far apart two poses are: (distance, angle in rad)
     interpolate(a, b, s)     the pose a fraction s of the way from a to b: position linear, orientation
-                             by slerp (planar: yaw the short way)
+                             by slerp (planar: yaw the short way); interpolate_path(a, b, fractions) and
+                             slerp_path(r0, r1, fractions) a path's, its ends' quaternions found once
     planar_pose(x, y, yaw)   the (4, 4) pose of a planar frame
     solve(a, b)              np.linalg.solve(a, b) for float64 systems known to be well posed (an inverse
                              kinematics' damped J J^T + lambda^2 I), its bits without its checks
@@ -29,6 +30,7 @@ from numpy.linalg import _umath_linalg
 
 __all__ = [
     "interpolate",
+    "interpolate_path",
     "is_planar",
     "planar_pose",
     "pose_gap",
@@ -38,6 +40,7 @@ __all__ = [
     "rotation_angle",
     "rotation_of",
     "slerp",
+    "slerp_path",
     "solve",
     "transform_pose",
     "transform_segment",
@@ -160,29 +163,49 @@ def rotation_of(q) -> np.ndarray:
     )
 
 
-def slerp(r0, r1, s: float) -> np.ndarray:
-    """The rotation (3, 3) a fraction s (0..1) of the way from r0 to r1 along the shorter arc."""
+def slerp_path(r0, r1, fractions) -> list[np.ndarray]:
+    """The rotations (3, 3) each fraction s (0..1) of `fractions` of the way from r0 to r1 along the shorter
+    arc: the ends' quaternions found once for the whole path."""
     q0, q1 = quat_of(r0), quat_of(r1)
     dot = float(q0 @ q1)
     if dot < 0:  # q and -q are one rotation: take the short way
         q1, dot = -q1, -dot
     if dot > 1 - 1e-12:
-        return rotation_of(q0 + s * (q1 - q0))
+        return [rotation_of(q0 + s * (q1 - q0)) for s in fractions]
     theta = math.acos(min(dot, 1.0))
-    return rotation_of((math.sin((1 - s) * theta) * q0 + math.sin(s * theta) * q1) / math.sin(theta))
+    return [
+        rotation_of((math.sin((1 - s) * theta) * q0 + math.sin(s * theta) * q1) / math.sin(theta))
+        for s in fractions
+    ]
+
+
+def slerp(r0, r1, s: float) -> np.ndarray:
+    """The rotation (3, 3) a fraction s (0..1) of the way from r0 to r1 along the shorter arc."""
+    return slerp_path(r0, r1, (s,))[0]
+
+
+def interpolate_path(a, b, fractions) -> list:
+    """The poses each fraction s (0..1) of `fractions` of the way from a to b: planar triples give triples
+    (x, y linear; yaw the short way), (4, 4) poses (4, 4) poses (position linear, orientation by slerp,
+    slerp_path's)."""
+    if is_planar(a) and is_planar(b):
+        dyaw = math.remainder(float(b[2]) - float(a[2]), math.tau)
+        return [
+            (a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1]), float(a[2]) + s * dyaw) for s in fractions
+        ]
+    a, b = _matrix(a), _matrix(b)
+    out = []
+    for s, rot in zip(fractions, slerp_path(a[:3, :3], b[:3, :3], fractions)):
+        pose = np.eye(4)
+        pose[:3, :3] = rot
+        pose[:3, 3] = a[:3, 3] + s * (b[:3, 3] - a[:3, 3])
+        out.append(pose)
+    return out
 
 
 def interpolate(a, b, s: float):
-    """The pose a fraction s (0..1) of the way from a to b: planar triples give a triple (x, y linear; yaw
-    the short way), (4, 4) poses a (4, 4) pose (position linear, orientation by slerp)."""
-    if is_planar(a) and is_planar(b):
-        dyaw = math.remainder(float(b[2]) - float(a[2]), math.tau)
-        return (a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1]), float(a[2]) + s * dyaw)
-    a, b = _matrix(a), _matrix(b)
-    out = np.eye(4)
-    out[:3, :3] = slerp(a[:3, :3], b[:3, :3], s)
-    out[:3, 3] = a[:3, 3] + s * (b[:3, 3] - a[:3, 3])
-    return out
+    """The pose a fraction s (0..1) of the way from a to b (interpolate_path's one pose)."""
+    return interpolate_path(a, b, (s,))[0]
 
 
 def solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -49,7 +49,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from datagen.poses import interpolate, pose_gap, rotation_angle, slerp, transform_pose, transform_segment
+from datagen.poses import (
+    interpolate_path,
+    pose_gap,
+    rotation_angle,
+    slerp_path,
+    transform_pose,
+    transform_segment,
+)
 from datagen.task import POSE_SHAPES, Outcome, Source, Subtask, Task, ended, owed
 
 __all__ = ["Replay", "Segment", "cut", "nearest", "plan_of", "signals"]
@@ -174,9 +181,11 @@ class Replay:
                 a0, a1 = task.frame_pose(frame, first), task.frame_pose(to, first)
                 b0, b1 = task.frame_pose(frame, now), task.frame_pose(to, now)
                 k = max(len(pts) - 1, 1)
+                way = [t / k for t in range(len(pts))]  # frame t in the pose a fraction t / k of the way
                 moved = []
-                for t in range(len(pts)):  # frame t in the pose a fraction t / k of the way
-                    was, now_ = interpolate(a0, a1, t / k), interpolate(b0, b1, t / k)
+                for t, (was, now_) in enumerate(
+                    zip(interpolate_path(a0, a1, way), interpolate_path(b0, b1, way))
+                ):
                     part = (None if x is None else x[t : t + 1] for x in (pts, vel, rots))
                     moved.append(_moved(*part, was, now_))
                 d = np.shape(pts)[1]
@@ -212,10 +221,10 @@ class Replay:
                 out[frame] = [transform_pose(p, a0, b0) for p in poses]
                 continue
             a1, b1 = task.frame_pose(to, first), task.frame_pose(to, now)
-            k = max(len(poses) - 1, 1)
+            way = [t / max(len(poses) - 1, 1) for t in range(len(poses))]
             out[frame] = [
-                transform_pose(p, interpolate(a0, a1, t / k), interpolate(b0, b1, t / k))
-                for t, p in enumerate(poses)
+                transform_pose(p, was, now_)
+                for p, was, now_ in zip(poses, interpolate_path(a0, a1, way), interpolate_path(b0, b1, way))
             ]
         return out
 
@@ -307,6 +316,10 @@ class Replay:
             self._aims = {a: segs[a][3][0] for a in task.replay.arms} if self._turning else None
             speed = self.bridge_speed(segs)
             self._n = self.bridge_steps(self._here, self._first, self._facing, self._aims, speed)
+            if self._turning:
+                self._turn_path = {
+                    a: self.turns(self._facing[a], self._aims[a], self._n) for a in task.replay.arms
+                }
             self._i, self._phase = 0, "bridge"
             self.bridging = task.object_pose(obs)
 
@@ -318,7 +331,7 @@ class Replay:
         wp = {a: here[a] + i / n * (first[a] - here[a]) for a in task.replay.arms}
         vel = {a: (first[a] - here[a]) * task.spec.fps / n for a in task.replay.arms}
         if self._turning:
-            self._turns = {a: self.turned(self._facing[a], self._aims[a], i / n) for a in task.replay.arms}
+            self._turns = {a: self._turn_path[a][i] for a in task.replay.arms}
         grips = None if self._grips is None else dict(self._grips)
         return task.replay.action.to_action(task, obs, wp, vel, grips, self._turns)
 
@@ -367,9 +380,10 @@ class Replay:
         return top if top > 0 else math.inf
 
     @staticmethod
-    def turned(facing, toward, s: float) -> np.ndarray:
-        """The orientation a fraction s of a bridge's way from `facing` (None: not known, so `toward`)."""
-        return toward if facing is None else slerp(facing, toward, s)
+    def turns(facing, toward, n: int) -> list:
+        """The orientations of a bridge's n steps, step i a fraction i / n of the way from `facing` to
+        `toward` (facing None: not known, so `toward`)."""
+        return [toward] * n if facing is None else slerp_path(facing, toward, [i / n for i in range(n)])
 
     def end_bridge(self, obs) -> None:
         """Whether the bridge that started at self.bridging moved the object beyond spec.bridge_moves."""

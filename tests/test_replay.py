@@ -12,7 +12,16 @@ import pusht_env
 from ch37.seeds import env_seed
 from datagen import PUSHT, Outcome, Perturbation, Source, engine, rollout
 from datagen.lockstep import replay_from
-from datagen.poses import interpolate, planar_pose, quat_of, rotation, rotation_of, transform_segment
+from datagen.poses import (
+    interpolate,
+    interpolate_path,
+    planar_pose,
+    quat_of,
+    rotation,
+    rotation_of,
+    slerp_path,
+    transform_segment,
+)
 from datagen.task import DeltaCommand, failures_of
 from datagen.tasks import pusht
 from scripted_expert import PushTExpert
@@ -116,6 +125,43 @@ def test_interpolate_moves_linearly_and_turns_by_slerp():
     assert interpolate((0, 0, 3.0), (1, 2, -3.0), 0.5) == pytest.approx(
         (0.5, 1.0, 3.0 + 0.5 * (math.tau - 6))
     )
+
+
+def test_a_path_is_each_of_its_poses_as_one_interpolation_makes_it_bit_for_bit():
+    """Issue 58 #6: interpolate_path and slerp_path find their ends' quaternions once for a whole path (a
+    bridge's turn, a frame sliding onto another); each pose is the one the plain per-fraction slerp
+    (written out here) gives, bit for bit: on the long arc, the short one (q1 flipped) and nearly equal
+    ends (the linear branch)."""
+
+    def plain_slerp(r0, r1, s):
+        q0, q1 = quat_of(r0), quat_of(r1)
+        dot = float(q0 @ q1)
+        if dot < 0:
+            q1, dot = -q1, -dot
+        if dot > 1 - 1e-12:
+            return rotation_of(q0 + s * (q1 - q0))
+        theta = math.acos(min(dot, 1.0))
+        return rotation_of((math.sin((1 - s) * theta) * q0 + math.sin(s * theta) * q1) / math.sin(theta))
+
+    rng = np.random.default_rng(7)
+    way = [t / 37 for t in range(38)]
+    flipped = 0
+    for i in range(60):
+        a, b = _random_pose(rng), _random_pose(rng)
+        if i % 3 == 0:  # nearly the same orientation
+            b[:3, :3] = rotation_of(quat_of(a[:3, :3]) + rng.normal(scale=1e-9, size=4))
+        flipped += float(quat_of(a[:3, :3]) @ quat_of(b[:3, :3])) < 0
+        rots = slerp_path(a[:3, :3], b[:3, :3], way)
+        poses = interpolate_path(a, b, way)
+        for s, rot, pose in zip(way, rots, poses):
+            want = plain_slerp(a[:3, :3], b[:3, :3], s)
+            assert rot.tobytes() == want.tobytes() and pose[:3, :3].tobytes() == want.tobytes()
+            assert pose[:3, 3].tobytes() == (a[:3, 3] + s * (b[:3, 3] - a[:3, 3])).tobytes()
+    assert flipped
+    a, b = (0.1, -0.2, 3.0), (1.0, 2.0, -3.0)
+    dyaw = math.remainder(b[2] - a[2], math.tau)
+    want = [(a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1]), a[2] + s * dyaw) for s in way]
+    assert interpolate_path(a, b, way) == want
 
 
 @pytest.fixture(scope="module")
