@@ -1330,6 +1330,9 @@ def test_bench_engine_measures_every_task_and_refuses_an_unknown_one_in_one_line
     assert p.returncode == 0, p.stderr[-2000:]
     costs = json.loads((tmp_path / "o" / "bench_engine_costs.json").read_text())["per_demo_costs"]
     assert costs["task"] == "gym_pusht" and costs["attempts"] == 2 and costs["physics_s"] > 0
+    # the run on the clocks: the expert acted on every simulated frame, and the physics stepped them
+    assert costs["task_calls"] >= costs["simulated_frames"] > 0
+    assert costs["task_s"] > 0 and costs["physics_in_run_s"] > 0 and costs["engine_over_physics"] >= 1
 
 
 def test_bench_reference_refuses_what_is_not_a_reference_checkout_in_one_line(tmp_path):
