@@ -909,16 +909,20 @@ def test_results_live_under_results_each_with_its_provenance():
 TASK_ORDER = ("pusht", "aloha", "gym_pusht", "pusher", "aloha_transfer_cube", "aloha_insertion")
 
 
-def bench_rows() -> list[str]:
-    """docs/engine.md's speed table, one row per kept python -m tools.bench engine --costs_only run
-    (results/bench_engine/TASK_MODE/bench_engine_costs.json), as the page prints it."""
-    rows = []
+def bench_runs() -> list[dict]:
+    """Every kept python -m tools.bench engine --costs_only run
+    (results/bench_engine/TASK_MODE/bench_engine_costs.json), in the page's order: task, then mode."""
     runs = [
         kept(f"bench_engine/{d.name}/bench_engine_costs.json") for d in (RESULTS / "bench_engine").iterdir()
     ]
     order = {(t, m): i for i, (t, m) in enumerate((t, m) for t in TASK_ORDER for m in ("resolve", "replay"))}
-    for r in sorted(runs, key=lambda r: order[r["per_demo_costs"]["task"], r["per_demo_costs"]["mode"]]):
-        c = r["per_demo_costs"]
+    return sorted(runs, key=lambda r: order[r["per_demo_costs"]["task"], r["per_demo_costs"]["mode"]])
+
+
+def bench_rows() -> list[str]:
+    """docs/engine.md's speed table, one row per kept run, as the page prints it."""
+    rows = []
+    for c in (r["per_demo_costs"] for r in bench_runs()):
         rows.append(
             f"| {c['task']} | {c['mode']} | {c['attempts']} | {c['kept']} | {thousands(c['frames'])} | "
             f"{thousands(c['simulated_frames'])} | {c['one_at_a_time_s']:.2f} | {c['lockstep_s']:.2f} | "
@@ -929,15 +933,10 @@ def bench_rows() -> list[str]:
 
 
 def clock_rows() -> list[str]:
-    """docs/engine.md's second speed table: where each kept bench's lockstep run on the clocks went (the
-    task's own code, the physics, the engine's own), one row per task and mode, as the page prints it."""
+    """docs/engine.md's second speed table: where each kept run's lockstep on the clocks went (the task's
+    own code, the physics, the engine's own), as the page prints it."""
     rows = []
-    runs = [
-        kept(f"bench_engine/{d.name}/bench_engine_costs.json") for d in (RESULTS / "bench_engine").iterdir()
-    ]
-    order = {(t, m): i for i, (t, m) in enumerate((t, m) for t in TASK_ORDER for m in ("resolve", "replay"))}
-    for r in sorted(runs, key=lambda r: order[r["per_demo_costs"]["task"], r["per_demo_costs"]["mode"]]):
-        c = r["per_demo_costs"]
+    for c in (r["per_demo_costs"] for r in bench_runs()):
         rows.append(
             f"| {c['task']} | {c['mode']} | {thousands(c['simulated_frames'])} | {c['clocked_s']:.2f} | "
             f"{c['task_s']:.2f} | {thousands(c['task_calls'])} | {c['physics_in_run_s']:.2f} | "
@@ -951,15 +950,11 @@ def test_the_engines_speed_table_is_its_kept_benches_recounted():
     bench (commit and host in the file, AMD EPYC)."""
     rows = bench_rows()
     assert {r.split(" | ")[0].strip("| ") for r in rows} == set(TASK_ORDER)
-    for d in (RESULTS / "bench_engine").iterdir():
-        prov = kept(f"bench_engine/{d.name}/bench_engine_costs.json")["provenance"]
+    for prov in (r["provenance"] for r in bench_runs()):
         assert not prov["git"]["dirty"] and prov["platform"]["cpu_model"] == "AMD EPYC"
     has("docs/engine.md", *rows, *clock_rows())
     # the prose's summary of the clocks' table: the engine's share, and the rows within 1.3x
-    costs = [
-        kept(f"bench_engine/{d.name}/bench_engine_costs.json")["per_demo_costs"]
-        for d in (RESULTS / "bench_engine").iterdir()
-    ]
+    costs = [r["per_demo_costs"] for r in bench_runs()]
     share = sorted(round(100 * c["engine_share"]) for c in costs)
     within = sorted(
         round(c["engine_over_physics"], 2) for c in costs if round(c["engine_over_physics"], 2) <= 1.3
