@@ -592,16 +592,10 @@ class TaskClock:
         return run
 
     def _made(self, cls, *methods: str):
+        made = self._timed(cls)  # the making is the task's too
+
         def make(*args, **kwargs):
-            self._depth += 1  # the making is the task's too
-            t0 = time.perf_counter()
-            try:
-                obj = cls(*args, **kwargs)
-            finally:
-                self._depth -= 1
-                if not self._depth:
-                    self.seconds["task"] += time.perf_counter() - t0
-                    self.calls["task"] += 1
+            obj = made(*args, **kwargs)
             for m in methods:
                 setattr(obj, m, self._timed(getattr(obj, m)))
             return obj
