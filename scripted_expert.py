@@ -81,11 +81,37 @@ def _pt_candidates() -> tuple[np.ndarray, np.ndarray]:
     return np.array(pts, dtype=np.float64), np.array(nrm, dtype=np.float64)
 
 
+def _rows_mv(m: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Each row's matrix times its vector, m (N, a, b) @ v (N, b) -> (N, a): a stack of `m[i] @ v[i]`."""
+    return (m @ v[:, :, None])[:, :, 0]
+
+
+def _rows_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Each row's dot product, (N, d) . (N, d) -> (N,): a stack of `a[i] @ b[i]`."""
+    return (a[:, None, :] @ b[:, :, None])[:, 0, 0]
+
+
+def _unit_gradient(d: np.ndarray) -> np.ndarray:
+    """Unit gradient (N, 2) of a distance field from its values d (N, 4) at p + (h, 0), p - (h, 0),
+    p + (0, h), p - (0, h) (central differences); (0, 1) where the field is flat."""
+    g = d[:, 0::2] - d[:, 1::2]  # (N, 2)
+    nrm = np.sqrt(_rows_dot(g, g))
+    return np.where((nrm > 1e-12)[:, None], g / np.maximum(nrm, 1e-12)[:, None], (0.0, 1.0))
+
+
 class PushTExpert:
-    """Scripted PushT expert: ``act(obs) -> float32[2]`` pusher velocity (m/s), Markov in obs.
+    """Scripted PushT expert, Markov in the observation: ``act_batch(obs (N, 10)) -> float32 (N, 2)``
+    pusher velocities (m/s), one row per env, so that the data engine decides for all its lockstep lanes
+    in one call; ``act(obs (10,)) -> float32 (2,)`` is a batch of one.
 
     ``noise`` is the std (m/s) of Gaussian noise added to every action, drawn from
-    ``np.random.default_rng(seed)`` created once here; the sum is clipped to [-1, 1].
+    ``np.random.default_rng(seed)`` created once here (a batch's rows in order); the sum is clipped to
+    [-1, 1].
+
+    A row's action has the same bits whatever shares its batch, on any x86-64 CPU: its angles (atan2,
+    cos, sin, hypot) come from Python's math, row by row, since numpy's vector versions round
+    differently from one CPU to another; each matrix product is a stack of the rows' own products
+    (``rot.mT @ v``), which BLAS computes row by row as it would one alone; the rest is elementwise.
     """
 
     def __init__(self, noise: float = 0.0, seed: int = 0) -> None:
@@ -93,97 +119,105 @@ class PushTExpert:
         self.seed = int(seed)
         self._rng = np.random.default_rng(self.seed)
         p, n = _pt_candidates()
-        self._p, self._n = p, n
+        self._p, self._n = p, n  # (K, 2) each
         self._t = np.stack([-n[:, 1], n[:, 0]], axis=1)  # tangent to each push direction
         self._contact = p - n * PT_R  # pusher centre when touching (m)
         self._pre = p - n * (PT_R + PT_STANDOFF)  # pusher centre behind the contact (m)
         tau = p[:, 0] * n[:, 1] - p[:, 1] * n[:, 0]  # torque arm (m) of a unit push
         u = np.concatenate([n, (PT_YAW_LEN * PT_K * tau)[:, None]], axis=1)
-        self._u = u / np.linalg.norm(u, axis=1, keepdims=True)  # predicted twist directions
+        self._u = u / np.linalg.norm(u, axis=1, keepdims=True)  # predicted twist directions (K, 3)
         self._seg = np.linspace(0.0, 1.0, 9)[1:-1]  # interior sample fractions of a path segment
+        # Central differences 1e-5 m apart: p + (h, 0), p - (h, 0), p + (0, h), p - (0, h), each
+        # subtraction written as the addition of its negative (IEEE's x - y is x + -y, zeros' signs too).
+        h = 1e-5
+        self._stencil = np.array([(h, 0.0), (-h, -0.0), (0.0, h), (-0.0, -h)])
 
     def reset(self) -> None:
         """Nothing to clear: the policy is memoryless (the noise generator keeps running)."""
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        v = self._clean_action(np.asarray(obs, dtype=np.float64))
+        return self.act_batch(np.asarray(obs, dtype=np.float64)[None])[0]
+
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        v = self._clean_actions(np.asarray(obs, dtype=np.float64).reshape(-1, _pt.OBS_DIM))
         if self.noise > 0.0:
-            v = v + self._rng.normal(0.0, self.noise, size=2)
+            v = v + self._rng.normal(0.0, self.noise, size=v.shape)
         return np.clip(v, -1.0, 1.0).astype(np.float32)
 
-    def _clean_action(self, o: np.ndarray) -> np.ndarray:
-        pw = o[0:2]
-        bw = o[2:4]
-        yaw = math.atan2(o[4], o[5])
-        c, s = math.cos(yaw), math.sin(yaw)
-        rot = np.array([[c, -s], [s, c]])  # block frame -> world
-        e = rot.T @ (o[6:8] - bw)  # position error in the block frame (m)
-        eyaw = _pt.wrap_angle(math.atan2(o[8], o[9]) - yaw)  # rad
-        p = rot.T @ (pw - bw)  # pusher in the block frame (m)
-        err = math.hypot(e[0], e[1])
+    def _clean_actions(self, o: np.ndarray) -> np.ndarray:
+        """Steps 1-4 above for every row of o (N, 10) -> (N, 2) pusher velocities (m/s, world frame)."""
+        n = len(o)
+        yaw = list(map(math.atan2, o[:, 4].tolist(), o[:, 5].tolist()))  # block yaw (rad)
+        c, s = np.array(list(map(math.cos, yaw))), np.array(list(map(math.sin, yaw)))
+        rot = np.array([c, -s, s, c]).T.reshape(n, 2, 2)  # [[c, -s], [s, c]]: block frame -> world
+        e = _rows_mv(rot.mT, o[:, 6:8] - o[:, 2:4])  # (N, 2) position error in the block frame (m)
+        p = _rows_mv(rot.mT, o[:, 0:2] - o[:, 2:4])  # (N, 2) pusher in the block frame (m)
+        target_yaw = list(map(math.atan2, o[:, 8].tolist(), o[:, 9].tolist()))  # rad
+        eyaw = _pt.wrap_angle(np.array(target_yaw) - yaw)  # (N,) yaw error (rad)
+        err = np.array(list(map(math.hypot, *e.T.tolist())))  # (N,) m
+        twist_err = np.array(list(map(math.hypot, err.tolist(), (PT_YAW_LEN * eyaw).tolist())))  # (N,) m
+        at_goal = (err < PT_GOAL_POS) & (np.abs(eyaw) < PT_GOAL_YAW)
 
-        if err < PT_GOAL_POS and abs(eyaw) < PT_GOAL_YAW:
-            # At the goal: back away from the block at 0.1 m/s until the pusher's edge is 3 cm
-            # clear, then stand still, so the block rests untouched through the success hold.
-            if float(_pt.t_sdf(p)) > PT_R + 0.03:
-                return np.zeros(2)
-            return rot @ (0.1 * self._grad(p))
-
-        # 1-2. Score every candidate push against the desired twist.
-        want = np.array([e[0], e[1], PT_YAW_LEN * eyaw])
-        want /= np.linalg.norm(want)
-        align = self._u @ want
-        pre_w = bw + self._pre @ rot.T
-        reach = np.all(np.abs(pre_w) < _pt.WALL_INNER - PT_R - 0.005, axis=1)
+        # 1-2. Score every candidate push (K) against the desired twist.
+        want = np.concatenate([e, PT_YAW_LEN * eyaw[:, None]], axis=1)  # (N, 3)
+        want /= np.maximum(np.sqrt(_rows_dot(want, want)), 1e-300)[:, None]  # the max: a goal row's 0/0
+        align = (self._u @ want[:, :, None])[:, :, 0]  # (N, K)
+        pre_w = o[:, None, 2:4] + self._pre @ rot.mT  # (N, K, 2) pre-contact points in the world (m)
+        inside = np.abs(pre_w) < _pt.WALL_INNER - PT_R - 0.005
+        reach = inside[:, :, 0] & inside[:, :, 1]  # (N, K)
         # Travel: distance to the segment from pre-contact point to contact (the push funnel),
         # so a pusher already pushing at a candidate pays nothing to keep pushing there.
-        rel = p - self._contact
-        along = np.clip(np.einsum("kj,kj->k", rel, self._n), -PT_STANDOFF, 0.0)
-        travel = np.linalg.norm(rel - along[:, None] * self._n, axis=1)
+        (cx, cy), (nx, ny) = self._contact.T, self._n.T  # (K,) each
+        rx, ry = p[:, 0:1] - cx, p[:, 1:2] - cy  # (N, K) pusher - contact
+        along = np.minimum(np.maximum(rx * nx + ry * ny, -PT_STANDOFF), 0.0)
+        dx, dy = rx - along * nx, ry - along * ny
+        travel = np.sqrt(dx * dx + dy * dy)  # (N, K) m
         score = np.where(reach, align - PT_TRAVEL_COST * travel, -np.inf)
-        k = int(np.argmax(score))
-        n, t, c0, g = self._n[k], self._t[k], self._contact[k], self._pre[k]
+        k = score.argmax(axis=1)  # (N,) each row's chosen candidate
+        n_k, t_k, c0, g = self._n[k], self._t[k], self._contact[k], self._pre[k]  # (N, 2) each
 
         # 3a. Behind the contact and on its line (within 6 mm sideways, from 8 mm behind the
         # pre-contact point to 1 cm past the contact): push through it, steering back onto the
         # line at 5 (m/s)/m of sideways error.
         rel = p - c0
-        along, lat = float(rel @ n), float(rel @ t)
-        if abs(lat) < 0.006 and -(PT_STANDOFF + 0.008) < along < 0.01:
-            twist_err = math.hypot(err, PT_YAW_LEN * eyaw)  # m
-            speed = min(max(PT_PUSH_GAIN * twist_err, PT_V_PUSH[0]), PT_V_PUSH[1])
-            v = speed * n - 5.0 * lat * t
-            return rot @ v
+        along, lat = _rows_dot(rel, n_k), _rows_dot(rel, t_k)
+        push = (np.abs(lat) < 0.006) & (-(PT_STANDOFF + 0.008) < along) & (along < 0.01)
+        speed = np.minimum(np.maximum(PT_PUSH_GAIN * twist_err, PT_V_PUSH[0]), PT_V_PUSH[1])
+        v_push = speed[:, None] * n_k - (5.0 * lat)[:, None] * t_k
         # 3b. Path to the pre-contact point clear of the T: go straight there.
         dg = g - p
-        dist = float(np.linalg.norm(dg))
-        speed = min(max(PT_MOVE_GAIN * dist, PT_V_MOVE[0]), PT_V_MOVE[1])
-        path = p + self._seg[:, None] * dg
+        dist = np.sqrt(_rows_dot(dg, dg))
+        speed = np.minimum(np.maximum(PT_MOVE_GAIN * dist, PT_V_MOVE[0]), PT_V_MOVE[1])
+        v_straight = speed[:, None] * dg / np.maximum(dist, 1e-9)[:, None]
+        # The T's distance field at every point this step reads, in one call: at the pusher (column 0),
+        # around it for the field's gradient (1-4), along the straight path (5-11). (N, 12) m
+        at = p[:, None, :]
+        sdf = _pt.t_sdf(
+            np.concatenate([at, at + self._stencil, at + self._seg[:, None] * dg[:, None, :]], axis=1)
+        )
+        sdf_p = sdf[:, 0]
         # Clear = the path never comes closer to the T than the pusher is now (or than R + 2 mm).
-        floor = min(PT_R + 0.002, float(_pt.t_sdf(p)) - 0.001)
-        if np.all(_pt.t_sdf(path) > floor):
-            return rot @ (speed * dg / max(dist, 1e-9))
+        floor = np.minimum(PT_R + 0.002, sdf_p - 0.001)
+        straight = (sdf[:, 5:] > floor[:, None]).all(axis=1)
         # 3c. Otherwise orbit the T at a safe clearance, the shorter way round.
-        grad = self._grad(p)
-        tang = np.array([-grad[1], grad[0]])  # counter-clockwise around the T
-        a_p = math.atan2(*(p - PT_ORBIT_CENTER)[::-1])
-        a_g = math.atan2(*(g - PT_ORBIT_CENTER)[::-1])
-        if _pt.wrap_angle(a_g - a_p) < 0.0:
-            tang = -tang
-        gap = float(_pt.t_sdf(p)) - PT_R  # m between pusher edge and block
-        radial = min(max(20.0 * (PT_CLEAR - gap), -1.0), 1.0)  # saturates at 5 cm off the orbit
-        v = tang + radial * grad
-        return rot @ (PT_V_MOVE[1] * v / max(np.linalg.norm(v), 1e-9))
+        grad = _unit_gradient(sdf[:, 1:5])
+        tang = grad[:, ::-1] * (-1.0, 1.0)  # (-g_y, g_x): counter-clockwise around the T
+        orbit = np.flatnonzero(~(at_goal | push | straight))  # the rows that orbit
+        (px, py), (gx, gy) = (p[orbit] - PT_ORBIT_CENTER).T.tolist(), (g[orbit] - PT_ORBIT_CENTER).T.tolist()
+        turn = np.array(list(map(math.atan2, gy, gx))) - np.array(list(map(math.atan2, py, px)))
+        tang[orbit[_pt.wrap_angle(turn) < 0.0]] *= -1.0  # clockwise is the shorter way
+        gap = sdf_p - PT_R  # m between pusher edge and block
+        radial = np.minimum(np.maximum(20.0 * (PT_CLEAR - gap), -1.0), 1.0)  # saturates 5 cm off the orbit
+        v = tang + radial[:, None] * grad
+        v_orbit = PT_V_MOVE[1] * v / np.maximum(np.sqrt(_rows_dot(v, v)), 1e-9)[:, None]
 
-    @staticmethod
-    def _grad(p: np.ndarray) -> np.ndarray:
-        """Unit outward gradient of the T's distance field at block-frame point p."""
-        h = 1e-5
-        q = np.array([p + (h, 0.0), p - (h, 0.0), p + (0.0, h), p - (0.0, h)])
-        d = _pt.t_sdf(q)
-        g = np.array([d[0] - d[1], d[2] - d[3]])
-        nrm = np.linalg.norm(g)
-        return g / nrm if nrm > 1e-12 else np.array([0.0, 1.0])
+        # 4. At the goal: back away from the block at 0.1 m/s until the pusher's edge is 3 cm clear,
+        # then stand still, so the block rests untouched through the success hold.
+        v = np.where(push[:, None], v_push, np.where(straight[:, None], v_straight, v_orbit))
+        v = np.where(at_goal[:, None], 0.1 * grad, v)
+        out = _rows_mv(rot, v)  # back to the world frame
+        out[at_goal & (sdf_p > PT_R + 0.03)] = 0.0  # standing still: zeros, not a rotated zero (-0.0)
+        return out
 
 
 # --- ALOHA expert ---

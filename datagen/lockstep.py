@@ -9,7 +9,8 @@ recorded here and nowhere else.
 
 attempts_lockstep returns exactly what [datagen.engine.attempt(task, sources[e], k, how, ...) for (e, k)
 in jobs] returns, frame for frame and bit for bit (tests/test_lockstep.py): it is the same runner with
-more lanes. Where the task decides for a batch (resolve: its expert.batch, datagen.tasks.fast_experts; replay:
+more lanes. Where the task decides for a batch (resolve: its expert.batch, PushTExpert itself or
+datagen.tasks.fast_experts' AlohaBatch; replay:
 a task that steps its envs as one batch, its step_batch, PushT's datagen.tasks.fast_pusht.step_many), up to
 `lanes` attempts are stepped together and the expert's ~40 small numpy calls per frame are paid once
 per control step for all of them; otherwise the runner runs one lane, each attempt in turn. Each attempt

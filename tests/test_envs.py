@@ -5,7 +5,6 @@ import pytest
 
 import aloha_env
 import pusht_env
-from datagen.tasks.fast_experts import PushTBatch
 from datagen.tasks.fast_pusht import SharedPushTEnv, step_many
 from scripted_expert import AlohaExpert, PushTExpert
 
@@ -92,7 +91,7 @@ def test_pusht_step_many_on_a_shared_mjdata_is_step_bit_for_bit():
     PushTEnv.step per env, each in
     its own: the same obs, success and done bits, clipped actions and the success latch included, and
     the same poses read between steps; a non-finite action is refused as step refuses it."""
-    expert, rng = PushTBatch(), np.random.default_rng(0)
+    expert, rng = PushTExpert(), np.random.default_rng(0)
     one = [pusht_env.PushTEnv() for _ in range(6)]
     many = [SharedPushTEnv()]
     many += [SharedPushTEnv(share=many[0]) for _ in range(5)]

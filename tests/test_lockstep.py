@@ -1,8 +1,10 @@
-"""Lockstep attempts and batched experts give today's one-at-a-time bytes: every decision of
-datagen.tasks.fast_experts' PushTBatch and AlohaBatch equals the expert's act bit for bit along real episodes,
+"""Lockstep attempts and batched experts give today's one-at-a-time bytes: the PushT expert, written over a
+batch, decides every row as the plain one-state reading of its steps (written out below) and as that row
+alone, bit for bit; datagen.tasks.fast_experts' AlohaBatch equals AlohaExpert's act along real episodes;
 and datagen.lockstep.attempts_lockstep returns exactly what datagen.engine.attempt returns, for both modes on
 PushT and for ALOHA's re-solve."""
 
+import math
 import time
 from dataclasses import replace
 
@@ -15,9 +17,24 @@ import gen_demos_pusht
 import pusht_env
 from datagen import ALOHA, PUSHT, Outcome, Perturbation, engine, lockstep, rollout
 from datagen.task import Task
-from datagen.tasks.fast_experts import AlohaBatch, PushTBatch
+from datagen.tasks.fast_experts import AlohaBatch
 from lerobot_v3.dataset import load_arrays
-from scripted_expert import AlohaExpert, PushTExpert
+from scripted_expert import (
+    PT_CLEAR,
+    PT_GOAL_POS,
+    PT_GOAL_YAW,
+    PT_MOVE_GAIN,
+    PT_ORBIT_CENTER,
+    PT_PUSH_GAIN,
+    PT_R,
+    PT_STANDOFF,
+    PT_TRAVEL_COST,
+    PT_V_MOVE,
+    PT_V_PUSH,
+    PT_YAW_LEN,
+    AlohaExpert,
+    PushTExpert,
+)
 
 
 def states_along(task, env, expert_class, seeds, noise: float) -> np.ndarray:
@@ -38,23 +55,113 @@ def assert_same_decisions(expert, batch, states: np.ndarray, chunk: int) -> None
     assert differ.size == 0, f"{differ.size} of {len(states)} decisions differ, first at row {differ[:1]}"
 
 
-def test_pusht_batched_expert_is_bit_identical():
+def plain_pusht_action(x: PushTExpert, o: np.ndarray) -> tuple[np.ndarray, str]:
+    """The PushT expert's steps 1-4 for one state as a reader writes them for one env (Python floats, one
+    numpy vector at a time: the expert's own code before it was written over a batch), the oracle a batch
+    must equal row by row, bit for bit. -> (the action before its clip, the step that decided it)."""
+    pw, bw = o[0:2], o[2:4]
+    yaw = math.atan2(o[4], o[5])
+    c, s = math.cos(yaw), math.sin(yaw)
+    rot = np.array([[c, -s], [s, c]])  # block frame -> world
+    e = rot.T @ (o[6:8] - bw)
+    eyaw = pusht_env.wrap_angle(math.atan2(o[8], o[9]) - yaw)
+    p = rot.T @ (pw - bw)
+    err = math.hypot(e[0], e[1])
+
+    def grad_at(p):
+        h = 1e-5
+        d = pusht_env.t_sdf(np.array([p + (h, 0.0), p - (h, 0.0), p + (0.0, h), p - (0.0, h)]))
+        g = np.array([d[0] - d[1], d[2] - d[3]])
+        nrm = np.linalg.norm(g)
+        return g / nrm if nrm > 1e-12 else np.array([0.0, 1.0])
+
+    if err < PT_GOAL_POS and abs(eyaw) < PT_GOAL_YAW:
+        if float(pusht_env.t_sdf(p)) > PT_R + 0.03:
+            return np.zeros(2), "goal still"
+        return rot @ (0.1 * grad_at(p)), "goal back off"
+    want = np.array([e[0], e[1], PT_YAW_LEN * eyaw])
+    want /= np.linalg.norm(want)
+    align = x._u @ want
+    pre_w = bw + x._pre @ rot.T
+    reach = np.all(np.abs(pre_w) < pusht_env.WALL_INNER - PT_R - 0.005, axis=1)
+    rel = p - x._contact
+    along = np.clip(np.einsum("kj,kj->k", rel, x._n), -PT_STANDOFF, 0.0)
+    travel = np.linalg.norm(rel - along[:, None] * x._n, axis=1)
+    k = int(np.argmax(np.where(reach, align - PT_TRAVEL_COST * travel, -np.inf)))
+    n, t, c0, g = x._n[k], x._t[k], x._contact[k], x._pre[k]
+    rel = p - c0
+    along, lat = float(rel @ n), float(rel @ t)
+    if abs(lat) < 0.006 and -(PT_STANDOFF + 0.008) < along < 0.01:
+        speed = min(max(PT_PUSH_GAIN * math.hypot(err, PT_YAW_LEN * eyaw), PT_V_PUSH[0]), PT_V_PUSH[1])
+        return rot @ (speed * n - 5.0 * lat * t), "push"
+    dg = g - p
+    dist = float(np.linalg.norm(dg))
+    speed = min(max(PT_MOVE_GAIN * dist, PT_V_MOVE[0]), PT_V_MOVE[1])
+    floor = min(PT_R + 0.002, float(pusht_env.t_sdf(p)) - 0.001)
+    if np.all(pusht_env.t_sdf(p + x._seg[:, None] * dg) > floor):
+        return rot @ (speed * dg / max(dist, 1e-9)), "straight"
+    grad = grad_at(p)
+    tang = np.array([-grad[1], grad[0]])
+    a_p = math.atan2(*(p - PT_ORBIT_CENTER)[::-1])
+    a_g = math.atan2(*(g - PT_ORBIT_CENTER)[::-1])
+    clockwise = pusht_env.wrap_angle(a_g - a_p) < 0.0
+    if clockwise:
+        tang = -tang
+    radial = min(max(20.0 * (PT_CLEAR - (float(pusht_env.t_sdf(p)) - PT_R)), -1.0), 1.0)
+    v = tang + radial * grad
+    return rot @ (PT_V_MOVE[1] * v / max(np.linalg.norm(v), 1e-9)), "orbit " + ("cw" if clockwise else "ccw")
+
+
+class OnePushT:
+    """act(obs): plain_pusht_action, clipped and cast as the expert's act."""
+
+    def __init__(self):
+        self.x = PushTExpert()
+
+    def act(self, obs):
+        v, _ = plain_pusht_action(self.x, np.asarray(obs, dtype=np.float64))
+        return np.clip(v, -1.0, 1.0).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def pusht_states():
     states = states_along(PUSHT, pusht_env.PushTEnv(), PushTExpert, range(240), noise=0.3)
     assert len(states) > 3000
-    assert_same_decisions(PushTExpert(), PushTBatch(), states, chunk=37)  # 37: batches mix every kind
+    return states
+
+
+def test_pusht_expert_over_a_batch_is_the_plain_reading_of_every_row_bit_for_bit(pusht_states):
+    # every row, however the rows are grouped (37: batches mix every kind; 1: act is a batch of one)
+    assert_same_decisions(OnePushT(), PushTExpert(), pusht_states, chunk=37)
+    assert_same_decisions(OnePushT(), PushTExpert(), pusht_states[:400], chunk=1)
+    assert_same_decisions(PushTExpert(), PushTExpert(), pusht_states, chunk=len(pusht_states))
+    # and every kind of decision is in there: pushes, straight moves, orbits both ways, the goal's two
+    x = PushTExpert()
+    kinds = [plain_pusht_action(x, o.astype(np.float64))[1] for o in pusht_states]
+    assert set(kinds) == {"push", "straight", "orbit ccw", "orbit cw", "goal back off", "goal still"}, set(
+        kinds
+    )
+
+
+def test_the_pusht_experts_noise_over_a_batch_is_its_rows_in_order_and_aloha_batch_refuses_noise(
+    pusht_states,
+):
+    # a noisy PushT expert draws a batch's rows in order from its one generator: act's actions, row by row
+    states = pusht_states[:300]
+    x = PushTExpert(noise=0.2, seed=7)
+    rows = np.stack([x.act(o) for o in states])
+    batched = PushTExpert(noise=0.2, seed=7)
+    together = np.concatenate([batched.act_batch(states[i : i + 50]) for i in range(0, len(states), 50)])
+    assert together.tobytes() == rows.tobytes()
+    assert not np.array_equal(rows, PushTExpert().act_batch(states))  # the noise is there
+    with pytest.raises(ValueError):
+        AlohaBatch(AlohaExpert(noise=0.1))
 
 
 def test_aloha_batched_expert_is_bit_identical():
     states = states_along(ALOHA, aloha_env.AlohaCubeEnv(), AlohaExpert, range(16), noise=0.3)
     assert len(states) > 2000
     assert_same_decisions(AlohaExpert(), AlohaBatch(), states, chunk=29)
-
-
-def test_batched_experts_refuse_noise():
-    with pytest.raises(ValueError):
-        PushTBatch(PushTExpert(noise=0.1))
-    with pytest.raises(ValueError):
-        AlohaBatch(AlohaExpert(noise=0.1))
 
 
 @pytest.fixture(scope="module")

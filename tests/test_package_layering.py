@@ -36,7 +36,7 @@ PRESENTATION = {"ch37.cli", "ch37.config", "ch37.viz", "ch37.poster", "ch37.resu
 # each bit for bit what it copies: a fast copy reads the very constants and state of what it copies (a
 # number copied by hand could drift), through their public names, so it may import those modules.
 FAST_COPIES = {
-    "datagen.tasks.fast_experts": {"scripted_expert", "pusht_env"},
+    "datagen.tasks.fast_experts": {"scripted_expert"},
     "datagen.tasks.fast_pusht": {"pusht_env"},
 }
 ERROR_TYPE = "ch37.errors"

@@ -3,8 +3,8 @@ each registers its task as it is imported (datagen.task.register), and datagen.t
 every module here, so a new task is one module in this folder, listed nowhere else (docs/adding-a-task.md).
 
 aloha                 our ALOHA cube handoff (aloha_env.py, scripted_expert.AlohaExpert)
-pusht                 our PushT (pusht_env.py, scripted_expert.PushTExpert)
-fast_experts          their experts over a batch of lanes (the same bits)
+pusht                 our PushT (pusht_env.py, scripted_expert.PushTExpert, written over a batch of lanes)
+fast_experts          AlohaExpert over a batch of lanes (the same bits)
 fast_pusht            PushT's lanes in one MjData
 gym_pusht             LeRobot's gym-pusht, pixels; gym_pusht_expert its expert
 pusher                Gymnasium's 7-DoF Pusher-v5, in SE(3); pusher_expert its controller and expert

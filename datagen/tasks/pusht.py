@@ -40,7 +40,6 @@ from datagen.task import (
     VelocityCommand,
     register,
 )
-from datagen.tasks.fast_experts import PushTBatch
 from datagen.tasks.fast_pusht import SharedPushTEnv, step_many
 from scripted_expert import PushTExpert
 
@@ -115,7 +114,7 @@ class PushT(Task):
     name, title = "pusht", "PushT"
     spec = EnvSpec.of(pusht_env, state_ranges=STATE_RANGES, action_ranges=ACTION_RANGES)
     start_names = START_NAMES
-    expert = ExpertSpec(PushTExpert, batch=PushTBatch, generator="gen_demos_pusht.py")
+    expert = ExpertSpec(PushTExpert, batch=PushTExpert, generator="gen_demos_pusht.py")
     replay = ReplaySpec(
         arms={"pusher": slice(0, 2)},
         action=VelocityCommand({"pusher": slice(0, 2)}, gain=TRACK_GAIN, limit=_LIMIT),
