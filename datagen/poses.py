@@ -39,11 +39,13 @@ __all__ = [
     "rotation",
     "rotation_angle",
     "rotation_of",
+    "rotations_of",
     "slerp",
     "slerp_path",
     "solve",
     "transform_pose",
     "transform_segment",
+    "transform_sliding",
 ]
 
 
@@ -71,11 +73,13 @@ def _matrix(pose) -> np.ndarray:
 
 
 def rigid_inverse(pose) -> np.ndarray:
-    """The inverse of a (4, 4) pose, [R^T, -R^T p]: exact where a general inverse rounds (an unmoved
-    frame gives the identity, so a replay at zero perturbation commands the source's own targets)."""
-    rot, pos = np.asarray(pose, np.float64)[:3, :3], np.asarray(pose, np.float64)[:3, 3]
-    out = np.eye(4)
-    out[:3, :3], out[:3, 3] = rot.T, -(rot.T @ pos)
+    """The inverse of a (4, 4) pose, [R^T, -R^T p], or of each of a stack (N, 4, 4): exact where a general
+    inverse rounds (an unmoved frame gives the identity, so a replay at zero perturbation commands the
+    source's own targets)."""
+    pose = np.asarray(pose, np.float64)
+    rot, pos = pose[..., :3, :3], pose[..., :3, 3:]  # pos (..., 3, 1)
+    out = np.zeros(pose.shape)
+    out[..., :3, :3], out[..., :3, 3:], out[..., 3, 3] = rot.mT, -(rot.mT @ pos), 1.0
     return out
 
 
@@ -103,6 +107,26 @@ def transform_segment(points, vectors, src_pose, new_pose, rotations=None):
     turn = rel[:3, :3]
     moved = np.asarray(points, np.float64).reshape(-1, 3) @ turn.T + rel[:3, 3]
     turned = None if vectors is None else np.asarray(vectors, np.float64).reshape(-1, 3) @ turn.T
+    spun = None if rotations is None else turn @ np.asarray(rotations, np.float64)  # (T, 3, 3)
+    return moved, turned, spun
+
+
+def transform_sliding(points, vectors, src_poses, new_poses, rotations=None):
+    """transform_segment for a path whose object frame moves along it (a frame sliding onto another): frame
+    t re-expressed from src_poses[t] to new_poses[t]; row t is transform_segment of row t alone, bit for
+    bit. SE(3) (poses (T, 4, 4)): every frame's M_t = new_t src_t^-1 and products at once, each a stack of
+    the frames' own; planar triples frame by frame."""
+    if is_planar(src_poses[0]) and is_planar(new_poses[0]) and rotations is None:
+        rows = [
+            transform_segment(points[t : t + 1], vectors[t : t + 1], was, now)
+            for t, (was, now) in enumerate(zip(src_poses, new_poses))
+        ]
+        return tuple(np.concatenate(part) for part in zip(*rows))
+    src, new = np.asarray(src_poses, np.float64), np.asarray(new_poses, np.float64)
+    rel = new @ rigid_inverse(src)  # (T, 4, 4)
+    turn = rel[:, :3, :3]
+    moved = (np.asarray(points, np.float64).reshape(-1, 1, 3) @ turn.mT)[:, 0] + rel[:, :3, 3]
+    turned = None if vectors is None else (np.asarray(vectors, np.float64).reshape(-1, 1, 3) @ turn.mT)[:, 0]
     spun = None if rotations is None else turn @ np.asarray(rotations, np.float64)  # (T, 3, 3)
     return moved, turned, spun
 
@@ -151,32 +175,41 @@ def quat_of(rot) -> np.ndarray:
     return -q if q[0] < 0 else q
 
 
+def rotations_of(qs) -> np.ndarray:
+    """The rotation matrices (N, 3, 3) of quaternions (N, 4) (w, x, y, z), each normalised first: row i is
+    rotation_of(qs[i]), bit for bit (its norm the same BLAS dot, in float32 for float32 quaternions, the
+    rest elementwise)."""
+    raw = np.asarray(qs).reshape(-1, 4)
+    raw = raw if raw.dtype.kind == "f" else raw.astype(np.float64)
+    norm = np.sqrt(raw[:, None, :] @ raw[:, :, None])[:, 0]  # in the quaternions' precision, as norm(q)
+    w, x, y, z = (raw.astype(np.float64) / norm).T
+    rows = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ]
+    return np.array(rows).transpose(2, 0, 1).copy()  # C order: each (3, 3) laid out as one alone, for BLAS
+
+
 def rotation_of(q) -> np.ndarray:
     """The rotation matrix (3, 3) of a quaternion (w, x, y, z) (normalised first)."""
-    w, x, y, z = np.asarray(q, np.float64) / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    return rotations_of(q)[0]
 
 
-def slerp_path(r0, r1, fractions) -> list[np.ndarray]:
-    """The rotations (3, 3) each fraction s (0..1) of `fractions` of the way from r0 to r1 along the shorter
-    arc: the ends' quaternions found once for the whole path."""
+def slerp_path(r0, r1, fractions) -> np.ndarray:
+    """The rotations (N, 3, 3) each fraction s (0..1) of `fractions` of the way from r0 to r1 along the
+    shorter arc: the ends' quaternions found once for the whole path."""
     q0, q1 = quat_of(r0), quat_of(r1)
     dot = float(q0 @ q1)
     if dot < 0:  # q and -q are one rotation: take the short way
         q1, dot = -q1, -dot
+    s = np.asarray(fractions, np.float64).reshape(-1, 1)
     if dot > 1 - 1e-12:
-        return [rotation_of(q0 + s * (q1 - q0)) for s in fractions]
+        return rotations_of(q0 + s * (q1 - q0))
     theta = math.acos(min(dot, 1.0))
-    return [
-        rotation_of((math.sin((1 - s) * theta) * q0 + math.sin(s * theta) * q1) / math.sin(theta))
-        for s in fractions
-    ]
+    w0 = np.array([math.sin((1 - f) * theta) for f in s[:, 0].tolist()]).reshape(-1, 1)
+    w1 = np.array([math.sin(f * theta) for f in s[:, 0].tolist()]).reshape(-1, 1)
+    return rotations_of((w0 * q0 + w1 * q1) / math.sin(theta))
 
 
 def slerp(r0, r1, s: float) -> np.ndarray:
@@ -184,22 +217,21 @@ def slerp(r0, r1, s: float) -> np.ndarray:
     return slerp_path(r0, r1, (s,))[0]
 
 
-def interpolate_path(a, b, fractions) -> list:
-    """The poses each fraction s (0..1) of `fractions` of the way from a to b: planar triples give triples
-    (x, y linear; yaw the short way), (4, 4) poses (4, 4) poses (position linear, orientation by slerp,
-    slerp_path's)."""
+def interpolate_path(a, b, fractions):
+    """The poses each fraction s (0..1) of `fractions` of the way from a to b: planar triples give a list
+    of triples (x, y linear; yaw the short way), (4, 4) poses an (N, 4, 4) array (position linear,
+    orientation by slerp_path)."""
     if is_planar(a) and is_planar(b):
         dyaw = math.remainder(float(b[2]) - float(a[2]), math.tau)
         return [
             (a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1]), float(a[2]) + s * dyaw) for s in fractions
         ]
     a, b = _matrix(a), _matrix(b)
-    out = []
-    for s, rot in zip(fractions, slerp_path(a[:3, :3], b[:3, :3], fractions)):
-        pose = np.eye(4)
-        pose[:3, :3] = rot
-        pose[:3, 3] = a[:3, 3] + s * (b[:3, 3] - a[:3, 3])
-        out.append(pose)
+    s = np.asarray(fractions, np.float64).reshape(-1, 1)
+    out = np.zeros((len(s), 4, 4))
+    out[:, :3, :3] = slerp_path(a[:3, :3], b[:3, :3], s[:, 0])
+    out[:, :3, 3] = a[:3, 3] + s * (b[:3, 3] - a[:3, 3])
+    out[:, 3, 3] = 1.0
     return out
 
 

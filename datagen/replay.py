@@ -56,6 +56,7 @@ from datagen.poses import (
     slerp_path,
     transform_pose,
     transform_segment,
+    transform_sliding,
 )
 from datagen.task import POSE_SHAPES, Outcome, Source, Subtask, Task, ended, owed
 
@@ -182,17 +183,9 @@ class Replay:
                 b0, b1 = task.frame_pose(frame, now), task.frame_pose(to, now)
                 k = max(len(pts) - 1, 1)
                 way = [t / k for t in range(len(pts))]  # frame t in the pose a fraction t / k of the way
-                moved = []
-                for t, (was, now_) in enumerate(
-                    zip(interpolate_path(a0, a1, way), interpolate_path(b0, b1, way))
-                ):
-                    part = (None if x is None else x[t : t + 1] for x in (pts, vel, rots))
-                    moved.append(_moved(*part, was, now_))
-                d = np.shape(pts)[1]
-                pts, vel, rots = (
-                    None if m[0] is None else np.concatenate(m).reshape(-1, *shape)
-                    for m, shape in zip(zip(*moved), ((d,), (d,), (3, 3)))
-                )
+                was, now_ = interpolate_path(a0, a1, way), interpolate_path(b0, b1, way)
+                pts, vel, *rest = transform_sliding(pts, vel, was, now_, rots)
+                rots = rest[0] if rest else None
             out[arm] = (pts, vel, None if grip is None else np.asarray(grip, np.float64), rots)
         return out
 

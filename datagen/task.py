@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from ch37.parallel import step_each
-from datagen.poses import quat_of, rotation_of
+from datagen.poses import quat_of, rotations_of
 
 __all__ = [
     "REQUIRED_ATTRIBUTES",
@@ -366,7 +366,7 @@ class PoseTarget(ActionKind):
         out = {}
         for arm, c in self.columns.items():
             pose = a[:, c]
-            out[arm] = (pose[:, :3], None, None, np.stack([rotation_of(q) for q in pose[:, 3:7]]))
+            out[arm] = (pose[:, :3], None, None, rotations_of(pose[:, 3:7]))
         return out
 
     def to_action(self, task, obs, waypoints, velocities, grips, orientations=None) -> np.ndarray:

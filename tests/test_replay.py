@@ -17,10 +17,13 @@ from datagen.poses import (
     interpolate_path,
     planar_pose,
     quat_of,
+    rigid_inverse,
     rotation,
     rotation_of,
+    rotations_of,
     slerp_path,
     transform_segment,
+    transform_sliding,
 )
 from datagen.task import DeltaCommand, failures_of
 from datagen.tasks import pusht
@@ -127,6 +130,71 @@ def test_interpolate_moves_linearly_and_turns_by_slerp():
     )
 
 
+def plain_rotation_of(q) -> np.ndarray:
+    """A quaternion's rotation matrix as one writes it for one quaternion (the oracle of rotations_of)."""
+    w, x, y, z = np.asarray(q, np.float64) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def plain_transform(points, vectors, rotations, src, new):
+    """transform_segment in SE(3) as one writes it for one pair of (4, 4) poses, its inverse [R^T, -R^T p]
+    with p a vector (the oracle of rigid_inverse and transform_sliding)."""
+    inv = np.eye(4)
+    inv[:3, :3], inv[:3, 3] = src[:3, :3].T, -(src[:3, :3].T @ src[:3, 3])
+    rel = new @ inv
+    turn = rel[:3, :3]
+    return points.reshape(-1, 3) @ turn.T + rel[:3, 3], vectors.reshape(-1, 3) @ turn.T, turn @ rotations
+
+
+def test_rotations_of_stacks_each_quaternions_plain_rotation_bit_for_bit():
+    """Issue 58 #6: rotations_of turns a stack of quaternions at once (a replayed path's orientations);
+    each is the one-quaternion formula's, bit for bit, unit or not, float64 or float32, and rotation_of is
+    its one row."""
+    qs = np.random.default_rng(3).normal(size=(500, 4)) * np.repeat([1.0, 1e-3, 7.0, 1e3], 125)[:, None]
+    for qs in (qs, qs.astype(np.float32)):  # float32: an observation's quaternion, its norm in float32
+        stacked = rotations_of(qs)
+        assert stacked.shape == (500, 3, 3) and stacked.dtype == np.float64 and stacked.flags.c_contiguous
+        assert rotation_of(qs[0]).flags.c_contiguous  # laid out as one alone: later products take its path
+        for q, got in zip(qs, stacked):
+            want = plain_rotation_of(q)
+            assert got.tobytes() == want.tobytes() and rotation_of(q).tobytes() == want.tobytes()
+
+
+def test_a_sliding_frame_moves_each_step_as_transform_segment_of_that_step_alone_bit_for_bit():
+    """Issue 58 #6: transform_sliding re-expresses every step of a path whose frame slides (its own source
+    and new pose per step) in one stack of products; each step is the plain one-pose transform's, bit for
+    bit, and rigid_inverse of a stack is each pose's."""
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        n = int(rng.integers(1, 40))
+        src = np.stack([_random_pose(rng) for _ in range(n)])
+        new = np.stack([_random_pose(rng) for _ in range(n)])
+        pts, vel = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+        rots = rotations_of(rng.normal(size=(n, 4)))
+        moved, turned, spun = transform_sliding(pts, vel, src, new, rots)
+        inverses = rigid_inverse(src)
+        for t in range(n):
+            want = plain_transform(pts[t], vel[t], rots[t : t + 1], src[t], new[t])
+            assert moved[t].tobytes() == want[0][0].tobytes() and turned[t].tobytes() == want[1][0].tobytes()
+            assert spun[t].tobytes() == want[2][0].tobytes()
+            one = transform_segment(pts[t : t + 1], vel[t : t + 1], src[t], new[t], rots[t : t + 1])
+            assert all(a.tobytes() == b.tobytes() for a, b in zip(one, want))
+            assert inverses[t].tobytes() == rigid_inverse(src[t]).tobytes()
+    # planar frames: frame by frame through transform_segment's SE(2) arithmetic
+    src, new = [(0.1 * t, 0.2, 0.3 * t) for t in range(5)], [(1.0, -0.5 * t, -0.2 * t) for t in range(5)]
+    pts, vel = rng.normal(size=(5, 2)), rng.normal(size=(5, 2))
+    moved, turned = transform_sliding(pts, vel, src, new)
+    for t in range(5):
+        one = transform_segment(pts[t : t + 1], vel[t : t + 1], src[t], new[t])
+        assert moved[t].tobytes() == one[0][0].tobytes() and turned[t].tobytes() == one[1][0].tobytes()
+
+
 def test_a_path_is_each_of_its_poses_as_one_interpolation_makes_it_bit_for_bit():
     """Issue 58 #6: interpolate_path and slerp_path find their ends' quaternions once for a whole path (a
     bridge's turn, a frame sliding onto another); each pose is the one the plain per-fraction slerp
@@ -139,9 +207,11 @@ def test_a_path_is_each_of_its_poses_as_one_interpolation_makes_it_bit_for_bit()
         if dot < 0:
             q1, dot = -q1, -dot
         if dot > 1 - 1e-12:
-            return rotation_of(q0 + s * (q1 - q0))
+            return plain_rotation_of(q0 + s * (q1 - q0))
         theta = math.acos(min(dot, 1.0))
-        return rotation_of((math.sin((1 - s) * theta) * q0 + math.sin(s * theta) * q1) / math.sin(theta))
+        return plain_rotation_of(
+            (math.sin((1 - s) * theta) * q0 + math.sin(s * theta) * q1) / math.sin(theta)
+        )
 
     rng = np.random.default_rng(7)
     way = [t / 37 for t in range(38)]
