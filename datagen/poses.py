@@ -175,25 +175,29 @@ def quat_of(rot) -> np.ndarray:
     return -q if q[0] < 0 else q
 
 
-def rotations_of(qs) -> np.ndarray:
-    """The rotation matrices (N, 3, 3) of quaternions (N, 4) (w, x, y, z), each normalised first: row i is
-    rotation_of(qs[i]), bit for bit (its norm the same BLAS dot, in float32 for float32 quaternions, the
-    rest elementwise)."""
-    raw = np.asarray(qs).reshape(-1, 4)
-    raw = raw if raw.dtype.kind == "f" else raw.astype(np.float64)
-    norm = np.sqrt(raw[:, None, :] @ raw[:, :, None])[:, 0]  # in the quaternions' precision, as norm(q)
-    w, x, y, z = (raw.astype(np.float64) / norm).T
-    rows = [
+def _rotation_rows(w, x, y, z) -> list:
+    """The rows of a unit quaternion's rotation matrix, for numbers or for arrays of them alike."""
+    return [
         [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
     ]
-    return np.array(rows).transpose(2, 0, 1).copy()  # C order: each (3, 3) laid out as one alone, for BLAS
 
 
 def rotation_of(q) -> np.ndarray:
     """The rotation matrix (3, 3) of a quaternion (w, x, y, z) (normalised first)."""
-    return rotations_of(q)[0]
+    return np.array(_rotation_rows(*(np.asarray(q, np.float64) / np.linalg.norm(q))))
+
+
+def rotations_of(qs) -> np.ndarray:
+    """The rotation matrices (N, 3, 3) of quaternions (N, 4) (w, x, y, z), each normalised first: row i is
+    rotation_of(qs[i]), bit for bit (its norm the same BLAS dot, in float32 for float32 quaternions as
+    np.linalg.norm takes it, the rest elementwise)."""
+    raw = np.asarray(qs).reshape(-1, 4)
+    raw = raw if raw.dtype.kind == "f" else raw.astype(np.float64)
+    norm = np.sqrt(raw[:, None, :] @ raw[:, :, None])[:, 0]  # (N, 1)
+    rows = _rotation_rows(*(raw.astype(np.float64) / norm).T)
+    return np.array(rows).transpose(2, 0, 1).copy()  # C order: each (3, 3) laid out as one alone, for BLAS
 
 
 def slerp_path(r0, r1, fractions) -> np.ndarray:
