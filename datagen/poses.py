@@ -10,6 +10,8 @@ depend on the 3-D path (tests/test_replay.py shows the two agree).
     transform_segment(points, vectors, src, new, rotations=None)   a path made relative to a frame at
         `src`, re-expressed for that frame at `new` (MimicGen's transform_source_data_segment_using_
         object_pose): points p' = M p, vectors v' = R_M v, rotations R' = R_M R, with M = new src^-1
+    transform_sliding(points, vectors, srcs, news, rotations=None)   the same for a path whose frame
+        slides (step t from srcs[t] to news[t]), all steps' products at once, each step's bits its own
     transform_pose(pose, src, new)   a pose made relative to a frame at `src` (an object's, say),
                              re-expressed for that frame at `new`: the pose M pose, M = new src^-1
     pose_gap(a, b)           how far apart two poses are: (distance, angle in rad)
@@ -17,6 +19,7 @@ depend on the 3-D path (tests/test_replay.py shows the two agree).
                              by slerp (planar: yaw the short way); interpolate_path(a, b, fractions) and
                              slerp_path(r0, r1, fractions) a path's, its ends' quaternions found once
     planar_pose(x, y, yaw)   the (4, 4) pose of a planar frame
+    rotation_of(q)           a quaternion's rotation matrix; rotations_of(qs) a stack's, row for row
     solve(a, b)              np.linalg.solve(a, b) for float64 systems known to be well posed (an inverse
                              kinematics' damped J J^T + lambda^2 I), its bits without its checks
 """
