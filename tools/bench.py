@@ -1067,35 +1067,76 @@ KERNEL_PATHS = {
 }
 # One measurement: the default recipe's shapes (hidden 512, batch 128, two arms of 420 and 3,490 frames:
 # the seed-0 source and source + augmented sizes, from its budgets; a step's time does not depend on
-# them), `steps` timed after a warm-up of 50; the weights' sha256 after the timed steps.
+# them), `steps` timed after a warm-up of 50; the weights' sha256 after the timed steps. With "parts",
+# the calls bc_recipe.train's loop makes are wrapped with clocks (PARTS: the stack's forward, the
+# backward, Adam's step, zero_grad, the scheduler; the rest is the batch, the loss and the progress bar),
+# and the bare products are timed after it: one arm's three hidden x hidden products on one thread (its
+# forward z = h @ W, its backward's h^T @ g and g @ W^T), and two arms' at once on two threads.
+PARTS = ("forward", "backward", "Adam", "zero_grad", "scheduler")
 TRAIN_STEP = """
-import hashlib, json, sys, time
+import hashlib, json, sys, threading, time
 import numpy as np, torch
 import bc_recipe as bc
 from ch37 import ensemble
 steps, hidden, batch, threads = map(int, sys.argv[1:5])
 if sys.argv[5] == "torch":  # the products on torch (MKL), as MLPStack runs them without numpy's OpenBLAS
     ensemble.one_blas_thread = lambda: False
+parts = {}
+def clocked(owner, name, part):  # owner.name timed into parts[part], from the first timed step on
+    call = getattr(owner, name)
+    def timed(*a, **k):
+        t0 = time.perf_counter()
+        try:
+            return call(*a, **k)
+        finally:
+            parts[part] = parts.get(part, 0.0) + time.perf_counter() - t0
+    setattr(owner, name, timed)
+if sys.argv[6:] == ["parts"]:
+    clocked(ensemble.MLPStack, "forward", "forward")
+    clocked(torch.Tensor, "backward", "backward")
+    clocked(torch.optim.Adam, "step", "Adam")
+    clocked(torch.optim.Adam, "zero_grad", "zero_grad")
+    clocked(torch.optim.lr_scheduler.CosineAnnealingLR, "step", "scheduler")
 torch.set_num_threads(threads)
 rng = np.random.default_rng(0)
 data = [(rng.normal(size=(n, 10)).astype(np.float32), rng.normal(size=(n, 2)).astype(np.float32))
         for n in (420, 3490)]
 init = bc.init_weights(hidden, 0)
 bc.train(data, 50, init, batch_size=batch, lr=1e-3, seed=0)
+parts.clear()
 t0 = time.perf_counter()
 pols, _ = bc.train(data, steps, init, batch_size=batch, lr=1e-3, seed=0)
 dt = time.perf_counter() - t0
 weights = b"".join(t.numpy().tobytes() for p in pols for t in p.net.state_dict().values())
-print(json.dumps({"s_per_step": dt / steps, "sha256": hashlib.sha256(weights).hexdigest()[:8],
-                  "blas": ensemble.blas_core()}))
+out = {"s_per_step": dt / steps, "sha256": hashlib.sha256(weights).hexdigest()[:8]}
+out["blas"] = ensemble.blas_core()
+if parts:
+    out["parts"] = {k: v / steps for k, v in parts.items()}
+    shapes = ((batch, hidden), (hidden, hidden), (batch, hidden))
+    a, w, g = (rng.normal(size=s).astype(np.float32) for s in shapes)
+    def arm(n=200):
+        for _ in range(n):
+            a @ w, a.T @ g, g @ w.T
+    def two():
+        t = threading.Thread(target=arm)
+        t.start(), arm(), t.join()
+    for name, f in (("one arm", arm), ("two arms", two)) if sys.argv[5] == "numpy" else ():
+        times = []
+        for _ in range(4):  # a warm-up, then the best of 3
+            t0 = time.perf_counter()
+            f()
+            times.append((time.perf_counter() - t0) / 200)
+        out["products"] = out.get("products", {}) | {name: min(times[1:])}
+print(json.dumps(out))
 """
 
 
-def train_step(path: str, steps: int, hidden: int, batch: int, threads: int) -> dict:
-    """Seconds per training step and the weights' hash, in a fresh process on kernel path `path`."""
+def train_step(path: str, steps: int, hidden: int, batch: int, threads: int, parts: bool = False) -> dict:
+    """Seconds per training step and the weights' hash, in a fresh process on kernel path `path` (parts:
+    and the seconds of each of its PARTS per step, and the bare products'; TRAIN_STEP)."""
     env, products = KERNEL_PATHS[path]
     base = {k: v for k, v in os.environ.items() if k not in ("MKL_CBWR", "OPENBLAS_CORETYPE")}
-    args = [steps, hidden, batch, threads, products]
+    args = [steps, hidden, batch, threads, products, *(["parts"] if parts else [])]
     return in_fresh_process(TRAIN_STEP, args, base | env, f"the timing process for {path}")
 
 
@@ -1107,6 +1148,7 @@ def kernels_main(argv: list[str]) -> int:
 
         python -m tools.bench kernels                    # the three paths below, 5 rounds of 1,000 steps
         python -m tools.bench kernels --paths held native --rounds 7 --steps 2000 --threads 1 2
+        python -m tools.bench kernels --parts            # and where a step's time goes, part by part
 
     "held" is the published path (the stack's products on numpy's OpenBLAS held to its Haswell kernels,
     MKL_CBWR=COMPATIBLE: scale_data.py's setup region); "compatible" the products on torch's MKL held to
@@ -1121,13 +1163,15 @@ def kernels_main(argv: list[str]) -> int:
     arg("--threads", nargs="+", type=int, default=[2], help="torch threads of each measurement")
     arg("--rounds", type=int, default=5, help="measurements per path, alternated")
     arg("--steps", type=int, default=1000, help="timed training steps per measurement")
+    arg("--parts", action="store_true", help="also time each part of a step (its calls wrapped with clocks)")
     a = p.parse_args(argv)
     config.check(a, positive=("rounds", "steps"))
     if min(a.threads) < 1:
         raise DataError(f"--threads must be at least 1, got {min(a.threads)}")
     shape = (a.steps, config.CHAPTER.hidden_dim, config.CHAPTER.batch_size)
     runs = {f"{path} {t}": (path, t) for path in a.paths for t in a.threads}
-    got = alternate({k: lambda _, p=p, t=t: train_step(p, *shape, t) for k, (p, t) in runs.items()}, a.rounds)
+    timed = {k: lambda _, p=p, t=t: train_step(p, *shape, t, a.parts) for k, (p, t) in runs.items()}
+    got = alternate(timed, a.rounds)
     seed0 = yaml.safe_load(META.read_text())["reference_run"]["seeds"]["rows"][0]["steps"]
     full = seed0["full"] + seed0["short"]  # the default run's steps at seed 0, both budgets
     med = medians({k: [m["s_per_step"] for m in ms] for k, ms in got.items()})
@@ -1141,6 +1185,18 @@ def kernels_main(argv: list[str]) -> int:
             f" {first}; a default run's {full} steps: {med[k] * full:.1f} s; weights {hashes}"
             f" (OpenBLAS {ms[0]['blas'] or 'absent'})"
         )
+    for k, ms in got.items() if a.parts else ():
+        part = {n: statistics.median(m["parts"].get(n, 0.0) for m in ms) * 1e3 for n in PARTS}
+        rest = med[k] * 1e3 - sum(part.values())
+        each = ", ".join(f"{n} {v:.3f}" for n, v in part.items())
+        print(f"  {k:12s} a step's parts, ms (medians): {each}; the rest (batch, loss, bar) {rest:.3f}")
+        if "products" in ms[0]:
+            bare = {n: statistics.median(m["products"][n] for m in ms) * 1e3 for n in ms[0]["products"]}
+            print(
+                f"  {k:12s} the bare products, ms: one arm's three {shape[2]}x{shape[1]}x{shape[1]} products"
+                f" on one thread {bare['one arm']:.3f}, two arms' at once on two threads"
+                f" {bare['two arms']:.3f} ({bare['two arms'] / (med[k] * 1e3):.0%} of the step)"
+            )
     return 0
 
 
