@@ -413,6 +413,26 @@ def test_reproducibility_costs_are_the_kept_sitting(sitting):
     assert v["provenance"]["platform"]["cpu_model"] == "AMD EPYC" and not v["provenance"]["git"]["dirty"]
 
 
+def test_reproducibility_step_parts_are_the_kept_part_benches():
+    """Issue 59: where a held training step goes on the Zen 4 host, as the two kept runs of
+    python -m tools.bench kernels --parts print it (results/zen4/bench_kernels_parts_N.txt)."""
+    import re
+
+    for i in (1, 2):
+        text = (RESULTS / f"zen4/bench_kernels_parts_{i}.txt").read_text()
+        step = re.search(r"held 2 +threads +([0-9.]+) ms/step", text).group(1)
+        parts = re.search(
+            r"held 2 +a step's parts, ms \(medians\): forward ([0-9.]+), backward ([0-9.]+), Adam ([0-9.]+),"
+            r" zero_grad ([0-9.]+), scheduler ([0-9.]+); the rest \(batch, loss, bar\) ([0-9.]+)",
+            text,
+        ).groups()
+        bare, share = re.search(
+            r"two arms' at once on two threads ([0-9.]+) \((\d+)% of the step\)", text
+        ).groups()
+        assert float(share) == pytest.approx(100 * float(bare) / float(step), abs=0.5)
+        has("docs/reproducibility.md", f"| {i} | {step} | " + " | ".join(parts) + f" | {bare} | {share}% |")
+
+
 # --- docs/replay.md -----------------------------------------------------------------------------------
 
 
