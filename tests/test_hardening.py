@@ -1335,6 +1335,28 @@ def test_bench_engine_measures_every_task_and_refuses_an_unknown_one_in_one_line
     assert costs["task_s"] > 0 and costs["physics_in_run_s"] > 0 and costs["engine_over_physics"] >= 1
 
 
+def test_bench_kernels_parts_splits_a_held_step_around_its_bare_products():
+    """Issue 59 #1: python -m tools.bench kernels --parts times bc_recipe.train's own calls inside a held
+    step (one round of a few steps here): every part took time, together less than the step, and the bare
+    products beside it on numpy's OpenBLAS, one arm's and two arms' at once."""
+    import re
+
+    p = run("-m", "tools.bench", "kernels", "--paths", "held", "--rounds", "1", "--steps", "20", "--parts")
+    assert p.returncode == 0, p.stderr[-2000:]
+    step = float(re.search(r"held 2 +threads +([0-9.]+) ms/step", p.stdout).group(1))
+    got = re.search(
+        r"held 2 +a step's parts, ms \(medians\): (.*); the rest \(batch, loss, bar\) (-?[0-9.]+)", p.stdout
+    )
+    parts = {n: float(v) for n, v in (x.rsplit(" ", 1) for x in got.group(1).split(", "))}
+    assert list(parts) == ["forward", "backward", "Adam", "zero_grad", "scheduler"], parts
+    assert all(v > 0 for v in parts.values()) and sum(parts.values()) < step and float(got.group(2)) > 0
+    bare = re.search(
+        r"one thread ([0-9.]+), two arms' at once on two threads ([0-9.]+) \((\d+)% of", p.stdout
+    )
+    one, two, share = map(float, bare.groups())
+    assert 0 < one < step and 0 < two and share == pytest.approx(100 * two / step, abs=0.5)
+
+
 def test_bench_reference_refuses_what_is_not_a_reference_checkout_in_one_line(tmp_path):
     """Issue 59 #1's one command for the other host kind: a --ref without the reference chapter's script,
     a --ref_python that is not a program, --rounds 0: one `error:` line each, exit 2, nothing run or made."""

@@ -1070,8 +1070,8 @@ KERNEL_PATHS = {
 # them), `steps` timed after a warm-up of 50; the weights' sha256 after the timed steps. With "parts",
 # the calls bc_recipe.train's loop makes are wrapped with clocks (PARTS: the stack's forward, the
 # backward, Adam's step, zero_grad, the scheduler; the rest is the batch, the loss and the progress bar),
-# and the bare products are timed after it: one arm's three hidden x hidden products on one thread (its
-# forward z = h @ W, its backward's h^T @ g and g @ W^T), and two arms' at once on two threads.
+# and the bare products are timed after it: one arm's three batch x hidden x hidden products on one thread
+# (its forward z = h @ W, its backward's h^T @ g and g @ W^T), and two arms' at once on two threads.
 PARTS = ("forward", "backward", "Adam", "zero_grad", "scheduler")
 TRAIN_STEP = """
 import hashlib, json, sys, threading, time
@@ -1082,7 +1082,7 @@ steps, hidden, batch, threads = map(int, sys.argv[1:5])
 if sys.argv[5] == "torch":  # the products on torch (MKL), as MLPStack runs them without numpy's OpenBLAS
     ensemble.one_blas_thread = lambda: False
 parts = {}
-def clocked(owner, name, part):  # owner.name timed into parts[part], from the first timed step on
+def clocked(owner, name, part):  # owner.name's seconds added to parts[part] (cleared after the warm-up)
     call = getattr(owner, name)
     def timed(*a, **k):
         t0 = time.perf_counter()
