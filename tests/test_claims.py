@@ -418,6 +418,7 @@ def test_reproducibility_step_parts_are_the_kept_part_benches():
     python -m tools.bench kernels --parts print it (results/zen4/bench_kernels_parts_N.txt)."""
     import re
 
+    native = []  # MKL's own kernels' step against the held one's, in each run
     for i in (1, 2):
         text = (RESULTS / f"zen4/bench_kernels_parts_{i}.txt").read_text()
         step = re.search(r"held 2 +threads +([0-9.]+) ms/step", text).group(1)
@@ -431,6 +432,8 @@ def test_reproducibility_step_parts_are_the_kept_part_benches():
         ).groups()
         assert float(share) == pytest.approx(100 * float(bare) / float(step), abs=0.5)
         has("docs/reproducibility.md", f"| {i} | {step} | " + " | ".join(parts) + f" | {bare} | {share}% |")
+        native.append(re.search(r"native 2 +threads .* x([0-9.]+) of held", text).group(1))
+    has("docs/reproducibility.md", f"and in {native[0]} and {native[1]} of it in the two part benches below")
 
 
 # --- docs/replay.md -----------------------------------------------------------------------------------
