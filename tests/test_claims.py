@@ -409,7 +409,7 @@ def test_reproducibility_costs_are_the_kept_sitting(sitting):
         row.format("MKL's own kernels", kernels["native"][0], kernels["native"][2]),
         f"MKL's own kernels take a step in {kernels['native'][1]} of the held path's time",
     )
-    # every run of the sitting on the landed code's history, on the host the page names
+    # the sitting ran on committed code (not dirty), on the CPU the page names
     assert v["provenance"]["platform"]["cpu_model"] == "AMD EPYC" and not v["provenance"]["git"]["dirty"]
 
 
