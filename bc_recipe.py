@@ -21,8 +21,8 @@ import numpy as np
 import torch
 
 import pusht_env
-from ch37.ensemble import BatchOrder, side_by_side
-from ch37.parallel import LockstepEnvs, progress
+from ch37.ensemble import BatchOrder, arm_process_setup, arm_processes, side_by_side
+from ch37.parallel import LockstepEnvs, map_jobs, progress
 
 
 def mlp(
@@ -84,7 +84,8 @@ def train(
     steps of `batch_size` rows from the weights `init`, every arm with the same batch-order seed.
     Returns the policies and each one's final MSE on its own (normalized) data. `masks`, one (N, act_dim)
     array of 1s (real) and 0s (padding) per dataset, makes the loss and the fit the wrangle region's
-    masked MSE: a padded action dimension adds nothing to the loss, hence no gradient."""
+    masked MSE: a padded action dimension adds nothing to the loss, hence no gradient. Where the machine
+    allows, each arm trains in a forked process of its own (the same bits as side by side in this one)."""
     device = torch.device(device)
     (hidden, obs_dim), act_dim = init["0.weight"].shape, init["4.weight"].shape[0]  # the init's shapes
     pols = [BCPolicy(x, y, mlp(hidden, obs_dim, act_dim)).to(device) for x, y in datasets]
@@ -94,28 +95,42 @@ def train(
     ]
     if masks is not None:
         masks = [torch.as_tensor(m, dtype=torch.float32, device=device) for m in masks]
-    orders = [BatchOrder(len(x), batch_size, seed) for x, _ in tensors]  # same seed for every arm
-    bar = progress(None, total=steps, desc="train", quiet=quiet)
-    # The arms as one network, side by side (ch37.ensemble): model(x) maps (arms, B, 10) -> (arms, B, 2),
-    # arm e with its own weights; on leaving the block each policy holds its arm's trained weights.
-    with side_by_side(init, [p.net for p in pols], device) as model:
-        opt = torch.optim.Adam(model.parameters(), lr=lr, fused=device.type in ("cpu", "cuda"))  # one kernel
-        sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=steps)  # lr cosine-decayed to 0
-        for _ in range(steps):
-            idx = [o.next() for o in orders]
-            xb = torch.stack([x[i] for (x, _), i in zip(tensors, idx)])  # (arms, B, 10)
-            yb = torch.stack([y[i] for (_, y), i in zip(tensors, idx)])  # (arms, B, 2)
-            if masks is None:  # each arm's MSE; the sum keeps them apart
-                loss = ((model(xb) - yb) ** 2).mean(dim=(1, 2)).sum()
-            else:  # each arm's masked MSE: squared errors on real dimensions over their count
-                mb = torch.stack([m[i] for m, i in zip(masks, idx)])
-                loss = (((model(xb) - yb) ** 2 * mb).sum(dim=(1, 2)) / mb.sum(dim=(1, 2)).clamp(min=1)).sum()
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            sched.step()
-            bar.update()
-    bar.close()
+    # The arms train on processes of their own where the machine allows (one an arm, on the CPU under
+    # Linux: ch37.ensemble.arm_processes), else all side by side in this one; the same weights either way.
+    n = arm_processes(len(pols), device)
+    groups = [list(range(j, len(pols), n)) for j in range(n)]  # process j trains arms j, j + n, ...
+
+    def fit(group):  # the BC loop over the arms of `group`; -> their trained weights, as numpy arrays
+        orders = [BatchOrder(len(tensors[e][0]), batch_size, seed) for e in group]  # same seed every arm
+        bar = progress(None, total=steps, desc="train", quiet=quiet or group[0] > 0)  # one bar for all
+        # The group's arms as one network (ch37.ensemble): model(x) maps (arms, B, 10) -> (arms, B, 2), arm e
+        # with its own weights; on leaving the block each of their policies holds its trained weights.
+        with side_by_side(init, [pols[e].net for e in group], device) as model:
+            fused = device.type in ("cpu", "cuda")  # Adam over every weight in one kernel
+            opt = torch.optim.Adam(model.parameters(), lr=lr, fused=fused)
+            sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=steps)  # lr cosine-decayed to 0
+            for _ in range(steps):
+                idx = [o.next() for o in orders]
+                xb = torch.stack([tensors[e][0][i] for e, i in zip(group, idx)])  # (arms, B, 10)
+                yb = torch.stack([tensors[e][1][i] for e, i in zip(group, idx)])  # (arms, B, 2)
+                if masks is None:  # each arm's MSE; the sum keeps them apart
+                    loss = ((model(xb) - yb) ** 2).mean(dim=(1, 2)).sum()
+                else:  # each arm's masked MSE: squared errors on real dimensions over their count
+                    mb = torch.stack([masks[e][i] for e, i in zip(group, idx)])
+                    loss = (
+                        ((model(xb) - yb) ** 2 * mb).sum(dim=(1, 2)) / mb.sum(dim=(1, 2)).clamp(min=1)
+                    ).sum()
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+                sched.step()
+                bar.update()
+        bar.close()
+        return [{k: v.cpu().numpy() for k, v in pols[e].net.state_dict().items()} for e in group]
+
+    for group, states in zip(groups, map_jobs(fit, groups, workers=n, setup=arm_process_setup)):
+        for e, state in zip(group, states):  # a process's arms, trained there, into this process's policies
+            pols[e].net.load_state_dict({k: torch.from_numpy(v) for k, v in state.items()})
     with torch.no_grad():  # fit on each arm's whole training set, a digit-level fingerprint of the run
         if masks is None:
             fits = [torch.nn.functional.mse_loss(p.net(x), y).item() for p, (x, y) in zip(pols, tensors)]

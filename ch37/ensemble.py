@@ -16,7 +16,11 @@ tests/test_ensemble.py checks that an arm trained in the stack ends with the wei
         ...                                       # a training loop over stack(x); then each net is trained
 
 On the CPU the stack's matrix products run on numpy's OpenBLAS, one single-threaded sgemm per arm, the
-arms on threads of their own: the published numbers' kernel path (docs/reproducibility.md). torch's
+arms on threads of their own: the published numbers' kernel path (docs/reproducibility.md). Where the
+machine allows, bc_recipe.train goes one step further and gives each arm a forked process of its own
+(arm_processes, arm_process_setup): an arm's whole loop, its Adam and its batches included, then runs
+beside the other's, with no lock between them; each process holds a stack of one arm, so the weights are
+the same bits. torch's
 products go through MKL, whose kernels depend on the CPU's maker; OpenBLAS held to one kernel set
 (OPENBLAS_CORETYPE=Haswell: AVX2 and FMA, on every x86-64 CPU since 2013, Intel or AMD) and to one
 thread per product computes the same bits on any of them, for any thread count (OpenBLAS's own threads
@@ -27,6 +31,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import importlib
 import re
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -229,6 +234,32 @@ def side_by_side(init: dict, nets: list[torch.nn.Sequential], device="cpu"):
         yield stack
     for e, net in enumerate(nets):
         stack.load_into(net, e)
+
+
+def arm_processes(arms: int, device) -> int:
+    """How many processes bc_recipe.train spreads `arms` over: one an arm, up to torch's thread count, on the
+    CPU where this process may fork workers (ch37.parallel.can_fork); else 1, every arm side by side in
+    this process (the stack's arms on threads). The weights never depend on it (tests/test_ensemble.py)."""
+    from ch37.parallel import can_fork
+
+    n = min(arms, torch.get_num_threads()) if torch.device(device).type == "cpu" and can_fork() else 1
+    if n > 1:  # torch's first optimizer imports torch._dynamo (0.9 s): here once, not in every fork
+        importlib.import_module("torch._dynamo")
+    return max(1, n)
+
+
+def arm_process_setup() -> None:
+    """First call in an arm's training process (arm_processes): one torch thread, the process being the
+    arm's core; and glibc's heap held. A step frees its gradients (1 MiB a 512 x 512 weight) and
+    allocates them again; glibc's defaults hand that memory back to the kernel each time and fault it in
+    again, a fifth of a lone arm's step (perf record, issue 59). A threshold fixed by hand also stops
+    glibc from moving it."""
+    torch.set_num_threads(1)
+    libc = ctypes.CDLL(None)
+    if hasattr(libc, "mallopt"):  # glibc; others keep their own heap
+        M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's malloc.h
+        libc.mallopt(M_MMAP_THRESHOLD, 64 << 20)  # bytes: blocks under 64 MiB from the heap, not mmap
+        libc.mallopt(M_TRIM_THRESHOLD, 256 << 20)  # bytes: hand the heap's top back only past 256 MiB free
 
 
 class BatchOrder:

@@ -26,17 +26,27 @@ def progress(iterable, *, total: int, desc: str, quiet: bool = False):
     return tqdm(iterable, total=total, desc=desc, unit="ep", leave=False, disable=quiet)
 
 
-def _imap(fn, jobs: list, *, workers: int, ordered: bool = True, chunksize: int | None = None):
+def can_fork() -> bool:
+    """Whether this process may fork workers: the fork start method exists (Linux; not Windows, and not
+    macOS's default) and this process is not itself a worker (multiprocessing's daemon workers may have
+    no children)."""
+    import multiprocessing as mp
+
+    return "fork" in mp.get_all_start_methods() and not mp.current_process().daemon
+
+
+def _imap(fn, jobs: list, *, workers: int, ordered=True, chunksize: int | None = None, setup=None):
     """fn(job) for each job, yielded as they finish (in job order when `ordered`), on `workers` forked
     processes; in this process without fork or with one worker. The results never depend on `workers`:
     every job carries its own seed. `fn` and `jobs` are each worker's arguments, inherited through fork,
     never pickled, so a function defined in a script or a notebook works; a worker takes the next
-    `chunksize` job indices from a shared counter and sends back (index, result, exception)."""
+    `chunksize` job indices from a shared counter and sends back (index, result, exception); `setup()`, if
+    given, runs first in each forked worker (never in this process)."""
     import multiprocessing as mp
     from multiprocessing.connection import wait
 
     jobs = list(jobs)
-    if workers <= 1 or len(jobs) <= 1 or "fork" not in mp.get_all_start_methods():
+    if workers <= 1 or len(jobs) <= 1 or not can_fork():
         yield from map(fn, jobs)
         return
     ctx = mp.get_context("fork")
@@ -44,7 +54,9 @@ def _imap(fn, jobs: list, *, workers: int, ordered: bool = True, chunksize: int 
     next_index = ctx.Value("q", 0)
     pipes = [ctx.Pipe(duplex=False) for _ in range(min(workers, len(jobs)))]  # (parent's end, worker's)
     procs = [
-        ctx.Process(target=_job_worker, args=(os.getpid(), fn, jobs, size, next_index, end), daemon=True)
+        ctx.Process(
+            target=_job_worker, args=(os.getpid(), fn, jobs, size, next_index, end, setup), daemon=True
+        )
         for _, end in pipes
     ]
     try:
@@ -102,8 +114,10 @@ def _exit_codes(procs, wait_s: float = 10.0) -> str:
     return ", ".join("none yet: still running" if c is None else str(c) for c in codes)
 
 
-def _job_worker(parent: int, fn, jobs: list, size: int, next_index, conn) -> None:
+def _job_worker(parent: int, fn, jobs: list, size: int, next_index, conn, setup) -> None:
     worker_setup(parent)
+    if setup is not None:
+        setup()
     while True:
         with next_index.get_lock():
             start = next_index.value
@@ -119,18 +133,30 @@ def _job_worker(parent: int, fn, jobs: list, size: int, next_index, conn) -> Non
 
 
 def map_jobs(
-    fn, jobs, *, workers: int, ray: str | None = None, ordered=True, star=False, bar=None, timing=None
+    fn,
+    jobs,
+    *,
+    workers: int,
+    ray: str | None = None,
+    ordered=True,
+    star=False,
+    bar=None,
+    timing=None,
+    setup=None,
 ):
     """The project's one map over jobs: fn(job) (fn(*job) when `star`) for each job, yielded as they
     finish, in job order when `ordered`. On `workers` forked local processes when `ray` is None (fn
     reaches them through fork, so a function of a script or a notebook works), else on Ray ("local": a
     private local Ray with `workers` CPUs; an address: that cluster; always completion order).
     `bar` (a tqdm bar, or None) advances once per job and is left open for the caller to close;
-    `timing`, if given, receives "start_s": Ray's start or join. The results never depend on the
-    executor or the worker count: every job carries its own seed."""
+    `timing`, if given, receives "start_s": Ray's start or join; `setup()`, if given, runs first in each
+    forked local worker. The results never depend on the executor or the worker count: every job carries
+    its own seed."""
     call = (lambda job: fn(*job)) if star else fn
     if ray is None:
-        got = _imap(call, jobs, workers=workers, ordered=ordered, chunksize=None if ordered else 1)
+        got = _imap(
+            call, jobs, workers=workers, ordered=ordered, chunksize=None if ordered else 1, setup=setup
+        )
     else:
         tasks = list(jobs) if star else [(job,) for job in jobs]
         got = _run_ray(fn, tasks, address=None if ray == "local" else ray, workers=workers, timing=timing)
@@ -158,7 +184,7 @@ class LockstepEnvs:
         n = max(1, min(workers, len(self.seeds)))
         self.parts = [list(range(w, len(self.seeds), n)) for w in range(n)]  # env indices per worker
         self.conns, self.procs, self.local = [], [], None
-        if n == 1 or "fork" not in mp.get_all_start_methods():
+        if n == 1 or not can_fork():
             self.parts, self.local = [list(range(len(self.seeds)))], [make_env() for _ in self.seeds]
             return
         ctx = mp.get_context("fork")

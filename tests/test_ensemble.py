@@ -179,3 +179,73 @@ def test_the_training_bits_hold_across_threads_vector_kernels_and_mkl_branches()
     assert trained_bits(4, MKL_CBWR="AVX2") == held  # more threads than arms
     assert trained_bits(2, ATEN_CPU_CAPABILITY="avx2") == held  # torch's AVX2 vector kernels
     assert trained_bits(2, OPENBLAS_CORETYPE="Sandybridge") != held  # OpenBLAS's AVX kernels: other bits
+
+
+# Issue 59: bc_recipe.train gives each arm a forked process of its own where it may (arm_processes).
+def two_arms_trained(threads: int):
+    import hashlib
+
+    import numpy as np
+
+    import bc_recipe as bc
+
+    rng = np.random.default_rng(0)
+    data = [
+        (rng.normal(size=(n, 10)).astype(np.float32), rng.normal(size=(n, 2)).astype(np.float32))
+        for n in (60, 90)
+    ]
+    saved = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        pols, fits = bc.train(data, 12, bc.init_weights(64, 0), batch_size=32, lr=1e-3, seed=0)
+    finally:
+        torch.set_num_threads(saved)
+    weights = b"".join(t.numpy().tobytes() for p in pols for t in p.net.state_dict().values())
+    return hashlib.sha256(weights).hexdigest(), fits
+
+
+def test_arms_in_processes_of_their_own_train_as_side_by_side_in_one():
+    from ch37.ensemble import arm_processes
+    from ch37.parallel import can_fork
+
+    if not can_fork():
+        pytest.skip("no fork here: the arms train side by side in this process only")
+    threads = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        assert arm_processes(2, "cpu") == 2 and arm_processes(3, "cpu") == 2 and arm_processes(1, "cpu") == 1
+    finally:
+        torch.set_num_threads(threads)
+    apart, together = two_arms_trained(2), two_arms_trained(1)  # two processes; both arms in this one
+    assert apart == together
+    assert len(set(apart[1])) == 2  # two arms that really differ: a swapped hand-back would not hide
+
+
+def test_train_inside_a_worker_keeps_its_arms_at_home():
+    """A forked map_jobs worker may have no children of its own (multiprocessing's daemons): bc_recipe.train
+    called there trains its arms side by side in that worker, with the same weights, instead of failing."""
+    from ch37.parallel import can_fork, map_jobs
+
+    if not can_fork():
+        pytest.skip("no fork here")
+    at_home = two_arms_trained(2)
+    assert list(map_jobs(two_arms_trained, [2, 2], workers=2)) == [at_home, at_home]
+
+
+def test_map_jobs_runs_setup_in_its_forked_workers_only():
+    import os
+
+    from ch37.parallel import can_fork, map_jobs
+
+    if not can_fork():
+        pytest.skip("no fork here")
+
+    def setup():
+        os.environ["CH37_TEST_SETUP"] = str(os.getpid())
+
+    def job(_):
+        return os.environ.get("CH37_TEST_SETUP") == str(os.getpid())
+
+    assert list(map_jobs(job, range(4), workers=2, setup=setup)) == [True] * 4
+    assert list(map_jobs(job, range(4), workers=1, setup=setup)) == [False] * 4  # in this process: no setup
+    assert "CH37_TEST_SETUP" not in os.environ

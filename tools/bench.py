@@ -1069,7 +1069,8 @@ KERNEL_PATHS = {
 # the seed-0 source and source + augmented sizes, from its budgets; a step's time does not depend on
 # them), `steps` timed after a warm-up of 50; the weights' sha256 after the timed steps. With "parts",
 # the calls bc_recipe.train's loop makes are wrapped with clocks (PARTS: the stack's forward, the
-# backward, Adam's step, zero_grad, the scheduler; the rest is the batch, the loss and the progress bar),
+# backward, Adam's step, zero_grad, the scheduler, each a mean over the arms' processes; the rest is the
+# batch, the loss, the progress bar and the processes' start and hand-back),
 # and the bare products are timed after it: one arm's three batch x hidden x hidden products on one thread
 # (its forward z = h @ W, its backward's h^T @ g and g @ W^T), and two arms' at once on two threads.
 PARTS = ("forward", "backward", "Adam", "zero_grad", "scheduler")
@@ -1081,17 +1082,20 @@ from ch37 import ensemble
 steps, hidden, batch, threads = map(int, sys.argv[1:5])
 if sys.argv[5] == "torch":  # the products on torch (MKL), as MLPStack runs them without numpy's OpenBLAS
     ensemble.one_blas_thread = lambda: False
-parts = {}
-def clocked(owner, name, part):  # owner.name's seconds added to parts[part] (cleared after the warm-up)
-    call = getattr(owner, name)
+import multiprocessing as mp
+names = sys.argv[7:]  # PARTS, with "parts"
+spent = mp.Array("d", len(names))  # seconds of each part, summed over the arms' processes (shared with them)
+def clocked(owner, name, part):  # owner.name's seconds added to spent[part] (cleared after the warm-up)
+    call, i = getattr(owner, name), names.index(part)
     def timed(*a, **k):
         t0 = time.perf_counter()
         try:
             return call(*a, **k)
         finally:
-            parts[part] = parts.get(part, 0.0) + time.perf_counter() - t0
+            with spent.get_lock():
+                spent[i] += time.perf_counter() - t0
     setattr(owner, name, timed)
-if sys.argv[6:] == ["parts"]:
+if sys.argv[6:7] == ["parts"]:
     clocked(ensemble.MLPStack, "forward", "forward")
     clocked(torch.Tensor, "backward", "backward")
     clocked(torch.optim.Adam, "step", "Adam")
@@ -1103,15 +1107,15 @@ data = [(rng.normal(size=(n, 10)).astype(np.float32), rng.normal(size=(n, 2)).as
         for n in (420, 3490)]
 init = bc.init_weights(hidden, 0)
 bc.train(data, 50, init, batch_size=batch, lr=1e-3, seed=0)
-parts.clear()
+spent[:] = [0.0] * len(names)
 t0 = time.perf_counter()
 pols, _ = bc.train(data, steps, init, batch_size=batch, lr=1e-3, seed=0)
 dt = time.perf_counter() - t0
 weights = b"".join(t.numpy().tobytes() for p in pols for t in p.net.state_dict().values())
 out = {"s_per_step": dt / steps, "sha256": hashlib.sha256(weights).hexdigest()[:8]}
 out["blas"] = ensemble.blas_core()
-if parts:
-    out["parts"] = {k: v / steps for k, v in parts.items()}
+if names:  # each part's seconds a step of one process (the arms' processes run theirs side by side)
+    out["parts"] = {k: v / steps / ensemble.arm_processes(len(data), "cpu") for k, v in zip(names, spent)}
     shapes = ((batch, hidden), (hidden, hidden), (batch, hidden))
     a, w, g = (rng.normal(size=s).astype(np.float32) for s in shapes)
     def arm(n=200):
@@ -1123,6 +1127,7 @@ if parts:
         arm()
         t.join()
     if sys.argv[5] == "numpy":  # the bare products on numpy's OpenBLAS, where the held path runs them
+        ensemble.one_blas_thread()  # as in the arms' processes: one thread a product
         out["products"] = {}
         for name, f in (("one arm", arm), ("two arms", two)):
             times = []
@@ -1140,7 +1145,7 @@ def train_step(path: str, steps: int, hidden: int, batch: int, threads: int, par
     and the seconds of each of its PARTS per step, and the bare products'; TRAIN_STEP)."""
     env, products = KERNEL_PATHS[path]
     base = {k: v for k, v in os.environ.items() if k not in ("MKL_CBWR", "OPENBLAS_CORETYPE")}
-    args = [steps, hidden, batch, threads, products, *(["parts"] if parts else [])]
+    args = [steps, hidden, batch, threads, products, *(["parts", *PARTS] if parts else [])]
     return in_fresh_process(TRAIN_STEP, args, base | env, f"the timing process for {path}")
 
 
