@@ -196,26 +196,30 @@ def config_hash(config: dict) -> str:
     return hashlib.sha256(json.dumps(c, sort_keys=True, separators=(",", ":")).encode()).hexdigest()[:12]
 
 
-# The sub-second probe behind the banner's estimate: PROBE_STEPS training steps of two arms side by side at
-# the run's shapes (the lesson's MLP stack, squared error, fused Adam, on random rows), each timed, after
-# PROBE_WARMUP untimed ones; the median step (a burst of other work slows only a few). Training is most of a
-# default run on a CPU (tools.bench lesson), so a row's minutes scale from the machine that measured it to
-# this one by their probes' ratio.
+# The sub-second probe behind the banner's estimate: PROBE_STEPS training steps at the run's shapes (the
+# lesson's MLP stack, squared error, fused Adam, on random rows) as one of the run's processes takes them
+# (ch37.ensemble.arm_processes: one arm on one thread where each arm trains in a process of its own, else
+# both arms side by side in this one), each timed, after PROBE_WARMUP untimed ones; the median step (a burst
+# of other work slows only a few). Training is most of a default run on a CPU (tools.bench lesson), so a
+# row's minutes scale from the machine that measured it to this one by their probes' ratio. One arm on one
+# thread also reads steadier than two on threads, whose hand-offs move with the machine's load.
 PROBE_STEPS, PROBE_WARMUP = 30, 3
 
 
 def step_probe(hidden: int, batch: int, device: str = "cpu") -> float:
-    """Milliseconds per training step of two arms side by side (PushT's 10 -> hidden -> hidden -> 2 MLP,
-    `batch` rows each) on the kernel path in force here: about 0.3 s on two cores at the default shapes,
-    after the warm-up (the first optimizer in a process pays torch's one-time set-up, as the run's first
-    training would). Torch's random state is left as it was: the run after it draws what it would have."""
+    """Milliseconds per training step of the arms one process of the run trains (PushT's 10 -> hidden ->
+    hidden -> 2 MLP, `batch` rows an arm) on the kernel path in force here: about 0.1 s at the default
+    shapes, after the warm-up (the first optimizer in a process pays torch's one-time set-up, as the
+    run's first training would). Torch's random state is left as it was: the run after it draws what it
+    would have."""
     import statistics
     import time
 
     import torch
 
-    from ch37.ensemble import stacked
+    from ch37.ensemble import arm_processes, stacked
 
+    arms = 1 if arm_processes(2, device) == 2 else 2  # one arm in its own process, or both in this one
     sizes = (PUSHT_OBS_DIM, hidden, hidden, PUSHT_ACT_DIM)
     times = []
     with torch.random.fork_rng(devices=[]):
@@ -224,8 +228,8 @@ def step_probe(hidden: int, batch: int, device: str = "cpu") -> float:
             init[f"{2 * i}.weight"] = torch.randn(n_out, n_in) / n_in**0.5
             init[f"{2 * i}.bias"] = torch.zeros(n_out)
         # (arms, B, 10) states, (arms, B, 2) actions
-        xb, yb = torch.randn(2, batch, sizes[0]), torch.randn(2, batch, sizes[-1])
-        with stacked(init, 2, device) as model:
+        xb, yb = torch.randn(arms, batch, sizes[0]), torch.randn(arms, batch, sizes[-1])
+        with stacked(init, arms, device) as model:
             opt = torch.optim.Adam(model.parameters(), lr=1e-3, fused=device in ("cpu", "cuda"))
             xb, yb = xb.to(device), yb.to(device)
             for _ in range(PROBE_WARMUP + PROBE_STEPS):

@@ -896,6 +896,28 @@ def test_the_step_probe_times_a_training_step_and_leaves_the_random_state():
     )  # the README says what it does
 
 
+@pytest.mark.parametrize("threads", [1, 2])
+def test_the_step_probe_times_what_one_of_the_runs_processes_trains(monkeypatch, threads):
+    """Issue 59 #3: the probe times the arms one process of the run trains: one arm on one thread where
+    bc_recipe.train gives each arm a process of its own (two torch threads and fork), else both arms."""
+    import torch
+
+    from ch37 import ensemble
+    from ch37.parallel import can_fork
+
+    seen, real = [], ensemble.stacked
+    monkeypatch.setattr(
+        ensemble, "stacked", lambda init, arms, device: seen.append(arms) or real(init, arms, device)
+    )
+    saved = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        ch37.cli.step_probe(16, 8)
+    finally:
+        torch.set_num_threads(saved)
+    assert seen == [1 if threads == 2 and can_fork() else 2]
+
+
 INTEL = "processor\t: 0\nvendor_id\t: GenuineIntel\nmodel name\t: Intel(R) Xeon(R)\n\nprocessor\t: 1\n"
 AMD = "processor\t: 0\nvendor_id\t: AuthenticAMD\nmodel name\t: AMD EPYC 7B13\n"
 GRAVITON = "processor\t: 0\nBogoMIPS\t: 243.75\nCPU implementer\t: 0x41\nCPU part\t: 0xd0c\n"
