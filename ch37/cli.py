@@ -197,29 +197,40 @@ def config_hash(config: dict) -> str:
 
 
 # The sub-second probe behind the banner's estimate: PROBE_STEPS training steps at the run's shapes (the
-# lesson's MLP stack, squared error, fused Adam, on random rows) as one of the run's processes takes them
-# (ch37.ensemble.arm_processes: one arm on one thread where each arm trains in a process of its own, else
-# both arms side by side in this one), each timed, after PROBE_WARMUP untimed ones; the median step (a burst
-# of other work slows only a few). Training is most of a default run on a CPU (tools.bench lesson), so a
-# row's minutes scale from the machine that measured it to this one by their probes' ratio. One arm on one
-# thread also reads steadier than two on threads, whose hand-offs move with the machine's load.
+# lesson's MLP stack, squared error, fused Adam, on random rows), taken as the run takes them
+# (ch37.ensemble.arm_processes): each of two arms in a forked process of its own, set up as the run's are
+# (arm_process_setup: its heap held, which moves a lone arm's step by a third), else both side by side in
+# this one; each step timed, after PROBE_WARMUP untimed ones; the median step (a burst of other work slows
+# only a few), of the slower process. Training is most of a default run on a CPU (tools.bench lesson), so
+# a row's minutes scale from the machine that measured it to this one by their probes' ratio.
 PROBE_STEPS, PROBE_WARMUP = 30, 3
 
 
 def step_probe(hidden: int, batch: int, device: str = "cpu") -> float:
-    """Milliseconds per training step of the arms one process of the run trains (PushT's 10 -> hidden ->
-    hidden -> 2 MLP, `batch` rows an arm) on the kernel path in force here: about 0.1 s at the default
-    shapes, after the warm-up (the first optimizer in a process pays torch's one-time set-up, as the
-    run's first training would). Torch's random state is left as it was: the run after it draws what it
-    would have."""
+    """Milliseconds per training step of two arms (PushT's 10 -> hidden -> hidden -> 2 MLP, `batch` rows an
+    arm) as the run trains them, on the kernel path in force here: about 0.2 s at the default shapes,
+    after the warm-up (the first optimizer in a process pays torch's one-time set-up, as the run's first
+    training would). Torch's random state is left as it was: the run after it draws what it would have."""
+    from ch37.ensemble import arm_process_setup, arm_processes
+    from ch37.parallel import map_jobs
+
+    n = arm_processes(2, device)  # 2: one arm in each of two processes; 1: both arms here
+    return max(
+        map_jobs(
+            _probe_steps, [(2 // n, hidden, batch, device)] * n, workers=n, star=True, setup=arm_process_setup
+        )
+    )
+
+
+def _probe_steps(arms: int, hidden: int, batch: int, device: str) -> float:
+    """step_probe's median ms a step of `arms` arms side by side in this process."""
     import statistics
     import time
 
     import torch
 
-    from ch37.ensemble import arm_processes, stacked
+    from ch37.ensemble import stacked
 
-    arms = 1 if arm_processes(2, device) == 2 else 2  # one arm in its own process, or both in this one
     sizes = (PUSHT_OBS_DIM, hidden, hidden, PUSHT_ACT_DIM)
     times = []
     with torch.random.fork_rng(devices=[]):

@@ -897,25 +897,27 @@ def test_the_step_probe_times_a_training_step_and_leaves_the_random_state():
 
 
 @pytest.mark.parametrize("threads", [1, 2])
-def test_the_step_probe_times_what_one_of_the_runs_processes_trains(monkeypatch, threads):
-    """Issue 59 #3: the probe times the arms one process of the run trains: one arm on one thread where
-    bc_recipe.train gives each arm a process of its own (two torch threads and fork), else both arms."""
+def test_the_step_probe_times_what_the_runs_processes_train(monkeypatch, threads):
+    """Issue 59 #3: the probe times the arms as bc_recipe.train runs them: one arm in each of two processes
+    set up as its are (two torch threads and fork), else both arms side by side in this one."""
     import torch
 
-    from ch37 import ensemble
-    from ch37.parallel import can_fork
+    from ch37 import parallel
 
-    seen, real = [], ensemble.stacked
+    seen, real = [], parallel.map_jobs
     monkeypatch.setattr(
-        ensemble, "stacked", lambda init, arms, device: seen.append(arms) or real(init, arms, device)
+        parallel, "map_jobs", lambda fn, jobs, **kw: seen.append((jobs, kw)) or real(fn, jobs, **kw)
     )
     saved = torch.get_num_threads()
     torch.set_num_threads(threads)
     try:
-        ch37.cli.step_probe(16, 8)
+        assert ch37.cli.step_probe(16, 8) > 0
     finally:
         torch.set_num_threads(saved)
-    assert seen == [1 if threads == 2 and can_fork() else 2]
+    ((jobs, kw),) = seen
+    apart = threads == 2 and parallel.can_fork()
+    assert [arms for arms, *_ in jobs] == ([1, 1] if apart else [2]) and kw["workers"] == len(jobs)
+    assert kw["setup"] is ch37.ensemble.arm_process_setup
 
 
 INTEL = "processor\t: 0\nvendor_id\t: GenuineIntel\nmodel name\t: Intel(R) Xeon(R)\n\nprocessor\t: 1\n"
