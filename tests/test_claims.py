@@ -341,9 +341,15 @@ def wallclock(tier: str) -> dict:
 
 
 def test_reproducibility_timings_are_wallclock_csvs():
+    import csv
+
     amd, h100 = wallclock("cpu-2core-amd"), wallclock("h100")
+    with (RESULTS / "wallclock_zen3.csv").open() as f:  # the cpu-2core-amd row before a33b4d3, on a Zen 3
+        (zen3,) = csv.DictReader(f)
     has(
         "docs/reproducibility.md",
+        f"took {zen3['minutes']} min at {zen3['step_ms']} ms a training step (wallclock.csv's cpu-2core-amd"
+        f" row then, AMD EPYC, 2 cores, {zen3['date']}; kept as `results/wallclock_zen3.csv`)",
         f"took {amd['minutes']} min (wallclock.csv's cpu-2core-amd row, AMD EPYC, 2 cores, {amd['date']}) at"
         f" {amd['step_ms']} ms a training step",
         f"timed the cold default run at {h100['minutes']} min (wallclock.csv's `h100` row, "
@@ -354,6 +360,12 @@ def test_reproducibility_timings_are_wallclock_csvs():
 SITTINGS = {  # issue 59's sittings: (the reference beside ours, the lesson bench, the kernel bench)
     "zen3": ("versus_reference/bench_reference.json", "bench_lesson.txt", "bench_kernels.txt"),
     "zen4": ("zen4/bench_reference.json", "zen4/bench_lesson.txt", "zen4/bench_kernels.txt"),
+    # each arm in a process of its own (bc_recipe.train since a33b4d3): the kernel bench with --parts
+    "zen4_arms": (
+        "zen4_arms/bench_reference.json",
+        "zen4_arms/bench_lesson.txt",
+        "zen4_arms/bench_kernels_parts.txt",
+    ),
 }
 
 
@@ -397,6 +409,8 @@ def test_reproducibility_costs_are_the_kept_sitting(sitting):
     # the bits table: each path's median ms a step, its weights and its ratio to the held path
     kernels = {}
     for line in (RESULTS / kernels_txt).read_text().splitlines()[1:]:
+        if "ms/step" not in line:  # --parts adds each path's parts and bare products below its line
+            continue
         got = re.match(r"\s+(\w+) 2 +threads +([0-9.]+) ms/step .* x([0-9.]+) of held .* weights (\w+)", line)
         kernels[got.group(1)] = (float(got.group(2)), got.group(3), got.group(4))
     row = "| {} | {:.1f} | {} |"
@@ -419,8 +433,10 @@ def test_reproducibility_step_parts_are_the_kept_part_benches():
     import re
 
     native = []  # MKL's own kernels' step against the held one's, in each run
-    for i in (1, 2):
-        text = (RESULTS / f"zen4/bench_kernels_parts_{i}.txt").read_text()
+    runs = {"1": "zen4/bench_kernels_parts_1.txt", "2": "zen4/bench_kernels_parts_2.txt"}
+    runs["3, each arm in its own process"] = "zen4_arms/bench_kernels_parts.txt"
+    for i, kept_txt in runs.items():
+        text = (RESULTS / kept_txt).read_text()
         step = re.search(r"held 2 +threads +([0-9.]+) ms/step", text).group(1)
         parts = re.search(
             r"held 2 +a step's parts, ms \(medians\): forward ([0-9.]+), backward ([0-9.]+), Adam ([0-9.]+),"
@@ -917,7 +933,7 @@ def test_performance_figures_are_wallclock_csv_and_meta_yaml():
     seed0 = meta()["reference_run"]["seeds"]["rows"][0]["steps"]
     has(
         "docs/PERFORMANCE.md",
-        f"{amd['minutes']} min (AMD EPYC, 2 cores, {amd['date']}; wallclock.csv's cpu-2core-amd row), a Zen 3"
+        f"{amd['minutes']} min (AMD EPYC, 2 cores, {amd['date']}; wallclock.csv's cpu-2core-amd row), a Zen 4"
         f" at {amd['step_ms']} ms a training step",
         f"{old['minutes']} min (a 2-core host whose CPU vendor was not recorded, {old['date']}; "
         "wallclock.csv's cpu-2core-vendor-unrecorded row)",
