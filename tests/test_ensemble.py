@@ -222,14 +222,23 @@ def test_arms_in_processes_of_their_own_train_as_side_by_side_in_one():
 
 
 def test_train_inside_a_worker_keeps_its_arms_at_home():
-    """A forked map_jobs worker may have no children of its own (multiprocessing's daemons): bc_recipe.train
-    called there trains its arms side by side in that worker, with the same weights, instead of failing."""
+    """A forked map_jobs worker may have no children of its own (multiprocessing's daemons): there
+    arm_processes gives 1, and bc_recipe.train trains its arms side by side in that worker, with the same
+    weights, instead of failing."""
+    from ch37.ensemble import arm_processes
     from ch37.parallel import can_fork, map_jobs
 
     if not can_fork():
         pytest.skip("no fork here")
+
+    def job(_):
+        torch.set_num_threads(2)  # as many as the arms: a process an arm, were this not a worker
+        n = arm_processes(2, "cpu")
+        # OpenMP's threads do not survive a fork (a second one would wait for ever): a worker trains on one
+        return n, two_arms_trained(1)
+
     at_home = two_arms_trained(2)
-    assert list(map_jobs(two_arms_trained, [2, 2], workers=2)) == [at_home, at_home]
+    assert list(map_jobs(job, [0, 1], workers=2)) == [(1, at_home), (1, at_home)]
 
 
 def test_map_jobs_runs_setup_in_its_forked_workers_only():
