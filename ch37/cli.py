@@ -173,6 +173,13 @@ def usable_cores() -> int:
     return min(cores, quota or cores)
 
 
+def _cpuinfo() -> str:
+    try:
+        return Path("/proc/cpuinfo").read_text(errors="replace")
+    except OSError:  # not Linux
+        return ""
+
+
 def device_tier(device: str) -> str:
     """wallclock.csv tier name for the device in use; a CPU's from this machine's cores and vendor."""
     if device == "cuda":
@@ -182,11 +189,28 @@ def device_tier(device: str) -> str:
         return next((t for t in GPU_TIERS if t in name), "cuda-other")
     if device == "mps":
         return "mps"
-    try:
-        cpuinfo = Path("/proc/cpuinfo").read_text(errors="replace")
-    except OSError:  # not Linux
-        cpuinfo = ""
-    return cpu_tier(usable_cores(), cpuinfo, platform.system(), platform.machine())
+    return cpu_tier(usable_cores(), _cpuinfo(), platform.system(), platform.machine())
+
+
+def cpu_model(cpuinfo: str) -> str:
+    """A CPU's model from /proc/cpuinfo's text, as wallclock.csv's `cpu` column names it: its model name,
+    family and model numbers ("AMD EPYC family 25 model 17": a cloud's EPYCs of two generations can share
+    one name and differ twofold in speed); "" where the text names none (not Linux, not x86)."""
+    fields = {}
+    for line in cpuinfo.split("\n\n")[0].splitlines():  # the first processor's block
+        key, sep, value = line.partition(":")
+        if sep:
+            fields[key.strip()] = value.strip()
+    name = fields.get("model name", "")
+    numbers = " ".join(
+        f"{k} {fields[f]}" for k, f in (("family", "cpu family"), ("model", "model")) if f in fields
+    )
+    return f"{name} {numbers}".strip() if name else ""
+
+
+def this_cpu() -> str:
+    """This machine's cpu_model (tools.wallclock records it in a CPU row; the banner compares)."""
+    return cpu_model(_cpuinfo())
 
 
 def config_hash(config: dict) -> str:
@@ -254,13 +278,19 @@ def _probe_steps(arms: int, hidden: int, batch: int, device: str) -> float:
 
 
 def expected_wallclock(
-    tier: str, config: str, csv_path: Path = ROOT / "wallclock.csv", probe_ms: float | None = None
+    tier: str,
+    config: str,
+    csv_path: Path = ROOT / "wallclock.csv",
+    probe_ms: float | None = None,
+    cpu: str = "",
 ) -> str:
     """The wall-clock a run of this configuration (config: its config_hash) should take here. A row of
     wallclock.csv measured on this configuration gives it: this tier's row, else (on a CPU, probe_ms
-    given: this machine's step_probe) the CPU row whose probe is nearest this one's. A row with a probe
-    of its own is scaled by the two probes' ratio (another CPU of one tier, a busier or quieter machine);
-    any other configuration may take much longer or shorter: no estimate."""
+    given: this machine's step_probe) the CPU row whose probe is nearest this one's. A row measured on
+    this very CPU model (cpu: this machine's cpu_model) is shown as it ran: a sub-second probe reads the
+    moment it lands in, and on a shared VM that moves more than a whole run does (issue 59). Another row
+    with a probe of its own is scaled by the two probes' ratio (another CPU of one tier, or of a tier not
+    measured); any other configuration may take much longer or shorter: no estimate."""
     try:
         rows = [r for r in csv.DictReader(csv_path.open()) if r.get("status") == "measured"]
     except OSError:
@@ -276,6 +306,10 @@ def expected_wallclock(
     if own is None:
         return "default-run wall-clock not yet measured for this tier"
     minutes, date, row_ms = float(own["minutes"]), own["date"], _ms(own)
+    if cpu and own.get("cpu") == cpu and own["tier"] == tier:  # measured on this CPU model: as it ran
+        return (
+            f"about {minutes:.1f} min here (wallclock.csv's {tier} row, measured {date} on this CPU: {cpu})"
+        )
     if not (probe_ms and row_ms):  # nothing to scale by: the row as measured
         return f"about {minutes:.1f} min for this configuration (wallclock.csv, measured {date})"
     unmeasured = "this tier is unmeasured; " if own["tier"] != tier else ""
@@ -435,8 +469,13 @@ def banner(args: argparse.Namespace, reminder=None) -> None:
     head = f"ch3.7 Datasets at Scale | seed {args.seed} | device {args.device} (wall-clock tier {tier})"
     print(f"{head} | torch {torch.__version__}")
     smoke = "smoke run: tiny configuration, seconds, numbers not meaningful"
-    probe = None if args.smoke or args.device != "cpu" else step_probe(args.hidden_dim, args.batch_size)
-    print(smoke if args.smoke else expected_wallclock(tier, config_hash(result_config(args)), probe_ms=probe))
+    on_cpu = args.device == "cpu" and not args.smoke
+    probe, cpu = (step_probe(args.hidden_dim, args.batch_size), this_cpu()) if on_cpu else (None, "")
+    print(
+        smoke
+        if args.smoke
+        else expected_wallclock(tier, config_hash(result_config(args)), probe_ms=probe, cpu=cpu)
+    )
     default = not args.smoke and five_seed_reference(result_config(args)) is not None  # ex1's experiment
     if default and (why := other_draw(args.device)):
         print(

@@ -881,6 +881,36 @@ def test_an_unmeasured_cpu_gets_an_estimate_from_its_probe(tmp_path):
     assert ch37.cli.expected_wallclock("t4", "abc", path, probe_ms=12.0).startswith("about 1.4 min for this")
 
 
+ZEN4 = (
+    "processor\t: 0\nvendor_id\t: AuthenticAMD\ncpu family\t: 25\nmodel\t\t: 17\nmodel name\t: AMD EPYC\n"
+    "\nprocessor\t: 1\n"
+)
+
+
+def test_a_row_measured_on_this_cpu_model_is_shown_as_it_ran(tmp_path):
+    """Issue 59 #3: the banner shows a row measured on this very CPU model unscaled (its probe reads the
+    moment, the row a whole run) and scales it by the probes on any other CPU of the tier."""
+    assert ch37.cli.cpu_model(ZEN4) == "AMD EPYC family 25 model 17"
+    assert ch37.cli.cpu_model("") == "" and ch37.cli.cpu_model(GRAVITON) == ""
+    path = tmp_path / "wallclock.csv"
+    zen4 = ch37.cli.cpu_model(ZEN4)
+    wallclock.write_wallclock_row(path, _measured("cpu-2core-amd", "1.20") | {"step_ms": "4.00", "cpu": zen4})
+    same = ch37.cli.expected_wallclock("cpu-2core-amd", "abc", path, probe_ms=8.0, cpu=zen4)
+    assert (
+        same
+        == f"about 1.2 min here (wallclock.csv's cpu-2core-amd row, measured 2026-11-28 on this CPU: {zen4})"
+    )
+    other = ch37.cli.expected_wallclock(
+        "cpu-2core-amd", "abc", path, probe_ms=8.0, cpu="AMD EPYC family 25 model 1"
+    )
+    assert other.startswith("about 2.4 min here (wallclock.csv's cpu-2core-amd row took 1.20 min"), other
+    assert ch37.cli.expected_wallclock("cpu-2core-amd", "abc", path, probe_ms=8.0).startswith("about 2.4 min")
+    # another tier on the same CPU model (more cores given): still scaled by the probes
+    assert ch37.cli.expected_wallclock("cpu-4core-amd", "abc", path, probe_ms=2.0, cpu=zen4).startswith(
+        "about 0.6 min here (this tier is unmeasured"
+    )
+
+
 def test_the_step_probe_times_a_training_step_and_leaves_the_random_state():
     """Issue 59 #3: the banner's probe returns milliseconds a step (a positive, finite figure; its speed is
     tools.wallclock's to print, not a test's) and draws nothing from torch's random state."""

@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 from ch37 import CHAPTER_ID, ROOT, errors
-from ch37.cli import TIERS, config_hash, device_tier
+from ch37.cli import TIERS, config_hash, device_tier, this_cpu
 from ch37.config import CHAPTER
 from ch37.errors import DataError
 from ch37.ownership import write_atomic
@@ -43,8 +43,20 @@ from tools.lock import drift, ran_versions
 VERSION_FIELDS = ("python", "torch", "numpy", "mujoco", "lerobot")
 # step_ms: ch37.cli.step_probe on the machine that measured the row, just before the timed run: the banner
 # scales the row's minutes to another machine by the two probes (rows measured before it leave it empty)
-WALLCLOCK_FIELDS = ("chapter", "tier", "minutes", "config_hash", "date", "status", "step_ms", *VERSION_FIELDS)
-OPTIONAL_FIELDS = ("step_ms", *VERSION_FIELDS)
+# cpu: ch37.cli.cpu_model of the machine that measured a CPU row: the banner shows that row as it ran to a run
+# on the same CPU model and scales it by the probes for any other (rows measured before it leave it empty)
+WALLCLOCK_FIELDS = (
+    "chapter",
+    "tier",
+    "minutes",
+    "config_hash",
+    "date",
+    "status",
+    "step_ms",
+    "cpu",
+    *VERSION_FIELDS,
+)
+OPTIONAL_FIELDS = ("step_ms", "cpu", *VERSION_FIELDS)
 
 
 def _pending(tier: str) -> dict:
@@ -101,6 +113,7 @@ def measure_wallclock(script: Path, smoke: bool, tier: str | None) -> dict:
         "config_hash": config_hash(config),
         "status": "measured",
         "step_ms": f"{probe:.2f}" if probe else "",
+        "cpu": this_cpu() if config["device"] == "cpu" else "",
     }
     return row | ran_versions(VERSION_FIELDS)
 
