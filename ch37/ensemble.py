@@ -20,11 +20,11 @@ arms on threads of their own: the published numbers' kernel path (docs/reproduci
 machine allows, bc_recipe.train goes one step further and gives each arm a forked process of its own
 (arm_processes, arm_process_setup): an arm's whole loop, its Adam and its batches included, then runs
 beside the other's, with no lock between them; each process holds a stack of one arm, so the weights are
-the same bits. torch's
-products go through MKL, whose kernels depend on the CPU's maker; OpenBLAS held to one kernel set
-(OPENBLAS_CORETYPE=Haswell: AVX2 and FMA, on every x86-64 CPU since 2013, Intel or AMD) and to one
-thread per product computes the same bits on any of them, for any thread count (OpenBLAS's own threads
-split a product by rows and columns, and a split moves which elements take its edge kernels).
+the same bits. torch's products go through MKL, whose kernels depend on the CPU's maker; OpenBLAS held to
+one kernel set (OPENBLAS_CORETYPE=Haswell: AVX2 and FMA, on every x86-64 CPU since 2013, Intel or AMD)
+and to one thread per product computes the same bits on any of them, for any thread count (OpenBLAS's
+own threads split a product by rows and columns, and a split moves which elements take its edge
+kernels).
 """
 
 from __future__ import annotations
