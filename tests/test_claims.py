@@ -427,6 +427,20 @@ def test_reproducibility_costs_are_the_kept_sitting(sitting):
     assert v["provenance"]["platform"]["cpu_model"] == "AMD EPYC" and not v["provenance"]["git"]["dirty"]
 
 
+def test_reproducibility_banner_on_its_own_cpu_model_is_the_row_as_it_ran():
+    """Issue 59 #3: the banner now shows wallclock.csv's row as it ran to a run on the CPU model that
+    measured it; what that would have said against the zen4_arms sitting's runs, recounted from its kept
+    file (results/zen4_arms/bench_reference.json) and the row (its cpu, minutes as the banner prints them)."""
+    v, amd = kept("zen4_arms/bench_reference.json"), wallclock("cpu-2core-amd")
+    shown = round(float(amd["minutes"]), 1)  # "about 1.1 min here": the banner's one decimal
+    errors = [shown * 60 / r["wall_s"] - 1 for r in v["runs"]["ours"]]
+    has(
+        "docs/reproducibility.md",
+        f"The row's cpu, {amd['cpu']}",
+        f"about {shown:.1f} min, against each of those runs: {', '.join(f'{e:+.0%}' for e in errors)}",
+    )
+
+
 def test_reproducibility_step_parts_are_the_kept_part_benches():
     """Issue 59: where a held training step goes on the Zen 4 host, as the two kept runs of
     python -m tools.bench kernels --parts print it (results/zen4/bench_kernels_parts_N.txt)."""
