@@ -449,6 +449,17 @@ def test_reproducibility_banner_on_its_own_cpu_model_is_the_row_as_it_ran():
         f"The row's cpu, {amd['cpu']}",
         f"about {shown:.1f} min, against each of those runs: {', '.join(f'{e:+.0%}' for e in errors)}",
     )
+    b = kept("zen4_arms/banner/bench_reference.json")  # a sitting with the banner as it is now
+    med, n = b["median_wall_s"], len(b["runs"]["ours"])
+    errs = ", ".join(f"{r['banner_estimate_s'] / r['wall_s'] - 1:+.0%}" for r in b["runs"]["ours"])
+    has(
+        "docs/reproducibility.md",
+        f"ours {med['ours']:.1f} s, the reference {med['reference']:.1f} s, medians of {n} cold runs each,"
+        f" alternated: {b['ratio_per_unit_of_work']:.3f} per unit of training work; the banner's estimate"
+        f" against each of our runs: {errs}",
+        f"at {b['provenance']['git']['commit'][:7]} (clean)",
+    )
+    assert not b["provenance"]["git"]["dirty"] and b["provenance"]["platform"]["cpu_model"] == "AMD EPYC"
 
 
 def test_reproducibility_step_parts_are_the_kept_part_benches():
