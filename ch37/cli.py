@@ -135,15 +135,21 @@ def pick_device(name: str) -> str:
     return name
 
 
-def cpu_tier(cores: int, cpuinfo: str = "", system: str = "", machine: str = "") -> str:
-    """cpu-<cores>core-<vendor>, e.g. cpu-2core-amd, cpu-8core-intel, cpu-10core-apple: the vendor from
-    /proc/cpuinfo's text (x86's vendor_id, ARM's CPU implementer), else on macOS from the architecture
-    (arm64: Apple silicon, else Intel), else the architecture itself (cpu-4core-aarch64) or "unknown"."""
+def cpuinfo_fields(cpuinfo: str) -> dict:
+    """/proc/cpuinfo's text as {field: value}, each field's first value (the first processor's)."""
     fields = {}
     for line in cpuinfo.splitlines():
         key, sep, value = line.partition(":")
         if sep:
             fields.setdefault(key.strip(), value.strip())
+    return fields
+
+
+def cpu_tier(cores: int, cpuinfo: str = "", system: str = "", machine: str = "") -> str:
+    """cpu-<cores>core-<vendor>, e.g. cpu-2core-amd, cpu-8core-intel, cpu-10core-apple: the vendor from
+    /proc/cpuinfo's text (x86's vendor_id, ARM's CPU implementer), else on macOS from the architecture
+    (arm64: Apple silicon, else Intel), else the architecture itself (cpu-4core-aarch64) or "unknown"."""
+    fields = cpuinfo_fields(cpuinfo)
     vendor = CPU_VENDORS.get(fields.get("vendor_id") or fields.get("CPU implementer", "").lower())
     if vendor is None and system == "Darwin":
         vendor = "apple" if machine == "arm64" else "intel"
@@ -196,11 +202,7 @@ def cpu_model(cpuinfo: str) -> str:
     """A CPU's model from /proc/cpuinfo's text, as wallclock.csv's `cpu` column names it: its model name,
     family and model numbers ("AMD EPYC family 25 model 17": a cloud's EPYCs of two generations can share
     one name and differ twofold in speed); "" where the text names none (not Linux, not x86)."""
-    fields = {}
-    for line in cpuinfo.split("\n\n")[0].splitlines():  # the first processor's block
-        key, sep, value = line.partition(":")
-        if sep:
-            fields[key.strip()] = value.strip()
+    fields = cpuinfo_fields(cpuinfo)
     name = fields.get("model name", "")
     numbers = " ".join(
         f"{k} {fields[f]}" for k, f in (("family", "cpu family"), ("model", "model")) if f in fields

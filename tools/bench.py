@@ -1067,10 +1067,10 @@ KERNEL_PATHS = {
 }
 # One measurement: the default recipe's shapes (hidden 512, batch 128, two arms of 420 and 3,490 frames:
 # the seed-0 source and source + augmented sizes, from its budgets; a step's time does not depend on
-# them), `steps` timed after a warm-up of 50; the weights' sha256 after the timed steps. With "parts",
-# the calls bc_recipe.train's loop makes are wrapped with clocks (PARTS: the stack's forward, the
-# backward, Adam's step, zero_grad, the scheduler, each a mean over the arms' processes; the rest is the
-# batch, the loss, the progress bar and the processes' start and hand-back),
+# them), `steps` timed after a warm-up of 50; the weights' sha256 after the timed steps. With --parts
+# (PARTS passed after the path), the calls bc_recipe.train's loop makes are wrapped with clocks (PARTS: the
+# stack's forward, the backward, Adam's step, zero_grad, the scheduler, each a mean over the arms'
+# processes; the rest is the batch, the loss, the progress bar and the processes' start and hand-back),
 # and the bare products are timed after it: one arm's three batch x hidden x hidden products on one thread
 # (its forward z = h @ W, its backward's h^T @ g and g @ W^T), and two arms' at once on two threads.
 PARTS = ("forward", "backward", "Adam", "zero_grad", "scheduler")
@@ -1083,7 +1083,7 @@ steps, hidden, batch, threads = map(int, sys.argv[1:5])
 if sys.argv[5] == "torch":  # the products on torch (MKL), as MLPStack runs them without numpy's OpenBLAS
     ensemble.one_blas_thread = lambda: False
 import multiprocessing as mp
-names = sys.argv[7:]  # PARTS, with "parts"
+names = sys.argv[6:]  # PARTS, with --parts; none without
 spent = mp.Array("d", len(names))  # seconds of each part, summed over the arms' processes (shared with them)
 def clocked(owner, name, part):  # owner.name's seconds added to spent[part] (cleared after the warm-up)
     call, i = getattr(owner, name), names.index(part)
@@ -1095,7 +1095,7 @@ def clocked(owner, name, part):  # owner.name's seconds added to spent[part] (cl
             with spent.get_lock():
                 spent[i] += time.perf_counter() - t0
     setattr(owner, name, timed)
-if sys.argv[6:7] == ["parts"]:
+if names:
     clocked(ensemble.MLPStack, "forward", "forward")
     clocked(torch.Tensor, "backward", "backward")
     clocked(torch.optim.Adam, "step", "Adam")
@@ -1145,7 +1145,7 @@ def train_step(path: str, steps: int, hidden: int, batch: int, threads: int, par
     and the seconds of each of its PARTS per step, and the bare products'; TRAIN_STEP)."""
     env, products = KERNEL_PATHS[path]
     base = {k: v for k, v in os.environ.items() if k not in ("MKL_CBWR", "OPENBLAS_CORETYPE")}
-    args = [steps, hidden, batch, threads, products, *(["parts", *PARTS] if parts else [])]
+    args = [steps, hidden, batch, threads, products, *(PARTS if parts else ())]
     return in_fresh_process(TRAIN_STEP, args, base | env, f"the timing process for {path}")
 
 
