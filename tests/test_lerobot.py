@@ -4,6 +4,7 @@ Training runs only under -m slow."""
 
 import json
 import math
+import os
 import shutil
 import sys
 from pathlib import Path
@@ -454,8 +455,9 @@ def test_the_lerobot_row_script_refuses_a_task_it_has_no_row_for(tmp_path):
 def test_the_lerobot_row_script_checks_every_argument_before_any_work(tmp_path):
     """Issue 62 #7: SEEDS, STEPS, EPISODES and LANES are whole numbers from 1 up (SEEDS=0 once ran no seed
     and pointed at a log it never wrote; STEPS=abc started generating sets), EPISODES at most one seed
-    block, OUT a folder, at most six arguments: each wrong one is one `error:` line naming it, exit 2,
-    before anything is made (OUT is not created)."""
+    block, OUT a folder, at most six arguments, and the GPU check's environment (DEVICE cpu or cuda,
+    WORKERS from 1 up): each wrong one is one `error:` line naming it, exit 2, before anything is made
+    (OUT is not created)."""
     import subprocess
 
     out, file = tmp_path / "out", tmp_path / "a_file"
@@ -470,13 +472,24 @@ def test_the_lerobot_row_script_checks_every_argument_before_any_work(tmp_path):
         ("1", "10", "5", "1.5"): "LANES",
         ("1", "10", "5", "1", "extra"): "extra",
         ("1", "99999999999999999999"): "STEPS",
+        ("DEVICE=gpu", "1"): "DEVICE",
+        ("WORKERS=0", "1"): "WORKERS",
+        ("WORKERS=two", "1"): "WORKERS",
     }
     for rest, name in cases.items():
+        env = dict(os.environ, **dict(a.split("=") for a in rest if "=" in a))
         p = subprocess.run(
-            ["bash", ROOT / "tools" / "lerobot_row.sh", "aloha_transfer_cube", out, *rest],
+            [
+                "bash",
+                ROOT / "tools" / "lerobot_row.sh",
+                "aloha_transfer_cube",
+                out,
+                *[a for a in rest if "=" not in a],
+            ],
             capture_output=True,
             text=True,
             timeout=60,
+            env=env,
         )
         lines = p.stderr.strip().splitlines()
         assert p.returncode == 2 and len(lines) == 1 and lines[0].startswith("error:"), (rest, p.stderr)

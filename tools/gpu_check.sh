@@ -15,8 +15,13 @@
 #      reused, result cache off), each timed, their metrics.json kept
 #   4. one training step of bc_recipe.train at the default shapes (hidden 512, batch 128, both data
 #      arms stacked), on cuda and on this machine's CPU, seconds per step, median of 5 rounds
+#   5. with the minutes left (GPU_CHECK_SECONDS, default 560, counted from the start): LeRobot's ACT row
+#      of transfer-cube on cuda, tools/lerobot_row.sh aloha_transfer_cube at ACT_SEEDS (default 1) seeds
+#      and ACT_STEPS (default 5000) steps, cut off at the budget; its evaluations, training configs and
+#      logs (not the checkpoints) in $OUT/act_row.tar.gz
 # Wheels: the lesson's imports (mujoco, lerobot and what lerobot's dataset code imports) minus what the
-# image holds; mujoco-studio (the viewer, 13 MB) is left out: the lesson never draws through it.
+# image holds, with termcolor and gym-aloha's model files for step 5 (lerobot-train and transfer-cube);
+# mujoco-studio (the viewer, 13 MB) is left out: the lesson never draws through it.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 usage="usage: bash tools/gpu_check.sh [--wheels [lesson|value] | --run CMD [ARG...] | --help]"
@@ -45,7 +50,7 @@ if [ "${1:-}" = "--wheels" ]; then
     grep -qx '/.whl/' .git/info/exclude 2>/dev/null || echo /.whl/ >>.git/info/exclude
     common="dill glfw gymnasium mujoco mujoco-core farama-notifications cffi pycparser"
     case "${2:-lesson}" in
-        lesson) names="$common av datasets diffusers draccus lerobot mergedeep multiprocess pytz tzdata" ;;
+        lesson) names="$common av datasets diffusers draccus gym-aloha lerobot mergedeep multiprocess pytz termcolor tzdata" ;;
         value) names="$common gym-pusht pymunk pygame shapely" ;;
     esac
     for name in $names; do
@@ -120,4 +125,16 @@ for device, steps in (("cuda", 2000), ("cpu", 300)):
                    "threads": torch.get_num_threads()}
 print(json.dumps(out, indent=1))
 EOF
+step "5. LeRobot's ACT row of transfer-cube on cuda, with the minutes left"
+left=$((${GPU_CHECK_SECONDS:-560} - SECONDS))
+if [ "$left" -ge 120 ]; then
+    echo "budget: $left s; ACT_SEEDS=${ACT_SEEDS:-1} ACT_STEPS=${ACT_STEPS:-5000}"
+    timed env DEVICE=cuda PYTHON=python3 WORKERS=$(($(nproc) > 3 ? $(nproc) - 3 : 1)) timeout "$left" \
+        bash tools/lerobot_row.sh aloha_transfer_cube /tmp/act "${ACT_SEEDS:-1}" "${ACT_STEPS:-5000}" 50 3
+    # what the row is counted from, and how far each part got: never the checkpoints (~50 MB each)
+    (cd /tmp/act && find . \( -name lerobot_eval.json -o -name '*.log' -o -name generation_report.json \
+        -o -path '*/pretrained_model/train_config.json' \) -print0 | tar czf "$OUT/act_row.tar.gz" --null -T -)
+else
+    echo "skipped: $left s left of GPU_CHECK_SECONDS=${GPU_CHECK_SECONDS:-560}"
+fi
 step done

@@ -16,6 +16,10 @@
 #                        model (its success: the top reward stage; gym-aloha's env cannot run on mujoco 4)
 #
 #   bash tools/lerobot_row.sh TASK OUT [SEEDS=3] [STEPS=1000] [EPISODES=50] [LANES=2]
+#   DEVICE=cuda PYTHON=python3 WORKERS=8 bash tools/lerobot_row.sh ...   on a GPU machine (tools/gpu_check.sh's
+#                        step 5): train and evaluate on DEVICE (default cpu), run every Python step with
+#                        PYTHON (default the checkout's .venv), augment with WORKERS processes (default 1;
+#                        the same bytes for any count)
 #   python -m tools.lerobot table OUT      the table, with Wilson intervals, from each run's evaluation
 #
 # Both policies are shrunk for a CPU (say so where their numbers go). Diffusion: the Diffusion Policy
@@ -54,7 +58,10 @@ done
 # each seed's evaluation starts are one block of ch37.seeds (tools.lerobot eval's own --eval_episodes bound)
 [ "$episodes" -le 1000000 ] || { echo "error: EPISODES must be at most 1000000, not $episodes; $usage" >&2 && exit 2; }
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
-bin="$root/.venv/bin"
+py=${PYTHON:-$root/.venv/bin/python}  # LeRobot's commands run as modules of this Python (no console scripts needed)
+device=${DEVICE:-cpu} workers=${WORKERS:-1}
+case "$device" in cpu | cuda) ;; *) echo "error: DEVICE must be cpu or cuda, not '$device'; $usage" >&2 && exit 2 ;; esac
+[[ $workers =~ ^[1-9][0-9]{0,2}$ ]] || { echo "error: WORKERS must be a whole number from 1 up, not '$workers'; $usage" >&2 && exit 2; }
 export HF_HUB_OFFLINE=1 HF_DATASETS_OFFLINE=1  # a file missing from a set is an error, never a download
 # one thread per lane: torch's OpenMP threads spin while they wait, and two lanes of two threads each on
 # two cores ran 15x slower a step than one thread each (4.5 against 0.3 s)
@@ -65,19 +72,23 @@ out=$(cd "$out" && pwd)
 sets() {  # the three training sets of seed $1
     local s=$1 d="$out/seed$1"
     mkdir -p "$d"
-    [ -f "$d/sources/meta/info.json" ] || "$bin/python" "$root/gen_demos.py" --task "$task" --episodes "$src" --seed "$s" --out "$d/sources" --quiet
-    [ -f "$d/fresh/meta/info.json" ] || "$bin/python" "$root/gen_demos.py" --task "$task" --episodes "$fresh" --seed "$s" --out "$d/fresh" --quiet
-    [ -f "$d/grown/meta/info.json" ] || "$bin/python" "$root/augment_demos.py" --src "$d/sources" --aug_mode "$mode" --attempts_per_demo "$per" --seed "$s" --out "$d/grown" --workers 1 --quiet
+    # the fresh set (the longest) is rolled out beside the sources and their growth: each is a pure function of
+    # its flags, so the order changes no byte
+    [ -f "$d/fresh/meta/info.json" ] || "$py" "$root/gen_demos.py" --task "$task" --episodes "$fresh" --seed "$s" --out "$d/fresh" --quiet &
+    local fresh_pid=$!
+    [ -f "$d/sources/meta/info.json" ] || "$py" "$root/gen_demos.py" --task "$task" --episodes "$src" --seed "$s" --out "$d/sources" --quiet
+    [ -f "$d/grown/meta/info.json" ] || "$py" "$root/augment_demos.py" --src "$d/sources" --aug_mode "$mode" --attempts_per_demo "$per" --seed "$s" --out "$d/grown" --workers "$workers" --quiet
     if [ ! -f "$d/$grown/meta/info.json" ]; then
         rm -rf "$d/grown_plain" "$d/$grown.part"
-        "$bin/lerobot-edit-dataset" --repo_id local/grown --root "$d/grown" --new_repo_id local/grown_plain \
+        "$py" -m lerobot.scripts.lerobot_edit_dataset --repo_id local/grown --root "$d/grown" --new_repo_id local/grown_plain \
             --new_root "$d/grown_plain" --operation.type remove_feature \
             --operation.feature_names '[aug.source_episode, aug.start]'
-        "$bin/lerobot-edit-dataset" --new_repo_id "local/$grown" --new_root "$d/$grown.part" \
+        "$py" -m lerobot.scripts.lerobot_edit_dataset --new_repo_id "local/$grown" --new_root "$d/$grown.part" \
             --operation.type merge --operation.repo_ids '[local/sources, local/grown_plain]' \
             --operation.roots "[$d/sources, $d/grown_plain]"
         mv "$d/$grown.part" "$d/$grown"
     fi
+    wait "$fresh_pid"
 }
 
 run() {  # train and evaluate one set: $1 seed, $2 set
@@ -90,7 +101,7 @@ run() {  # train and evaluate one set: $1 seed, $2 set
     [ "$task" = gym_pusht ] || result=lerobot_eval.json  # tools.lerobot eval's
     [ -f "$eval/$result" ] && return 0
     if [ -f "$train/checkpoints/last/pretrained_model/train_config.json" ] && [ ! -f "$model/config.json" ]; then
-        "$bin/lerobot-train" --config_path="$train/checkpoints/last/pretrained_model/train_config.json" \
+        "$py" -m lerobot.scripts.lerobot_train --config_path="$train/checkpoints/last/pretrained_model/train_config.json" \
             --resume=true >> "$d/train_$set.log" 2>&1 ||
             { echo "seed $s $set: lerobot-train failed to resume, see $d/train_$set.log"; return 1; }
     elif [ ! -f "$model/config.json" ]; then
@@ -104,8 +115,8 @@ run() {  # train and evaluate one set: $1 seed, $2 set
                 --policy.n_encoder_layers=2 --policy.n_vae_encoder_layers=2 --policy.chunk_size=50
                 --policy.n_action_steps=50 --policy.optimizer_lr=1e-4 --batch_size=8)
         fi
-        "$bin/lerobot-train" --dataset.repo_id="local/$set" --dataset.root="$d/$set" --dataset.video_backend=pyav \
-            "${policy[@]}" --policy.device=cpu --policy.push_to_hub=false --num_workers=0 \
+        "$py" -m lerobot.scripts.lerobot_train --dataset.repo_id="local/$set" --dataset.root="$d/$set" --dataset.video_backend=pyav \
+            "${policy[@]}" --policy.device="$device" --policy.push_to_hub=false --num_workers=0 \
             --steps="$steps" --save_freq=$((steps < checkpoint ? steps : checkpoint)) --log_freq=100 --seed="$s" \
             --output_dir="$train" > "$d/train_$set.log" 2>&1 ||
             { echo "seed $s $set: lerobot-train failed, see $d/train_$set.log"; return 1; }
@@ -115,13 +126,13 @@ run() {  # train and evaluate one set: $1 seed, $2 set
     rm -rf "$eval" "$eval.part"
     mkdir -p "$eval.part"
     if [ "$task" = gym_pusht ]; then
-        "$bin/lerobot-eval" --policy.path="$model" --env.type=pusht \
+        "$py" -m lerobot.scripts.lerobot_eval --policy.path="$model" --env.type=pusht \
             --env.obs_type=environment_state_agent_pos --eval.n_episodes="$episodes" --eval.batch_size=10 \
-            --eval.use_async_envs=false --policy.device=cpu --seed=$(((3 * s + 2) * 1000000)) \
+            --eval.use_async_envs=false --policy.device="$device" --seed=$(((3 * s + 2) * 1000000)) \
             --output_dir="$eval.part" > "$d/eval_$set.log" 2>&1
     else
-        (cd "$root" && "$bin/python" -m tools.lerobot eval --task "$task" --policy "$model" \
-            --eval_episodes "$episodes" --seed "$s" --device cpu --out "$eval.part/$result") > "$d/eval_$set.log" 2>&1
+        (cd "$root" && "$py" -m tools.lerobot eval --task "$task" --policy "$model" \
+            --eval_episodes "$episodes" --seed "$s" --device "$device" --out "$eval.part/$result") > "$d/eval_$set.log" 2>&1
     fi || { echo "seed $s $set: the evaluation failed, see $d/eval_$set.log"; return 1; }
     mv "$eval.part" "$eval"
     echo "seed $s $set: $(grep -oE "'pc_success': [0-9.]*|success [0-9.]* \[[^]]*\]" "$d/eval_$set.log" | tail -n 1)"
@@ -129,6 +140,6 @@ run() {  # train and evaluate one set: $1 seed, $2 set
 
 for s in $(seq 0 $((seeds - 1))); do sets "$s" > "$out/sets_seed$s.log" 2>&1; done
 export -f run
-export out steps episodes bin task root checkpoint
+export out steps episodes py device task root checkpoint
 for s in $(seq 0 $((seeds - 1))); do for set in sources "$grown" fresh; do echo "$s $set"; done; done |
     xargs -P "$lanes" -L 1 bash -c 'run "$0" "$1"'
