@@ -239,10 +239,14 @@ def side_by_side(init: dict, nets: list[torch.nn.Sequential], device="cpu"):
 def arm_processes(arms: int, device) -> int:
     """How many processes bc_recipe.train spreads `arms` over: one an arm, up to torch's thread count, on the
     CPU where this process may fork workers (ch37.parallel.can_fork); else 1, every arm side by side in
-    this process (the stack's arms on threads). The weights never depend on it (tests/test_ensemble.py)."""
+    this process (the stack's arms on threads). Also 1 once this process has used CUDA: its autograd
+    threads do not survive a fork, and a forked arm's backward then stops with "Unable to handle autograd's
+    threading in combination with fork-based multiprocessing" (a cuda run, then a cpu one, in one process:
+    tools/gpu_check.sh's step 4 on an H200). The weights never depend on it (tests/test_ensemble.py)."""
     from ch37.parallel import can_fork
 
-    n = min(arms, torch.get_num_threads()) if torch.device(device).type == "cpu" and can_fork() else 1
+    forkable = can_fork() and not torch.cuda.is_initialized()
+    n = min(arms, torch.get_num_threads()) if torch.device(device).type == "cpu" and forkable else 1
     if n > 1:  # torch's first optimizer imports torch._dynamo (0.9 s): here once, not in every fork
         importlib.import_module("torch._dynamo")
     return max(1, n)

@@ -204,6 +204,27 @@ def two_arms_trained(threads: int):
     return hashlib.sha256(weights).hexdigest(), fits
 
 
+def test_a_process_that_has_used_cuda_keeps_its_arms_at_home(monkeypatch):
+    """A cuda run then a cpu run in one process (tools/gpu_check.sh's step 4 on an H200) stopped in the forked
+    arm's backward: CUDA's autograd threads do not survive a fork. Once CUDA is initialised, arm_processes
+    gives 1 (the arms side by side in this process); before, 2. This machine has no GPU, so the query
+    torch.cuda.is_initialized answers both ways here by hand."""
+    from ch37.ensemble import arm_processes
+    from ch37.parallel import can_fork
+
+    if not can_fork():
+        pytest.skip("no fork here: the arms train side by side in this process only")
+    threads = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        monkeypatch.setattr(torch.cuda, "is_initialized", lambda: False)
+        assert arm_processes(2, "cpu") == 2
+        monkeypatch.setattr(torch.cuda, "is_initialized", lambda: True)
+        assert arm_processes(2, "cpu") == 1
+    finally:
+        torch.set_num_threads(threads)
+
+
 def test_arms_in_processes_of_their_own_train_as_side_by_side_in_one():
     from ch37.ensemble import arm_processes
     from ch37.parallel import can_fork
