@@ -357,6 +357,55 @@ def test_reproducibility_timings_are_wallclock_csvs():
     )
 
 
+def test_the_h200_check_is_recounted_from_its_kept_files():
+    """docs/reproducibility.md's H200 paragraph, from results/h200/ (tools/gpu_check.sh's log and files) and
+    wallclock.csv's h200 row."""
+    import re
+    import tarfile
+
+    h200, d = wallclock("h200"), RESULTS / "h200"
+    log = (d / "gpu_check.log").read_text()
+    cold, warm = (json.loads((d / f"metrics_{w}.json").read_text()) for w in ("cold", "warm"))
+    assert cold == warm
+    arms, budgets = cold["arms"], cold["budgets"]
+    seeds = meta()["reference_run"]["seeds"]
+    effects = [r["data_full"] for r in seeds["rows"]]
+    lo5, hi5, mean5 = 100 * min(effects), 100 * max(effects), 100 * seeds["mean"]["data_full"]
+    full_s = re.search(r"budget full: (\d+) steps for each data arm \(([\d.]+) s\)", log.split("=== 3a.")[1])
+    assert int(full_s[1]) == budgets["full"]
+    step = json.loads((d / "step.json").read_text())
+    gpu = re.search(r"^(NVIDIA H200), ([\d.]+),", log, re.M)
+    rates, reached = [], []  # each cut-off ACT training's last progress line
+    with tarfile.open(d / "act_row.tar.gz") as tar:
+        for m in tar.getmembers():
+            if re.search(r"train_\w+\.log$", m.name):
+                last = re.findall(
+                    r"Training:.*?(\d+)/5000 .*?([\d.]+)step/s", tar.extractfile(m).read().decode()
+                )[-1]
+                reached.append(int(last[0]))
+                rates.append(float(last[1]))
+    assert len(rates) == 3 and "rc 124" in log.split("=== 5.")[1]
+    a, lo, hi = arms["augmented_full"]["success"], *arms["augmented_full"]["ci95"]
+    has(
+        "docs/reproducibility.md",
+        f"on one {gpu[1]} (driver {gpu[2]})",
+        f"timed the cold default run at {h200['minutes']} min (wallclock.csv's `h200` row,"
+        f" numpy\n  {h200['numpy']})",
+        f"slower than the H100's {wallclock('h100')['minutes']} min",
+        f"full budget trained in {full_s[2]} s on the card ({thousands(budgets['full'])} steps",
+        f"at {thousands(budgets['short'])} and {thousands(budgets['full'])} steps",
+        f"source only {arms['source_short']['success']:.2f} and {arms['source_full']['success']:.2f},\n"
+        f"  source + augmented {arms['augmented_short']['success']:.2f} and {a:.2f} [{lo:.2f}, {hi:.2f}]:"
+        f" {100 * cold['effects']['data_full']:+.0f} points",
+        f"(mean {mean5:+.1f}, from {lo5:+.0f} to {hi5:+.0f})",
+        f"{1000 * step['cuda']['s_per_step_median']:.2f} ms on the H200,\n  "
+        f"{1000 * step['cpu']['s_per_step_median']:.2f} ms on its host's {step['cpu']['threads']}"
+        " CPU threads",
+        f"ran at {min(rates):.1f} to {max(rates):.1f} steps a second each and were cut at {min(reached)} to"
+        f" {max(reached)} of 5,000 steps",
+    )
+
+
 SITTINGS = {  # issue 59's sittings: (the reference beside ours, the lesson bench, the kernel bench)
     "zen3": ("versus_reference/bench_reference.json", "bench_lesson.txt", "bench_kernels.txt"),
     "zen4": ("zen4/bench_reference.json", "zen4/bench_lesson.txt", "zen4/bench_kernels.txt"),
