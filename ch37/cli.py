@@ -287,31 +287,35 @@ def expected_wallclock(
     cpu: str = "",
 ) -> str:
     """The wall-clock a run of this configuration (config: its config_hash) should take here. A row of
-    wallclock.csv measured on this configuration gives it: this tier's row, else (on a CPU, probe_ms
-    given: this machine's step_probe) the CPU row whose probe is nearest this one's. A row measured on
-    this very CPU model (cpu: this machine's cpu_model) is shown as it ran: a sub-second probe reads the
-    moment it lands in, and on a shared VM that moves more than a whole run does (issue 59). Another row
-    with a probe of its own is scaled by the two probes' ratio (another CPU of one tier, or of a tier not
-    measured); any other configuration may take much longer or shorter: no estimate."""
+    wallclock.csv measured on this configuration gives it; a CPU tier holds one row per CPU model measured
+    (its `cpu`). A row of this tier measured on this very CPU model (cpu: this machine's cpu_model) is
+    shown as it ran: a sub-second probe reads the moment it lands in, and on a shared VM that moves more
+    than a whole run does (issue 59). Else, on a CPU with probe_ms (this machine's step_probe), the row
+    whose probe is nearest this one's, of this tier or, where the tier is unmeasured, of any CPU tier,
+    scaled by the two probes' ratio; else this tier's row as measured. Any other configuration may take
+    much longer or shorter: no estimate."""
     try:
         rows = [r for r in csv.DictReader(csv_path.open()) if r.get("status") == "measured"]
     except OSError:
         rows = []
-    own = next((r for r in rows if r.get("tier") == tier), None)
-    if own is not None and own.get("config_hash") != config:
+    mine = [r for r in rows if r.get("tier") == tier]  # one a CPU model measured in this tier
+    if mine and not any(r.get("config_hash") == config for r in mine):
         return "wall-clock: measured for the default run only (wallclock.csv), not this configuration"
-    # an unmeasured CPU: the CPU row of this configuration nearest in speed
-    if own is None and probe_ms and tier.startswith("cpu-"):
-        probed = [r for r in rows if r["tier"].startswith("cpu-") and r.get("config_hash") == config]
-        probed = [r for r in probed if _ms(r)]
-        own = min(probed, key=lambda r: abs(math.log(_ms(r) / probe_ms)), default=None)
-    if own is None:
-        return "default-run wall-clock not yet measured for this tier"
-    minutes, date, row_ms = float(own["minutes"]), own["date"], _ms(own)
-    if cpu and own.get("cpu") == cpu and own["tier"] == tier:  # measured on this CPU model: as it ran
+    mine = [r for r in mine if r.get("config_hash") == config]
+    same = next((r for r in mine if cpu and r.get("cpu") == cpu), None)
+    if same is not None:  # measured on this CPU model: as it ran
+        minutes, date = float(same["minutes"]), same["date"]
         return (
             f"about {minutes:.1f} min here (wallclock.csv's {tier} row, measured {date} on this CPU: {cpu})"
         )
+    # else the row nearest this probe in speed: of this tier, or on an unmeasured CPU of any CPU tier
+    pool = mine or [r for r in rows if r["tier"].startswith("cpu-") and r.get("config_hash") == config]
+    probed = [r for r in pool if _ms(r)] if probe_ms and tier.startswith("cpu-") else []
+    nearest = min(probed, key=lambda r: abs(math.log(_ms(r) / probe_ms)), default=None)
+    own = nearest or next(iter(mine), None)
+    if own is None:
+        return "default-run wall-clock not yet measured for this tier"
+    minutes, date, row_ms = float(own["minutes"]), own["date"], _ms(own)
     if not (probe_ms and row_ms):  # nothing to scale by: the row as measured
         return f"about {minutes:.1f} min for this configuration (wallclock.csv, measured {date})"
     unmeasured = "this tier is unmeasured; " if own["tier"] != tier else ""

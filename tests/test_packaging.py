@@ -911,6 +911,42 @@ def test_a_row_measured_on_this_cpu_model_is_shown_as_it_ran(tmp_path):
     )
 
 
+def test_a_cpu_tier_keeps_a_row_per_cpu_model(tmp_path):
+    """Issue 59 #3: a Zen 3 and a Zen 4 are both cpu-2core-amd and differ twofold, so tools.wallclock keeps a
+    row per CPU model of a tier (a new measurement replaces only its own model's row), and the banner shows
+    each host its own model's row as it ran; a third model of the tier gets the row nearest its probe,
+    scaled."""
+    path = tmp_path / "wallclock.csv"
+    zen4, zen3 = ch37.cli.cpu_model(ZEN4), "AMD EPYC family 25 model 1"
+    row = _measured("cpu-2core-amd", "1.20") | {"step_ms": "4.00", "cpu": zen4}
+    wallclock.write_wallclock_row(path, row)
+    wallclock.write_wallclock_row(path, _measured("cpu-2core-amd", "2.50") | {"step_ms": "8.00", "cpu": zen3})
+    wallclock.write_wallclock_row(path, row | {"minutes": "1.10"})  # zen4 again: its own row replaced
+    rows = [r for r in csv.DictReader(path.open()) if r["tier"] == "cpu-2core-amd"]
+    assert [(r["cpu"], r["minutes"]) for r in rows] == [(zen3, "2.50"), (zen4, "1.10")]
+
+    def shown(cpu, probe):
+        return ch37.cli.expected_wallclock("cpu-2core-amd", "abc", path, probe_ms=probe, cpu=cpu)
+
+    assert shown(zen4, 9.0).startswith(
+        f"about 1.1 min here (wallclock.csv's cpu-2core-amd row, measured 2026-11-28 on this CPU: {zen4}"
+    )
+    assert shown(zen3, 3.0).startswith(
+        f"about 2.5 min here (wallclock.csv's cpu-2core-amd row, measured 2026-11-28 on this CPU: {zen3}"
+    )
+    # another model of the tier: the row nearest its probe (6.4 ms: zen3's 8.00, 2.50 x 6.4 / 8 = 2.0)
+    assert shown("AMD EPYC family 25 model 160", 6.4).startswith(
+        "about 2.0 min here (wallclock.csv's cpu-2core-amd row took 2.50"
+    )
+    assert shown("AMD EPYC family 25 model 160", 4.4).startswith(
+        "about 1.2 min here (wallclock.csv's cpu-2core-amd row took 1.10"
+    )
+    # another configuration: no estimate from either row
+    assert "not this configuration" in ch37.cli.expected_wallclock(
+        "cpu-2core-amd", "other", path, probe_ms=4.0, cpu=zen4
+    )
+
+
 def test_the_step_probe_times_a_training_step_and_leaves_the_random_state():
     """Issue 59 #3: the banner's probe returns milliseconds a step (a positive, finite figure; its speed is
     tools.wallclock's to print, not a test's) and draws nothing from torch's random state."""

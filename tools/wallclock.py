@@ -1,4 +1,4 @@
-"""Time the default run here and write this tier's row of wallclock.csv.
+"""Time the default run here and write this tier's row of wallclock.csv (on a CPU: this CPU model's).
 
     python -m tools.wallclock              time `scale_data.py --seed 0` cold, write this tier's row
     python -m tools.wallclock --dry-run    print the row, write nothing
@@ -8,7 +8,8 @@
 The run is cold (a fresh output folder, demos generated, the result cache off). The row's tier is the
 one the banner of scale_data.py reads its expected wall-clock from (ch37.cli.device_tier): on a CPU
 named from the machine, cpu-<cores>core-<vendor> (cpu-2core-amd, cpu-8core-intel), one row per kind of
-machine measured; mps and the GPUs (ch37.cli.TIERS) keep a pending row until measured. config_hash
+machine and CPU model measured (its `cpu`: a Zen 3 and a Zen 4 are both cpu-2core-amd and differ twofold);
+mps and the GPUs (ch37.cli.TIERS) keep a pending row until measured. config_hash
 is ch37.cli.config_hash: the first 12 hex of sha256 over the run's config without the device, workers,
 cache and rerun, so the same configuration hashes the same on every tier; the banner shows a row's
 minutes only to a run of that configuration. python, torch, numpy, mujoco and lerobot are the versions
@@ -78,11 +79,20 @@ def read_wallclock(path: Path) -> list[dict]:
 
 
 def write_wallclock_row(path: Path, row: dict) -> list[dict]:
-    """Replace (or add) the row for row['tier']; keep every other row; CPU tiers first (by name), then the
-    fixed tiers in order, then any other."""
-    rows = [r for r in read_wallclock(path) if r["tier"] != row["tier"]] + [dict(row)]
+    """Replace (or add) the row of row['tier'] and row['cpu'] (a CPU tier keeps a row per CPU model); keep
+    every other row; CPU tiers first (by name, then CPU model), then the fixed tiers in order, then any
+    other."""
+    key = (row["tier"], row.get("cpu", ""))
+    rows = [r for r in read_wallclock(path) if (r["tier"], r["cpu"]) != key] + [dict(row)]
     order = {t: i for i, t in enumerate(TIERS)}
-    rows.sort(key=lambda r: (not r["tier"].startswith("cpu-"), order.get(r["tier"], len(TIERS)), r["tier"]))
+    rows.sort(
+        key=lambda r: (
+            not r["tier"].startswith("cpu-"),
+            order.get(r["tier"], len(TIERS)),
+            r["tier"],
+            r.get("cpu", ""),
+        )
+    )
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=WALLCLOCK_FIELDS, lineterminator="\n")
     w.writeheader()
@@ -152,7 +162,7 @@ def main(argv: list[str]) -> int:
         print(f"not written ({'a smoke time never goes into wallclock.csv' if a.smoke else '--dry-run'})")
         return 0
     write_wallclock_row(a.csv, row)
-    print(f"wrote the {row['tier']} row of {rel(a.csv)}")
+    print(f"wrote the {row['tier']} row{f' of {cpu}' if (cpu := row['cpu']) else ''} of {rel(a.csv)}")
     return 0
 
 
