@@ -509,6 +509,34 @@ def test_reproducibility_banner_on_its_own_cpu_model_is_the_row_as_it_ran():
         f"at {b['provenance']['git']['commit'][:7]} (clean)",
     )
     assert not b["provenance"]["git"]["dirty"] and b["provenance"]["platform"]["cpu_model"] == "AMD EPYC"
+    # the fourth sitting (a row per CPU model): its runs one by one, the banner, the lesson bench
+    import re
+
+    c = kept("zen4_arms/0f380e6/bench_reference.json")
+    med, n = c["median_wall_s"], len(c["runs"]["ours"])
+    ours, ref = ([r["wall_s"] for r in c["runs"][k]] for k in ("ours", "reference"))
+    errs = ", ".join(f"{r['banner_estimate_s'] / r['wall_s'] - 1:+.0%}" for r in c["runs"]["ours"])
+    lesson = (RESULTS / "zen4_arms/0f380e6/bench_lesson.txt").read_text()
+    got = re.search(
+        r"in-run training: (\d+) GFLOP/s .*?, (\d+)% of this machine's best matrix rate \((\w+): (\d+)",
+        lesson,
+    )
+    earlier = [
+        kept(f)["ratio_per_unit_of_work"]
+        for f in ("zen4_arms/bench_reference.json", "zen4_arms/banner/bench_reference.json")
+    ]
+    has(
+        "docs/reproducibility.md",
+        f"at {c['provenance']['git']['commit'][:7]} (clean",
+        f"Ours {med['ours']:.1f} s ({listed(ours, ' s')}), the reference {med['reference']:.1f} s"
+        f" ({listed(ref, ' s')}), medians of {n} cold\n  runs each, alternated:"
+        f" {c['ratio_per_unit_of_work']:.3f} per unit of training work",
+        f"the\n  two kept sittings before it gave {earlier[0]:.3f} and {earlier[1]:.3f}",
+        f"against each of our runs: {errs}",
+        f"{got[1]} GFLOP/s, {got[2]}% of this machine's best\n  matrix rate ({got[3]}: {got[4]} GFLOP/s)",
+    )
+    assert c["ratio_per_unit_of_work"] < 0.60 and "the run printed meta.yaml's seed-0 row: yes" in lesson
+    assert not c["provenance"]["git"]["dirty"] and c["provenance"]["platform"]["cpu_model"] == "AMD EPYC"
 
 
 def test_reproducibility_step_parts_are_the_kept_part_benches():
