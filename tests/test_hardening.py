@@ -1357,9 +1357,11 @@ def test_bench_kernels_parts_splits_a_held_step_around_its_bare_products():
     assert 0 < one < step and 0 < two and share == pytest.approx(100 * two / step, abs=0.5)
 
 
-def test_bench_reference_refuses_what_is_not_a_reference_checkout_in_one_line(tmp_path):
-    """Issue 59 #1's one command for the other host kind: a --ref without the reference chapter's script,
-    a --ref_python that is not a program, --rounds 0: one `error:` line each, exit 2, nothing run or made."""
+@pytest.mark.parametrize("sub", ["reference", "host"])
+def test_bench_reference_refuses_what_is_not_a_reference_checkout_in_one_line(tmp_path, sub):
+    """Issue 59 #1's one command for the other host kind (`host`) and its first step (`reference`): a --ref
+    without the reference chapter's script, a --ref_python that is not a program, --rounds 0: one `error:`
+    line each, exit 2, nothing run or made."""
     from tools import bench
 
     (tmp_path / "ref").mkdir()
@@ -1370,19 +1372,56 @@ def test_bench_reference_refuses_what_is_not_a_reference_checkout_in_one_line(tm
         (["--ref", tmp_path / "ref", "--ref_python", sys.executable], "no curriculum/phase3_advanced"),
         (["--ref", ROOT, "--ref_python", fake_py, "--rounds", "0"], "--rounds"),
     ):
-        p = run("-m", "tools.bench", "reference", *args, "--out", out)
+        p = run("-m", "tools.bench", sub, *args, "--out", out)
         err = p.stderr.strip().splitlines()
         assert p.returncode == 2 and len(err) == 1 and said in err[0], p.stderr[-2000:]
         assert not out.exists()
     script = tmp_path / "ref" / bench.REF_SCRIPT
     script.parent.mkdir(parents=True)
     script.write_text("")
-    p = run(
-        "-m", "tools.bench", "reference", "--ref", tmp_path / "ref", "--ref_python", fake_py, "--out", out
-    )
+    p = run("-m", "tools.bench", sub, "--ref", tmp_path / "ref", "--ref_python", fake_py, "--out", out)
     assert p.returncode == 2 and "not an executable Python" in p.stderr and not out.exists(), p.stderr[-2000:]
     # the reference's work: two arms of 500 epochs, a last short minibatch each epoch counted as a step
     assert bench.ref_arm_steps({"source_frames": 420, "aug_frames": 3070}) == 500 * (4 + 28)
+
+
+def test_bench_host_keeps_each_steps_output_and_sums_up_issue_59s_figures(tmp_path):
+    """`python -m tools.bench host`: a step's output is shown and kept (tee), a failed step is one line
+    naming its log; a user's file where a log would go is refused before any work; the summary reads the
+    figures issue 59's note gives from what the steps wrote (here: a kept Zen 4 sitting's files)."""
+    from ch37.errors import DataError
+    from tools import bench
+
+    log = tmp_path / "step.txt"
+    bench.tee([sys.executable, "-c", "print('one'); print('two')"], log)
+    assert log.read_text() == "one\ntwo\n"
+    with pytest.raises(DataError, match=f"exited 3; its output is in {log}"):
+        bench.tee([sys.executable, "-c", "print('half'); raise SystemExit(3)"], log)
+    assert log.read_text() == "half\n"
+    # a user's file where the host check writes a log, and no result of ours beside it: refused
+    (tmp_path / "o").mkdir()
+    (tmp_path / "o" / "bench_lesson.txt").write_text("mine")
+    script = tmp_path / "ref" / bench.REF_SCRIPT
+    script.parent.mkdir(parents=True)
+    script.write_text("")
+    args = ["--ref", tmp_path / "ref", "--ref_python", sys.executable, "--out", tmp_path / "o"]
+    p = run("-m", "tools.bench", "host", *args)
+    assert p.returncode == 2 and "bench_lesson.txt exists and was not written by this tool" in p.stderr
+    assert (tmp_path / "o" / "bench_lesson.txt").read_text() == "mine"
+    # the summary, from a kept sitting's files under the names the host check writes
+    out = tmp_path / "kept"
+    out.mkdir()
+    sitting = ROOT / "results" / "zen4_arms"
+    shutil.copy(sitting / "0f380e6" / "bench_reference.json", out)
+    shutil.copy(sitting / "0f380e6" / "bench_lesson.txt", out)
+    shutil.copy(sitting / "bench_kernels_parts.txt", out / "bench_kernels.txt")
+    v = json.loads((out / "bench_reference.json").read_text())
+    summary = "\n".join(bench.host_summary(out))
+    assert f"{v['ratio_per_unit_of_work']:.3f} per unit of training work" in summary
+    assert "the banner against each of our runs: -4%, -4%, -6%" in summary
+    assert "in-run training: 111 GFLOP/s on OpenBLAS Haswell kernels, 101% of this machine's best" in summary
+    for path, weights in (("held", "ebffe19e"), ("compatible", "fec0e134"), ("native", "87d74143")):
+        assert f"{path}: " in summary and f"weights {weights}" in summary
 
 
 # ---------------------------------------------------------------------------------------------

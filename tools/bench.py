@@ -7,6 +7,8 @@
     python -m tools.bench gym_pusht         the scripted expert on LeRobot's own PushT, by its success rule
     python -m tools.bench kernels           what the kernel path costs the training, and its bits
     python -m tools.bench reference         the lesson beside the reference chapter, cold, in one sitting
+    python -m tools.bench host              issue 59's check of a host, one command: reference, lesson and
+                                            kernels in turn, their outputs and a summary in OUT
     python -m tools.bench writer            the one-pass LeRobot v3 writer vs LeRobot's per-frame path
 
 `SUBCOMMAND --help` says what each measures. One timing path: alternate() (every variant once a round,
@@ -1231,6 +1233,15 @@ def timed_run(cmd: list, cwd: Path, env: dict, out: Path) -> tuple[float, str, d
     return wall, p.stdout, json.loads((out / "metrics.json").read_text())
 
 
+def check_reference(a) -> None:
+    """--ref, --ref_python and --rounds of `reference` and `host`, before any work: one line each."""
+    config.check(a, positive=("rounds",))
+    if not (a.ref / REF_SCRIPT).is_file():
+        raise DataError(f"--ref {a.ref}: no {REF_SCRIPT} in it (a zero2robot checkout)")
+    if not os.access(a.ref_python, os.X_OK) or a.ref_python.is_dir():
+        raise DataError(f"--ref_python {a.ref_python}: not an executable Python")
+
+
 def reference_main(argv: list[str]) -> int:
     """The lesson beside the reference chapter (zero2robot's ch3.7: its own checkout and venv), both cold
     (new output folders, demos generated, our result cache off), alternated, in one sitting:
@@ -1252,11 +1263,7 @@ def reference_main(argv: list[str]) -> int:
     arg("--rounds", type=int, default=2, help="runs of each, alternated")
     arg("--out", type=Path, default=ROOT / "outputs" / VERSUS, help="where bench_reference.json goes")
     a = p.parse_args(argv)
-    config.check(a, positive=("rounds",))
-    if not (a.ref / REF_SCRIPT).is_file():
-        raise DataError(f"--ref {a.ref}: no {REF_SCRIPT} in it (a zero2robot checkout)")
-    if not os.access(a.ref_python, os.X_OK) or a.ref_python.is_dir():
-        raise DataError(f"--ref_python {a.ref_python}: not an executable Python")
+    check_reference(a)
     check_results(a.out, VERSUS)
     ours_env = {k: v for k, v in os.environ.items() if k not in ("MKL_CBWR", "OPENBLAS_CORETYPE")}
     ref_env = ours_env | {"PYTHONPATH": str(a.ref.resolve())}
@@ -1314,6 +1321,94 @@ def reference_main(argv: list[str]) -> int:
         "provenance": provenance(a.script),
     }
     print(f"wrote {write_result(a.out / f'{VERSUS}.json', result)}")
+    return 0
+
+
+# --- host: issue 59's check of a host, one command -------------------------------------------------------
+HOST_LOGS = ("bench_reference.txt", "bench_lesson.txt", "bench_kernels.txt")  # each step's printed output
+
+
+def tee(cmd: list, log: Path) -> None:
+    """Run `cmd` from the checkout, its output (stdout and stderr) shown as it comes and written to `log`;
+    a DataError naming the log if it fails."""
+    with (
+        log.open("w") as f,
+        subprocess.Popen(
+            [str(c) for c in cmd], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        ) as proc,
+    ):
+        for line in proc.stdout:
+            print(line, end="", flush=True)
+            f.write(line)
+    if proc.returncode:
+        raise DataError(f"{shlex.join(map(str, cmd))} exited {proc.returncode}; its output is in {log}")
+
+
+def host_summary(out: Path) -> list[str]:
+    """Issue 59's figures for a host, from what `host` wrote to `out`: the time of both chapters and the
+    ratio per unit of work, the banner against each of our runs, the in-run training rate against the best
+    matrix rate, and each kernel path's weights (the bits table's row for this CPU)."""
+    v = json.loads((out / f"{VERSUS}.json").read_text())
+    lesson, kernels = ((out / name).read_text() for name in HOST_LOGS[1:])
+    med = v["median_wall_s"]
+    lines = [
+        f"host: {cli.this_cpu() or v['provenance']['platform']['cpu_model']}, commit"
+        f" {v['provenance']['git']['commit'][:7]}{' (dirty)' if v['provenance']['git']['dirty'] else ''}",
+        f"both chapters, medians of {len(v['runs']['ours'])}: ours {med['ours']:.1f} s, the reference"
+        f" {med['reference']:.1f} s: {v['ratio_per_unit_of_work']:.3f} per unit of training work"
+        " (issue 59: at most 0.60)",
+        "the banner against each of our runs: "
+        + (", ".join(f"{e:+.0%}" for e in v["banner_estimate_errors"]) or "no estimate"),
+    ]
+    lines += [
+        ln.strip() for ln in lesson.splitlines() if ln.startswith(("in-run training:", "the run printed"))
+    ]
+    lines += [  # "held 2 threads 3.913 ms/step (...) ...; weights ebffe19e (OpenBLAS Haswell)"
+        f"{got[1]}: {got[2]} ms a step, weights {got[3]}"
+        for got in re.finditer(r"^\s+(\w+) \d+ +threads +([0-9.]+) ms/step .* weights (\w+)", kernels, re.M)
+    ]
+    return lines
+
+
+def host_main(argv: list[str]) -> int:
+    """Issue 59's check of this host, one command, alone on the machine (about 15 minutes):
+
+        python -m tools.bench host --ref ~/zero2robot --ref_python ~/z2r-venv/bin/python --out OUT
+
+    In that order, each in a process of its own: [--wallclock: python -m tools.wallclock, this tier's and
+    CPU model's row of wallclock.csv, so the banner below shows it as it ran]; python -m tools.bench
+    reference (both chapters, cold, alternated, --rounds each); python -m tools.bench lesson (the in-run
+    training rate against this machine's best); python -m tools.bench kernels --rounds 3 --steps 500
+    --parts (each kernel path's step and weights). OUT keeps bench_reference.json and each step's output
+    (bench_reference.txt, bench_lesson.txt, bench_kernels.txt, wallclock.txt), and the summary printed
+    last: the figures issue 59's note gives for a host."""
+    p = parser("bench host", host_main.__doc__)
+    arg = p.add_argument
+    arg("--ref", type=Path, required=True, help="a zero2robot checkout (holds " + REF_SCRIPT + ")")
+    arg("--ref_python", type=Path, required=True, help="the Python of the reference's own venv")
+    arg("--rounds", type=int, default=3, help="runs of each chapter, alternated")
+    arg("--wallclock", action="store_true", help="first write this host's wallclock.csv row")
+    arg("--out", type=Path, required=True, help="where the results and outputs go")
+    a = p.parse_args(argv)
+    check_reference(a)
+    logs = (*HOST_LOGS, "wallclock.txt", "host_summary.txt")
+    check_results(a.out, VERSUS, beside={VERSUS: [a.out / name for name in logs]})
+    a.out.mkdir(parents=True, exist_ok=True)
+    me = [sys.executable, "-m", "tools.bench"]
+    steps = [
+        ("bench_reference.txt", [*me, "reference", "--ref", a.ref, "--ref_python", a.ref_python]
+         + ["--rounds", a.rounds, "--out", a.out]),
+        ("bench_lesson.txt", [*me, "lesson"]),
+        ("bench_kernels.txt", [*me, "kernels", "--rounds", 3, "--steps", 500, "--parts"]),
+    ]  # fmt: skip
+    if a.wallclock:
+        steps.insert(0, ("wallclock.txt", [sys.executable, "-m", "tools.wallclock"]))
+    for name, cmd in steps:
+        print(f"=== {shlex.join(map(str, cmd))}", flush=True)
+        tee(cmd, a.out / name)
+    summary = host_summary(a.out)
+    print("\n".join(["=== issue 59's figures for this host", *summary]))
+    (a.out / "host_summary.txt").write_text("\n".join(summary) + "\n")
     return 0
 
 
@@ -1403,6 +1498,7 @@ SUBCOMMANDS = {
     "gym_pusht": gym_pusht_main,
     "kernels": kernels_main,
     "reference": reference_main,
+    "host": host_main,
     "writer": writer_main,
 }
 
