@@ -47,7 +47,7 @@ from types import SimpleNamespace
 from ch37 import ROOT, cli, config, errors
 from ch37.config import DEFAULTS, check
 from ch37.errors import DataError
-from ch37.ownership import is_ours, read_stamp
+from ch37.ownership import is_ours, read_stamp, write_atomic
 from exercises.rules import ARMS
 from tools.common import (
     META,
@@ -1329,19 +1329,17 @@ HOST_LOGS = ("bench_reference.txt", "bench_lesson.txt", "bench_kernels.txt")  # 
 
 
 def tee(cmd: list, log: Path) -> None:
-    """Run `cmd` from the checkout, its output (stdout and stderr) shown as it comes and written to `log`;
-    a DataError naming the log if it fails."""
-    with (
-        log.open("w") as f,
-        subprocess.Popen(
-            [str(c) for c in cmd], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
-        ) as proc,
-    ):
+    """Run `cmd` from the checkout, its output (stdout and stderr) shown as it comes and written to `log`
+    when it ends (atomically); a DataError naming the log if it fails."""
+    lines = []
+    cmd = [str(c) for c in cmd]
+    with subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) as proc:
         for line in proc.stdout:
             print(line, end="", flush=True)
-            f.write(line)
+            lines.append(line)
+    write_atomic(log, "".join(lines))
     if proc.returncode:
-        raise DataError(f"{shlex.join(map(str, cmd))} exited {proc.returncode}; its output is in {log}")
+        raise DataError(f"{shlex.join(cmd)} exited {proc.returncode}; its output is in {log}")
 
 
 def host_summary(out: Path) -> list[str]:
@@ -1408,7 +1406,7 @@ def host_main(argv: list[str]) -> int:
         tee(cmd, a.out / name)
     summary = host_summary(a.out)
     print("\n".join(["=== issue 59's figures for this host", *summary]))
-    (a.out / "host_summary.txt").write_text("\n".join(summary) + "\n")
+    write_atomic(a.out / "host_summary.txt", "\n".join(summary) + "\n")
     return 0
 
 
