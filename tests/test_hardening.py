@@ -1416,7 +1416,8 @@ def test_bench_host_keeps_each_steps_output_and_sums_up_issue_59s_figures(tmp_pa
     shutil.copy(sitting / "0f380e6" / "bench_lesson.txt", out)
     shutil.copy(sitting / "bench_kernels_parts.txt", out / "bench_kernels.txt")
     v = json.loads((out / "bench_reference.json").read_text())
-    summary = "\n".join(bench.host_summary(out))
+    summary = "\n".join(bench.host_summary(out, "AMD EPYC family 25 model 17"))
+    assert summary.startswith("host: AMD EPYC family 25 model 17, commit 0f380e6\n")
     assert f"{v['ratio_per_unit_of_work']:.3f} per unit of training work" in summary
     assert "the banner against each of our runs: -4%, -4%, -6%" in summary
     assert "in-run training: 111 GFLOP/s on OpenBLAS Haswell kernels, 101% of this machine's best" in summary

@@ -1233,6 +1233,13 @@ def timed_run(cmd: list, cwd: Path, env: dict, out: Path) -> tuple[float, str, d
     return wall, p.stdout, json.loads((out / "metrics.json").read_text())
 
 
+def reference_args(arg, rounds: int) -> None:
+    """--ref, --ref_python and --rounds (default `rounds`) of `reference` and `host`: defined here once."""
+    arg("--ref", type=Path, required=True, help="a zero2robot checkout (holds " + REF_SCRIPT + ")")
+    arg("--ref_python", type=Path, required=True, help="the Python of the reference's own venv")
+    arg("--rounds", type=int, default=rounds, help="runs of each chapter, alternated")
+
+
 def check_reference(a) -> None:
     """--ref, --ref_python and --rounds of `reference` and `host`, before any work: one line each."""
     config.check(a, positive=("rounds",))
@@ -1258,9 +1265,7 @@ def reference_main(argv: list[str]) -> int:
     """
     p = parser("bench reference", reference_main.__doc__)
     arg = p.add_argument
-    arg("--ref", type=Path, required=True, help="a zero2robot checkout (holds " + REF_SCRIPT + ")")
-    arg("--ref_python", type=Path, required=True, help="the Python of the reference's own venv")
-    arg("--rounds", type=int, default=2, help="runs of each, alternated")
+    reference_args(arg, rounds=2)
     arg("--out", type=Path, default=ROOT / "outputs" / VERSUS, help="where bench_reference.json goes")
     a = p.parse_args(argv)
     check_reference(a)
@@ -1342,15 +1347,15 @@ def tee(cmd: list, log: Path) -> None:
         raise DataError(f"{shlex.join(cmd)} exited {proc.returncode}; its output is in {log}")
 
 
-def host_summary(out: Path) -> list[str]:
+def host_summary(out: Path, cpu: str) -> list[str]:
     """Issue 59's figures for a host, from what `host` wrote to `out`: the time of both chapters and the
     ratio per unit of work, the banner against each of our runs, the in-run training rate against the best
-    matrix rate, and each kernel path's weights (the bits table's row for this CPU)."""
+    matrix rate, and each kernel path's weights (the bits table's row for `cpu`, the host's cpu_model)."""
     v = json.loads((out / f"{VERSUS}.json").read_text())
     lesson, kernels = ((out / name).read_text() for name in HOST_LOGS[1:])
     med = v["median_wall_s"]
     lines = [
-        f"host: {cli.this_cpu() or v['provenance']['platform']['cpu_model']}, commit"
+        f"host: {cpu or v['provenance']['platform']['cpu_model']}, commit"
         f" {v['provenance']['git']['commit'][:7]}{' (dirty)' if v['provenance']['git']['dirty'] else ''}",
         f"both chapters, medians of {len(v['runs']['ours'])}: ours {med['ours']:.1f} s, the reference"
         f" {med['reference']:.1f} s: {v['ratio_per_unit_of_work']:.3f} per unit of training work"
@@ -1382,9 +1387,7 @@ def host_main(argv: list[str]) -> int:
     last: the figures issue 59's note gives for a host."""
     p = parser("bench host", host_main.__doc__)
     arg = p.add_argument
-    arg("--ref", type=Path, required=True, help="a zero2robot checkout (holds " + REF_SCRIPT + ")")
-    arg("--ref_python", type=Path, required=True, help="the Python of the reference's own venv")
-    arg("--rounds", type=int, default=3, help="runs of each chapter, alternated")
+    reference_args(arg, rounds=3)
     arg("--wallclock", action="store_true", help="first write this host's wallclock.csv row")
     arg("--out", type=Path, required=True, help="where the results and outputs go")
     a = p.parse_args(argv)
@@ -1393,18 +1396,29 @@ def host_main(argv: list[str]) -> int:
     check_results(a.out, VERSUS, beside={VERSUS: [a.out / name for name in logs]})
     a.out.mkdir(parents=True, exist_ok=True)
     me = [sys.executable, "-m", "tools.bench"]
-    steps = [
-        ("bench_reference.txt", [*me, "reference", "--ref", a.ref, "--ref_python", a.ref_python]
-         + ["--rounds", a.rounds, "--out", a.out]),
-        ("bench_lesson.txt", [*me, "lesson"]),
-        ("bench_kernels.txt", [*me, "kernels", "--rounds", 3, "--steps", 500, "--parts"]),
-    ]  # fmt: skip
+    cmds = (
+        [
+            *me,
+            "reference",
+            "--ref",
+            a.ref,
+            "--ref_python",
+            a.ref_python,
+            "--rounds",
+            a.rounds,
+            "--out",
+            a.out,
+        ],
+        [*me, "lesson"],
+        [*me, "kernels", "--rounds", 3, "--steps", 500, "--parts"],
+    )
+    steps = list(zip(HOST_LOGS, cmds, strict=True))
     if a.wallclock:
         steps.insert(0, ("wallclock.txt", [sys.executable, "-m", "tools.wallclock"]))
     for name, cmd in steps:
         print(f"=== {shlex.join(map(str, cmd))}", flush=True)
         tee(cmd, a.out / name)
-    summary = host_summary(a.out)
+    summary = host_summary(a.out, cli.this_cpu())
     print("\n".join(["=== issue 59's figures for this host", *summary]))
     write_atomic(a.out / "host_summary.txt", "\n".join(summary) + "\n")
     return 0
