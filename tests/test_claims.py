@@ -564,6 +564,109 @@ def test_reproducibility_step_parts_are_the_kept_part_benches():
     has("docs/reproducibility.md", f"and in {native[0]} and {native[1]} of it in the two part benches below")
 
 
+ZEN4_ARMS = (
+    "zen4_arms",
+    "zen4_arms/banner",
+    "zen4_arms/0f380e6",
+    "zen4_arms/fe85dfe",
+)  # the sittings' folders
+
+
+def walls(v: dict, side: str) -> list[float]:
+    return [r["wall_s"] for r in v["runs"][side]]
+
+
+def test_reproducibility_zen4_sittings_table_and_the_fifth_sitting_are_the_kept_files():
+    """Issue 59 #1 on Zen 4: the fifth sitting (python -m tools.bench host, its outputs kept under
+    results/zen4_arms/fe85dfe/), the table of every Zen 4 sitting with the arms in processes (each side's
+    median and fastest run per unit of work, tools.bench.versus), and what 0.60 would take, recounted."""
+    import re
+
+    from tools import bench
+
+    sittings = [kept(f"{folder}/bench_reference.json") for folder in ZEN4_ARMS]
+    for v in sittings:
+        both = bench.versus(v["runs"], v["arm_steps"])
+        assert both["median"][2] == pytest.approx(v["ratio_per_unit_of_work"], 1e-3)
+        ours, ref = (", ".join(f"{w:.1f}" for w in walls(v, k)) for k in ("ours", "reference"))
+        has(
+            "docs/reproducibility.md",
+            f"| {v['provenance']['git']['commit'][:7]} | {ours} | {ref} | {both['median'][2]:.3f} |"
+            f" {both['fastest'][2]:.3f} |",
+        )
+        assert not v["provenance"]["git"]["dirty"] and v["provenance"]["platform"]["cpu_model"] == "AMD EPYC"
+    # the reference's runs near 85 s, and the fastest ratio of the sittings that had one
+    near_85 = [w for v in sittings for w in walls(v, "reference") if w < 90]
+    quiet = [
+        bench.versus(v["runs"], v["arm_steps"])["fastest"][2]
+        for v in sittings
+        if min(walls(v, "reference")) < 90
+    ]
+    assert len(near_85) == 3 and len(quiet) == 2
+    ours_all = [w for v in sittings for w in walls(v, "ours")]
+    spread = max(max(walls(v, "ours")) / min(walls(v, "ours")) for v in sittings)
+    has(
+        "docs/reproducibility.md",
+        f"Our runs move by at most {spread - 1:.0%} within a sitting"
+        f" ({min(ours_all):.1f} to {max(ours_all):.1f} s",
+        "Where the reference ran near 85 s (three runs, in two sittings), the lesson took"
+        f" {quiet[0]:.2f} and {quiet[1]:.2f} of its time per unit of work, fastest against fastest",
+    )
+    # the fifth sitting, from its four kept outputs
+    fifth, v = RESULTS / ZEN4_ARMS[-1], sittings[-1]
+    med, work = v["median_wall_s"], v["arm_steps"]
+
+    def listed(xs):  # "66.9, 66.8 and 72.1 s"
+        return ", ".join(f"{x:.1f}" for x in xs[:-1]) + f" and {xs[-1]:.1f} s"
+
+    lesson = (fifth / "bench_lesson.txt").read_text()
+    rate, pct, best, best_rate = re.search(
+        r"in-run training: (\d+) GFLOP/s .*?, (\d+)% of this machine's best matrix rate \((\w+): (\d+)",
+        lesson,
+    ).groups()
+    train_s = float(re.search(r"TFLOP in ([0-9.]+) s", lesson).group(1))
+    wall_s = float(re.search(r"wall \(one run, in process\) +([0-9.]+)", lesson).group(1))
+    kernels = (fifth / "bench_kernels.txt").read_text()
+    step = {
+        k: re.search(
+            rf"{k} 2 +threads +([0-9.]+) ms/step .* x([0-9.]+) of held .* weights (\w+)", kernels
+        ).groups()
+        for k in ("held", "compatible", "native")
+    }
+    bare, share = re.search(
+        r"two arms' at once on two threads ([0-9.]+) \((\d+)% of the step\)", kernels
+    ).groups()
+    adam = re.search(r"held 2 +a step's parts, ms \(medians\): .*?Adam ([0-9.]+)", kernels).group(1)
+    earlier = [
+        re.search(r"native 2 +threads .* x([0-9.]+) of held", (RESULTS / f).read_text()).group(1)
+        for f in ("zen4_arms/bench_kernels_parts.txt", "zen4/bench_kernels.txt")
+    ]
+    target = 0.60 * med["reference"] * work["ours"] / work["reference"]  # ours's wall-clock at 0.60 per unit
+    trained = train_s - (med["ours"] - target)  # the training's seconds at that wall-clock, the rest as it is
+    has(
+        "docs/reproducibility.md",
+        f"at {v['provenance']['git']['commit'][:7]} (clean)",
+        f"--rounds 3 --out results/{ZEN4_ARMS[-1]}`",
+        f"Ours {med['ours']:.1f} s ({listed(walls(v, 'ours'))}), the reference {med['reference']:.1f} s"
+        f" ({listed(walls(v, 'reference'))}), medians of 3 cold runs each, alternated:"
+        f" {v['ratio_per_unit_of_work']:.3f} per unit of training work",
+        "The banner against each of our runs: " + ", ".join(f"{e:+.0%}" for e in v["banner_estimate_errors"]),
+        f"{rate} GFLOP/s, {pct}% of this machine's best matrix rate ({best}: {best_rate} GFLOP/s); training"
+        f" took {train_s} s of the run's {wall_s:.1f} s",
+        f"held {step['held'][0]} ms a step (weights {step['held'][2]}),"
+        f" MKL COMPATIBLE {step['compatible'][0]} ({step['compatible'][2]}),"
+        f" MKL's own {step['native'][0]} ({step['native'][2]})",
+        f"MKL's own kernels take a step in {step['native'][1]} of the held path's time.",
+        f"reference's {med['reference']:.1f} s is ours at {target:.1f} s,"
+        f" a training {1 - trained / train_s:.0%} shorter ({train_s} s to {trained:.0f} s",
+        f"(MKL's own {step['native'][1]}, {earlier[0]} and {earlier[1]} of its step in three sittings)",
+        f"rate for a whole step ({pct}%)",
+        f"are {share}% of the held step, {bare} of {step['held'][0]} ms),"
+        f" and Adam's fused kernel, at {adam} ms,",
+    )
+    assert "the run printed meta.yaml's seed-0 row: yes" in lesson
+
+
 # --- docs/replay.md -----------------------------------------------------------------------------------
 
 

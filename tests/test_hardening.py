@@ -1385,6 +1385,20 @@ def test_bench_reference_refuses_what_is_not_a_reference_checkout_in_one_line(tm
     assert bench.ref_arm_steps({"source_frames": 420, "aug_frames": 3070}) == 500 * (4 + 28)
 
 
+def test_bench_versus_gives_the_median_and_the_fastest_run_of_each_chapter_per_unit_of_work():
+    """tools.bench.versus: each side's median and fastest wall-clock, and ours over the reference per unit of
+    training work (arm-steps), from a sitting's runs; the fastest is not the median's pair."""
+    from tools import bench
+
+    runs = {
+        "ours": [{"wall_s": s} for s in (3.0, 1.0, 2.0)],
+        "reference": [{"wall_s": s} for s in (10, 4, 6)],
+    }
+    got = bench.versus(runs, {"ours": 200, "reference": 100})
+    assert got["median"] == (2.0, 6, pytest.approx(2 / 6 * 100 / 200))
+    assert got["fastest"] == (1.0, 4, pytest.approx(1 / 4 * 100 / 200))
+
+
 def test_bench_host_keeps_each_steps_output_and_sums_up_issue_59s_figures(tmp_path):
     """`python -m tools.bench host`: a step's output is shown and kept (tee), a failed step is one line
     naming its log; a user's file where a log would go is refused before any work; the summary reads the
@@ -1418,7 +1432,14 @@ def test_bench_host_keeps_each_steps_output_and_sums_up_issue_59s_figures(tmp_pa
     v = json.loads((out / "bench_reference.json").read_text())
     summary = "\n".join(bench.host_summary(out, "AMD EPYC family 25 model 17"))
     assert summary.startswith("host: AMD EPYC family 25 model 17, commit 0f380e6\n")
-    assert f"{v['ratio_per_unit_of_work']:.3f} per unit of training work" in summary
+    med = v["median_wall_s"]
+    medians = (
+        f"ours {med['ours']:.1f} s, the reference {med['reference']:.1f} s: {v['ratio_per_unit_of_work']:.3f}"
+    )
+    assert f"medians of 3: {medians} per unit" in summary
+    ours, ref = (min(r["wall_s"] for r in v["runs"][k]) for k in ("ours", "reference"))  # 68.6 s, 85.8 s
+    fastest = ours / ref * v["arm_steps"]["reference"] / v["arm_steps"]["ours"]
+    assert f"fastest of 3: ours {ours:.1f} s, the reference {ref:.1f} s: {fastest:.3f} per unit" in summary
     assert "the banner against each of our runs: -4%, -4%, -6%" in summary
     assert "in-run training: 111 GFLOP/s on OpenBLAS Haswell kernels, 101% of this machine's best" in summary
     for path, weights in (("held", "ebffe19e"), ("compatible", "fec0e134"), ("native", "87d74143")):
