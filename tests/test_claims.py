@@ -476,18 +476,23 @@ def test_reproducibility_costs_are_the_kept_sitting(sitting):
     assert v["provenance"]["platform"]["cpu_model"] == "AMD EPYC" and not v["provenance"]["git"]["dirty"]
 
 
+def walls(v: dict, side: str) -> list[float]:  # a kept bench_reference.json's runs of one side, s
+    return [r["wall_s"] for r in v["runs"][side]]
+
+
+def listed(xs, unit=""):  # "70.6, 80.3 and 77.3 s"
+    return ", ".join(f"{x:.1f}" for x in xs[:-1]) + f" and {xs[-1]:.1f}{unit}"
+
+
 def test_reproducibility_banner_on_its_own_cpu_model_is_the_row_as_it_ran():
     """Issue 59 #3: the zen4_arms sitting's runs one by one and what its probe-scaled banner read, and what
     the banner says now (wallclock.csv's row as it ran, on the CPU model that measured it) against those
     runs, recounted from the kept file (results/zen4_arms/bench_reference.json) and the row."""
     v, amd = kept("zen4_arms/bench_reference.json"), wallclock("cpu-2core-amd")
-    ours, ref = ([r["wall_s"] for r in v["runs"][k]] for k in ("ours", "reference"))
+    ours, ref = walls(v, "ours"), walls(v, "reference")
     said = [r["banner_estimate_s"] / 60 for r in v["runs"]["ours"]]  # the banner's minutes, probe-scaled
     shown = round(float(amd["minutes"]), 1)  # "about 1.1 min here": the banner's one decimal
     errors = [shown * 60 / w - 1 for w in ours]
-
-    def listed(xs, unit=""):  # "70.6, 80.3 and 77.3 s"
-        return ", ".join(f"{x:.1f}" for x in xs[:-1]) + f" and {xs[-1]:.1f}{unit}"
 
     has(
         "docs/reproducibility.md",
@@ -514,7 +519,7 @@ def test_reproducibility_banner_on_its_own_cpu_model_is_the_row_as_it_ran():
 
     c = kept("zen4_arms/0f380e6/bench_reference.json")
     med, n = c["median_wall_s"], len(c["runs"]["ours"])
-    ours, ref = ([r["wall_s"] for r in c["runs"][k]] for k in ("ours", "reference"))
+    ours, ref = walls(c, "ours"), walls(c, "reference")
     errs = ", ".join(f"{r['banner_estimate_s'] / r['wall_s'] - 1:+.0%}" for r in c["runs"]["ours"])
     lesson = (RESULTS / "zen4_arms/0f380e6/bench_lesson.txt").read_text()
     got = re.search(
@@ -572,10 +577,6 @@ ZEN4_ARMS = (
 )  # the sittings' folders
 
 
-def walls(v: dict, side: str) -> list[float]:
-    return [r["wall_s"] for r in v["runs"][side]]
-
-
 def test_reproducibility_zen4_sittings_table_and_the_fifth_sitting_are_the_kept_files():
     """Issue 59 #1 on Zen 4: the fifth sitting (python -m tools.bench host, its outputs kept under
     results/zen4_arms/fe85dfe/), the table of every Zen 4 sitting with the arms in processes (each side's
@@ -616,9 +617,6 @@ def test_reproducibility_zen4_sittings_table_and_the_fifth_sitting_are_the_kept_
     fifth, v = RESULTS / ZEN4_ARMS[-1], sittings[-1]
     med, work = v["median_wall_s"], v["arm_steps"]
 
-    def listed(xs):  # "66.9, 66.8 and 72.1 s"
-        return ", ".join(f"{x:.1f}" for x in xs[:-1]) + f" and {xs[-1]:.1f} s"
-
     lesson = (fifth / "bench_lesson.txt").read_text()
     rate, pct, best, best_rate = re.search(
         r"in-run training: (\d+) GFLOP/s .*?, (\d+)% of this machine's best matrix rate \((\w+): (\d+)",
@@ -647,8 +645,8 @@ def test_reproducibility_zen4_sittings_table_and_the_fifth_sitting_are_the_kept_
         "docs/reproducibility.md",
         f"at {v['provenance']['git']['commit'][:7]} (clean)",
         f"--rounds 3 --out results/{ZEN4_ARMS[-1]}`",
-        f"Ours {med['ours']:.1f} s ({listed(walls(v, 'ours'))}), the reference {med['reference']:.1f} s"
-        f" ({listed(walls(v, 'reference'))}), medians of 3 cold runs each, alternated:"
+        f"Ours {med['ours']:.1f} s ({listed(walls(v, 'ours'), ' s')}), the reference {med['reference']:.1f} s"
+        f" ({listed(walls(v, 'reference'), ' s')}), medians of 3 cold runs each, alternated:"
         f" {v['ratio_per_unit_of_work']:.3f} per unit of training work",
         "The banner against each of our runs: " + ", ".join(f"{e:+.0%}" for e in v["banner_estimate_errors"]),
         f"{rate} GFLOP/s, {pct}% of this machine's best matrix rate ({best}: {best_rate} GFLOP/s); training"
