@@ -1273,8 +1273,9 @@ def reference_main(argv: list[str]) -> int:
     (MKL's own, none of our kernel variables passed on). Per run: the wall-clock and the training work in
     arm-steps (ours: both budgets' steps, two arms each, from metrics.json; the reference: its two arms'
     epochs x minibatches, from its metrics.json); medians, their ratio and the ratio per unit of work, the
-    same of each side's fastest run (versus), and ours's banner estimate against its own run. Run it alone: another busy process moves the figures
-    more than the paths do. Writes OUT/bench_reference.json (default outputs/bench_reference).
+    same of each side's fastest run (versus), and ours's banner estimate against its own run. Run it alone:
+    another busy process moves the figures more than the paths do. Writes OUT/bench_reference.json (default
+    outputs/bench_reference).
     """
     p = parser("bench reference", reference_main.__doc__)
     arg = p.add_argument
