@@ -484,6 +484,16 @@ def listed(xs, unit=""):  # "70.6, 80.3 and 77.3 s"
     return ", ".join(f"{x:.1f}" for x in xs[:-1]) + f" and {xs[-1]:.1f}{unit}"
 
 
+def in_run(lesson: str) -> tuple[str, ...]:
+    """A kept bench_lesson.txt's in-run line: (GFLOP/s, % of the best matrix rate, best path, its rate)."""
+    import re
+
+    return re.search(
+        r"in-run training: (\d+) GFLOP/s .*?, (\d+)% of this machine's best matrix rate \((\w+): (\d+)",
+        lesson,
+    ).groups()
+
+
 def test_reproducibility_banner_on_its_own_cpu_model_is_the_row_as_it_ran():
     """Issue 59 #3: the zen4_arms sitting's runs one by one and what its probe-scaled banner read, and what
     the banner says now (wallclock.csv's row as it ran, on the CPU model that measured it) against those
@@ -515,17 +525,12 @@ def test_reproducibility_banner_on_its_own_cpu_model_is_the_row_as_it_ran():
     )
     assert not b["provenance"]["git"]["dirty"] and b["provenance"]["platform"]["cpu_model"] == "AMD EPYC"
     # the fourth sitting (a row per CPU model): its runs one by one, the banner, the lesson bench
-    import re
-
     c = kept("zen4_arms/0f380e6/bench_reference.json")
     med, n = c["median_wall_s"], len(c["runs"]["ours"])
     ours, ref = walls(c, "ours"), walls(c, "reference")
     errs = ", ".join(f"{r['banner_estimate_s'] / r['wall_s'] - 1:+.0%}" for r in c["runs"]["ours"])
     lesson = (RESULTS / "zen4_arms/0f380e6/bench_lesson.txt").read_text()
-    got = re.search(
-        r"in-run training: (\d+) GFLOP/s .*?, (\d+)% of this machine's best matrix rate \((\w+): (\d+)",
-        lesson,
-    )
+    rate, pct, best, best_rate = in_run(lesson)
     earlier = [
         kept(f)["ratio_per_unit_of_work"]
         for f in ("zen4_arms/bench_reference.json", "zen4_arms/banner/bench_reference.json")
@@ -538,7 +543,7 @@ def test_reproducibility_banner_on_its_own_cpu_model_is_the_row_as_it_ran():
         f" {c['ratio_per_unit_of_work']:.3f} per unit of training work",
         f"the\n  two kept sittings before it gave {earlier[0]:.3f} and {earlier[1]:.3f}",
         f"against each of our runs: {errs}",
-        f"{got[1]} GFLOP/s, {got[2]}% of this machine's best\n  matrix rate ({got[3]}: {got[4]} GFLOP/s)",
+        f"{rate} GFLOP/s, {pct}% of this machine's best\n  matrix rate ({best}: {best_rate} GFLOP/s)",
     )
     assert c["ratio_per_unit_of_work"] < 0.60 and "the run printed meta.yaml's seed-0 row: yes" in lesson
     assert not c["provenance"]["git"]["dirty"] and c["provenance"]["platform"]["cpu_model"] == "AMD EPYC"
@@ -586,8 +591,8 @@ def test_reproducibility_zen4_sittings_table_and_the_fifth_sitting_are_the_kept_
     from tools import bench
 
     sittings = [kept(f"{folder}/bench_reference.json") for folder in ZEN4_ARMS]
-    for v in sittings:
-        both = bench.versus(v["runs"], v["arm_steps"])
+    ratios = [bench.versus(v["runs"], v["arm_steps"]) for v in sittings]  # each sitting's median and fastest
+    for v, both in zip(sittings, ratios):
         assert both["median"][2] == pytest.approx(v["ratio_per_unit_of_work"], 1e-3)
         ours, ref = (", ".join(f"{w:.1f}" for w in walls(v, k)) for k in ("ours", "reference"))
         has(
@@ -598,11 +603,7 @@ def test_reproducibility_zen4_sittings_table_and_the_fifth_sitting_are_the_kept_
         assert not v["provenance"]["git"]["dirty"] and v["provenance"]["platform"]["cpu_model"] == "AMD EPYC"
     # the reference's runs near 85 s, and the fastest ratio of the sittings that had one
     near_85 = [w for v in sittings for w in walls(v, "reference") if w < 90]
-    quiet = [
-        bench.versus(v["runs"], v["arm_steps"])["fastest"][2]
-        for v in sittings
-        if min(walls(v, "reference")) < 90
-    ]
+    quiet = [both["fastest"][2] for v, both in zip(sittings, ratios) if min(walls(v, "reference")) < 90]
     assert len(near_85) == 3 and len(quiet) == 2
     ours_all = [w for v in sittings for w in walls(v, "ours")]
     spread = max(max(walls(v, "ours")) / min(walls(v, "ours")) for v in sittings)
@@ -618,10 +619,7 @@ def test_reproducibility_zen4_sittings_table_and_the_fifth_sitting_are_the_kept_
     med, work = v["median_wall_s"], v["arm_steps"]
 
     lesson = (fifth / "bench_lesson.txt").read_text()
-    rate, pct, best, best_rate = re.search(
-        r"in-run training: (\d+) GFLOP/s .*?, (\d+)% of this machine's best matrix rate \((\w+): (\d+)",
-        lesson,
-    ).groups()
+    rate, pct, best, best_rate = in_run(lesson)
     train_s = float(re.search(r"TFLOP in ([0-9.]+) s", lesson).group(1))
     wall_s = float(re.search(r"wall \(one run, in process\) +([0-9.]+)", lesson).group(1))
     kernels = (fifth / "bench_kernels.txt").read_text()
